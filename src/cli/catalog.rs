@@ -1,0 +1,94 @@
+//! `relume stages` and `relume validate`.
+
+use clap::Args;
+use relume::graph::{Params, Pipeline, Registry};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct StagesArgs {
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct ValidateArgs {
+    /// The pipeline file (TOML).
+    pipeline: PathBuf,
+}
+
+pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
+    let registry = Registry::builtin();
+    let mut docs = Vec::new();
+    for info in registry.kinds() {
+        let ports = (info.ports)(&Params::defaults(info.params));
+        let port_list = |ports: &[relume::graph::Port]| {
+            ports.iter().map(|p| serde_json::json!({ "role": p.role, "default": p.default_product, "kinds": p.kinds.iter().map(|k| k.name()).collect::<Vec<_>>() })).collect::<Vec<_>>()
+        };
+        let params: Vec<serde_json::Value> = info.params.iter().map(|p| serde_json::json!({ "name": p.name, "type": p.type_name(), "default": p.default_value().to_string(), "min": p.min, "max": p.max, "choices": p.choices, "doc": p.doc })).collect();
+        if !a.json {
+            println!("{}\n    {}", info.kind, info.summary);
+            let show = |ports: &[relume::graph::Port]| {
+                if ports.is_empty() {
+                    "-".to_string()
+                } else {
+                    ports
+                        .iter()
+                        .map(|p| p.default_product.clone())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                }
+            };
+            println!(
+                "    reads: {}   writes: {}",
+                show(&ports.inputs),
+                show(&ports.outputs)
+            );
+            for p in info.params {
+                let mut line =
+                    format!("    {} = {}  ({}", p.name, p.default_value(), p.type_name());
+                if let (Some(lo), Some(hi)) = (p.min, p.max) {
+                    line.push_str(&format!(", {lo} to {hi}"));
+                }
+                if !p.choices.is_empty() {
+                    line.push_str(&format!(", one of {}", p.choices.join(" | ")));
+                }
+                println!("{line})\n        {}", p.doc);
+            }
+            println!();
+        }
+        docs.push(serde_json::json!({ "kind": info.kind, "summary": info.summary, "inputs": port_list(&ports.inputs), "outputs": port_list(&ports.outputs), "params": params }));
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&docs)?);
+    }
+    Ok(0)
+}
+
+pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
+    let pipeline = Pipeline::load(&a.pipeline, &Registry::builtin())?;
+    let chain: Vec<String> = pipeline
+        .stages
+        .iter()
+        .map(|s| {
+            if s.name == s.kind {
+                s.name.clone()
+            } else {
+                format!("{} ({})", s.name, s.kind)
+            }
+        })
+        .collect();
+    println!(
+        "{}: ok, {} stages: {}",
+        a.pipeline.display(),
+        pipeline.stages.len(),
+        chain.join(" -> ")
+    );
+    for fb in &pipeline.feedback {
+        println!(
+            "  feedback: `{}` from stage `{}` reaches stage `{}` one frame later",
+            fb.product, pipeline.stages[fb.producer].name, pipeline.stages[fb.consumer].name
+        );
+    }
+    Ok(0)
+}

@@ -1,0 +1,141 @@
+//! `relume inspect`: what a recording holds.
+
+use clap::Args;
+use relume::recording::{Replay, ReplayOptions, StreamKind};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct InspectArgs {
+    /// The recording (.relume).
+    recording: PathBuf,
+    /// Print JSON (keys include frames, frames_with_pose, streams, association).
+    #[arg(long)]
+    json: bool,
+    /// Read every record and check its checksum and encoding.
+    #[arg(long)]
+    verify: bool,
+}
+
+pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
+    let replay = Replay::open(
+        &a.recording,
+        ReplayOptions {
+            skip_corrupt: true,
+            ..Default::default()
+        },
+    )?;
+    let rec = &replay.recording;
+    let h = rec.header();
+    let index = rec.index();
+    let streams: Vec<serde_json::Value> = StreamKind::ALL
+        .iter()
+        .filter_map(|&kind| {
+            let stamps: Vec<i64> = index.iter().filter(|e| e.kind == kind).map(|e| e.stamp_ns).collect();
+            let (first, last) = (stamps.iter().min()?, stamps.iter().max()?);
+            let span_s = (last - first) as f64 * 1e-9;
+            let rate = if span_s > 0.0 { (stamps.len() - 1) as f64 / span_s } else { 0.0 };
+            let bytes: u64 = index.iter().filter(|e| e.kind == kind).map(|e| e.len as u64).sum();
+            Some(serde_json::json!({ "stream": kind.name(), "records": stamps.len(), "first_ns": first, "last_ns": last, "rate_hz": rate, "bytes": bytes }))
+        })
+        .collect();
+    let corrupt: Vec<String> = if a.verify {
+        (0..index.len())
+            .filter_map(|i| rec.read_record(i).err().map(|e| e.to_string()))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let s = &replay.stats;
+    let doc = serde_json::json!({
+        "path": rec.path().display().to_string(),
+        "format_version": rec.version().to_string(),
+        "bytes": rec.file_len(),
+        "name": h.name,
+        "provenance": { "tool": h.provenance.tool, "tool_version": h.provenance.tool_version, "source": h.provenance.source, "settings": h.provenance.settings },
+        "color_intrinsics": h.color_intrinsics,
+        "depth_intrinsics": h.depth_intrinsics,
+        "depth_unit_m": h.depth_unit_m,
+        "streams": streams,
+        "frames": s.frames,
+        "frames_with_pose": s.frames_with_pose,
+        "frames_with_truth": s.frames_with_truth,
+        "duration_s": replay.duration_s(),
+        "association": s,
+        "ground_truth": h.ground_truth,
+        "attachments": h.attachments.iter().map(|a| serde_json::json!({ "name": a.name, "kind": a.kind, "width": a.image.width, "height": a.image.height, "channels": a.image.channels })).collect::<Vec<_>>(),
+        "damage": rec.damage().map(|d| d.to_string()),
+        "verified": a.verify,
+        "corrupt_records": corrupt,
+    });
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else {
+        println!(
+            "{} ({}, format {}, {:.1} MB)",
+            rec.path().display(),
+            h.name,
+            rec.version(),
+            rec.file_len() as f64 / 1e6
+        );
+        println!(
+            "  made by   {} {} from {}",
+            h.provenance.tool, h.provenance.tool_version, h.provenance.source
+        );
+        let k = &h.color_intrinsics;
+        println!(
+            "  color     {}x{}  fx {:.2} fy {:.2} cx {:.2} cy {:.2}",
+            k.width, k.height, k.fx, k.fy, k.cx, k.cy
+        );
+        let k = &h.depth_intrinsics;
+        println!(
+            "  depth     {}x{}  fx {:.2} fy {:.2} cx {:.2} cy {:.2}  unit {} m",
+            k.width, k.height, k.fx, k.fy, k.cx, k.cy, h.depth_unit_m
+        );
+        for st in &streams {
+            println!(
+                "  stream    {:<6} {:>6} records  {:>7.2} Hz  {:>9.1} MB",
+                st["stream"].as_str().unwrap_or(""),
+                st["records"],
+                st["rate_hz"].as_f64().unwrap_or(0.0),
+                st["bytes"].as_u64().unwrap_or(0) as f64 / 1e6
+            );
+        }
+        println!(
+            "  frames    {} associated over {:.2} s: {} with pose, {} with ground truth",
+            s.frames,
+            replay.duration_s(),
+            s.frames_with_pose,
+            s.frames_with_truth
+        );
+        println!(
+            "  skipped   {} color records without depth within 20 ms, {} corrupt pose records",
+            s.skipped_no_depth, s.skipped_corrupt_poses
+        );
+        if let Some(gt) = &h.ground_truth {
+            println!(
+                "  truth     {} (object at {:?})",
+                gt.description, gt.object_position
+            );
+        }
+        for att in &h.attachments {
+            println!(
+                "  attached  {} ({}, {}x{})",
+                att.name, att.kind, att.image.width, att.image.height
+            );
+        }
+        if let Some(d) = rec.damage() {
+            println!("  DAMAGED   {d}");
+        }
+        if a.verify {
+            println!(
+                "  verified  {} records, {} corrupt",
+                index.len(),
+                corrupt.len()
+            );
+            for c in &corrupt {
+                println!("    {c}");
+            }
+        }
+    }
+    Ok(if corrupt.is_empty() { 0 } else { 1 })
+}

@@ -1,0 +1,185 @@
+//! `relume synth` and `relume import`: commands that produce recordings.
+
+use super::progress;
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, tum};
+use relume::recording::synth::{self, SynthConfig};
+use relume::recording::{Intrinsics, Recording};
+use std::path::{Path, PathBuf};
+
+#[derive(Args, Debug)]
+pub struct SynthArgs {
+    /// Output recording (.relume).
+    #[arg(short, long)]
+    out: PathBuf,
+    /// Number of frames.
+    #[arg(long, default_value_t = SynthConfig::default().frames)]
+    frames: usize,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "640x480", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Seed of every random choice (noise, holes, shading samples).
+    #[arg(long, default_value_t = SynthConfig::default().seed)]
+    seed: u64,
+    /// Frames per second of the stamps.
+    #[arg(long, default_value_t = SynthConfig::default().fps)]
+    fps: f64,
+    /// Amplitude of the camera's contrast change between frames (0 = none).
+    #[arg(long, default_value_t = SynthConfig::default().contrast)]
+    contrast: f32,
+    /// Store clean depth instead of Kinect-like noisy depth with holes.
+    #[arg(long)]
+    no_depth_noise: bool,
+}
+
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WIDTHxHEIGHT, e.g. 320x240, got {text:?}"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().ok().filter(|&v| v > 0);
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!(
+            "expected WIDTHxHEIGHT with positive integers, e.g. 320x240, got {text:?}"
+        )),
+    }
+}
+
+pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
+    let config = SynthConfig {
+        frames: a.frames,
+        width: a.size.0,
+        height: a.size.1,
+        seed: a.seed,
+        fps: a.fps,
+        contrast: a.contrast,
+        depth_noise: !a.no_depth_noise,
+        ..SynthConfig::default()
+    };
+    let start = std::time::Instant::now();
+    let summary = synth::generate(&config, &a.out)?;
+    println!(
+        "wrote {} ({} frames, {}x{}, {:.1} MB) in {:.2} s",
+        summary.path.display(),
+        summary.frames,
+        config.width,
+        config.height,
+        summary.bytes as f64 / 1e6,
+        start.elapsed().as_secs_f64()
+    );
+    Ok(0)
+}
+
+/// Makes sure the built-in default recording exists and matches the current generator;
+/// (re)generates it otherwise.
+pub fn ensure_default_recording(path: &Path) -> anyhow::Result<()> {
+    let config = SynthConfig::default();
+    if let Ok(rec) = Recording::open(path)
+        && rec.damage().is_none()
+        && rec.header().provenance == synth::provenance(&config)
+    {
+        return Ok(());
+    }
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    eprintln!(
+        "generating the built-in synthetic recording into {} (first use; {} frames at {}x{}) ...",
+        path.display(),
+        config.frames,
+        config.width,
+        config.height
+    );
+    synth::generate(&config, path)?;
+    Ok(())
+}
+
+#[derive(Subcommand, Debug)]
+pub enum ImportCommand {
+    /// TUM RGB-D layout: rgb.txt, depth.txt (PNG16, 5000 per metre), groundtruth.txt.
+    Tum {
+        /// The dataset directory.
+        dir: PathBuf,
+        #[command(flatten)]
+        common: CommonImportArgs,
+    },
+    /// Redwood / Open3D layout: color/ or image/, depth/ (PNG16, mm), a .log trajectory.
+    Redwood {
+        /// The dataset directory.
+        dir: PathBuf,
+        /// Frames per second (the layout has no stamps: frame k is at k / fps).
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        /// The trajectory file (default: the directory's .log file).
+        #[arg(long)]
+        trajectory: Option<PathBuf>,
+        #[command(flatten)]
+        common: CommonImportArgs,
+    },
+}
+
+#[derive(Args, Debug)]
+pub struct CommonImportArgs {
+    /// Output recording (.relume).
+    #[arg(short, long)]
+    out: PathBuf,
+    /// Camera intrinsics: fx,fy,cx,cy (for 640x480) or a preset: primesense, tum-fr1, tum-fr2, tum-fr3.
+    #[arg(long, default_value = "primesense", value_parser = importers::parse_intrinsics)]
+    intrinsics: Intrinsics,
+    /// Keep images compressed as found (decoded on replay) or store raw pixels.
+    #[arg(long, value_enum, default_value_t = StoreMode::Compressed)]
+    store: StoreMode,
+}
+
+impl CommonImportArgs {
+    fn options(&self) -> ImportOptions {
+        ImportOptions {
+            intrinsics: self.intrinsics,
+            store: self.store,
+        }
+    }
+}
+
+pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
+    let start = std::time::Instant::now();
+    let bar = progress::bar(0, "importing");
+    let mut tick = |done: usize, total: usize| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
+    let (out, summary) = match &command {
+        ImportCommand::Tum { dir, common } => (
+            &common.out,
+            tum::import(dir, &common.out, &common.options(), &mut tick)?,
+        ),
+        ImportCommand::Redwood {
+            dir,
+            fps,
+            trajectory,
+            common,
+        } => {
+            let options = redwood::RedwoodOptions {
+                common: common.options(),
+                fps: *fps,
+                trajectory: trajectory.clone(),
+            };
+            (
+                &common.out,
+                redwood::import(dir, &common.out, &options, &mut tick)?,
+            )
+        }
+    };
+    bar.finish_and_clear();
+    let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
+    println!(
+        "wrote {} ({} color, {} depth, {} poses, {:.1} MB) in {:.2} s",
+        out.display(),
+        summary.color,
+        summary.depth,
+        summary.poses,
+        bytes as f64 / 1e6,
+        start.elapsed().as_secs_f64()
+    );
+    Ok(0)
+}

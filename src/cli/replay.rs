@@ -1,0 +1,345 @@
+//! `relume replay` and `relume bench`.
+
+use super::{default_recording_path, produce, progress};
+use anyhow::{Context, bail};
+use clap::Args;
+use relume::graph::{Frame, Pipeline, Registry, RunFailure, RunOptions, RunReport, Stats, run};
+use relume::recording::{Replay, ReplayOptions};
+use std::io::Write;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// What replay and bench share: which recording, which pipeline, which frames.
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// The recording (.relume). Default: the built-in synthetic recording, generated into
+    /// recordings/default.relume on first use.
+    recording: Option<PathBuf>,
+    /// Pipeline file (TOML). Default: the built-in pipelines/default.toml.
+    #[arg(short, long)]
+    pipeline: Option<PathBuf>,
+    /// Frames to replay: A..B (B excluded), A.., ..B or a single index N.
+    #[arg(long, value_parser = parse_frames)]
+    frames: Option<Range<usize>>,
+    /// Skip (and count) frames with corrupt records instead of stopping with an error.
+    #[arg(long)]
+    skip_corrupt: bool,
+    /// Seed for stages that draw random numbers.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+#[derive(Args, Debug)]
+pub struct ReplayArgs {
+    #[command(flatten)]
+    run: RunArgs,
+    /// Directory that `write` stages save into.
+    #[arg(short, long, default_value = "out")]
+    out: PathBuf,
+    /// Write per-frame timings of every stage (.csv, or .json).
+    #[arg(long, value_name = "FILE")]
+    timings: Option<PathBuf>,
+    /// Write a Chrome trace (open it in Perfetto or chrome://tracing).
+    #[arg(long, value_name = "FILE.json")]
+    trace: Option<PathBuf>,
+    /// Print one line per frame with a digest of every product (the timing table then
+    /// goes to stderr), to compare runs frame by frame.
+    #[arg(long)]
+    hash: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[command(flatten)]
+    run: RunArgs,
+    /// Measured runs (after one warm-up run).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
+    repeat: u32,
+    /// Print JSON: stages.<name>.{median_ms, p95_ms, max_ms}, fps.
+    #[arg(long)]
+    json: bool,
+}
+
+fn parse_frames(text: &str) -> Result<Range<usize>, String> {
+    let num = |s: &str, default: usize| {
+        if s.is_empty() {
+            Ok(default)
+        } else {
+            s.parse::<usize>()
+                .map_err(|_| format!("invalid frame range {text:?}: expected A..B, A.., ..B or N"))
+        }
+    };
+    let range = match text.split_once("..") {
+        Some((a, b)) => num(a, 0)?..num(b, usize::MAX)?,
+        None => {
+            let n = num(text, 0)?;
+            n..n + 1
+        }
+    };
+    if range.start >= range.end {
+        return Err(format!("frame range {text:?} is empty"));
+    }
+    Ok(range)
+}
+
+/// A recording and pipeline loaded and checked, ready to run.
+struct Loaded {
+    replay: Replay,
+    pipeline: Pipeline,
+    registry: Registry,
+    frames: Range<usize>,
+}
+
+fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
+    let registry = Registry::builtin();
+    let pipeline = match &args.pipeline {
+        Some(p) => Pipeline::load(p, &registry)?,
+        None => Pipeline::builtin_default(&registry)?,
+    };
+    let path = match &args.recording {
+        Some(p) => p.clone(),
+        None => {
+            let p = default_recording_path();
+            produce::ensure_default_recording(&p)?;
+            p
+        }
+    };
+    let replay = Replay::open(
+        &path,
+        ReplayOptions {
+            skip_corrupt: args.skip_corrupt,
+            ..Default::default()
+        },
+    )?;
+    if let Some(damage) = replay.recording.damage() {
+        eprintln!(
+            "warning: {damage}; replaying the {} complete frames before it",
+            replay.len()
+        );
+    }
+    if replay.is_empty() {
+        bail!(
+            "{}: no frames to replay ({} color records, {} skipped without depth)",
+            path.display(),
+            replay.stats.color_records,
+            replay.stats.skipped_no_depth
+        );
+    }
+    let frames = args.frames.clone().unwrap_or(0..usize::MAX);
+    if frames.start >= replay.len() {
+        bail!(
+            "--frames starts at {} but {} has {} frames",
+            frames.start,
+            path.display(),
+            replay.len()
+        );
+    }
+    let frames = frames.start..frames.end.min(replay.len());
+    Ok(Loaded {
+        replay,
+        pipeline,
+        registry,
+        frames,
+    })
+}
+
+impl Loaded {
+    fn run_once(
+        &self,
+        out_dir: &Path,
+        seed: u64,
+        skip_corrupt: bool,
+        stop: &Arc<AtomicBool>,
+        sink: &mut dyn FnMut(Frame),
+    ) -> Result<RunReport, Box<RunFailure>> {
+        let stages = match self.pipeline.build(
+            &self.registry,
+            self.replay.recording.header(),
+            out_dir,
+            seed,
+        ) {
+            Ok(s) => s,
+            Err((stage, source)) => {
+                return Err(Box::new(RunFailure {
+                    error: relume::graph::PipelineError::Build { stage, source },
+                    report: RunReport::default(),
+                }));
+            }
+        };
+        let options = RunOptions {
+            frames: self.frames.clone(),
+            skip_corrupt,
+            stop: stop.clone(),
+        };
+        run(&self.pipeline, stages, &self.replay, &options, sink)
+    }
+}
+
+/// Sets `stop` on the first Ctrl-C; exits on the second.
+fn stop_on_ctrl_c() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let _ = ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        eprintln!("\nstopping after the frames in flight (Ctrl-C again to abort) ...");
+    });
+    stop
+}
+
+pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
+    let loaded = load(&a.run)?;
+    let stop = stop_on_ctrl_c();
+    let bar = progress::bar(loaded.frames.len() as u64, "replaying");
+    let stdout = std::io::stdout();
+    let mut hash_error = None;
+    let mut sink = |frame: Frame| {
+        bar.inc(1);
+        if a.hash {
+            let mut line = format!("{:06} {}", frame.index, frame.stamp_ns);
+            for (name, product) in frame.products() {
+                line.push_str(&format!(" {name}={:016x}", product.digest()));
+            }
+            if let Err(e) = writeln!(stdout.lock(), "{line}") {
+                hash_error.get_or_insert(e);
+            }
+        }
+    };
+    let result = loaded.run_once(&a.out, a.run.seed, a.run.skip_corrupt, &stop, &mut sink);
+    bar.finish_and_clear();
+    let (report, failure) = match result {
+        Ok(r) => (r, None),
+        Err(f) => (f.report, Some(f.error)),
+    };
+    let table = format!(
+        "{} on {} ({}):\n{}",
+        loaded.pipeline.name,
+        loaded.replay.recording.path().display(),
+        loaded.pipeline.file,
+        report.table()
+    );
+    if a.hash {
+        eprint!("{table}")
+    } else {
+        print!("{table}")
+    }
+    for (frame, cause) in &report.skipped_corrupt {
+        eprintln!("skipped corrupt frame {frame}: {cause}");
+    }
+    if !report.skipped_corrupt.is_empty() {
+        eprintln!("{} corrupt frame(s) skipped", report.skipped_corrupt.len());
+    }
+    if let Some(path) = &a.timings {
+        report
+            .write_timings(path)
+            .with_context(|| format!("cannot write timings to {}", path.display()))?;
+    }
+    if let Some(path) = &a.trace {
+        report
+            .write_trace(path)
+            .with_context(|| format!("cannot write the trace to {}", path.display()))?;
+    }
+    if let Some(e) = hash_error {
+        bail!("cannot write hash lines: {e}");
+    }
+    if let Some(error) = failure {
+        return Err(anyhow::Error::new(error).context(format!(
+            "replay of {} stopped",
+            loaded.replay.recording.path().display()
+        )));
+    }
+    if report.interrupted {
+        eprintln!("interrupted: {} frames complete", report.frames_out);
+        return Ok(130);
+    }
+    Ok(0)
+}
+
+pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
+    let loaded = load(&a.run)?;
+    let stop = stop_on_ctrl_c();
+    let scratch = std::env::temp_dir().join(format!("relume-bench-{}", std::process::id()));
+    let result = (|| -> anyhow::Result<Vec<RunReport>> {
+        let mut reports = Vec::new();
+        let bar = progress::bar(a.repeat as u64 + 1, "bench");
+        for i in 0..=a.repeat {
+            let report = loaded
+                .run_once(&scratch, a.run.seed, a.run.skip_corrupt, &stop, &mut |_| {})
+                .map_err(|f| anyhow::Error::new(f.error))?;
+            if i > 0 {
+                reports.push(report); // run 0 warms caches and page-ins
+            }
+            bar.inc(1);
+            if stop.load(Ordering::Relaxed) {
+                break;
+            }
+        }
+        bar.finish_and_clear();
+        Ok(reports)
+    })();
+    let _ = std::fs::remove_dir_all(&scratch);
+    let reports = result?;
+    if reports.is_empty() {
+        bail!("interrupted before a measured run");
+    }
+    let names: Vec<(String, String)> = reports[0]
+        .stages
+        .iter()
+        .map(|s| (s.name.clone(), s.kind.clone()))
+        .collect();
+    let per_stage: Vec<Stats> = (0..names.len())
+        .map(|i| {
+            Stats::of(
+                reports
+                    .iter()
+                    .flat_map(|r| r.stages[i].frames.iter().map(|f| f.process_ns)),
+            )
+        })
+        .collect();
+    let mut fps: Vec<f64> = reports.iter().map(|r| r.fps()).collect();
+    fps.sort_by(f64::total_cmp);
+    let median_fps = fps[fps.len() / 2];
+    let frames = reports[0].frames_out;
+    if a.json {
+        let stages: serde_json::Map<String, serde_json::Value> = names.iter().zip(&per_stage).map(|((n, k), s)| (n.clone(), serde_json::json!({ "kind": k, "median_ms": s.median_ms, "p95_ms": s.p95_ms, "max_ms": s.max_ms }))).collect();
+        let doc = serde_json::json!({ "pipeline": loaded.pipeline.name, "recording": loaded.replay.recording.path().display().to_string(), "frames": frames, "repeat": reports.len(), "stages": stages, "fps": median_fps });
+        println!("{}", serde_json::to_string_pretty(&doc)?);
+    } else {
+        let width = names
+            .iter()
+            .map(|(n, k)| n.len().max(k.len()))
+            .max()
+            .unwrap_or(5)
+            .max(5);
+        println!(
+            "{} on {}: {} frames x {} runs (after 1 warm-up)",
+            loaded.pipeline.name,
+            loaded.replay.recording.path().display(),
+            frames,
+            reports.len()
+        );
+        println!(
+            "{:<width$}  {:<width$}  {:>9}  {:>9}  {:>9}  {:>10}",
+            "stage", "kind", "median ms", "p95 ms", "max ms", "frames/s"
+        );
+        for ((n, k), s) in names.iter().zip(&per_stage) {
+            let rate = if s.median_ms > 0.0 {
+                1e3 / s.median_ms
+            } else {
+                f64::INFINITY
+            };
+            println!(
+                "{n:<width$}  {k:<width$}  {:>9.3}  {:>9.3}  {:>9.3}  {:>10.1}",
+                s.median_ms, s.p95_ms, s.max_ms, rate
+            );
+        }
+        println!(
+            "end to end: {median_fps:.1} frames/s (median of {} runs)",
+            reports.len()
+        );
+    }
+    Ok(0)
+}

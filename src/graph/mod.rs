@@ -1,0 +1,19 @@
+//! Pipelines: config files, the registry of stage kinds, the threaded runtime and timing.
+
+pub mod config;
+pub mod frame;
+pub mod params;
+pub mod pipeline;
+pub mod registry;
+pub mod runtime;
+pub mod stage;
+pub mod timing;
+
+pub use config::{ConfigError, SourceFile};
+pub use frame::{Frame, Product, ProductKind};
+pub use params::{ParamDefault, ParamSpec, ParamValue, Params};
+pub use pipeline::{Feedback, Pipeline, ResolvedStage};
+pub use registry::Registry;
+pub use runtime::{FrameSource, PipelineError, RunFailure, RunOptions, run};
+pub use stage::{BuildContext, Port, Ports, Stage, StageError, StageInfo};
+pub use timing::{FrameTiming, RunReport, StageTimings, Stats};

@@ -1,0 +1,492 @@
+//! A pipeline config checked against the registry: kinds exist, parameters have the
+//! declared types and bounds, every input is produced upstream (or, with `@prev`,
+//! anywhere, as a feedback edge delivering the previous frame's value), and kinds match.
+
+use super::config::{self, ConfigError, Located, PipelineDecl, RawValue, SourceFile, StageDecl};
+use super::frame::ProductKind;
+use super::params::{ParamDefault, ParamSpec, ParamValue, Params, did_you_mean};
+use super::registry::Registry;
+use super::stage::{BuildContext, Stage, StageError};
+use crate::recording::Header;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The product the source puts into every frame: the frame's encoded records.
+pub const SOURCE_PRODUCT: &str = "record";
+/// Suffix of an input that reads the previous frame's value of a product.
+pub const PREVIOUS_SUFFIX: &str = "@prev";
+/// Frames buffered between two stages when the config does not say.
+pub const DEFAULT_CHANNEL_CAPACITY: usize = 2;
+
+/// The built-in default pipeline (`pipelines/default.toml`, compiled in).
+pub const DEFAULT_PIPELINE_TOML: &str = include_str!("../../pipelines/default.toml");
+
+/// A checked stage of a pipeline.
+#[derive(Clone, Debug)]
+pub struct ResolvedStage {
+    pub name: String,
+    pub kind: &'static str,
+    pub params: Params,
+    /// Role -> product (with `@prev` for previous-frame inputs).
+    pub inputs: BTreeMap<String, String>,
+    /// Role -> product.
+    pub outputs: BTreeMap<String, String>,
+    /// Line of the stage in its file.
+    pub line: usize,
+}
+
+/// A feedback edge: `producer`'s `product` of frame t-1 goes to `consumer` at frame t.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Feedback {
+    pub producer: usize,
+    pub consumer: usize,
+    pub product: String,
+}
+
+/// A pipeline ready to build and run.
+#[derive(Clone, Debug)]
+pub struct Pipeline {
+    pub name: String,
+    pub description: String,
+    /// Where it was loaded from.
+    pub file: String,
+    pub channel_capacity: usize,
+    pub stages: Vec<ResolvedStage>,
+    pub feedback: Vec<Feedback>,
+}
+
+impl Pipeline {
+    /// Loads and checks the pipeline file at `path`.
+    pub fn load(path: &Path, registry: &Registry) -> Result<Pipeline, ConfigError> {
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            ConfigError::whole_file(&name, format!("cannot read the pipeline: {e}"))
+        })?;
+        Pipeline::parse(&SourceFile { name, text }, registry)
+    }
+
+    /// The built-in default pipeline.
+    pub fn builtin_default(registry: &Registry) -> Result<Pipeline, ConfigError> {
+        let src = SourceFile {
+            name: "<built-in pipelines/default.toml>".into(),
+            text: DEFAULT_PIPELINE_TOML.into(),
+        };
+        Pipeline::parse(&src, registry)
+    }
+
+    /// Parses and checks a pipeline from text.
+    pub fn parse(src: &SourceFile, registry: &Registry) -> Result<Pipeline, ConfigError> {
+        let decl = config::parse(src)?;
+        Pipeline::resolve(&decl, src, registry)
+    }
+
+    /// Checks a parsed pipeline against the registry.
+    pub fn resolve(
+        decl: &PipelineDecl,
+        src: &SourceFile,
+        registry: &Registry,
+    ) -> Result<Pipeline, ConfigError> {
+        let channel_capacity = match &decl.channel_capacity {
+            None => DEFAULT_CHANNEL_CAPACITY,
+            Some(c) if (1..=1024).contains(&c.value) => c.value as usize,
+            Some(c) => {
+                return Err(src.error(
+                    c.span.clone(),
+                    format!(
+                        "channel_capacity must be between 1 and 1024, got {}",
+                        c.value
+                    ),
+                    None,
+                ));
+            }
+        };
+        // Pass 1: kinds, names, parameters, ports.
+        let mut stages = Vec::new();
+        let mut port_sets = Vec::new();
+        for d in &decl.stages {
+            let info = registry.get(&d.kind.value).ok_or_else(|| {
+                let hint =
+                    match did_you_mean(&d.kind.value, registry.kinds().iter().map(|k| k.kind)) {
+                        Some(s) => format!("did you mean `{s}`? `relume stages` lists every kind"),
+                        None => "`relume stages` lists every kind".to_string(),
+                    };
+                src.error(
+                    d.kind.span.clone(),
+                    format!("unknown stage kind `{}`", d.kind.value),
+                    Some(hint),
+                )
+            })?;
+            let name = d
+                .name
+                .as_ref()
+                .map_or(info.kind.to_string(), |n| n.value.clone());
+            if let Some(prev) = stages.iter().find(|s: &&ResolvedStage| s.name == name) {
+                let span = d
+                    .name
+                    .as_ref()
+                    .map_or(d.kind.span.clone(), |n| n.span.clone());
+                return Err(src.error(
+                    span,
+                    format!(
+                        "a second stage named `{name}` (the first is on line {})",
+                        prev.line
+                    ),
+                    Some("give each stage a unique `name`".into()),
+                ));
+            }
+            let params = check_params(src, d, info.params, &name)?;
+            let ports = (info.ports)(&params);
+            let inputs = bind_ports(src, &d.inputs, &ports.inputs, &name, "input")?;
+            let outputs = bind_ports(src, &d.outputs, &ports.outputs, &name, "output")?;
+            stages.push(ResolvedStage {
+                name,
+                kind: info.kind,
+                params,
+                inputs,
+                outputs,
+                line: src.line_col(d.span.start).0,
+            });
+            port_sets.push(ports);
+        }
+        // Pass 2: every product is produced once, and inputs are produced upstream or
+        // (with @prev) anywhere in the pipeline.
+        let mut producers: BTreeMap<String, (usize, ProductKind)> = BTreeMap::new();
+        let mut available: Vec<BTreeMap<String, (usize, ProductKind)>> = Vec::new();
+        producers.insert(SOURCE_PRODUCT.into(), (usize::MAX, ProductKind::Record));
+        for (i, (stage, ports)) in stages.iter().zip(&port_sets).enumerate() {
+            available.push(producers.clone());
+            for port in &ports.outputs {
+                let product = &stage.outputs[&port.role];
+                if let Some(&(p, _)) = producers.get(product) {
+                    let by = if p == usize::MAX {
+                        "the source".to_string()
+                    } else {
+                        format!("stage `{}`", stages[p].name)
+                    };
+                    let span = located_span(&decl.stages[i].outputs, &port.role)
+                        .unwrap_or(decl.stages[i].kind.span.clone());
+                    return Err(src.error(
+                        span,
+                        format!(
+                            "stage `{}` writes product `{product}`, which {by} already produces",
+                            stage.name
+                        ),
+                        Some(format!(
+                            "rename it: outputs = {{ {} = \"another_name\" }}",
+                            port.role
+                        )),
+                    ));
+                }
+                producers.insert(product.clone(), (i, port.kinds[0]));
+            }
+        }
+        let mut feedback = Vec::new();
+        for (i, (stage, ports)) in stages.iter().zip(&port_sets).enumerate() {
+            let d = &decl.stages[i];
+            for port in &ports.inputs {
+                let bound = &stage.inputs[&port.role];
+                let span = located_span(&d.inputs, &port.role).unwrap_or(d.kind.span.clone());
+                let (product, previous) = match bound.strip_suffix(PREVIOUS_SUFFIX) {
+                    Some(p) => (p, true),
+                    None => (bound.as_str(), false),
+                };
+                let found = if previous {
+                    producers.get(product)
+                } else {
+                    available[i].get(product)
+                };
+                let Some(&(producer, kind)) = found else {
+                    return Err(missing_product(
+                        src,
+                        span,
+                        &stages,
+                        &available[i],
+                        &producers,
+                        stage,
+                        &port.role,
+                        product,
+                        previous,
+                    ));
+                };
+                if !port.kinds.contains(&kind) {
+                    let expected: Vec<&str> = port.kinds.iter().map(|k| k.name()).collect();
+                    return Err(src.error(span, format!("stage `{}` reads `{product}` as its `{}` input, but `{product}` is a {}; it needs a {}", stage.name, port.role, kind.name(), expected.join(" or ")), None));
+                }
+                if previous {
+                    if producer == usize::MAX {
+                        return Err(src.error(span, format!("`{product}` comes from the source and has no previous-frame value to feed back"), None));
+                    }
+                    feedback.push(Feedback {
+                        producer,
+                        consumer: i,
+                        product: product.to_string(),
+                    });
+                }
+            }
+        }
+        Ok(Pipeline {
+            name: decl.name.clone().unwrap_or_else(|| src.name.clone()),
+            description: decl.description.clone().unwrap_or_default(),
+            file: src.name.clone(),
+            channel_capacity,
+            stages,
+            feedback,
+        })
+    }
+
+    /// Builds every stage for a run over a recording with `header`.
+    pub fn build(
+        &self,
+        registry: &Registry,
+        header: &Header,
+        out_dir: &Path,
+        seed: u64,
+    ) -> Result<Vec<Box<dyn Stage>>, (String, StageError)> {
+        self.stages
+            .iter()
+            .map(|s| {
+                let info = registry.get(s.kind).ok_or_else(|| {
+                    (
+                        s.name.clone(),
+                        StageError::Failed(format!("stage kind `{}` is not registered", s.kind)),
+                    )
+                })?;
+                let ctx = BuildContext {
+                    stage_name: &s.name,
+                    params: &s.params,
+                    inputs: &s.inputs,
+                    outputs: &s.outputs,
+                    header,
+                    out_dir,
+                    seed,
+                };
+                (info.build)(&ctx).map_err(|e| (s.name.clone(), e))
+            })
+            .collect()
+    }
+}
+
+fn located_span(
+    pairs: &[(Located<String>, Located<String>)],
+    role: &str,
+) -> Option<std::ops::Range<usize>> {
+    pairs
+        .iter()
+        .find(|(k, _)| k.value == role)
+        .map(|(_, v)| v.span.clone())
+}
+
+#[allow(clippy::too_many_arguments)]
+fn missing_product(
+    src: &SourceFile,
+    span: std::ops::Range<usize>,
+    stages: &[ResolvedStage],
+    upstream: &BTreeMap<String, (usize, ProductKind)>,
+    all: &BTreeMap<String, (usize, ProductKind)>,
+    stage: &ResolvedStage,
+    role: &str,
+    product: &str,
+    previous: bool,
+) -> ConfigError {
+    let hint = match all.get(product) {
+        Some(&(p, _)) if !previous => format!(
+            "`{product}` is produced later, by stage `{}`: move that stage up, or read `{product}{PREVIOUS_SUFFIX}` for its previous-frame value",
+            stages[p].name
+        ),
+        _ => {
+            let names: Vec<&str> = upstream.keys().map(|s| s.as_str()).collect();
+            match did_you_mean(product, names.iter().copied()) {
+                Some(s) => format!(
+                    "did you mean `{s}`? products available here: {}",
+                    names.join(", ")
+                ),
+                None => format!("products available here: {}", names.join(", ")),
+            }
+        }
+    };
+    let where_ = if previous {
+        "any stage"
+    } else {
+        "an upstream stage"
+    };
+    src.error(
+        span,
+        format!(
+            "stage `{}` reads `{product}` as its `{role}` input, but no {where_} produces it",
+            stage.name
+        ),
+        Some(hint),
+    )
+}
+
+/// Binds a stage's declared ports to product names from the config's role table.
+fn bind_ports(
+    src: &SourceFile,
+    given: &[(Located<String>, Located<String>)],
+    ports: &[super::stage::Port],
+    stage: &str,
+    what: &str,
+) -> Result<BTreeMap<String, String>, ConfigError> {
+    for (role, product) in given {
+        if !ports.iter().any(|p| p.role == role.value) {
+            let roles: Vec<&str> = ports.iter().map(|p| p.role.as_str()).collect();
+            let hint = match did_you_mean(&role.value, roles.iter().copied()) {
+                Some(s) => format!(
+                    "did you mean `{s}`? {what}s of this stage: {}",
+                    roles.join(", ")
+                ),
+                None if roles.is_empty() => format!("this stage has no {what}s"),
+                None => format!("{what}s of this stage: {}", roles.join(", ")),
+            };
+            return Err(src.error(
+                role.span.clone(),
+                format!("stage `{stage}` has no {what} `{}`", role.value),
+                Some(hint),
+            ));
+        }
+        if product.value.trim().is_empty() || (what == "output" && product.value.contains('@')) {
+            return Err(src.error(
+                product.span.clone(),
+                format!("invalid product name {:?}", product.value),
+                Some("product names are non-empty and contain no `@`".into()),
+            ));
+        }
+    }
+    Ok(ports
+        .iter()
+        .map(|p| {
+            let bound = given
+                .iter()
+                .find(|(r, _)| r.value == p.role)
+                .map_or(p.default_product.clone(), |(_, v)| v.value.clone());
+            (p.role.clone(), bound)
+        })
+        .collect())
+}
+
+/// Checks a stage's parameters against its declaration and fills in defaults.
+fn check_params(
+    src: &SourceFile,
+    d: &StageDecl,
+    specs: &[ParamSpec],
+    stage: &str,
+) -> Result<Params, ConfigError> {
+    let mut params = Params::defaults(specs);
+    for (key, value) in &d.params {
+        let Some(spec) = specs.iter().find(|s| s.name == key.value) else {
+            let names: Vec<&str> = specs.iter().map(|s| s.name).collect();
+            let hint = match did_you_mean(&key.value, names.iter().copied()) {
+                Some(s) => format!(
+                    "did you mean `{s}`? parameters of {}: {}",
+                    d.kind.value,
+                    names.join(", ")
+                ),
+                None if names.is_empty() => format!("{} takes no parameters", d.kind.value),
+                None => format!("parameters of {}: {}", d.kind.value, names.join(", ")),
+            };
+            return Err(src.error(
+                key.span.clone(),
+                format!(
+                    "unknown parameter `{}` for stage `{stage}` ({})",
+                    key.value, d.kind.value
+                ),
+                Some(hint),
+            ));
+        };
+        params.set(spec.name, check_value(src, spec, value)?);
+    }
+    Ok(params)
+}
+
+fn check_value(
+    src: &SourceFile,
+    spec: &ParamSpec,
+    value: &Located<RawValue>,
+) -> Result<ParamValue, ConfigError> {
+    let wrong_type = || {
+        src.error(
+            value.span.clone(),
+            format!(
+                "parameter `{}` must be a {}, found a {}",
+                spec.name,
+                spec.type_name(),
+                value.value.type_name()
+            ),
+            Some(format!("{}; default {}", spec.doc, spec.default_value())),
+        )
+    };
+    let in_range = |x: f64| -> Result<(), ConfigError> {
+        let low = spec.min.is_some_and(|m| x < m);
+        let high = spec.max.is_some_and(|m| x > m);
+        if low || high || !x.is_finite() {
+            let bounds = format!(
+                "{} to {}",
+                spec.min.map_or("-inf".into(), |m| m.to_string()),
+                spec.max.map_or("inf".into(), |m| m.to_string())
+            );
+            return Err(src.error(
+                value.span.clone(),
+                format!("parameter `{}` = {x} is out of range ({bounds})", spec.name),
+                Some(spec.doc.to_string()),
+            ));
+        }
+        Ok(())
+    };
+    let choice = |s: &str, span: &std::ops::Range<usize>| -> Result<(), ConfigError> {
+        if spec.choices.is_empty() || spec.choices.contains(&s) {
+            return Ok(());
+        }
+        let hint = match did_you_mean(s, spec.choices.iter().copied()) {
+            Some(c) => format!("did you mean {c:?}? choices: {}", spec.choices.join(", ")),
+            None => format!("choices: {}", spec.choices.join(", ")),
+        };
+        Err(src.error(
+            span.clone(),
+            format!("parameter `{}` does not accept {s:?}", spec.name),
+            Some(hint),
+        ))
+    };
+    Ok(match (&spec.default, &value.value) {
+        (ParamDefault::Bool(_), RawValue::Bool(b)) => ParamValue::Bool(*b),
+        (ParamDefault::Int(_), RawValue::Int(i)) => {
+            in_range(*i as f64)?;
+            ParamValue::Int(*i)
+        }
+        (ParamDefault::Float(_), RawValue::Float(f)) => {
+            in_range(*f)?;
+            ParamValue::Float(*f)
+        }
+        (ParamDefault::Float(_), RawValue::Int(i)) => {
+            in_range(*i as f64)?;
+            ParamValue::Float(*i as f64)
+        }
+        (ParamDefault::Str(_), RawValue::Str(s)) => {
+            choice(s, &value.span)?;
+            ParamValue::Str(s.clone())
+        }
+        (ParamDefault::StrList(_), RawValue::Array(items)) => {
+            let mut out = Vec::new();
+            for item in items {
+                match &item.value {
+                    RawValue::Str(s) => {
+                        choice(s, &item.span)?;
+                        out.push(s.clone());
+                    }
+                    other => {
+                        return Err(src.error(
+                            item.span.clone(),
+                            format!(
+                                "parameter `{}` must hold strings, found a {}",
+                                spec.name,
+                                other.type_name()
+                            ),
+                            None,
+                        ));
+                    }
+                }
+            }
+            ParamValue::StrList(out)
+        }
+        _ => return Err(wrong_type()),
+    })
+}

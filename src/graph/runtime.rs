@@ -1,0 +1,416 @@
+//! The threaded runtime: a source thread reads frames, each stage runs on its own
+//! thread, bounded crossbeam channels connect them (a slow stage holds back its
+//! producers; nothing is dropped), and the calling thread receives finished frames in
+//! order. Feedback edges carry a product of frame t-1 to a stage processing frame t.
+//!
+//! Failure: the first error or panic of any stage is recorded with the stage, frame
+//! and cause; that stage drops its channels, which stops its producers (their sends
+//! fail) and lets its consumers finish the frames already passed on. Nothing blocks
+//! forever: every wait is on a channel whose other end is dropped when its thread ends.
+
+use super::frame::{Frame, Product};
+use super::pipeline::{PREVIOUS_SUFFIX, Pipeline};
+use super::stage::{Stage, StageError};
+use super::timing::{FrameTiming, RunReport, StageTimings};
+use crate::recording::{RecordingError, Replay};
+use crossbeam_channel::{Receiver, Sender, bounded};
+use std::ops::Range;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// Where frames come from.
+pub trait FrameSource: Sync {
+    /// Number of frames.
+    fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Reads frame `n` with its source products.
+    fn read(&self, n: usize) -> Result<Frame, RecordingError>;
+}
+
+impl FrameSource for Replay {
+    fn len(&self) -> usize {
+        Replay::len(self)
+    }
+
+    fn read(&self, n: usize) -> Result<Frame, RecordingError> {
+        let records = self.read_frame(n)?;
+        let mut frame = Frame::new(n, records.stamp_ns);
+        frame.insert(
+            super::pipeline::SOURCE_PRODUCT,
+            Product::Record(Arc::new(records)),
+        );
+        Ok(frame)
+    }
+}
+
+/// Why a run stopped early.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error("stage `{stage}` could not be set up: {source}")]
+    Build {
+        stage: String,
+        #[source]
+        source: StageError,
+    },
+    #[error("stage `{stage}` ({kind}) failed at frame {frame}: {source}")]
+    Stage {
+        stage: String,
+        kind: String,
+        frame: usize,
+        #[source]
+        source: StageError,
+    },
+    #[error("stage `{stage}` ({kind}) panicked at frame {frame}: {message}")]
+    Panic {
+        stage: String,
+        kind: String,
+        frame: usize,
+        message: String,
+    },
+    #[error("stage `{stage}` ({kind}) failed while finishing: {source}")]
+    Finish {
+        stage: String,
+        kind: String,
+        #[source]
+        source: StageError,
+    },
+    #[error("cannot read frame {frame}: {source}")]
+    Source {
+        frame: usize,
+        #[source]
+        source: RecordingError,
+    },
+}
+
+/// A run that stopped on an error, with what it measured up to then.
+#[derive(Debug)]
+pub struct RunFailure {
+    pub error: PipelineError,
+    pub report: RunReport,
+}
+
+impl std::fmt::Display for RunFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.error.fmt(f)
+    }
+}
+
+impl std::error::Error for RunFailure {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        Some(&self.error)
+    }
+}
+
+/// How to run.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    /// Frames to replay (clamped to the source).
+    pub frames: Range<usize>,
+    /// Skip and count frames whose records are corrupt instead of stopping.
+    pub skip_corrupt: bool,
+    /// Set to stop after the frames in flight (Ctrl-C).
+    pub stop: Arc<AtomicBool>,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            frames: 0..usize::MAX,
+            skip_corrupt: false,
+            stop: Arc::new(AtomicBool::new(false)),
+        }
+    }
+}
+
+type FeedbackValue = Option<Arc<Product>>;
+
+/// The channels one stage thread owns.
+struct StageWiring {
+    input: Receiver<Frame>,
+    output: Sender<Frame>,
+    /// (frame key `product@prev`, receiver) for previous-frame inputs.
+    feedback_in: Vec<(String, Receiver<FeedbackValue>)>,
+    /// (product, sender) for products this stage feeds back.
+    feedback_out: Vec<(String, Sender<FeedbackValue>)>,
+}
+
+/// Runs `stages` (built from `pipeline`) over `source`, handing each finished frame to
+/// `sink` in order on the calling thread.
+pub fn run(
+    pipeline: &Pipeline,
+    stages: Vec<Box<dyn Stage>>,
+    source: &dyn FrameSource,
+    options: &RunOptions,
+    sink: &mut dyn FnMut(Frame),
+) -> Result<RunReport, Box<RunFailure>> {
+    assert_eq!(
+        stages.len(),
+        pipeline.stages.len(),
+        "one built stage per config stage"
+    );
+    let capacity = pipeline.channel_capacity;
+    let frames = options.frames.start.min(source.len())..options.frames.end.min(source.len());
+    let first_error: Mutex<Option<PipelineError>> = Mutex::new(None);
+    let record_error = |e: PipelineError| {
+        let mut slot = first_error.lock().unwrap_or_else(|p| p.into_inner());
+        slot.get_or_insert(e);
+    };
+    let skipped: Mutex<Vec<(usize, String)>> = Mutex::new(Vec::new());
+
+    // Channels: source -> stage 0 -> ... -> stage n-1 -> sink.
+    let (mut senders, mut receivers) = (Vec::new(), Vec::new());
+    for _ in 0..=stages.len() {
+        let (tx, rx) = bounded::<Frame>(capacity);
+        senders.push(tx);
+        receivers.push(rx);
+    }
+    let source_tx = senders.remove(0);
+    let sink_rx = receivers.pop().expect("n+1 channels");
+    let mut wiring: Vec<StageWiring> = receivers
+        .into_iter()
+        .zip(senders)
+        .map(|(input, output)| StageWiring {
+            input,
+            output,
+            feedback_in: Vec::new(),
+            feedback_out: Vec::new(),
+        })
+        .collect();
+    // A producer can run ahead of its consumer by every buffered frame: size the
+    // feedback channel so that sending never waits on the consumer.
+    let feedback_capacity = capacity * (stages.len() + 2) + 2;
+    for fb in &pipeline.feedback {
+        let (tx, rx) = bounded::<FeedbackValue>(feedback_capacity);
+        wiring[fb.producer]
+            .feedback_out
+            .push((fb.product.clone(), tx));
+        wiring[fb.consumer]
+            .feedback_in
+            .push((format!("{}{PREVIOUS_SUFFIX}", fb.product), rx));
+    }
+
+    let t0 = Instant::now();
+    let mut report = RunReport::default();
+    let mut latencies = Vec::new();
+    let mut interrupted = false;
+    let stage_timings = std::thread::scope(|scope| {
+        let source_handle = std::thread::Builder::new()
+            .name("relume-source".into())
+            .spawn_scoped(scope, || {
+                source_loop(
+                    source,
+                    frames,
+                    options,
+                    source_tx,
+                    t0,
+                    &record_error,
+                    &skipped,
+                )
+            })
+            .expect("spawn source thread");
+        let mut handles = Vec::new();
+        for ((stage, wires), cfg) in stages.into_iter().zip(wiring).zip(&pipeline.stages) {
+            let record_error = &record_error;
+            let handle = std::thread::Builder::new()
+                .name(format!("relume-{}", cfg.name))
+                .spawn_scoped(scope, move || {
+                    stage_loop(stage, wires, &cfg.name, cfg.kind, t0, record_error)
+                })
+                .expect("spawn stage thread");
+            handles.push(handle);
+        }
+        let mut last_index = None;
+        for frame in sink_rx.iter() {
+            debug_assert!(
+                last_index.is_none_or(|l| frame.index > l),
+                "frames leave in order"
+            );
+            last_index = Some(frame.index);
+            latencies.push(frame.entered.elapsed().as_nanos() as u64);
+            sink(frame);
+        }
+        let (source_timing, was_interrupted) = source_handle
+            .join()
+            .expect("the source thread catches its panics");
+        interrupted = was_interrupted;
+        let mut all = vec![source_timing];
+        all.extend(handles.into_iter().zip(&pipeline.stages).map(|(h, cfg)| {
+            h.join()
+                .expect("stage threads catch their panics")
+                .unwrap_or_else(|| StageTimings::new(&cfg.name, cfg.kind))
+        }));
+        all
+    });
+    report.wall_ns = t0.elapsed().as_nanos() as u64;
+    report.stages = stage_timings;
+    report.frames_out = latencies.len();
+    report.latencies_ns = latencies;
+    report.skipped_corrupt = skipped.into_inner().unwrap_or_else(|p| p.into_inner());
+    report.interrupted = interrupted;
+    match first_error.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        Some(error) => Err(Box::new(RunFailure { error, report })),
+        None => Ok(report),
+    }
+}
+
+/// Reads frames and sends them on; returns its timings and whether it was interrupted.
+fn source_loop(
+    source: &dyn FrameSource,
+    frames: Range<usize>,
+    options: &RunOptions,
+    output: Sender<Frame>,
+    t0: Instant,
+    record_error: &dyn Fn(PipelineError),
+    skipped: &Mutex<Vec<(usize, String)>>,
+) -> (StageTimings, bool) {
+    let mut timings = StageTimings::new("source", "read");
+    for n in frames {
+        if options.stop.load(Ordering::Relaxed) {
+            return (timings, true);
+        }
+        let start = Instant::now();
+        let frame = match catch_unwind(AssertUnwindSafe(|| source.read(n))) {
+            Ok(Ok(mut frame)) => {
+                frame.entered = start;
+                frame
+            }
+            Ok(Err(e)) if options.skip_corrupt => {
+                skipped
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .push((n, e.to_string()));
+                continue;
+            }
+            Ok(Err(source)) => {
+                record_error(PipelineError::Source { frame: n, source });
+                break;
+            }
+            Err(panic) => {
+                record_error(PipelineError::Panic {
+                    stage: "source".into(),
+                    kind: "read".into(),
+                    frame: n,
+                    message: panic_message(panic),
+                });
+                break;
+            }
+        };
+        let processed = Instant::now();
+        if output.send(frame).is_err() {
+            break; // downstream stopped on an error
+        }
+        let sent = Instant::now();
+        timings.frames.push(FrameTiming {
+            frame: n,
+            start_ns: (start - t0).as_nanos() as u64,
+            wait_in_ns: 0,
+            process_ns: (processed - start).as_nanos() as u64,
+            wait_out_ns: (sent - processed).as_nanos() as u64,
+        });
+    }
+    (timings, false)
+}
+
+/// Runs one stage until its input closes or something fails.
+fn stage_loop(
+    mut stage: Box<dyn Stage>,
+    wires: StageWiring,
+    name: &str,
+    kind: &str,
+    t0: Instant,
+    record_error: &dyn Fn(PipelineError),
+) -> Option<StageTimings> {
+    let mut timings = StageTimings::new(name, kind);
+    let mut first = true;
+    let mut failed = false;
+    'frames: loop {
+        let wait_start = Instant::now();
+        let Ok(mut frame) = wires.input.recv() else {
+            break;
+        };
+        if !first {
+            for (key, rx) in &wires.feedback_in {
+                match rx.recv() {
+                    Ok(Some(product)) => frame.insert_shared(key, product),
+                    Ok(None) => {}
+                    Err(_) => break 'frames, // the producer stopped on an error
+                }
+            }
+        }
+        first = false;
+        let start = Instant::now();
+        let index = frame.index;
+        let result = catch_unwind(AssertUnwindSafe(|| stage.process(&mut frame)));
+        let processed = Instant::now();
+        let error = match result {
+            Ok(Ok(())) => None,
+            Ok(Err(source)) => Some(PipelineError::Stage {
+                stage: name.into(),
+                kind: kind.into(),
+                frame: index,
+                source,
+            }),
+            Err(panic) => Some(PipelineError::Panic {
+                stage: name.into(),
+                kind: kind.into(),
+                frame: index,
+                message: panic_message(panic),
+            }),
+        };
+        if let Some(e) = error {
+            record_error(e);
+            failed = true;
+            break;
+        }
+        for (key, _) in &wires.feedback_in {
+            frame.remove(key);
+        }
+        for (product, tx) in &wires.feedback_out {
+            // A send fails only when the consumer has stopped; the run is ending then.
+            let _ = tx.send(frame.get_shared(product).cloned());
+        }
+        if wires.output.send(frame).is_err() {
+            break;
+        }
+        let sent = Instant::now();
+        timings.frames.push(FrameTiming {
+            frame: index,
+            start_ns: (start - t0).as_nanos() as u64,
+            wait_in_ns: (start - wait_start).as_nanos() as u64,
+            process_ns: (processed - start).as_nanos() as u64,
+            wait_out_ns: (sent - processed).as_nanos() as u64,
+        });
+    }
+    // Close our channels before finishing, so neighbours are never held up by `finish`.
+    drop(wires);
+    if !failed {
+        match catch_unwind(AssertUnwindSafe(|| stage.finish())) {
+            Ok(Ok(())) => {}
+            Ok(Err(source)) => record_error(PipelineError::Finish {
+                stage: name.into(),
+                kind: kind.into(),
+                source,
+            }),
+            Err(panic) => record_error(PipelineError::Finish {
+                stage: name.into(),
+                kind: kind.into(),
+                source: StageError::Failed(format!("panicked: {}", panic_message(panic))),
+            }),
+        }
+    }
+    Some(timings)
+}
+
+fn panic_message(panic: Box<dyn std::any::Any + Send>) -> String {
+    if let Some(s) = panic.downcast_ref::<&str>() {
+        s.to_string()
+    } else if let Some(s) = panic.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic payload".into()
+    }
+}

@@ -1,0 +1,15 @@
+//! relume: replay recorded RGB-D sensor logs through configurable, timed pipelines.
+//!
+//! The crate is organised as the product is:
+//! - [`recording`]: the `.relume` format, association of streams into frames, importers
+//!   of common RGB-D dataset layouts, and the synthetic scene generator with ground truth.
+//! - [`graph`]: pipeline configs, the stage registry, the threaded runtime and timing.
+//! - [`stages`]: the stage families, each as plain functions over buffers plus a thin
+//!   stage type the registry builds from config.
+//! - [`raster`] and [`rng`]: the image buffer type and counter-based random numbers.
+
+pub mod graph;
+pub mod raster;
+pub mod recording;
+pub mod rng;
+pub mod stages;

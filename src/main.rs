@@ -1,0 +1,13 @@
+//! The `relume` command line.
+
+mod cli;
+
+fn main() {
+    match cli::main() {
+        Ok(code) => std::process::exit(code),
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::exit(1);
+        }
+    }
+}

@@ -1,0 +1,349 @@
+//! Reads `.relume` files robustly: the index footer makes every record a seek; when the
+//! footer is missing or damaged, a linear scan of the frame headers recovers every
+//! complete record before the damage, and [`Recording::damage`] says what and where.
+
+use super::error::RecordingError;
+use super::format::{
+    FORMAT_VERSION, FRAME_HEADER_LEN, FrameHeader, IndexEntry, MAGIC, MAX_PAYLOAD_LEN,
+    PREAMBLE_LEN, TRAILER_LEN, TRAILER_MAGIC, Tag, Version, decode_versions,
+};
+use super::types::{ColorRecord, DepthRecord, Header, PoseRecord, Record, StreamKind, TruthRecord};
+use serde::de::DeserializeOwned;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+/// An open recording: its header and the index of its records.
+#[derive(Debug)]
+pub struct Recording {
+    path: PathBuf,
+    file: File,
+    file_len: u64,
+    version: Version,
+    header: Header,
+    index: Vec<IndexEntry>,
+    damage: Option<RecordingError>,
+}
+
+impl Recording {
+    /// Opens `path`. Fails on a file that is not a recording, of a newer format, or whose
+    /// header is unreadable; a damaged body opens with the complete records recovered and
+    /// the damage reported by [`Recording::damage`].
+    pub fn open(path: &Path) -> Result<Recording, RecordingError> {
+        let file = File::open(path).map_err(|e| RecordingError::io(path, e))?;
+        let file_len = file
+            .metadata()
+            .map_err(|e| RecordingError::io(path, e))?
+            .len();
+        let mut rec = Recording {
+            path: path.to_path_buf(),
+            file,
+            file_len,
+            version: FORMAT_VERSION,
+            header: placeholder_header(),
+            index: Vec::new(),
+            damage: None,
+        };
+        rec.read_preamble()?;
+        let (header_frame, header_payload) = rec.read_frame_at(PREAMBLE_LEN, "the header")?;
+        if Tag::from_byte(header_frame.tag_byte) != Some(Tag::Header) {
+            return Err(rec.corrupt(PREAMBLE_LEN, "the first record is not a header".into()));
+        }
+        rec.check_crc(&header_frame, &header_payload, 0, "header", PREAMBLE_LEN)?;
+        rec.header = rec.decode(&header_payload, 0, "header", PREAMBLE_LEN)?;
+        let body_start = PREAMBLE_LEN + FRAME_HEADER_LEN + header_payload.len() as u64;
+        match rec.read_footer(body_start) {
+            Ok(index) => rec.index = index,
+            Err(footer_problem) => {
+                let (index, scan_problem) = rec.scan(body_start);
+                rec.index = index;
+                rec.damage = Some(scan_problem.unwrap_or(footer_problem));
+            }
+        }
+        Ok(rec)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// The format version the file was written in.
+    pub fn version(&self) -> Version {
+        self.version
+    }
+
+    /// Size of the file in bytes.
+    pub fn file_len(&self) -> u64 {
+        self.file_len
+    }
+
+    /// Every stream record, in file order.
+    pub fn index(&self) -> &[IndexEntry] {
+        &self.index
+    }
+
+    /// Why the index had to be rebuilt by a scan, if it had to: a truncated file or a
+    /// damaged footer. The records listed by [`Recording::index`] are all complete.
+    pub fn damage(&self) -> Option<&RecordingError> {
+        self.damage.as_ref()
+    }
+
+    /// Reads and checks record `i` of the index.
+    pub fn read_record(&self, i: usize) -> Result<Record, RecordingError> {
+        let entry = *self.index.get(i).ok_or_else(|| RecordingError::Invalid {
+            path: self.path.clone(),
+            reason: format!("record {i} does not exist ({} records)", self.index.len()),
+        })?;
+        let what = entry.kind.name();
+        let (frame, payload) = self.read_frame_at(entry.offset, what)?;
+        if frame.len != entry.len || Tag::from_byte(frame.tag_byte) != Some(Tag::Stream(entry.kind))
+        {
+            return Err(self.corrupt(
+                entry.offset,
+                format!(
+                    "record {i} does not match the index (expected a {what} record of {} bytes)",
+                    entry.len
+                ),
+            ));
+        }
+        self.check_crc(&frame, &payload, i, what, entry.offset)?;
+        let at = entry.offset;
+        Ok(match entry.kind {
+            StreamKind::Color => Record::Color(self.decode::<ColorRecord>(&payload, i, what, at)?),
+            StreamKind::Depth => Record::Depth(self.decode::<DepthRecord>(&payload, i, what, at)?),
+            StreamKind::Pose => Record::Pose(self.decode::<PoseRecord>(&payload, i, what, at)?),
+            StreamKind::Truth => {
+                Record::Truth(Box::new(self.decode::<TruthRecord>(&payload, i, what, at)?))
+            }
+        })
+    }
+
+    fn read_preamble(&mut self) -> Result<(), RecordingError> {
+        let mut pre = [0u8; PREAMBLE_LEN as usize];
+        let n = (self.file_len.min(PREAMBLE_LEN)) as usize;
+        self.read_exact_at(&mut pre[..n], 0)?;
+        if pre[..n.min(MAGIC.len())] != MAGIC[..n.min(MAGIC.len())] || n == 0 {
+            return Err(RecordingError::BadMagic {
+                path: self.path.clone(),
+            });
+        }
+        if n < PREAMBLE_LEN as usize {
+            return Err(self.truncated(self.file_len, "inside the preamble".into()));
+        }
+        let (version, min_reader) = decode_versions(&pre);
+        if version.major > FORMAT_VERSION.major || min_reader > FORMAT_VERSION {
+            return Err(RecordingError::UnsupportedVersion {
+                path: self.path.clone(),
+                found: version.to_string(),
+                min_reader: min_reader.to_string(),
+                supported: FORMAT_VERSION.to_string(),
+            });
+        }
+        self.version = version;
+        Ok(())
+    }
+
+    /// Reads the frame header at `offset` and its payload, checking sizes first.
+    fn read_frame_at(
+        &self,
+        offset: u64,
+        what: &str,
+    ) -> Result<(FrameHeader, Vec<u8>), RecordingError> {
+        let frame = self.frame_header_at(offset, what)?;
+        let mut payload = vec![0u8; frame.len as usize];
+        self.read_exact_at(&mut payload, offset + FRAME_HEADER_LEN)?;
+        Ok((frame, payload))
+    }
+
+    /// Reads and validates a frame header: sane length, fits in the file.
+    fn frame_header_at(&self, offset: u64, what: &str) -> Result<FrameHeader, RecordingError> {
+        if offset + FRAME_HEADER_LEN > self.file_len {
+            return Err(self.truncated(
+                self.file_len,
+                format!("the file ends inside the frame of {what} at byte {offset}"),
+            ));
+        }
+        let mut b = [0u8; FRAME_HEADER_LEN as usize];
+        self.read_exact_at(&mut b, offset)?;
+        let frame = FrameHeader::parse(&b);
+        if frame.reserved != [0; 3] || Tag::from_byte(frame.tag_byte).is_none() {
+            return Err(self.corrupt(offset, format!("no valid record frame for {what}")));
+        }
+        if frame.len > MAX_PAYLOAD_LEN {
+            return Err(self.corrupt(
+                offset,
+                format!(
+                    "{what} declares {} bytes, over the limit of {MAX_PAYLOAD_LEN}",
+                    frame.len
+                ),
+            ));
+        }
+        let end = offset + FRAME_HEADER_LEN + frame.len as u64;
+        if end > self.file_len {
+            return Err(self.truncated(
+                self.file_len,
+                format!(
+                    "{what} at byte {offset} needs {} bytes up to byte {end}",
+                    frame.len
+                ),
+            ));
+        }
+        Ok(frame)
+    }
+
+    /// Reads the index footer through the trailer; any problem is reported, not fatal.
+    fn read_footer(&self, body_start: u64) -> Result<Vec<IndexEntry>, RecordingError> {
+        let no_footer = |reason: String| self.truncated(self.file_len, reason);
+        if self.file_len < body_start + TRAILER_LEN {
+            return Err(no_footer("the index footer is missing".into()));
+        }
+        let trailer_at = self.file_len - TRAILER_LEN;
+        let mut t = [0u8; TRAILER_LEN as usize];
+        self.read_exact_at(&mut t, trailer_at)?;
+        if t[8..] != TRAILER_MAGIC {
+            return Err(no_footer("the index footer is missing".into()));
+        }
+        let footer_at = u64::from_le_bytes(t[..8].try_into().expect("8 bytes"));
+        if footer_at < body_start || footer_at + FRAME_HEADER_LEN > trailer_at {
+            return Err(self.corrupt(
+                trailer_at,
+                format!("the trailer points outside the file (byte {footer_at})"),
+            ));
+        }
+        let (frame, payload) = self.read_frame_at(footer_at, "the index footer")?;
+        if Tag::from_byte(frame.tag_byte) != Some(Tag::Index)
+            || footer_at + FRAME_HEADER_LEN + frame.len as u64 != trailer_at
+        {
+            return Err(self.corrupt(
+                footer_at,
+                "the index footer is not where the trailer says".into(),
+            ));
+        }
+        let n = self.index.len();
+        self.check_crc(&frame, &payload, n, "index", footer_at)?;
+        let index: Vec<IndexEntry> = self.decode(&payload, n, "index", footer_at)?;
+        for (i, e) in index.iter().enumerate() {
+            let end = e.offset.checked_add(FRAME_HEADER_LEN + e.len as u64);
+            if e.offset < body_start
+                || e.len > MAX_PAYLOAD_LEN
+                || end.is_none_or(|end| end > footer_at)
+            {
+                return Err(self.corrupt(
+                    footer_at,
+                    format!("index entry {i} points outside the records"),
+                ));
+            }
+        }
+        Ok(index)
+    }
+
+    /// Rebuilds the index by walking frame headers from `start`. Returns the complete
+    /// records and, if the walk stopped before a clean end, why.
+    fn scan(&self, start: u64) -> (Vec<IndexEntry>, Option<RecordingError>) {
+        let mut index = Vec::new();
+        let mut offset = start;
+        while offset < self.file_len {
+            let frame = match self.frame_header_at(offset, &format!("record {}", index.len())) {
+                Ok(f) => f,
+                Err(e) => return (index, Some(e)),
+            };
+            match Tag::from_byte(frame.tag_byte) {
+                Some(Tag::Stream(kind)) => index.push(IndexEntry {
+                    kind,
+                    stamp_ns: frame.stamp_ns,
+                    offset,
+                    len: frame.len,
+                }),
+                // A footer that failed to read: everything before it is recovered.
+                Some(Tag::Index) => return (index, None),
+                Some(Tag::Header) => {
+                    return (
+                        index,
+                        Some(self.corrupt(offset, "a second header inside the records".into())),
+                    );
+                }
+                None => unreachable!("frame_header_at checks the tag"),
+            }
+            offset += FRAME_HEADER_LEN + frame.len as u64;
+        }
+        (index, None)
+    }
+
+    fn check_crc(
+        &self,
+        frame: &FrameHeader,
+        payload: &[u8],
+        record: usize,
+        kind: &'static str,
+        offset: u64,
+    ) -> Result<(), RecordingError> {
+        let computed = FrameHeader::checksum(frame.tag_byte, frame.stamp_ns, payload);
+        if computed != frame.crc {
+            return Err(RecordingError::Checksum {
+                path: self.path.clone(),
+                record,
+                kind,
+                offset,
+                stored: frame.crc,
+                computed,
+            });
+        }
+        Ok(())
+    }
+
+    fn decode<T: DeserializeOwned>(
+        &self,
+        payload: &[u8],
+        record: usize,
+        kind: &'static str,
+        offset: u64,
+    ) -> Result<T, RecordingError> {
+        rmp_serde::from_slice(payload).map_err(|e| RecordingError::Decode {
+            path: self.path.clone(),
+            record,
+            kind,
+            offset,
+            reason: e.to_string(),
+        })
+    }
+
+    fn read_exact_at(&self, buf: &mut [u8], offset: u64) -> Result<(), RecordingError> {
+        use std::os::unix::fs::FileExt;
+        self.file
+            .read_exact_at(buf, offset)
+            .map_err(|e| RecordingError::io(&self.path, e))
+    }
+
+    fn truncated(&self, offset: u64, what: String) -> RecordingError {
+        RecordingError::Truncated {
+            path: self.path.clone(),
+            offset,
+            what,
+        }
+    }
+
+    fn corrupt(&self, offset: u64, reason: String) -> RecordingError {
+        RecordingError::Corrupt {
+            path: self.path.clone(),
+            offset,
+            reason,
+        }
+    }
+}
+
+fn placeholder_header() -> Header {
+    use super::types::Intrinsics;
+    Header {
+        name: String::new(),
+        provenance: Default::default(),
+        color_intrinsics: Intrinsics::PRIMESENSE,
+        depth_intrinsics: Intrinsics::PRIMESENSE,
+        depth_unit_m: 0.001,
+        streams: Vec::new(),
+        ground_truth: None,
+        attachments: Vec::new(),
+    }
+}

@@ -1,0 +1,128 @@
+//! Replay access to a recording: association once at open, then each frame's records
+//! by seeking through the index.
+
+use super::association::{AssociationStats, FrameRef, associate};
+use super::error::RecordingError;
+use super::reader::Recording;
+use super::types::{ColorRecord, DepthRecord, Pose, Record, StreamKind, TruthRecord};
+use std::path::Path;
+
+/// How to open a recording for replay.
+#[derive(Clone, Copy, Debug)]
+pub struct ReplayOptions {
+    /// Tolerance between color and depth (and truth) stamps.
+    pub tolerance_ns: i64,
+    /// Skip (and count) records that fail their checksum or decoding instead of failing.
+    pub skip_corrupt: bool,
+}
+
+impl Default for ReplayOptions {
+    fn default() -> Self {
+        ReplayOptions {
+            tolerance_ns: super::association::DEFAULT_TOLERANCE_NS,
+            skip_corrupt: false,
+        }
+    }
+}
+
+/// The records of one associated frame, still encoded.
+#[derive(Clone, Debug)]
+pub struct FrameRecords {
+    /// Position among the associated frames.
+    pub index: usize,
+    pub stamp_ns: i64,
+    pub color: ColorRecord,
+    pub depth: Option<DepthRecord>,
+    pub pose: Option<Pose>,
+    pub truth: Option<Box<TruthRecord>>,
+}
+
+/// A recording opened for replay.
+#[derive(Debug)]
+pub struct Replay {
+    pub recording: Recording,
+    pub frames: Vec<FrameRef>,
+    pub stats: AssociationStats,
+}
+
+impl Replay {
+    /// Opens and associates `path`. Pose records are read now; a corrupt one is an error
+    /// unless `skip_corrupt` is set, in which case it is skipped and counted.
+    pub fn open(path: &Path, options: ReplayOptions) -> Result<Replay, RecordingError> {
+        let recording = Recording::open(path)?;
+        let mut poses = Vec::new();
+        let mut skipped_corrupt_poses = 0;
+        for (i, e) in recording.index().iter().enumerate() {
+            if e.kind != StreamKind::Pose {
+                continue;
+            }
+            match recording.read_record(i) {
+                Ok(Record::Pose(p)) => poses.push((p.stamp_ns, p.pose)),
+                Ok(_) => unreachable!("read_record checks the kind against the index"),
+                Err(_) if options.skip_corrupt => skipped_corrupt_poses += 1,
+                Err(e) => return Err(e),
+            }
+        }
+        poses.sort_by_key(|p| p.0);
+        let has_depth = recording.header().streams.contains(&StreamKind::Depth);
+        let (frames, mut stats) =
+            associate(recording.index(), &poses, has_depth, options.tolerance_ns);
+        stats.skipped_corrupt_poses = skipped_corrupt_poses;
+        Ok(Replay {
+            recording,
+            frames,
+            stats,
+        })
+    }
+
+    /// Number of associated frames.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// Duration from the first to the last frame stamp, in seconds.
+    pub fn duration_s(&self) -> f64 {
+        match (self.frames.first(), self.frames.last()) {
+            (Some(a), Some(b)) => (b.stamp_ns - a.stamp_ns) as f64 * 1e-9,
+            _ => 0.0,
+        }
+    }
+
+    /// Reads frame `n`'s records (a seek per record, no scan).
+    pub fn read_frame(&self, n: usize) -> Result<FrameRecords, RecordingError> {
+        let f = self
+            .frames
+            .get(n)
+            .ok_or_else(|| RecordingError::FrameOutOfRange {
+                path: self.recording.path().to_path_buf(),
+                frame: n,
+                frames: self.frames.len(),
+            })?;
+        let color = match self.recording.read_record(f.color)? {
+            Record::Color(c) => c,
+            _ => unreachable!("read_record checks the kind against the index"),
+        };
+        let depth = match f.depth.map(|i| self.recording.read_record(i)).transpose()? {
+            Some(Record::Depth(d)) => Some(d),
+            None => None,
+            _ => unreachable!("read_record checks the kind against the index"),
+        };
+        let truth = match f.truth.map(|i| self.recording.read_record(i)).transpose()? {
+            Some(Record::Truth(t)) => Some(t),
+            None => None,
+            _ => unreachable!("read_record checks the kind against the index"),
+        };
+        Ok(FrameRecords {
+            index: n,
+            stamp_ns: f.stamp_ns,
+            color,
+            depth,
+            pose: f.pose,
+            truth,
+        })
+    }
+}

@@ -1,0 +1,247 @@
+//! `write`: saves chosen products of every frame to `OUT/<dir>/<product>/<frame>.<ext>`.
+//!
+//! | product | png | exr |
+//! |---|---|---|
+//! | color | 8-bit sRGB | R, G, B = value / 255 |
+//! | depth | 16-bit, millimetres, 0 = missing | Z, f32 metres, 0 = missing |
+//! | points | 16-bit, z in millimetres | X, Y, Z f32 metres |
+//! | normals | 8-bit RGB = (n + 1) / 2 for viewing, black = invalid | X, Y, Z f32 |
+//!
+//! Every file is written to a temporary name and renamed, so an interrupted run leaves
+//! complete files only.
+
+use crate::graph::{
+    Frame, ParamDefault, ParamSpec, Params, Port, Ports, Product, ProductKind, Stage, StageError,
+    StageInfo,
+};
+use crate::raster::{Image, depth_is_valid};
+use crate::recording::writer::write_file_atomic;
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec::new(
+        "products",
+        ParamDefault::StrList(&["depth", "normals"]),
+        "products to save (color images, depth, point or normal maps)",
+    ),
+    ParamSpec::new(
+        "formats",
+        ParamDefault::StrList(&["png"]),
+        "file formats to write for each product",
+    )
+    .choices(&["png", "exr"]),
+    ParamSpec::new(
+        "dir",
+        ParamDefault::Str(""),
+        "sub-directory of the output directory (--out) to write into",
+    ),
+    ParamSpec::new("every", ParamDefault::Int(1), "write every n-th frame only").range(1.0, 1e9),
+];
+
+pub const INFO: StageInfo = StageInfo {
+    kind: "write",
+    summary: "save chosen products per frame as PNG (depth 16-bit mm, normals for viewing) or EXR (f32)",
+    params: PARAMS,
+    ports,
+    build: |ctx| {
+        let p = ctx.params;
+        let dir = ctx.out_dir.join(p.str("dir"));
+        let products: Vec<(String, PathBuf)> = p
+            .str_list("products")
+            .iter()
+            .map(|role| (ctx.input(role), dir.join(role)))
+            .collect();
+        for (_, d) in &products {
+            std::fs::create_dir_all(d).map_err(|source| StageError::Io {
+                path: d.clone(),
+                source,
+            })?;
+        }
+        Ok(Box::new(Write {
+            products,
+            png: p.str_list("formats").iter().any(|f| f == "png"),
+            exr: p.str_list("formats").iter().any(|f| f == "exr"),
+            every: p.int("every") as usize,
+        }))
+    },
+};
+
+fn ports(params: &Params) -> Ports {
+    Ports {
+        inputs: params
+            .str_list("products")
+            .iter()
+            .map(|p| Port::new(p, p, ProductKind::IMAGES))
+            .collect(),
+        outputs: Vec::new(),
+    }
+}
+
+struct Write {
+    /// (product name in the frame, directory for its files)
+    products: Vec<(String, PathBuf)>,
+    png: bool,
+    exr: bool,
+    every: usize,
+}
+
+impl Stage for Write {
+    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
+        if frame.index % self.every != 0 {
+            return Ok(());
+        }
+        let mut jobs = Vec::new();
+        for (name, dir) in &self.products {
+            let product = frame
+                .get(name)
+                .ok_or_else(|| StageError::MissingInput(name.clone()))?;
+            let stem = dir.join(format!("{:06}", frame.index));
+            if self.png {
+                jobs.push((product, stem.with_extension("png"), false));
+            }
+            if self.exr {
+                jobs.push((product, stem.with_extension("exr"), true));
+            }
+        }
+        jobs.par_iter()
+            .map(|(product, path, exr)| {
+                if *exr {
+                    write_exr(product, path)
+                } else {
+                    write_png(product, path)
+                }
+            })
+            .collect()
+    }
+}
+
+/// Writes a product as PNG (see the module table).
+pub fn write_png(product: &Product, path: &Path) -> Result<(), StageError> {
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    let mm = |z: f32| {
+        if depth_is_valid(z) {
+            (z * 1000.0).round().clamp(0.0, 65535.0) as u16
+        } else {
+            0
+        }
+    };
+    let (w, h) = image_size(product)?;
+    let img = match product {
+        Product::Color(c) => image::DynamicImage::ImageRgb8(
+            image::RgbImage::from_raw(w, h, bytemuck::cast_slice(&c.data).to_vec())
+                .expect("size checked"),
+        ),
+        Product::Depth(d) => image::DynamicImage::ImageLuma16(
+            image::ImageBuffer::from_raw(w, h, d.data.iter().map(|&z| mm(z)).collect())
+                .expect("size checked"),
+        ),
+        Product::Points(p) => image::DynamicImage::ImageLuma16(
+            image::ImageBuffer::from_raw(w, h, p.data.iter().map(|v| mm(v.z)).collect())
+                .expect("size checked"),
+        ),
+        Product::Normals(n) => {
+            let bytes = n
+                .data
+                .iter()
+                .flat_map(|v| {
+                    if *v == glam::Vec3::ZERO {
+                        [0; 3]
+                    } else {
+                        v.to_array()
+                            .map(|c| ((c + 1.0) * 127.5).round().clamp(0.0, 255.0) as u8)
+                    }
+                })
+                .collect();
+            image::DynamicImage::ImageRgb8(
+                image::RgbImage::from_raw(w, h, bytes).expect("size checked"),
+            )
+        }
+        _ => unreachable!("image_size accepts images only"),
+    };
+    let mut bytes = Vec::new();
+    img.write_with_encoder(PngEncoder::new_with_quality(
+        &mut bytes,
+        CompressionType::Fast,
+        FilterType::Adaptive,
+    ))
+    .map_err(|e| StageError::Failed(format!("{}: PNG encoding failed: {e}", path.display())))?;
+    write_file_atomic(path, &bytes).map_err(|source| StageError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Writes a product as EXR with f32 channels (see the module table).
+pub fn write_exr(product: &Product, path: &Path) -> Result<(), StageError> {
+    let channels: Vec<(&str, Vec<f32>)> = match product {
+        Product::Color(c) => (0..3)
+            .map(|i| {
+                (
+                    ["R", "G", "B"][i],
+                    c.data.iter().map(|p| p[i] as f32 / 255.0).collect(),
+                )
+            })
+            .collect(),
+        Product::Depth(d) => vec![(
+            "Z",
+            d.data
+                .iter()
+                .map(|&z| if depth_is_valid(z) { z } else { 0.0 })
+                .collect(),
+        )],
+        Product::Points(v) | Product::Normals(v) => (0..3)
+            .map(|i| (["X", "Y", "Z"][i], v.data.iter().map(|p| p[i]).collect()))
+            .collect(),
+        _ => {
+            return Err(StageError::Failed(format!(
+                "a {} cannot be written as an image",
+                product.kind().name()
+            )));
+        }
+    };
+    let (w, h) = image_size(product)?;
+    let bytes = exr_bytes(w, h, channels)
+        .map_err(|e| StageError::Failed(format!("{}: EXR encoding failed: {e}", path.display())))?;
+    write_file_atomic(path, &bytes).map_err(|source| StageError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Encodes named f32 channels as a single-layer, losslessly compressed EXR.
+pub fn exr_bytes(
+    width: u32,
+    height: u32,
+    channels: Vec<(&str, Vec<f32>)>,
+) -> Result<Vec<u8>, exr::error::Error> {
+    use exr::prelude::*;
+    let list: Vec<AnyChannel<FlatSamples>> = channels
+        .into_iter()
+        .map(|(name, samples)| AnyChannel::new(name, FlatSamples::F32(samples)))
+        .collect();
+    let layer = Layer::new(
+        (width as usize, height as usize),
+        LayerAttributes::default(),
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(list.into()),
+    );
+    let mut out = std::io::Cursor::new(Vec::new());
+    Image::from_layer(layer).write().to_buffered(&mut out)?;
+    Ok(out.into_inner())
+}
+
+fn image_size(product: &Product) -> Result<(u32, u32), StageError> {
+    fn size<T>(i: &Image<T>) -> (u32, u32) {
+        (i.width, i.height)
+    }
+    match product {
+        Product::Color(i) => Ok(size(i)),
+        Product::Depth(i) => Ok(size(i)),
+        Product::Points(i) | Product::Normals(i) => Ok(size(i)),
+        other => Err(StageError::Failed(format!(
+            "a {} cannot be written as an image",
+            other.kind().name()
+        ))),
+    }
+}

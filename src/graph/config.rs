@@ -17,6 +17,7 @@
 //! outputs = { normals = "normals" }
 //! ```
 
+use super::params::a;
 use std::ops::Range;
 
 /// The text of a config and where it came from.
@@ -218,8 +219,8 @@ pub fn parse(src: &SourceFile) -> Result<PipelineDecl, ConfigError> {
                     return Err(src.error(
                         v.span(),
                         format!(
-                            "channel_capacity must be an integer, found a {}",
-                            other.type_name()
+                            "channel_capacity must be an integer, found {}",
+                            a(other.type_name())
                         ),
                         None,
                     ));
@@ -298,7 +299,7 @@ fn expect_table<'a, 'i>(
         DeValue::Table(t) => Ok(t),
         other => Err(src.error(
             v.span(),
-            format!("{what} must be a table, found a {}", other.type_str()),
+            format!("{what} must be a table, found {}", a(other.type_str())),
             None,
         )),
     }
@@ -340,7 +341,7 @@ fn opt_string(
             })),
             other => Err(src.error(
                 v.span(),
-                format!("`{key}` must be a string, found a {}", other.type_str()),
+                format!("`{key}` must be a string, found {}", a(other.type_str())),
                 None,
             )),
         },
@@ -368,9 +369,9 @@ fn string_table(
             other => Err(src.error(
                 v.span(),
                 format!(
-                    "{key}.{} must be a product name (a string), found a {}",
+                    "{key}.{} must be a product name (a string), found {}",
                     k.get_ref(),
-                    other.type_str()
+                    a(other.type_str())
                 ),
                 None,
             )),

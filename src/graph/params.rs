@@ -177,6 +177,12 @@ fn declared_wrong(name: &str, found: Option<&ParamValue>) -> ! {
     )
 }
 
+/// `noun` with its indefinite article: "a string", "an integer".
+pub fn a(noun: &str) -> String {
+    let vowel = noun.starts_with(['a', 'e', 'i', 'o', 'u']);
+    format!("{} {noun}", if vowel { "an" } else { "a" })
+}
+
 /// The closest of `candidates` to `word` by edit distance, if close enough to suggest.
 pub fn did_you_mean<'a>(
     word: &str,
@@ -185,7 +191,7 @@ pub fn did_you_mean<'a>(
     candidates
         .into_iter()
         .map(|c| (edit_distance(word, c), c))
-        .filter(|&(d, c)| d <= (c.len().max(word.len()) / 3).max(1))
+        .filter(|&(d, c)| d <= c.len().max(word.len()).div_ceil(3))
         .min()
         .map(|(_, c)| c)
 }

@@ -4,7 +4,7 @@
 
 use super::config::{self, ConfigError, Located, PipelineDecl, RawValue, SourceFile, StageDecl};
 use super::frame::ProductKind;
-use super::params::{ParamDefault, ParamSpec, ParamValue, Params, did_you_mean};
+use super::params::{ParamDefault, ParamSpec, ParamValue, Params, a, did_you_mean};
 use super::registry::Registry;
 use super::stage::{BuildContext, Stage, StageError};
 use crate::recording::Header;
@@ -210,7 +210,7 @@ impl Pipeline {
                 };
                 if !port.kinds.contains(&kind) {
                     let expected: Vec<&str> = port.kinds.iter().map(|k| k.name()).collect();
-                    return Err(src.error(span, format!("stage `{}` reads `{product}` as its `{}` input, but `{product}` is a {}; it needs a {}", stage.name, port.role, kind.name(), expected.join(" or ")), None));
+                    return Err(src.error(span, format!("stage `{}` reads `{product}` as its `{}` input, but `{product}` is {}; it needs {}", stage.name, port.role, a(kind.name()), expected.iter().map(|k| a(k)).collect::<Vec<_>>().join(" or ")), None));
                 }
                 if previous {
                     if producer == usize::MAX {
@@ -304,11 +304,7 @@ fn missing_product(
             }
         }
     };
-    let where_ = if previous {
-        "any stage"
-    } else {
-        "an upstream stage"
-    };
+    let where_ = if previous { "stage" } else { "upstream stage" };
     src.error(
         span,
         format!(
@@ -407,10 +403,10 @@ fn check_value(
         src.error(
             value.span.clone(),
             format!(
-                "parameter `{}` must be a {}, found a {}",
+                "parameter `{}` must be {}, found {}",
                 spec.name,
-                spec.type_name(),
-                value.value.type_name()
+                a(spec.type_name()),
+                a(value.value.type_name())
             ),
             Some(format!("{}; default {}", spec.doc, spec.default_value())),
         )
@@ -476,9 +472,9 @@ fn check_value(
                         return Err(src.error(
                             item.span.clone(),
                             format!(
-                                "parameter `{}` must hold strings, found a {}",
+                                "parameter `{}` must hold strings, found {}",
                                 spec.name,
-                                other.type_name()
+                                a(other.type_name())
                             ),
                             None,
                         ));

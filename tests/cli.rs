@@ -1,0 +1,355 @@
+//! The command line as a user runs it.
+
+mod common;
+
+use common::{ok, run_in, stderr, stdout};
+use relume::recording::{Recording, StreamKind};
+use std::path::{Path, PathBuf};
+
+/// A small synthetic recording in `dir`.
+fn small_recording(dir: &Path, frames: usize) -> PathBuf {
+    let path = dir.join("small.relume");
+    ok(run_in(
+        dir,
+        &[
+            "synth",
+            "-o",
+            "small.relume",
+            "--frames",
+            &frames.to_string(),
+            "--size",
+            "64x48",
+            "--seed",
+            "3",
+        ],
+    ));
+    path
+}
+
+fn hash_lines(dir: &Path, rec: &str, threads: Option<&str>) -> String {
+    let mut cmd = common::relume();
+    cmd.args(["replay", rec, "--hash", "--out", "o"])
+        .current_dir(dir);
+    if let Some(t) = threads {
+        cmd.env("RAYON_NUM_THREADS", t);
+    }
+    stdout(&ok(cmd.output().unwrap()))
+}
+
+#[test]
+fn hash_lines_are_identical_across_runs_and_thread_counts() {
+    let tmp = tempfile::tempdir().unwrap();
+    small_recording(tmp.path(), 6);
+    let first = hash_lines(tmp.path(), "small.relume", None);
+    let lines: Vec<&str> = first.lines().collect();
+    assert_eq!(lines.len(), 6, "{first}");
+    for (i, line) in lines.iter().enumerate() {
+        assert!(line.starts_with(&format!("{i:06} ")), "{line}");
+        for product in [
+            "color=", "depth=", "normals=", "points=", "pose=", "record=",
+        ] {
+            assert!(line.contains(product), "{line} lacks {product}");
+        }
+    }
+    assert_eq!(hash_lines(tmp.path(), "small.relume", None), first);
+    assert_eq!(hash_lines(tmp.path(), "small.relume", Some("1")), first);
+    assert_eq!(hash_lines(tmp.path(), "small.relume", Some("3")), first);
+}
+
+#[test]
+fn livingroom1_imports_inspects_and_replays() {
+    let data = common::data_dir().join("livingroom1");
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    ok(run_in(
+        d,
+        &[
+            "import",
+            "redwood",
+            data.to_str().unwrap(),
+            "-o",
+            "lr.relume",
+        ],
+    ));
+    let inspect: serde_json::Value =
+        serde_json::from_str(&stdout(&ok(run_in(d, &["inspect", "lr.relume", "--json"])))).unwrap();
+    assert_eq!(inspect["frames"], 211);
+    assert_eq!(inspect["frames_with_pose"], 211);
+    assert_eq!(inspect["damage"], serde_json::Value::Null);
+
+    let o = ok(run_in(
+        d,
+        &[
+            "replay",
+            "lr.relume",
+            "--frames",
+            "0..8",
+            "--out",
+            "out",
+            "--timings",
+            "t.csv",
+            "--trace",
+            "trace.json",
+        ],
+    ));
+    let table = stdout(&o);
+    for stage in [
+        "source",
+        "decode",
+        "depth.to_points",
+        "normals.cross",
+        "write",
+        "8 frames in",
+    ] {
+        assert!(table.contains(stage), "table lacks {stage}:\n{table}");
+    }
+    for n in 0..8 {
+        for product in ["color", "depth", "normals"] {
+            assert!(
+                d.join(format!("out/{product}/{n:06}.png")).is_file(),
+                "{product} of frame {n}"
+            );
+        }
+    }
+    assert!(!d.join("out/color/000008.png").exists());
+    let depth = image::open(d.join("out/depth/000003.png")).unwrap();
+    assert_eq!(
+        (depth.width(), depth.height(), depth.color()),
+        (640, 480, image::ColorType::L16)
+    );
+    let csv = std::fs::read_to_string(d.join("t.csv")).unwrap();
+    assert_eq!(
+        csv.lines().next(),
+        Some("stage,kind,frame,start_ms,wait_in_ms,process_ms,wait_out_ms")
+    );
+    assert_eq!(
+        csv.lines().count(),
+        1 + 5 * 8,
+        "source + 4 stages, 8 frames each"
+    );
+    let trace: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("trace.json")).unwrap()).unwrap();
+    let events = trace["traceEvents"].as_array().unwrap();
+    assert_eq!(
+        events.iter().filter(|e| e["cat"] == "process").count(),
+        5 * 8
+    );
+}
+
+#[test]
+fn a_failing_stage_exits_non_zero_naming_stage_and_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 8);
+    let pipeline = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"depth.to_points\"\n[[stage]]\nname = \"fail\"\nkind = \"debug.fail\"\nparams = { frame = 5 }\n[[stage]]\nkind = \"write\"\nparams = { products = [\"depth\"] }\n";
+    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    let o = run_in(
+        d,
+        &[
+            "replay",
+            "small.relume",
+            "--pipeline",
+            "p.toml",
+            "--out",
+            "out",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(err.contains("error: replay of small.relume stopped: stage `fail` (debug.fail) failed at frame 5: debug.fail was asked to fail at frame 5"), "{err}");
+    let written: Vec<_> = std::fs::read_dir(d.join("out/depth"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    let mut written = written;
+    written.sort();
+    assert_eq!(
+        written,
+        [
+            "000000.png",
+            "000001.png",
+            "000002.png",
+            "000003.png",
+            "000004.png"
+        ],
+        "complete outputs before the failure stay, nothing partial"
+    );
+}
+
+/// Flips one byte in the middle of the payload of the `nth` record of `kind`.
+fn corrupt_record(path: &Path, kind: StreamKind, nth: usize) -> (usize, u64) {
+    let rec = Recording::open(path).unwrap();
+    let (record, entry) = rec
+        .index()
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| e.kind == kind)
+        .nth(nth)
+        .unwrap();
+    let mut bytes = std::fs::read(path).unwrap();
+    bytes[(entry.offset + 20 + entry.len as u64 / 2) as usize] ^= 0x40;
+    std::fs::write(path, bytes).unwrap();
+    (record, entry.offset)
+}
+
+#[test]
+fn a_corrupt_record_stops_replay_unless_skipped() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let path = small_recording(d, 6);
+    let (record, offset) = corrupt_record(&path, StreamKind::Color, 2);
+    let o = run_in(d, &["replay", "small.relume", "--hash", "--out", "o"]);
+    assert_eq!(o.status.code(), Some(1));
+    let expected = format!(
+        "cannot read frame 2: small.relume: record {record} (color) at byte {offset} is corrupt: checksum mismatch"
+    );
+    assert!(stderr(&o).contains(&expected), "{}", stderr(&o));
+    assert_eq!(stdout(&o).lines().count(), 2, "frames 0 and 1 complete");
+
+    let o = ok(run_in(
+        d,
+        &[
+            "replay",
+            "small.relume",
+            "--hash",
+            "--out",
+            "o",
+            "--skip-corrupt",
+        ],
+    ));
+    let lines = stdout(&o);
+    let frames: Vec<&str> = lines.lines().map(|l| &l[..6]).collect();
+    assert_eq!(frames, ["000000", "000001", "000003", "000004", "000005"]);
+    assert!(
+        stderr(&o).contains("1 corrupt frame(s) skipped"),
+        "{}",
+        stderr(&o)
+    );
+
+    let o = run_in(d, &["inspect", "small.relume", "--verify"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stdout(&o).contains("1 corrupt"), "{}", stdout(&o));
+}
+
+#[test]
+fn a_truncated_recording_replays_its_complete_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let path = small_recording(d, 6);
+    let rec = Recording::open(&path).unwrap();
+    // Cut inside frame 4's color record: frames 0-3 stay complete.
+    let cut = rec
+        .index()
+        .iter()
+        .filter(|e| e.kind == StreamKind::Color)
+        .nth(4)
+        .unwrap()
+        .offset
+        + 30;
+    drop(rec);
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..cut as usize]).unwrap();
+    let o = ok(run_in(
+        d,
+        &["replay", "small.relume", "--hash", "--out", "o"],
+    ));
+    assert_eq!(stdout(&o).lines().count(), 4);
+    let err = stderr(&o);
+    assert!(
+        err.contains(&format!("warning: small.relume: truncated at byte {cut}")),
+        "{err}"
+    );
+    let inspect = stdout(&ok(run_in(d, &["inspect", "small.relume"])));
+    assert!(inspect.contains("DAMAGED"), "{inspect}");
+}
+
+#[test]
+fn bad_files_are_clear_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    std::fs::write(d.join("bad.relume"), b"GIF89a not a recording at all").unwrap();
+    let o = run_in(d, &["inspect", "bad.relume"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stderr(&o),
+        "error: bad.relume: not a relume recording (the file does not start with the relume magic bytes)\n"
+    );
+    let o = run_in(d, &["replay", "missing.relume"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).starts_with("error: missing.relume: No such file"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn validate_and_stages_explain_pipelines() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let default = concat!(env!("CARGO_MANIFEST_DIR"), "/pipelines/default.toml");
+    let o = ok(run_in(d, &["validate", default]));
+    assert!(
+        stdout(&o).contains("ok, 4 stages: decode -> depth.to_points -> normals.cross -> write"),
+        "{}",
+        stdout(&o)
+    );
+    std::fs::write(d.join("p.toml"), "[[stage]]\nkind = \"decod\"\n").unwrap();
+    let o = run_in(d, &["validate", "p.toml"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).starts_with("error: p.toml:2:8: unknown stage kind `decod`"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(
+        stderr(&o).contains("hint: did you mean `decode`?"),
+        "{}",
+        stderr(&o)
+    );
+    let list = stdout(&ok(run_in(d, &["stages"])));
+    for kind in [
+        "decode",
+        "depth.to_points",
+        "normals.cross",
+        "write",
+        "debug.noop",
+        "debug.sleep",
+        "debug.fail",
+        "max_depth_jump = 0.1",
+    ] {
+        assert!(list.contains(kind), "stages lacks {kind}");
+    }
+}
+
+#[test]
+fn bench_reports_stage_medians_as_json() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 4);
+    let o = ok(run_in(
+        d,
+        &["bench", "small.relume", "--repeat", "2", "--json"],
+    ));
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    for stage in [
+        "source",
+        "decode",
+        "depth.to_points",
+        "normals.cross",
+        "write",
+    ] {
+        for key in ["median_ms", "p95_ms", "max_ms"] {
+            assert!(
+                doc["stages"][stage][key].as_f64().is_some_and(|v| v >= 0.0),
+                "{stage}.{key} in {doc}"
+            );
+        }
+    }
+    assert!(doc["fps"].as_f64().unwrap() > 0.0);
+    assert_eq!(doc["repeat"], 2);
+    assert!(
+        !d.join("out").exists(),
+        "bench writes into a scratch directory"
+    );
+}

@@ -1,0 +1,54 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// The shared test data folder: `$RELUME_DATA`, else `../shared/data` beside the checkout.
+/// Panics with a message saying where it looked when it is missing.
+pub fn data_dir() -> PathBuf {
+    let dir = match std::env::var_os("RELUME_DATA") {
+        Some(d) => PathBuf::from(d),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"),
+    };
+    assert!(
+        dir.join("README.md").is_file(),
+        "test data is missing: expected the shared data folder at {} (set RELUME_DATA to its path)",
+        dir.display()
+    );
+    dir
+}
+
+/// The `relume` binary built for these tests.
+pub fn relume() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_relume"))
+}
+
+/// Runs `relume` with `args` in `cwd`; returns its output.
+pub fn run_in(cwd: &std::path::Path, args: &[&str]) -> Output {
+    relume()
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run relume")
+}
+
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Asserts success, printing both streams otherwise.
+pub fn ok(o: Output) -> Output {
+    assert!(
+        o.status.success(),
+        "relume failed ({:?})\nstdout:\n{}\nstderr:\n{}",
+        o.status,
+        stdout(&o),
+        stderr(&o)
+    );
+    o
+}

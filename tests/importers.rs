@@ -1,0 +1,330 @@
+//! Importers: a TUM-layout directory written here (depth and pose stamps offset from the
+//! color stamps) imports with correct association and interpolated poses; malformed
+//! inputs are errors naming the file and line; Redwood reads livingroom1.
+
+mod common;
+
+use glam::{DMat4, DQuat, DVec3};
+use relume::recording::importers::redwood::{self, RedwoodOptions};
+use relume::recording::importers::{ImportOptions, tum};
+use relume::recording::{Replay, ReplayOptions, codec};
+use std::path::Path;
+
+const T0: f64 = 1305031102.0;
+
+fn write_color(path: &Path, w: u32, h: u32, value: u8) {
+    image::RgbImage::from_pixel(w, h, image::Rgb([value, 2 * value, 3]))
+        .save(path)
+        .unwrap();
+}
+
+fn write_depth(path: &Path, w: u32, h: u32, units: u16) {
+    image::ImageBuffer::<image::Luma<u16>, _>::from_pixel(w, h, image::Luma([units]))
+        .save(path)
+        .unwrap();
+}
+
+/// The true pose at time t (seconds after T0): constant linear and angular velocity,
+/// so lerp and slerp reproduce it exactly between samples.
+fn true_pose(t: f64) -> (DVec3, DQuat) {
+    (
+        DVec3::new(1.0 * t, 0.2, -0.5 * t),
+        DQuat::from_axis_angle(DVec3::new(0.0, 1.0, 0.0), 0.1 + 0.5 * t),
+    )
+}
+
+/// Five color frames at 30 Hz; depth 7 ms later except frame 3 (45 ms: unmatched);
+/// poses at 100 Hz from -50 ms to +100 ms, so frame 4 (133 ms) has no pose.
+fn write_tum(dir: &Path) {
+    std::fs::create_dir_all(dir.join("rgb")).unwrap();
+    std::fs::create_dir_all(dir.join("depth")).unwrap();
+    let mut rgb = String::from("# color images\n# timestamp filename\n");
+    let mut depth = String::from("# depth maps\n");
+    for i in 0..5u32 {
+        let t = i as f64 / 30.0;
+        write_color(&dir.join(format!("rgb/{i}.png")), 8, 6, 10 * i as u8);
+        write_depth(
+            &dir.join(format!("depth/{i}.png")),
+            8,
+            6,
+            1000 * (i as u16 + 1),
+        );
+        rgb.push_str(&format!("{:.6} rgb/{i}.png\n", T0 + t));
+        let offset = if i == 3 { 0.045 } else { 0.007 };
+        depth.push_str(&format!("{:.6} depth/{i}.png\n\n", T0 + t + offset));
+    }
+    std::fs::write(dir.join("rgb.txt"), rgb).unwrap();
+    std::fs::write(dir.join("depth.txt"), depth).unwrap();
+    let mut gt = String::from("# ground truth trajectory\n# timestamp tx ty tz qx qy qz qw\n");
+    for k in -5..=10 {
+        let t = k as f64 * 0.01;
+        let (p, q) = true_pose(t);
+        gt.push_str(&format!(
+            "{:.6} {} {} {} {} {} {} {}\n",
+            T0 + t,
+            p.x,
+            p.y,
+            p.z,
+            q.x,
+            q.y,
+            q.z,
+            q.w
+        ));
+    }
+    std::fs::write(dir.join("groundtruth.txt"), gt).unwrap();
+}
+
+#[test]
+fn tum_import_associates_depth_and_interpolates_poses() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("tum");
+    write_tum(&dir);
+    let out = tmp.path().join("t.relume");
+    let summary = tum::import(&dir, &out, &ImportOptions::default(), &mut |_, _| {}).unwrap();
+    assert_eq!((summary.color, summary.depth, summary.poses), (5, 5, 16));
+
+    let replay = Replay::open(&out, ReplayOptions::default()).unwrap();
+    let s = &replay.stats;
+    assert_eq!(
+        (s.color_records, s.depth_records, s.pose_records),
+        (5, 5, 16)
+    );
+    assert_eq!(
+        (s.frames, s.skipped_no_depth, s.frames_with_pose),
+        (4, 1, 3)
+    );
+    assert_eq!(replay.recording.header().depth_unit_m, 1.0 / 5000.0);
+    let expected_color_index = [0u32, 1, 2, 4];
+    for (n, &i) in expected_color_index.iter().enumerate() {
+        let f = replay.read_frame(n).unwrap();
+        assert_eq!(
+            f.stamp_ns,
+            relume::recording::importers::parse_stamp_ns(&format!("{:.6}", T0 + i as f64 / 30.0))
+                .unwrap()
+        );
+        assert_eq!(
+            codec::decode_color(&f.color.image).unwrap().data[0],
+            [10 * i as u8, 20 * i as u8, 3]
+        );
+        let depth = codec::decode_depth_units(&f.depth.as_ref().unwrap().image).unwrap();
+        assert_eq!(
+            depth.data[0],
+            1000 * (i as u16 + 1),
+            "frame {n} takes the depth 7 ms after it"
+        );
+        match f.pose {
+            Some(pose) => {
+                let t = (f.stamp_ns
+                    - relume::recording::importers::parse_stamp_ns("1305031102").unwrap())
+                    as f64
+                    * 1e-9;
+                let (p, q) = true_pose(t);
+                assert!(
+                    (pose.translation() - p).length() < 1e-9,
+                    "frame {n}: {:?} vs {p:?}",
+                    pose.translation()
+                );
+                assert!(pose.rotation().angle_between(q) < 1e-7, "frame {n}");
+                assert!(i < 4, "frame {n} lies inside the pose stream");
+            }
+            None => assert_eq!(i, 4, "only the frame after the last pose has none"),
+        }
+    }
+}
+
+fn tum_error(edit: impl Fn(&Path)) -> String {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("tum");
+    write_tum(&dir);
+    edit(&dir);
+    let out = tmp.path().join("t.relume");
+    let e = tum::import(&dir, &out, &ImportOptions::default(), &mut |_, _| {})
+        .expect_err("import fails");
+    assert!(!out.exists(), "no recording is left under the final name");
+    let leftovers: Vec<_> = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        leftovers.len(),
+        1,
+        "no temporary file is left: {leftovers:?}"
+    );
+    e.to_string().replace(&format!("{}/", dir.display()), "")
+}
+
+fn edit_line(path: &Path, line: usize, text: &str) {
+    let mut lines: Vec<String> = std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(String::from)
+        .collect();
+    lines[line - 1] = text.to_string();
+    std::fs::write(path, lines.join("\n")).unwrap();
+}
+
+#[test]
+fn tum_errors_name_file_and_line() {
+    let e = tum_error(|d| edit_line(&d.join("groundtruth.txt"), 4, "1305031102.0 1 2 3 0 0 0"));
+    assert_eq!(
+        e,
+        "groundtruth.txt:4: expected `timestamp tx ty tz qx qy qz qw` (8 fields), found 7 field(s): \"1305031102.0 1 2 3 0 0 0\""
+    );
+    let e = tum_error(|d| edit_line(&d.join("groundtruth.txt"), 5, "1305031102.0 1 2 3 0 0 0 2"));
+    assert_eq!(
+        e,
+        "groundtruth.txt:5: quaternion qx qy qz qw has length 2.0000, expected 1"
+    );
+    let e = tum_error(|d| edit_line(&d.join("rgb.txt"), 4, "1305031102.066667 rgb/missing.png"));
+    assert!(
+        e.starts_with("rgb.txt:4: image ") && e.ends_with("rgb/missing.png does not exist"),
+        "{e}"
+    );
+    let e = tum_error(|d| edit_line(&d.join("depth.txt"), 1, "12:00 depth/0.png"));
+    assert_eq!(
+        e,
+        "depth.txt:1: invalid timestamp \"12:00\" (expected seconds like 1305031102.175304)"
+    );
+    let e = tum_error(|d| write_color(&d.join("rgb/2.png"), 4, 6, 1));
+    assert_eq!(
+        e,
+        "rgb/2.png: image is 4x6, but the sequence's images are 8x6"
+    );
+    let e = tum_error(|d| {
+        image::GrayImage::new(8, 6)
+            .save(d.join("depth/1.png"))
+            .unwrap()
+    });
+    assert_eq!(
+        e,
+        "depth/1.png: a depth image must be a 16-bit single-channel PNG, found 1 channel(s) of 8 bits"
+    );
+    let e = tum_error(|d| std::fs::write(d.join("rgb/0.png"), b"not an image").unwrap());
+    assert!(e.starts_with("rgb/0.png: not an image"), "{e}");
+}
+
+fn write_redwood(dir: &Path, frames: usize, trajectory: &str) {
+    std::fs::create_dir_all(dir.join("color")).unwrap();
+    std::fs::create_dir_all(dir.join("depth")).unwrap();
+    for i in 0..frames {
+        write_color(&dir.join(format!("color/{i:05}.jpg")), 8, 6, 50);
+        write_depth(&dir.join(format!("depth/{i:05}.png")), 8, 6, 1500);
+    }
+    std::fs::write(dir.join("trajectory.log"), trajectory).unwrap();
+}
+
+const IDENTITY_RECORD: &str = "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n";
+
+#[test]
+fn redwood_errors_name_file_and_line() {
+    let cases = [
+        (
+            format!("0 0 1\n{IDENTITY_RECORD}1 1 2\n1 0 0 0.5\n0 1 0\n0 0 1 0\n0 0 0 1\n"),
+            "trajectory.log:8: matrix row 2 must hold four finite numbers, found \"0 1 0\"",
+        ),
+        (
+            format!("0 0 1\n{IDENTITY_RECORD}1 1 2\n1 0 0 0\n"),
+            "trajectory.log:6: incomplete record: 7 lines are not a multiple of 5 (a line of three integers, then four matrix rows)",
+        ),
+        (
+            format!("0 0 x\n{IDENTITY_RECORD}"),
+            "trajectory.log:1: expected three integers starting a pose record, found \"0 0 x\"",
+        ),
+        (
+            format!("0 0 1\n2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n"),
+            "trajectory.log:2: the matrix is not a rigid transform (rotation and translation, last row 0 0 0 1)",
+        ),
+    ];
+    for (trajectory, expected) in cases {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().join("rw");
+        write_redwood(&dir, 2, &trajectory);
+        let e = redwood::import(
+            &dir,
+            &tmp.path().join("r.relume"),
+            &RedwoodOptions::default(),
+            &mut |_, _| {},
+        )
+        .unwrap_err();
+        assert_eq!(
+            e.to_string().replace(&format!("{}/", dir.display()), ""),
+            expected
+        );
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("rw");
+    write_redwood(&dir, 2, IDENTITY_RECORD);
+    std::fs::remove_file(dir.join("depth/00001.png")).unwrap();
+    let e = redwood::import(
+        &dir,
+        &tmp.path().join("r.relume"),
+        &RedwoodOptions::default(),
+        &mut |_, _| {},
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string().ends_with("holds 2 images but")
+            || e.to_string().contains("holds 2 images but"),
+        "{e}"
+    );
+}
+
+#[test]
+fn redwood_reads_livingroom1_with_every_pose() {
+    let data = common::data_dir().join("livingroom1");
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("lr.relume");
+    let summary = redwood::import(&data, &out, &RedwoodOptions::default(), &mut |_, _| {}).unwrap();
+    assert_eq!(
+        (summary.color, summary.depth, summary.poses),
+        (211, 211, 211)
+    );
+    let replay = Replay::open(&out, ReplayOptions::default()).unwrap();
+    assert_eq!(
+        (replay.stats.frames, replay.stats.frames_with_pose),
+        (211, 211)
+    );
+    assert!((replay.duration_s() - 210.0 / 30.0).abs() < 1e-6);
+
+    // Frame 100's pose is the trajectory's 101st matrix.
+    let text = std::fs::read_to_string(data.join("trajectory.log")).unwrap();
+    let rows: Vec<f64> = text
+        .lines()
+        .skip(100 * 5 + 1)
+        .take(4)
+        .flat_map(|l| {
+            l.split_whitespace()
+                .map(|v| v.parse::<f64>().unwrap())
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let expected = DMat4::from_cols_slice(&rows).transpose();
+    let f = replay.read_frame(100).unwrap();
+    let got = f.pose.unwrap().matrix();
+    assert!(
+        got.abs_diff_eq(expected, 1e-6),
+        "{got:?} vs {expected:?} (the file has 8 decimals)"
+    );
+    assert_eq!(
+        replay.read_frame(0).unwrap().pose.unwrap().matrix(),
+        DMat4::IDENTITY
+    );
+
+    let color = codec::decode_color(&f.color.image).unwrap();
+    let depth = codec::decode_depth(
+        &f.depth.unwrap().image,
+        replay.recording.header().depth_unit_m,
+    )
+    .unwrap();
+    assert_eq!(
+        (color.width, color.height, depth.width, depth.height),
+        (640, 480, 640, 480)
+    );
+    let valid: Vec<f32> = depth.data.iter().copied().filter(|&z| z > 0.0).collect();
+    let mean = valid.iter().sum::<f32>() / valid.len() as f32;
+    assert!(
+        valid.len() > 640 * 480 / 2 && (0.5..6.0).contains(&mean),
+        "{} valid, mean {mean} m",
+        valid.len()
+    );
+}

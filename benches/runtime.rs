@@ -1,1 +1,84 @@
-fn main() {}
+//! The runtime's own cost: frames with no products through chains of `debug.noop`
+//! stages. The difference between a chain of 9 and of 1 no-op stage, divided by 8, is
+//! the overhead of one stage hop (channel send and receive, timing, thread hand-off).
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use relume::graph::{Frame, FrameSource, Pipeline, Registry, RunOptions, SourceFile, run};
+use relume::recording::{Header, Intrinsics, RecordingError};
+use std::hint::black_box;
+
+struct EmptyFrames(usize);
+
+impl FrameSource for EmptyFrames {
+    fn len(&self) -> usize {
+        self.0
+    }
+    fn read(&self, n: usize) -> Result<Frame, RecordingError> {
+        Ok(Frame::new(n, n as i64))
+    }
+}
+
+fn header() -> Header {
+    Header {
+        name: "bench".into(),
+        provenance: Default::default(),
+        color_intrinsics: Intrinsics::PRIMESENSE,
+        depth_intrinsics: Intrinsics::PRIMESENSE,
+        depth_unit_m: 0.001,
+        streams: vec![],
+        ground_truth: None,
+        attachments: vec![],
+    }
+}
+
+fn noop_chain(stages: usize, capacity: usize) -> Pipeline {
+    let mut text = format!("[pipeline]\nchannel_capacity = {capacity}\n");
+    for i in 0..stages {
+        text.push_str(&format!(
+            "[[stage]]\nname = \"noop{i}\"\nkind = \"debug.noop\"\n"
+        ));
+    }
+    Pipeline::parse(
+        &SourceFile {
+            name: "bench".into(),
+            text,
+        },
+        &Registry::builtin(),
+    )
+    .expect("valid pipeline")
+}
+
+fn bench_hops(c: &mut Criterion) {
+    let registry = Registry::builtin();
+    let frames = 2000;
+    let mut group = c.benchmark_group("runtime/noop_chain");
+    group.throughput(Throughput::Elements(frames as u64));
+    group.sample_size(20);
+    for stages in [1, 9] {
+        for capacity in [2, 16] {
+            let pipeline = noop_chain(stages, capacity);
+            let id = BenchmarkId::new(format!("capacity{capacity}"), format!("{stages}stages"));
+            group.bench_with_input(id, &pipeline, |b, p| {
+                b.iter(|| {
+                    let built = p
+                        .build(&registry, &header(), std::path::Path::new("."), 1)
+                        .expect("build");
+                    let mut n = 0usize;
+                    run(
+                        p,
+                        built,
+                        &EmptyFrames(frames),
+                        &RunOptions::default(),
+                        &mut |f| n += black_box(f.index),
+                    )
+                    .expect("run");
+                    n
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_hops);
+criterion_main!(benches);

@@ -353,3 +353,58 @@ fn bench_reports_stage_medians_as_json() {
         "bench writes into a scratch directory"
     );
 }
+
+#[test]
+fn ctrl_c_stops_after_the_frames_in_flight_and_keeps_complete_outputs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 40);
+    let pipeline = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"debug.sleep\"\nparams = { ms = 40.0 }\n[[stage]]\nkind = \"write\"\nparams = { products = [\"color\"] }\n";
+    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    let child = common::relume()
+        .args([
+            "replay",
+            "small.relume",
+            "--pipeline",
+            "p.toml",
+            "--out",
+            "out",
+        ])
+        .current_dir(d)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until a few frames are written, then interrupt.
+    let first = d.join("out/color/000003.png");
+    let start = std::time::Instant::now();
+    while !first.exists() && start.elapsed().as_secs() < 30 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let status = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(stderr(&o).contains("interrupted:"), "{}", stderr(&o));
+    let mut written: Vec<String> = std::fs::read_dir(d.join("out/color"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    written.sort();
+    assert!((4..40).contains(&written.len()), "{written:?}");
+    for (i, name) in written.iter().enumerate() {
+        assert_eq!(
+            name,
+            &format!("{i:06}.png"),
+            "only complete, consecutive frames"
+        );
+        image::open(d.join("out/color").join(name)).expect("every output is a complete PNG");
+    }
+    assert!(
+        stdout(&o).contains("frames in"),
+        "the timing table is still printed"
+    );
+}

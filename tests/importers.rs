@@ -231,7 +231,7 @@ fn redwood_errors_name_file_and_line() {
             "trajectory.log:1: expected three integers starting a pose record, found \"0 0 x\"",
         ),
         (
-            format!("0 0 1\n2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n"),
+            "0 0 1\n2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n".to_string(),
             "trajectory.log:2: the matrix is not a rigid transform (rotation and translation, last row 0 0 0 1)",
         ),
     ];

@@ -399,19 +399,9 @@ fn raw(v: &Spanned<DeValue<'_>>) -> Located<RawValue> {
     }
 }
 
+/// `text` is toml's `from_str_radix`-ready form: sign and digits, no prefix or `_`.
 fn parse_int(text: &str, radix: u32) -> Option<i64> {
-    let clean: String = text.chars().filter(|&c| c != '_').collect();
-    let (neg, digits) = match clean.strip_prefix('-') {
-        Some(d) => (true, d.to_string()),
-        None => (false, clean.trim_start_matches('+').to_string()),
-    };
-    let digits = if radix == 10 {
-        digits.as_str()
-    } else {
-        &digits[2..]
-    };
-    let v = i64::from_str_radix(digits, radix).ok()?;
-    Some(if neg { -v } else { v })
+    i64::from_str_radix(text, radix).ok()
 }
 
 fn parse_float(text: &str) -> Option<f64> {

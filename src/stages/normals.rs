@@ -145,13 +145,13 @@ impl Stage for CrossNormals {
 mod tests {
     use super::*;
 
-    /// Positions of the plane z = 2 + 0.5 x seen by a unit pinhole camera.
+    /// Positions of the plane z = 2 + 0.5 x seen by a pinhole camera, 0.01 rad per pixel.
     fn tilted_plane() -> Vec3Image {
         let (w, h) = (8u32, 6u32);
         let data = (0..h)
             .flat_map(|v| {
                 (0..w).map(move |u| {
-                    let (dx, dy) = (u as f32 * 0.1 - 0.4, v as f32 * 0.1 - 0.3);
+                    let (dx, dy) = (u as f32 * 0.01 - 0.04, v as f32 * 0.01 - 0.03);
                     // ray (dx, dy, 1) * t meets z = 2 + 0.5 x at t = 2 / (1 - 0.5 dx)
                     let t = 2.0 / (1.0 - 0.5 * dx);
                     Vec3::new(dx * t, dy * t, t)

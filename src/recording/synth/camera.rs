@@ -6,7 +6,7 @@
 //! (stored as the frame's `color_transform`), then `v = max(v, 0)^contrast_t`, then
 //! `v^(1 / 2.2)`, clipped to [0, 1] and rounded to 8 bits.
 
-use super::scene::OBJECT_POSITION;
+use super::scene::OBJECT_POSITION_F64;
 use crate::recording::types::Pose;
 use glam::{DMat3, DQuat, DVec3, Vec3};
 
@@ -19,19 +19,20 @@ pub const GAMMA: f32 = 2.2;
 
 /// The true camera-to-world pose at `time_s` seconds from the start: an orbit of about
 /// 1.8 m radius around the object spot at 1.2-1.5 m height, about 2.7 cm per frame at
-/// 30 fps, with gentle changes of radius, height, look-at point and roll. It stays
-/// clear of the furniture and at least 0.5 m from the walls.
+/// 30 fps, looking at a point a little above the object spot, with gentle changes of
+/// radius, height, look-at point and roll. It stays at least 0.5 m from the walls and
+/// the tops of the furniture.
 pub fn camera_pose(time_s: f64) -> Pose {
     let t = time_s;
     let angle = 2.3 + 0.45 * t;
     let radius = 1.8 + 0.1 * (0.5 * t + 0.3).sin();
     let height = 1.35 + 0.12 * (0.8 * t).sin();
     let eye = DVec3::new(radius * angle.cos(), height, radius * angle.sin());
-    let object = OBJECT_POSITION.as_dvec3();
+    let object = OBJECT_POSITION_F64;
     let target = object
         + DVec3::new(
             0.15 * (0.6 * t).sin(),
-            0.1 * (0.45 * t + 1.0).sin(),
+            0.2 + 0.1 * (0.45 * t + 1.0).sin(),
             0.15 * (0.7 * t + 0.5).cos(),
         );
     let roll = 0.03 * (0.9 * t).sin();
@@ -226,8 +227,8 @@ mod tests {
             let eye = pose.translation();
             assert!(eye.x.abs() < 2.0 && eye.z.abs() < 2.0 && (1.1..1.6).contains(&eye.y));
             let forward = pose.rotation() * DVec3::Z;
-            let to_object = (OBJECT_POSITION.as_dvec3() - eye).normalize();
-            assert!(forward.dot(to_object) > 0.98);
+            let to_object = (OBJECT_POSITION_F64 - eye).normalize();
+            assert!(forward.dot(to_object) > 0.95);
             // Image rows go down: camera +y points roughly to world -y.
             assert!((pose.rotation() * DVec3::Y).y < -0.5);
             if let Some(p) = previous {

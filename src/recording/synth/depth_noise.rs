@@ -6,6 +6,7 @@
 //! result does not depend on the number of threads.
 
 use super::render::{pixel_direction, purpose};
+use crate::raster::depth_is_valid;
 use crate::recording::types::Intrinsics;
 use crate::rng::Counter;
 use glam::Vec3;
@@ -76,11 +77,16 @@ pub fn noisy_depth_units(
     if depth.len() != w * h || normals.len() != depth.len() {
         return out;
     }
+    let dropouts = dropout_mask(seed, frame, k.width, k.height);
     out.par_chunks_mut(w.max(1))
         .enumerate()
         .for_each(|(y, row)| {
             for (x, unit) in row.iter_mut().enumerate() {
-                *unit = noisy_pixel(depth, normals, k, seed, frame, unit_m, x, y);
+                *unit = if dropouts[y * w + x] {
+                    0
+                } else {
+                    noisy_pixel(depth, normals, k, seed, frame, unit_m, x, y)
+                };
             }
         });
     out
@@ -100,7 +106,7 @@ fn noisy_pixel(
     let (w, h) = (k.width as usize, k.height as usize);
     let i = y * w + x;
     let z = depth[i];
-    if !(z > 0.0) || (z as f64) < MIN_RANGE_M || (z as f64) > MAX_RANGE_M {
+    if !depth_is_valid(z) || (z as f64) < MIN_RANGE_M || (z as f64) > MAX_RANGE_M {
         return 0;
     }
     let pixel = i as u64;
@@ -115,7 +121,7 @@ fn noisy_pixel(
     for ny in y.saturating_sub(1)..(y + 2).min(h) {
         for nx in x.saturating_sub(1)..(x + 2).min(w) {
             let zn = depth[ny * w + nx];
-            if !(zn > 0.0) || z - zn > threshold {
+            if !depth_is_valid(zn) || z - zn > threshold {
                 far_side = true;
             } else if zn - z > threshold {
                 near_side = true;
@@ -126,9 +132,6 @@ fn noisy_pixel(
     if (far_side && r < FAR_SIDE_HOLE) || (near_side && r < NEAR_SIDE_HOLE) {
         return 0;
     }
-    if in_dropout_blob(seed, frame, x as u32, y as u32) {
-        return 0;
-    }
     let z = z as f64;
     let mut noise = Counter::new(&[seed, frame, purpose::DEPTH_NOISE, pixel]);
     let sigma = NOISE_BASE_M + NOISE_QUADRATIC * (z - MIN_RANGE_M).powi(2);
@@ -137,32 +140,37 @@ fn noisy_pixel(
     metres_to_units(1.0 / (steps * DISPARITY_STEP), unit_m)
 }
 
-/// True when pixel (x, y) lies in a dropout blob. Each `DROPOUT_CELL`-square cell holds
-/// a blob with probability `DROPOUT_PROBABILITY`, centred anywhere in the cell with a
-/// radius of 1 to 3 pixels, so only the 3 x 3 cells around a pixel can reach it.
-pub fn in_dropout_blob(seed: u64, frame: u64, x: u32, y: u32) -> bool {
-    let (cx, cy) = ((x / DROPOUT_CELL) as i64, (y / DROPOUT_CELL) as i64);
-    let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
-    for by in cy - 1..=cy + 1 {
-        for bx in cx - 1..=cx + 1 {
-            if bx < 0 || by < 0 {
-                continue;
-            }
-            let mut r = Counter::new(&[seed, frame, purpose::DEPTH_DROPOUT, bx as u64, by as u64]);
+/// The dropout blobs of a `width` x `height` frame (true = dropped). Each
+/// `DROPOUT_CELL`-square cell holds a blob with probability `DROPOUT_PROBABILITY`,
+/// centred anywhere in the cell, with a radius of 1 to 3 pixels.
+pub fn dropout_mask(seed: u64, frame: u64, width: u32, height: u32) -> Vec<bool> {
+    let (w, h) = (width as usize, height as usize);
+    let mut mask = vec![false; w * h];
+    let size = DROPOUT_CELL as f32;
+    for cell_y in 0..height.div_ceil(DROPOUT_CELL) as u64 {
+        for cell_x in 0..width.div_ceil(DROPOUT_CELL) as u64 {
+            let mut r = Counter::new(&[seed, frame, purpose::DEPTH_DROPOUT, cell_x, cell_y]);
             if r.next_f32() >= DROPOUT_PROBABILITY {
                 continue;
             }
-            let size = DROPOUT_CELL as f32;
-            let centre_x = (bx as f32 + r.next_f32()) * size;
-            let centre_y = (by as f32 + r.next_f32()) * size;
+            let centre_x = (cell_x as f32 + r.next_f32()) * size;
+            let centre_y = (cell_y as f32 + r.next_f32()) * size;
             let radius = 1.0 + 2.0 * r.next_f32();
-            let (dx, dy) = (px - centre_x, py - centre_y);
-            if dx * dx + dy * dy <= radius * radius {
-                return true;
+            let x0 = (centre_x - radius).floor().max(0.0) as usize;
+            let y0 = (centre_y - radius).floor().max(0.0) as usize;
+            let x1 = ((centre_x + radius).ceil() as usize).min(w);
+            let y1 = ((centre_y + radius).ceil() as usize).min(h);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let (dx, dy) = (x as f32 + 0.5 - centre_x, y as f32 + 0.5 - centre_y);
+                    if dx * dx + dy * dy <= radius * radius {
+                        mask[y * w + x] = true;
+                    }
+                }
             }
         }
     }
-    false
+    mask
 }
 
 #[cfg(test)]

@@ -1,9 +1,10 @@
 //! `relume synth`: a deterministic synthetic RGB-D recording with ground truth.
 //!
-//! An analytic room ([`scene`]) is rendered along a smooth camera path ([`camera`]) with
-//! soft shadows from a warm ceiling panel and a bright window ([`render`]), seen through
-//! a camera with automatic exposure, white balance and optional contrast changes, and
-//! measured by a Kinect-like depth sensor ([`depth_noise`]).
+//! An analytic room ([`scene`], built from [`geometry`] with [`texture`]s) is rendered
+//! along a smooth camera path ([`camera`]) with soft shadows from a warm ceiling panel
+//! and a bright window ([`render`]), seen through a camera with automatic exposure,
+//! white balance and optional contrast changes, and measured by a Kinect-like depth
+//! sensor ([`depth_noise`]).
 //!
 //! A recording holds, per frame `i`:
 //! - color at `round(i / fps * 1e9)` ns: 8-bit sRGB-like PNG, `camera_pixel(M_i,
@@ -29,8 +30,10 @@
 
 pub mod camera;
 pub mod depth_noise;
+pub mod geometry;
 pub mod render;
 pub mod scene;
+pub mod texture;
 
 use super::codec::{self, encode_floats};
 use super::error::RecordingError;
@@ -223,7 +226,7 @@ pub fn depth_stamp_ns(config: &SynthConfig, frame: usize) -> i64 {
 /// The scene-level ground truth stored in the header.
 pub fn scene_truth() -> SceneTruth {
     SceneTruth {
-        object_position: scene::OBJECT_POSITION.as_dvec3().to_array(),
+        object_position: scene::OBJECT_POSITION_F64.to_array(),
         description: "analytic room of 5 x 5 x 2.6 m (world +y up, floor at y = 0, \
                       x and z in [-2.5, 2.5]) lit by a warm ceiling panel and a bright \
                       sky window on the wall at x = +2.5; object_position is the centre \
@@ -257,6 +260,7 @@ pub fn header(config: &SynthConfig) -> Header {
 }
 
 /// Renders frame `frame` of `config` and returns its records: color, depth, pose, truth.
+/// Fails, with a message, only when an image cannot be encoded.
 pub fn frame_records(
     config: &SynthConfig,
     scene: &Scene,

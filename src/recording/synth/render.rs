@@ -45,6 +45,7 @@ pub fn shade(scene: &Scene, hit: &Hit, rng: &mut Counter, grid: (u32, u32)) -> V
     let samples = (grid.0 * grid.1).max(1) as f32;
     let mut irradiance = Vec3::ZERO;
     for light in &scene.lights {
+        let occluders = scene.occluders_towards(origin, light);
         let mut geometry_sum = 0.0f32;
         for j in 0..grid.0 {
             for k in 0..grid.1 {
@@ -52,17 +53,14 @@ pub fn shade(scene: &Scene, hit: &Hit, rng: &mut Counter, grid: (u32, u32)) -> V
                 let v = (k as f32 + rng.next_f32()) / grid.1 as f32;
                 let q = light.point(u, v);
                 let w = q - origin;
+                // cos_here * cos_light / d^2 with unnormalized w: no square root.
+                let here = hit.normal.dot(w);
+                let there = -light.normal.dot(w);
+                if here <= 0.0 || there <= 0.0 || scene.occluded_by(occluders, origin, q) {
+                    continue;
+                }
                 let d2 = w.length_squared();
-                if d2 <= 1e-8 {
-                    continue;
-                }
-                let wn = w / d2.sqrt();
-                let cos_here = hit.normal.dot(wn);
-                let cos_light = -light.normal.dot(wn);
-                if cos_here <= 0.0 || cos_light <= 0.0 || scene.occluded(origin, q) {
-                    continue;
-                }
-                geometry_sum += cos_here * cos_light / d2;
+                geometry_sum += here * there / (d2 * d2);
             }
         }
         irradiance += light.radiance * (geometry_sum * light.area() / samples);

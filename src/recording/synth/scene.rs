@@ -1,5 +1,5 @@
-//! The analytic room of the synthetic recordings: geometry, lights, materials with
-//! procedural textures, and ray intersection.
+//! The analytic room of the synthetic recordings: its surfaces, furniture and lights,
+//! materials, and the first hit and shadow queries over them.
 //!
 //! World frame: right-handed, metres, +y up, the floor at y = 0. The room spans
 //! x in [-2.5, 2.5], z in [-2.5, 2.5] and y in [0, 2.6]. The walls are named by the
@@ -9,6 +9,9 @@
 //! The scene is fixed: it does not depend on the seed or on any setting, so every
 //! recording shows the same room.
 
+pub use super::geometry::{AxisBox, Ray, Sphere, ray_box_entry, ray_sphere, segment_crosses_box};
+pub use super::texture::BlockTexture;
+use super::texture::{BALL_ALBEDO, block_albedo, room_albedo};
 use glam::Vec3;
 
 /// Lower corner of the room's interior.
@@ -18,37 +21,8 @@ pub const ROOM_MAX: Vec3 = Vec3::new(2.5, 2.6, 2.5);
 /// Centre of the free spot left for a virtual object: 0.3 m above the middle of the
 /// floor, so a sphere of radius 0.3 m placed here rests on the floor.
 pub const OBJECT_POSITION: Vec3 = Vec3::new(0.0, 0.3, 0.0);
-
-/// A ray `origin + t * direction`. The direction need not be unit length; distances
-/// `t` are then in multiples of its length (a camera ray with direction z = 1 in camera
-/// space gives `t` = depth).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Ray {
-    pub origin: Vec3,
-    pub direction: Vec3,
-}
-
-impl Ray {
-    /// The point at parameter `t`.
-    #[inline]
-    pub fn at(&self, t: f32) -> Vec3 {
-        self.origin + self.direction * t
-    }
-}
-
-/// An axis-aligned box.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AxisBox {
-    pub min: Vec3,
-    pub max: Vec3,
-}
-
-/// A sphere.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Sphere {
-    pub center: Vec3,
-    pub radius: f32,
-}
+/// [`OBJECT_POSITION`] in double precision, as stored in the header.
+pub const OBJECT_POSITION_F64: glam::DVec3 = glam::DVec3::new(0.0, 0.3, 0.0);
 
 /// Which surface of the scene a ray hit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -123,19 +97,6 @@ impl RectLight {
         let v = d.dot(self.edge_v) / self.edge_v.length_squared();
         (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)
     }
-}
-
-/// Procedural textures of the boxes.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum BlockTexture {
-    /// Wood-like value noise stretched along x.
-    Wood,
-    /// Horizontal drawer fronts with dark gaps.
-    Drawers,
-    /// A two-colour 3D checker of 0.1 m cells.
-    Checker,
-    /// Dark fabric: faint value noise.
-    Fabric,
 }
 
 /// An axis-aligned box standing on the floor, with its texture.
@@ -234,15 +195,58 @@ impl Scene {
     /// True when a box or the sphere blocks the segment from `from` to `to`. The room is
     /// convex and the lights lie on its boundary, so walls never occlude.
     pub fn occluded(&self, from: Vec3, to: Vec3) -> bool {
-        let ray = Ray {
-            origin: from,
-            direction: to - from,
-        };
+        self.occluded_by(ALL_OCCLUDERS, from, to)
+    }
+
+    /// The occluders (bit i: block i, bit [`BALL_BIT`]: the sphere) whose bounds overlap
+    /// the bounds of `from` and the whole of `light`: the only ones that can block a
+    /// segment from `from` to any point of the light.
+    pub fn occluders_towards(&self, from: Vec3, light: &RectLight) -> u32 {
+        let far = light.corner + light.edge_u + light.edge_v;
+        let lo = from.min(light.corner).min(far);
+        let hi = from.max(light.corner).max(far);
+        let overlaps = |b: &AxisBox| b.min.cmple(hi).all() && b.max.cmpge(lo).all();
+        let mut mask = 0;
+        for (i, b) in self.blocks.iter().enumerate().take(BALL_BIT as usize) {
+            if overlaps(&b.bounds) {
+                mask |= 1 << i;
+            }
+        }
+        let r = Vec3::splat(self.ball.radius);
+        if overlaps(&AxisBox {
+            min: self.ball.center - r,
+            max: self.ball.center + r,
+        }) {
+            mask |= 1 << BALL_BIT;
+        }
+        mask
+    }
+
+    /// True when one of the occluders in `mask` (see [`Scene::occluders_towards`])
+    /// blocks the segment from `from` to `to`.
+    pub fn occluded_by(&self, mask: u32, from: Vec3, to: Vec3) -> bool {
+        if mask == 0 {
+            return false;
+        }
+        let direction = to - from;
+        let inv = direction.recip();
         let (t_min, t_max) = (1e-5, 1.0 - 1e-4);
-        self.blocks
-            .iter()
-            .any(|b| ray_box_entry(&ray, &b.bounds, t_min, t_max).is_some())
-            || ray_sphere(&ray, &self.ball, t_min, t_max).is_some()
+        for (i, b) in self.blocks.iter().enumerate().take(BALL_BIT as usize) {
+            if mask & (1 << i) != 0 && segment_crosses_box(from, inv, &b.bounds, t_min, t_max) {
+                return true;
+            }
+        }
+        mask & (1 << BALL_BIT) != 0
+            && ray_sphere(
+                &Ray {
+                    origin: from,
+                    direction,
+                },
+                &self.ball,
+                t_min,
+                t_max,
+            )
+            .is_some()
     }
 
     /// Albedo and emission at a hit.
@@ -257,7 +261,9 @@ impl Scene {
         }
         let albedo = match hit.surface {
             Surface::Block(i) => match self.blocks.get(i) {
-                Some(b) => block_albedo(b.texture, hit.position),
+                // Evaluated just inside the face, so 3D patterns are stable on faces
+                // that lie on a pattern boundary.
+                Some(b) => block_albedo(b.texture, hit.position - hit.normal * 1e-3),
                 None => Vec3::splat(0.5),
             },
             Surface::Ball => BALL_ALBEDO,
@@ -316,169 +322,10 @@ pub fn ray_room_exit(ray: &Ray, room: &AxisBox) -> Option<(f32, Vec3, Surface)> 
     best.filter(|(t, _, _)| *t > 0.0)
 }
 
-/// Where a ray from outside enters `b`, if within (t_min, t_max): parameter and the unit
-/// outward normal of the face it enters.
-pub fn ray_box_entry(ray: &Ray, b: &AxisBox, t_min: f32, t_max: f32) -> Option<(f32, Vec3)> {
-    let mut near = t_min;
-    let mut far = t_max;
-    let mut near_axis = None;
-    for axis in 0..3 {
-        let (o, d) = (ray.origin[axis], ray.direction[axis]);
-        let (lo, hi) = (b.min[axis], b.max[axis]);
-        if d == 0.0 {
-            if o < lo || o > hi {
-                return None;
-            }
-            continue;
-        }
-        let inv = 1.0 / d;
-        let (t0, t1) = if inv > 0.0 {
-            ((lo - o) * inv, (hi - o) * inv)
-        } else {
-            ((hi - o) * inv, (lo - o) * inv)
-        };
-        if t0 > near {
-            near = t0;
-            near_axis = Some((axis, d));
-        }
-        far = far.min(t1);
-        if near > far {
-            return None;
-        }
-    }
-    // An origin inside the box (no entering face after t_min) is not an entry.
-    let (axis, d) = near_axis?;
-    let mut normal = Vec3::ZERO;
-    normal[axis] = -d.signum();
-    Some((near, normal))
-}
-
-/// The nearest intersection of a ray with a sphere's surface in (t_min, t_max).
-pub fn ray_sphere(ray: &Ray, s: &Sphere, t_min: f32, t_max: f32) -> Option<f32> {
-    let oc = ray.origin - s.center;
-    let a = ray.direction.length_squared();
-    let half_b = oc.dot(ray.direction);
-    let c = oc.length_squared() - s.radius * s.radius;
-    let disc = half_b * half_b - a * c;
-    if a <= 0.0 || disc < 0.0 {
-        return None;
-    }
-    let root = disc.sqrt();
-    [(-half_b - root) / a, (-half_b + root) / a]
-        .into_iter()
-        .find(|&t| t > t_min && t < t_max)
-}
-
-/// Uniform orange of the sphere.
-const BALL_ALBEDO: Vec3 = Vec3::new(0.85, 0.42, 0.08);
-
-/// Smooth value noise in [0, 1] on the integer lattice of `p` (a fixed function of
-/// position: textures do not change between frames or seeds).
-pub fn value_noise(p: Vec3) -> f32 {
-    let cell = p.floor();
-    let f = p - cell;
-    let w = f * f * (Vec3::splat(3.0) - 2.0 * f);
-    let (ix, iy, iz) = (cell.x as i64, cell.y as i64, cell.z as i64);
-    let lattice = |dx: i64, dy: i64, dz: i64| {
-        let h = crate::rng::hash(&[(ix + dx) as u64, (iy + dy) as u64, (iz + dz) as u64]);
-        crate::rng::unit_f32(h)
-    };
-    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
-    let x00 = lerp(lattice(0, 0, 0), lattice(1, 0, 0), w.x);
-    let x10 = lerp(lattice(0, 1, 0), lattice(1, 1, 0), w.x);
-    let x01 = lerp(lattice(0, 0, 1), lattice(1, 0, 1), w.x);
-    let x11 = lerp(lattice(0, 1, 1), lattice(1, 1, 1), w.x);
-    lerp(lerp(x00, x10, w.y), lerp(x01, x11, w.y), w.z)
-}
-
-/// Two octaves of value noise, in [0, 1].
-fn fbm(p: Vec3) -> f32 {
-    (2.0 * value_noise(p) + value_noise(p * 2.03 + Vec3::splat(17.0))) / 3.0
-}
-
-/// 1 when `x` lies within `half_width` of a multiple of `period`.
-fn near_multiple(x: f32, period: f32, half_width: f32) -> bool {
-    let r = x.rem_euclid(period);
-    r < half_width || r > period - half_width
-}
-
-fn checker(a: f32, b: f32, size: f32) -> bool {
-    ((a / size).floor() as i64 + (b / size).floor() as i64).rem_euclid(2) == 0
-}
-
-/// Albedo of the floor, walls and ceiling.
-fn room_albedo(surface: Surface, p: Vec3) -> Vec3 {
-    match surface {
-        Surface::Floor => {
-            // 0.5 m tiles in two wood tones with light grout, slightly mottled.
-            if near_multiple(p.x, 0.5, 0.008) || near_multiple(p.z, 0.5, 0.008) {
-                return Vec3::new(0.45, 0.44, 0.42);
-            }
-            let tile = if checker(p.x, p.z, 0.5) {
-                Vec3::new(0.62, 0.48, 0.33)
-            } else {
-                Vec3::new(0.26, 0.16, 0.09)
-            };
-            tile * (0.85 + 0.3 * value_noise(Vec3::new(p.x * 6.0, 0.5, p.z * 6.0)))
-        }
-        Surface::Ceiling => Vec3::new(0.80, 0.80, 0.78),
-        Surface::WestWall => {
-            if p.y < 0.1 {
-                return Vec3::new(0.85, 0.85, 0.82);
-            }
-            // Sage green, lighter towards the ceiling.
-            let s = (p.y / ROOM_MAX.y).clamp(0.0, 1.0);
-            Vec3::new(0.22, 0.38, 0.25).lerp(Vec3::new(0.55, 0.70, 0.55), s)
-        }
-        Surface::EastWall => Vec3::new(0.72, 0.70, 0.64),
-        Surface::NorthWall => {
-            // Vertical stripes, 0.25 m wide.
-            if (p.x / 0.25).floor() as i64 % 2 == 0 {
-                Vec3::new(0.72, 0.60, 0.42)
-            } else {
-                Vec3::new(0.38, 0.46, 0.70)
-            }
-        }
-        Surface::SouthWall => {
-            if (1.0..1.2).contains(&p.y) {
-                Vec3::new(0.85, 0.80, 0.62)
-            } else {
-                Vec3::new(0.62, 0.30, 0.20)
-            }
-        }
-        Surface::Block(_) | Surface::Ball => Vec3::splat(0.5),
-    }
-}
-
-/// Albedo of a box's texture at `p`.
-fn block_albedo(texture: BlockTexture, p: Vec3) -> Vec3 {
-    match texture {
-        BlockTexture::Wood => {
-            let grain = fbm(Vec3::new(p.x * 2.0, p.y * 24.0, p.z * 24.0));
-            Vec3::new(0.55, 0.30, 0.14) * (0.55 + 0.6 * grain)
-        }
-        BlockTexture::Drawers => {
-            if near_multiple(p.y, 0.3, 0.01) {
-                Vec3::splat(0.05)
-            } else {
-                Vec3::new(0.08, 0.16, 0.48)
-            }
-        }
-        BlockTexture::Checker => {
-            let odd = ((p.x / 0.1).floor() as i64
-                + (p.y / 0.1).floor() as i64
-                + (p.z / 0.1).floor() as i64)
-                .rem_euclid(2)
-                == 1;
-            if odd {
-                Vec3::new(0.15, 0.55, 0.20)
-            } else {
-                Vec3::new(0.85, 0.85, 0.80)
-            }
-        }
-        BlockTexture::Fabric => Vec3::new(0.07, 0.06, 0.08) * (0.8 + 0.4 * fbm(p * 30.0)),
-    }
-}
+/// Bit of the sphere in occluder masks (blocks use the bits below it).
+pub const BALL_BIT: u32 = 31;
+/// An occluder mask naming every block and the sphere.
+pub const ALL_OCCLUDERS: u32 = u32::MAX;
 
 #[cfg(test)]
 mod tests {
@@ -489,46 +336,6 @@ mod tests {
             origin: Vec3::from_array(o),
             direction: Vec3::from_array(d),
         }
-    }
-
-    #[test]
-    fn ray_enters_box_through_the_facing_side() {
-        let b = AxisBox {
-            min: Vec3::new(-1.0, -1.0, 4.0),
-            max: Vec3::new(1.0, 1.0, 6.0),
-        };
-        let (t, n) = ray_box_entry(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), &b, 0.0, 100.0).unwrap();
-        assert!((t - 4.0).abs() < 1e-6);
-        assert_eq!(n, Vec3::NEG_Z);
-        // Unnormalized direction: t is in multiples of its length.
-        let (t, _) = ray_box_entry(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 2.0]), &b, 0.0, 100.0).unwrap();
-        assert!((t - 2.0).abs() < 1e-6);
-        // From the side, through the +x face.
-        let (t, n) =
-            ray_box_entry(&ray([3.0, 0.5, 5.0], [-1.0, 0.0, 0.0]), &b, 0.0, 100.0).unwrap();
-        assert!((t - 2.0).abs() < 1e-6);
-        assert_eq!(n, Vec3::X);
-        // Misses, beyond t_max, and from inside.
-        assert!(ray_box_entry(&ray([0.0, 2.0, 0.0], [0.0, 0.0, 1.0]), &b, 0.0, 100.0).is_none());
-        assert!(ray_box_entry(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), &b, 0.0, 3.9).is_none());
-        assert!(ray_box_entry(&ray([0.0, 0.0, 5.0], [0.0, 0.0, 1.0]), &b, 0.0, 100.0).is_none());
-    }
-
-    #[test]
-    fn ray_hits_sphere_at_the_near_root() {
-        let s = Sphere {
-            center: Vec3::new(0.0, 0.0, 5.0),
-            radius: 1.0,
-        };
-        let t = ray_sphere(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), &s, 0.0, 100.0).unwrap();
-        assert!((t - 4.0).abs() < 1e-5);
-        let t = ray_sphere(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 0.5]), &s, 0.0, 100.0).unwrap();
-        assert!((t - 8.0).abs() < 1e-4);
-        // From inside: the far root.
-        let t = ray_sphere(&ray([0.0, 0.0, 5.0], [1.0, 0.0, 0.0]), &s, 0.0, 100.0).unwrap();
-        assert!((t - 1.0).abs() < 1e-5);
-        // Tangent-ish miss.
-        assert!(ray_sphere(&ray([1.01, 0.0, 0.0], [0.0, 0.0, 1.0]), &s, 0.0, 100.0).is_none());
     }
 
     #[test]
@@ -570,6 +377,47 @@ mod tests {
             let nearest = spot.center.clamp(b.bounds.min, b.bounds.max);
             assert!(nearest.distance(spot.center) > spot.radius);
         }
+    }
+
+    #[test]
+    fn culled_occluder_sets_give_the_same_shadows() {
+        let scene = Scene::room();
+        let mut rng = crate::rng::Counter::new(&[3]);
+        let mut blocked = 0;
+        for _ in 0..20_000 {
+            let p = Vec3::new(
+                -2.5 + 5.0 * rng.next_f32(),
+                0.001 + 1.0 * rng.next_f32(),
+                -2.5 + 5.0 * rng.next_f32(),
+            );
+            if scene
+                .blocks
+                .iter()
+                .any(|b| p.cmpge(b.bounds.min).all() && p.cmple(b.bounds.max).all())
+                || p.distance(scene.ball.center) < scene.ball.radius
+            {
+                continue;
+            }
+            for light in &scene.lights {
+                let q = light.point(rng.next_f32(), rng.next_f32());
+                let mask = scene.occluders_towards(p, light);
+                let all = scene.occluded_by(ALL_OCCLUDERS, p, q);
+                assert_eq!(scene.occluded_by(mask, p, q), all);
+                // The slab test agrees with the entry test for outside origins.
+                let ray = Ray {
+                    origin: p,
+                    direction: q - p,
+                };
+                let entry = scene
+                    .blocks
+                    .iter()
+                    .any(|b| ray_box_entry(&ray, &b.bounds, 1e-5, 1.0 - 1e-4).is_some())
+                    || ray_sphere(&ray, &scene.ball, 1e-5, 1.0 - 1e-4).is_some();
+                assert_eq!(all, entry);
+                blocked += all as usize;
+            }
+        }
+        assert!(blocked > 500, "{blocked}");
     }
 
     #[test]

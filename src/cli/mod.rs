@@ -18,7 +18,7 @@ use std::path::PathBuf;
 /// (into recordings/default.relume), runs the default pipeline over it, writes the
 /// products to out/ and prints a timing table per stage.
 #[derive(Parser, Debug)]
-#[command(name = "relume", version, about, long_about, max_term_width = 100)]
+#[command(name = "relume", version, about, long_about, max_term_width = 100, after_help = EXAMPLES)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -42,6 +42,17 @@ enum Command {
     /// Check a pipeline file without running it.
     Validate(catalog::ValidateArgs),
 }
+
+const EXAMPLES: &str = "\
+Examples:
+  relume replay                                    the built-in recording and pipeline
+  relume import redwood DATA/livingroom1 -o lr.relume
+  relume inspect lr.relume --json
+  relume replay lr.relume -p pipelines/default.toml --frames 0..50 --out out/lr --trace t.json
+  relume replay lr.relume --hash > run1.txt         one digest line per frame, to diff runs
+  relume bench lr.relume --repeat 5
+  relume stages                                    what a pipeline can use
+  relume validate my.toml";
 
 /// Runs the command line; returns the exit code.
 pub fn main() -> anyhow::Result<i32> {

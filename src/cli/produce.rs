@@ -58,7 +58,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
         ..SynthConfig::default()
     };
     let start = std::time::Instant::now();
-    let summary = synth::generate(&config, &a.out)?;
+    let summary = generate(&config, &a.out)?;
     println!(
         "wrote {} ({} frames, {}x{}, {:.1} MB) in {:.2} s",
         summary.path.display(),
@@ -91,8 +91,17 @@ pub fn ensure_default_recording(path: &Path) -> anyhow::Result<()> {
         config.width,
         config.height
     );
-    synth::generate(&config, path)?;
+    generate(&config, path)?;
     Ok(())
+}
+
+/// Generates with a progress bar (shown on terminals only).
+fn generate(config: &SynthConfig, path: &Path) -> anyhow::Result<synth::SynthSummary> {
+    let bar = progress::bar(config.frames as u64, "rendering");
+    let summary =
+        synth::generate_with_progress(config, path, &mut |done, _| bar.set_position(done as u64));
+    bar.finish_and_clear();
+    Ok(summary?)
 }
 
 #[derive(Subcommand, Debug)]

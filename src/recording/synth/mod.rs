@@ -356,6 +356,15 @@ pub fn frame_records(
 /// Renders the recording of `config` frame by frame and writes it atomically to `path`
 /// (nothing appears under `path` unless the whole recording is written).
 pub fn generate(config: &SynthConfig, path: &Path) -> Result<SynthSummary, RecordingError> {
+    generate_with_progress(config, path, &mut |_, _| {})
+}
+
+/// [`generate`], calling `progress(done, total)` after each frame.
+pub fn generate_with_progress(
+    config: &SynthConfig,
+    path: &Path,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<SynthSummary, RecordingError> {
     let invalid = |reason: String| RecordingError::Invalid {
         path: path.to_path_buf(),
         reason,
@@ -369,6 +378,7 @@ pub fn generate(config: &SynthConfig, path: &Path) -> Result<SynthSummary, Recor
         for record in frame_records(config, &scene, frame).map_err(invalid)? {
             writer.write(&record)?;
         }
+        progress(frame + 1, config.frames);
     }
     let path = writer.finish()?;
     let bytes = std::fs::metadata(&path)

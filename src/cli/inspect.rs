@@ -32,7 +32,7 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
         .filter_map(|&kind| {
             let stamps: Vec<i64> = index.iter().filter(|e| e.kind == kind).map(|e| e.stamp_ns).collect();
             let (first, last) = (stamps.iter().min()?, stamps.iter().max()?);
-            let span_s = (last - first) as f64 * 1e-9;
+            let span_s = last.abs_diff(*first) as f64 * 1e-9;
             let rate = if span_s > 0.0 { (stamps.len() - 1) as f64 / span_s } else { 0.0 };
             let bytes: u64 = index.iter().filter(|e| e.kind == kind).map(|e| e.len as u64).sum();
             Some(serde_json::json!({ "stream": kind.name(), "records": stamps.len(), "first_ns": first, "last_ns": last, "rate_hz": rate, "bytes": bytes }))

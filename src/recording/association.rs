@@ -59,7 +59,7 @@ fn nearest(sorted: &[(i64, usize)], t: i64, tolerance_ns: i64) -> Option<usize> 
         .into_iter()
         .flatten()
         .filter_map(|i| sorted.get(i))
-        .map(|&(s, i)| ((s - t).unsigned_abs(), i))
+        .map(|&(s, i)| (s.abs_diff(t), i))
         .filter(|&(d, _)| d <= tolerance_ns.unsigned_abs())
         .min()
         .map(|(_, i)| i)
@@ -78,7 +78,8 @@ pub fn pose_at(poses: &[(i64, Pose)], t: i64) -> Option<Pose> {
         return Some(p1);
     }
     let (s0, p0) = poses[at - 1];
-    let w = (t - s0) as f64 / (s1 - s0) as f64;
+    // i128: stamps may span the whole i64 range (e.g. from a damaged file).
+    let w = (t as i128 - s0 as i128) as f64 / (s1 as i128 - s0 as i128) as f64;
     Some(Pose::interpolate(&p0, &p1, w))
 }
 

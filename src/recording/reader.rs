@@ -207,7 +207,7 @@ impl Recording {
             return Err(no_footer("the index footer is missing".into()));
         }
         let footer_at = u64::from_le_bytes(t[..8].try_into().expect("8 bytes"));
-        if footer_at < body_start || footer_at + FRAME_HEADER_LEN > trailer_at {
+        if footer_at < body_start || footer_at > trailer_at.saturating_sub(FRAME_HEADER_LEN) {
             return Err(self.corrupt(
                 trailer_at,
                 format!("the trailer points outside the file (byte {footer_at})"),

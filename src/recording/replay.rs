@@ -87,7 +87,7 @@ impl Replay {
     /// Duration from the first to the last frame stamp, in seconds.
     pub fn duration_s(&self) -> f64 {
         match (self.frames.first(), self.frames.last()) {
-            (Some(a), Some(b)) => (b.stamp_ns - a.stamp_ns) as f64 * 1e-9,
+            (Some(a), Some(b)) => b.stamp_ns.abs_diff(a.stamp_ns) as f64 * 1e-9,
             _ => 0.0,
         }
     }

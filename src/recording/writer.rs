@@ -76,14 +76,21 @@ impl RecordingWriter {
         trailer[8..].copy_from_slice(&TRAILER_MAGIC);
         self.put(&trailer)?;
         let out = self.out.take().expect("writer is open until finish");
-        let file = out
-            .into_inner()
-            .map_err(|e| RecordingError::io(&self.tmp_path, e.into_error()))?;
-        file.sync_all()
-            .map_err(|e| RecordingError::io(&self.tmp_path, e))?;
-        drop(file);
-        std::fs::rename(&self.tmp_path, &self.final_path)
-            .map_err(|e| RecordingError::io(&self.final_path, e))?;
+        let published = (|| {
+            let file = out
+                .into_inner()
+                .map_err(|e| RecordingError::io(&self.tmp_path, e.into_error()))?;
+            file.sync_all()
+                .map_err(|e| RecordingError::io(&self.tmp_path, e))?;
+            drop(file);
+            std::fs::rename(&self.tmp_path, &self.final_path)
+                .map_err(|e| RecordingError::io(&self.final_path, e))
+        })();
+        if let Err(e) = published {
+            // `out` is taken, so Drop no longer removes the temporary file.
+            let _ = std::fs::remove_file(&self.tmp_path);
+            return Err(e);
+        }
         Ok(self.final_path.clone())
     }
 

@@ -19,16 +19,7 @@ impl FrameSource for EmptyFrames {
 }
 
 fn header() -> Header {
-    Header {
-        name: "bench".into(),
-        provenance: Default::default(),
-        color_intrinsics: Intrinsics::PRIMESENSE,
-        depth_intrinsics: Intrinsics::PRIMESENSE,
-        depth_unit_m: 0.001,
-        streams: vec![],
-        ground_truth: None,
-        attachments: vec![],
-    }
+    Header::new("bench", Intrinsics::PRIMESENSE, 0.001)
 }
 
 fn noop_chain(stages: usize, capacity: usize) -> Pipeline {

@@ -188,16 +188,7 @@ fn structure_errors() {
 #[test]
 fn every_builtin_kind_builds_from_its_defaults() {
     let registry = Registry::builtin();
-    let header = Header {
-        name: "t".into(),
-        provenance: Default::default(),
-        color_intrinsics: Intrinsics::PRIMESENSE,
-        depth_intrinsics: Intrinsics::PRIMESENSE,
-        depth_unit_m: 0.001,
-        streams: vec![],
-        ground_truth: None,
-        attachments: vec![],
-    };
+    let header = Header::new("t", Intrinsics::PRIMESENSE, 0.001);
     let dir = tempfile::tempdir().unwrap();
     for info in registry.kinds() {
         let params = Params::defaults(info.params);

@@ -135,16 +135,7 @@ fn pipeline(text: &str) -> Pipeline {
 }
 
 fn header() -> Header {
-    Header {
-        name: "test".into(),
-        provenance: Default::default(),
-        color_intrinsics: Intrinsics::PRIMESENSE,
-        depth_intrinsics: Intrinsics::PRIMESENSE,
-        depth_unit_m: 0.001,
-        streams: vec![],
-        ground_truth: None,
-        attachments: vec![],
-    }
+    Header::new("test", Intrinsics::PRIMESENSE, 0.001)
 }
 
 struct Outcome {

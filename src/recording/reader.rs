@@ -335,15 +335,5 @@ impl Recording {
 }
 
 fn placeholder_header() -> Header {
-    use super::types::Intrinsics;
-    Header {
-        name: String::new(),
-        provenance: Default::default(),
-        color_intrinsics: Intrinsics::PRIMESENSE,
-        depth_intrinsics: Intrinsics::PRIMESENSE,
-        depth_unit_m: 0.001,
-        streams: Vec::new(),
-        ground_truth: None,
-        attachments: Vec::new(),
-    }
+    Header::new("", super::types::Intrinsics::PRIMESENSE, 0.001)
 }

@@ -105,6 +105,21 @@ pub struct Header {
 }
 
 impl Header {
+    /// A header for one camera with both sensors at `intrinsics`, and no provenance,
+    /// streams, ground truth or attachments (for sources built in code).
+    pub fn new(name: &str, intrinsics: Intrinsics, depth_unit_m: f64) -> Header {
+        Header {
+            name: name.to_string(),
+            provenance: Provenance::default(),
+            color_intrinsics: intrinsics,
+            depth_intrinsics: intrinsics,
+            depth_unit_m,
+            streams: Vec::new(),
+            ground_truth: None,
+            attachments: Vec::new(),
+        }
+    }
+
     /// The attachment called `name`, if any.
     pub fn attachment(&self, name: &str) -> Option<&Attachment> {
         self.attachments.iter().find(|a| a.name == name)

@@ -12,7 +12,7 @@ pub mod tum;
 
 use super::codec::{self, wrap_image_file};
 use super::error::ImportError;
-use super::types::{EncodedImage, Intrinsics};
+use super::types::{EncodedImage, Header, Intrinsics, Provenance, StreamKind};
 use std::path::Path;
 
 /// Named intrinsics presets for `--intrinsics`.
@@ -196,6 +196,45 @@ pub(crate) fn line_error(path: &Path, line: usize, reason: String) -> ImportErro
         path: path.to_path_buf(),
         line,
         reason,
+    }
+}
+
+/// Width and height of a stream's images.
+pub(crate) type ImageSize = (u32, u32);
+
+/// The header of a recording imported from the `layout` directory `dir`: its name,
+/// provenance (tool, version, source, settings), intrinsics fitted to the image sizes.
+pub(crate) fn import_header(
+    layout: &str,
+    dir: &Path,
+    options: &ImportOptions,
+    extra_settings: &[(&str, String)],
+    (color_size, depth_size): (Option<ImageSize>, Option<ImageSize>),
+    depth_unit_m: f64,
+    streams: Vec<StreamKind>,
+) -> Header {
+    let mut settings: std::collections::BTreeMap<String, String> = extra_settings
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.clone()))
+        .collect();
+    settings.insert("intrinsics".into(), format!("{:?}", options.intrinsics));
+    settings.insert("store".into(), format!("{:?}", options.store));
+    Header {
+        name: dir
+            .file_name()
+            .map_or_else(|| layout.to_string(), |n| n.to_string_lossy().into_owned()),
+        provenance: Provenance {
+            tool: format!("relume import {layout}"),
+            tool_version: env!("CARGO_PKG_VERSION").into(),
+            source: dir.display().to_string(),
+            settings,
+        },
+        color_intrinsics: intrinsics_for(&options.intrinsics, color_size),
+        depth_intrinsics: intrinsics_for(&options.intrinsics, depth_size),
+        depth_unit_m,
+        streams,
+        ground_truth: None,
+        attachments: Vec::new(),
     }
 }
 

@@ -9,13 +9,11 @@
 //! The layout has no timestamps: frame k is stamped k / fps.
 
 use super::{
-    ImportOptions, ImportSummary, check_size, file_error, intrinsics_for, line_error, read_color,
+    ImportOptions, ImportSummary, check_size, file_error, import_header, line_error, read_color,
     read_depth,
 };
 use crate::recording::error::ImportError;
-use crate::recording::types::{
-    ColorRecord, DepthRecord, Header, Pose, PoseRecord, Provenance, Record, StreamKind,
-};
+use crate::recording::types::{ColorRecord, DepthRecord, Pose, PoseRecord, Record, StreamKind};
 use crate::recording::writer::RecordingWriter;
 use glam::{DMat3, DMat4, DQuat, DVec4};
 use std::path::{Path, PathBuf};
@@ -241,39 +239,22 @@ pub fn import(
     if !poses.is_empty() {
         streams.push(StreamKind::Pose);
     }
-    let header = Header {
-        name: dir
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "redwood".into()),
-        provenance: Provenance {
-            tool: "relume import redwood".into(),
-            tool_version: env!("CARGO_PKG_VERSION").into(),
-            source: dir.display().to_string(),
-            settings: [
-                ("fps".to_string(), options.fps.to_string()),
-                (
-                    "intrinsics".to_string(),
-                    format!("{:?}", options.common.intrinsics),
-                ),
-                ("store".to_string(), format!("{:?}", options.common.store)),
-                (
-                    "trajectory".to_string(),
-                    trajectory
-                        .as_ref()
-                        .map(|p| p.display().to_string())
-                        .unwrap_or_default(),
-                ),
-            ]
-            .into(),
-        },
-        color_intrinsics: intrinsics_for(&options.common.intrinsics, color_size),
-        depth_intrinsics: intrinsics_for(&options.common.intrinsics, depth_size),
-        depth_unit_m: REDWOOD_DEPTH_UNIT_M,
+    let trajectory_setting = trajectory
+        .as_ref()
+        .map(|p| p.display().to_string())
+        .unwrap_or_default();
+    let header = import_header(
+        "redwood",
+        dir,
+        &options.common,
+        &[
+            ("fps", options.fps.to_string()),
+            ("trajectory", trajectory_setting),
+        ],
+        (color_size, depth_size),
+        REDWOOD_DEPTH_UNIT_M,
         streams,
-        ground_truth: None,
-        attachments: Vec::new(),
-    };
+    );
     let mut writer = RecordingWriter::create(out, &header)?;
     let stamp = |k: usize| (k as f64 / options.fps * 1e9).round() as i64;
     for (k, (color_path, depth_path)) in colors.iter().zip(&depths).enumerate() {

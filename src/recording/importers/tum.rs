@@ -8,13 +8,11 @@
 //! Streams keep their own stamps; association happens at replay.
 
 use super::{
-    ImportOptions, ImportSummary, check_size, file_error, intrinsics_for, line_error,
+    ImportOptions, ImportSummary, check_size, file_error, import_header, line_error,
     parse_stamp_ns, read_color, read_depth,
 };
 use crate::recording::error::ImportError;
-use crate::recording::types::{
-    ColorRecord, DepthRecord, Header, Pose, PoseRecord, Provenance, Record, StreamKind,
-};
+use crate::recording::types::{ColorRecord, DepthRecord, Pose, PoseRecord, Record, StreamKind};
 use crate::recording::writer::RecordingWriter;
 use glam::{DQuat, DVec3};
 use std::path::{Path, PathBuf};
@@ -167,31 +165,15 @@ pub fn import(
     if !poses.is_empty() {
         streams.push(StreamKind::Pose);
     }
-    let header = Header {
-        name: dir
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "tum".into()),
-        provenance: Provenance {
-            tool: "relume import tum".into(),
-            tool_version: env!("CARGO_PKG_VERSION").into(),
-            source: dir.display().to_string(),
-            settings: [
-                (
-                    "intrinsics".to_string(),
-                    format!("{:?}", options.intrinsics),
-                ),
-                ("store".to_string(), format!("{:?}", options.store)),
-            ]
-            .into(),
-        },
-        color_intrinsics: intrinsics_for(&options.intrinsics, color_size),
-        depth_intrinsics: intrinsics_for(&options.intrinsics, depth_size),
-        depth_unit_m: TUM_DEPTH_UNIT_M,
+    let header = import_header(
+        "tum",
+        dir,
+        options,
+        &[],
+        (color_size, depth_size),
+        TUM_DEPTH_UNIT_M,
         streams,
-        ground_truth: None,
-        attachments: Vec::new(),
-    };
+    );
     let mut writer = RecordingWriter::create(out, &header)?;
     let total = colors.len() + depths.len();
     let mut expected_color = color_size;

@@ -1,0 +1,354 @@
+//! Absurd declared sizes (frame lengths, MessagePack lengths, footer entries, trailer
+//! offsets, image sizes) are clean errors found before any allocation of that size.
+
+mod common;
+
+use common::sample::*;
+use relume::recording::format::{
+    FRAME_HEADER_LEN, IndexEntry, MAX_PAYLOAD_LEN, PREAMBLE_LEN, TRAILER_LEN, TRAILER_MAGIC, Tag,
+};
+use relume::recording::{
+    EncodedImage, ImageEncoding, Record, Recording, RecordingError, Replay, ReplayOptions,
+    StreamKind, codec,
+};
+
+use std::time::{Duration, Instant};
+
+// ---------------------------------------------------- absurd declared sizes
+
+/// Runs `f`, which must fail fast (no allocation of a declared size can be that fast).
+fn quickly<T>(f: impl FnOnce() -> T) -> T {
+    let t = Instant::now();
+    let out = f();
+    assert!(
+        t.elapsed() < Duration::from_secs(2),
+        "took {:?}",
+        t.elapsed()
+    );
+    out
+}
+
+#[test]
+fn a_record_declaring_4_gib_is_rejected_before_allocation() {
+    let s = Sample::new();
+    let victim = s.index[4];
+    for declared in [u32::MAX, MAX_PAYLOAD_LEN + 1, MAX_PAYLOAD_LEN, 1 << 30] {
+        let mut bytes = s.bytes.clone();
+        set_len(&mut bytes, victim.offset, declared);
+        let path = s.variant("huge.relume", &bytes);
+        let rec = Recording::open(&path).unwrap();
+        assert!(rec.damage().is_none());
+        let err = quickly(|| rec.read_record(4)).unwrap_err();
+        if declared > MAX_PAYLOAD_LEN {
+            match err {
+                RecordingError::Corrupt { offset, reason, .. } => {
+                    assert_eq!(offset, victim.offset);
+                    assert!(
+                        reason.contains(&format!("declares {declared} bytes, over the limit")),
+                        "{reason}"
+                    );
+                }
+                other => panic!("{declared}: {other:?}"),
+            }
+        } else {
+            match err {
+                RecordingError::Truncated { offset, what, .. } => {
+                    assert_eq!(offset, s.len());
+                    assert!(
+                        what.contains(&format!("at byte {}", victim.offset)),
+                        "{what}"
+                    );
+                }
+                other => panic!("{declared}: {other:?}"),
+            }
+        }
+        assert_eq!(rec.read_record(3).unwrap(), s.records[3]);
+        assert_eq!(rec.read_record(5).unwrap(), s.records[5]);
+
+        // Without a footer the scan stops there, keeping the records before it.
+        let cut = s.footer_at as usize;
+        let path = s.variant("huge-cut.relume", &bytes[..cut]);
+        let rec = quickly(|| Recording::open(&path)).unwrap();
+        assert_eq!(rec.index(), &s.index[..4]);
+        assert_all_records_read_back(&rec, &s);
+        match rec.damage() {
+            Some(RecordingError::Corrupt { offset, .. }) => {
+                assert!(declared > MAX_PAYLOAD_LEN);
+                assert_eq!(*offset, victim.offset);
+            }
+            Some(RecordingError::Truncated { offset, what, .. }) => {
+                assert!(declared <= MAX_PAYLOAD_LEN);
+                assert_eq!(*offset, cut as u64);
+                assert!(
+                    what.contains(&format!("record 4 at byte {}", victim.offset)),
+                    "{what}"
+                );
+            }
+            other => panic!("{declared}: {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn a_header_declaring_4_gib_fails_to_open() {
+    let s = Sample::new();
+    let mut bytes = s.bytes.clone();
+    set_len(&mut bytes, PREAMBLE_LEN, u32::MAX);
+    let path = s.variant("huge-header.relume", &bytes);
+    match quickly(|| Recording::open(&path)) {
+        Err(RecordingError::Corrupt { offset, reason, .. }) => {
+            assert_eq!(offset, PREAMBLE_LEN);
+            assert!(reason.contains("over the limit"), "{reason}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// The file up to the footer (no footer, no trailer) followed by `tail`, so the scan
+/// indexes whatever frames `tail` holds.
+fn without_footer_then(s: &Sample, tail: &[u8]) -> Vec<u8> {
+    let mut bytes = s.bytes[..s.footer_at as usize].to_vec();
+    bytes.extend_from_slice(tail);
+    bytes
+}
+
+#[test]
+fn payloads_declaring_huge_messagepack_lengths_are_decode_errors() {
+    let s = Sample::new();
+    // A color record whose image bytes claim u32::MAX bytes (bin32), one whose map
+    // claims u32::MAX entries (map32), one whose pixels array claims u32::MAX entries,
+    // and a pose whose string key claims u32::MAX bytes (str32).
+    let mut bin = b"\x82\xa8stamp_ns\x00\xa5image\x85\xa8encoding\xa3Png\xa5width\x04\xa6height\x03\xa8channels\x03\xa5bytes\xc6".to_vec();
+    bin.extend_from_slice(&[0xff; 4]);
+    bin.extend_from_slice(&[0; 64]);
+    let map = [0xdf, 0xff, 0xff, 0xff, 0xff, 0xa1, b'x', 0x00];
+    let array = [0xdd, 0xff, 0xff, 0xff, 0xff, 0x01, 0x02];
+    let str32 = [0x81, 0xdb, 0xff, 0xff, 0xff, 0xff, b'a', b'b'];
+    // An unknown field nesting arrays 100 000 deep: must not overflow the stack.
+    let mut deep = vec![0x81, 0xa1, b'z'];
+    deep.extend(std::iter::repeat_n(0x91, 100_000));
+    deep.push(0xc0);
+    let cases: [(StreamKind, &[u8]); 5] = [
+        (StreamKind::Color, &bin),
+        (StreamKind::Color, &map),
+        (StreamKind::Depth, &array),
+        (StreamKind::Pose, &str32),
+        (StreamKind::Color, &deep),
+    ];
+    for (kind, payload) in cases {
+        let bytes = without_footer_then(&s, &frame(Tag::Stream(kind), 5, payload));
+        let path = s.variant("msgpack.relume", &bytes);
+        let rec = Recording::open(&path).unwrap();
+        assert_eq!(rec.index().len(), 10);
+        assert_eq!(rec.index()[9].offset, s.footer_at);
+        let err = quickly(|| rec.read_record(9)).unwrap_err();
+        match err {
+            RecordingError::Decode {
+                record,
+                kind: k,
+                offset,
+                ..
+            } => assert_eq!((record, k, offset), (9, kind.name(), s.footer_at)),
+            other => panic!("{kind:?}: {other:?}"),
+        }
+        // Replay reads poses at open: a bad one fails the open with the same error.
+        let replay = Replay::open(&path, ReplayOptions::default());
+        if kind == StreamKind::Pose {
+            assert!(matches!(
+                replay,
+                Err(RecordingError::Decode { record: 9, .. })
+            ));
+        } else {
+            let replay = replay.unwrap();
+            for n in 0..replay.len() {
+                let got = replay.read_frame(n);
+                let uses_9 = replay.frames[n].color == 9 || replay.frames[n].depth == Some(9);
+                assert_eq!(got.is_err(), uses_9, "frame {n}");
+            }
+        }
+    }
+}
+
+#[test]
+fn an_index_footer_with_absurd_entries_falls_back_to_a_scan() {
+    let s = Sample::new();
+    let absurd = [
+        IndexEntry {
+            offset: u64::MAX,
+            ..s.index[0]
+        },
+        IndexEntry {
+            offset: u64::MAX - 10,
+            len: u32::MAX,
+            ..s.index[0]
+        },
+        IndexEntry {
+            len: u32::MAX,
+            ..s.index[0]
+        },
+        IndexEntry {
+            offset: 0,
+            ..s.index[0]
+        },
+        IndexEntry {
+            offset: s.footer_at,
+            ..s.index[0]
+        },
+    ];
+    for entry in absurd {
+        let mut index = s.index.clone();
+        index[0] = entry;
+        let payload = rmp_serde::to_vec_named(&index).unwrap();
+        let mut tail = frame(Tag::Index, 0, &payload);
+        tail.extend_from_slice(&s.footer_at.to_le_bytes());
+        tail.extend_from_slice(&TRAILER_MAGIC);
+        let path = s.variant("index.relume", &without_footer_then(&s, &tail));
+        let rec = quickly(|| Recording::open(&path)).unwrap();
+        match rec.damage() {
+            Some(RecordingError::Corrupt { offset, reason, .. }) => {
+                assert_eq!(*offset, s.footer_at);
+                assert!(reason.contains("index entry 0 points outside"), "{reason}");
+            }
+            other => panic!("{entry:?}: {other:?}"),
+        }
+        assert_eq!(rec.index(), &s.index[..]);
+        assert_all_records_read_back(&rec, &s);
+    }
+}
+
+#[test]
+fn a_trailer_pointing_anywhere_falls_back_to_a_scan() {
+    let s = Sample::new();
+    let trailer_at = s.len() - TRAILER_LEN;
+    let targets = [
+        0,
+        PREAMBLE_LEN,
+        s.index[3].offset,
+        s.footer_at + 1,
+        trailer_at,
+        trailer_at - FRAME_HEADER_LEN + 1,
+        s.len(),
+        u64::MAX - FRAME_HEADER_LEN + 1,
+        u64::MAX - 5,
+        u64::MAX,
+    ];
+    for target in targets {
+        let mut bytes = s.bytes.clone();
+        bytes[trailer_at as usize..trailer_at as usize + 8].copy_from_slice(&target.to_le_bytes());
+        let path = s.variant("trailer.relume", &bytes);
+        let rec = quickly(|| Recording::open(&path)).unwrap_or_else(|e| panic!("{target}: {e}"));
+        match rec.damage() {
+            Some(RecordingError::Corrupt { offset, .. }) => {
+                assert!([trailer_at, target].contains(offset), "{target}: {offset}")
+            }
+            other => panic!("{target}: {other:?}"),
+        }
+        assert_eq!(rec.index(), &s.index[..], "{target}");
+        assert_all_records_read_back(&rec, &s);
+    }
+}
+
+#[test]
+fn images_declaring_absurd_sizes_are_codec_errors() {
+    let png = match &color(0) {
+        Record::Color(c) => c.image.clone(),
+        _ => unreachable!(),
+    };
+    for (w, h) in [(u32::MAX, u32::MAX), (1 << 16, 1 << 16), (0, 3), (4, 0)] {
+        let img = EncodedImage {
+            width: w,
+            height: h,
+            ..png.clone()
+        };
+        let err = quickly(|| codec::decode_color(&img)).unwrap_err();
+        assert!(
+            err.0.contains("implausible image size"),
+            "{w}x{h}: {}",
+            err.0
+        );
+        let raw = EncodedImage {
+            encoding: ImageEncoding::RawU16,
+            channels: 1,
+            ..img.clone()
+        };
+        assert!(quickly(|| codec::decode_depth_units(&raw)).is_err());
+        let floats = EncodedImage {
+            encoding: ImageEncoding::ShuffledF32,
+            ..img
+        };
+        assert!(quickly(|| codec::decode_floats(&floats)).is_err());
+    }
+    // A PNG whose stored size disagrees with its own header is an error, not a panic.
+    let lying = EncodedImage { width: 8, ..png };
+    let err = codec::decode_color(&lying).unwrap_err();
+    assert!(err.0.contains("differs from the stored 8x3"), "{}", err.0);
+}
+
+// ------------------------------------------------------------------- replay
+
+#[test]
+fn replay_of_a_corrupt_color_record_names_it_in_read_frame() {
+    let s = Sample::new();
+    let color1 = s.index[3];
+    assert_eq!(color1.kind, StreamKind::Color);
+    let mut bytes = s.bytes.clone();
+    bytes[payload_range(&color1).end - 2] ^= 0x80;
+    let path = s.variant("corrupt-color.relume", &bytes);
+    let replay = Replay::open(&path, ReplayOptions::default()).unwrap();
+    assert_eq!(replay.len(), 3);
+    let err = replay.read_frame(1).unwrap_err();
+    let message = err.to_string();
+    match err {
+        RecordingError::Checksum {
+            path: p,
+            record,
+            kind,
+            offset,
+            ..
+        } => {
+            assert_eq!(p, path);
+            assert_eq!((record, kind, offset), (3, "color", color1.offset));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(message.contains(&format!("record 3 (color) at byte {}", color1.offset)));
+    assert_eq!(
+        Record::Color(replay.read_frame(0).unwrap().color),
+        s.records[0]
+    );
+    assert_eq!(
+        Record::Color(replay.read_frame(2).unwrap().color),
+        s.records[6]
+    );
+}
+
+#[test]
+fn replay_of_a_corrupt_pose_fails_at_open_unless_skipping() {
+    let s = Sample::new();
+    let pose2 = s.index[8];
+    assert_eq!(pose2.kind, StreamKind::Pose);
+    let mut bytes = s.bytes.clone();
+    bytes[payload_range(&pose2).start + 5] ^= 0x01;
+    let path = s.variant("corrupt-pose.relume", &bytes);
+    match Replay::open(&path, ReplayOptions::default()) {
+        Err(RecordingError::Checksum {
+            record,
+            kind,
+            offset,
+            ..
+        }) => assert_eq!((record, kind, offset), (8, "pose", pose2.offset)),
+        other => panic!("{other:?}"),
+    }
+    let options = ReplayOptions {
+        skip_corrupt: true,
+        ..ReplayOptions::default()
+    };
+    let replay = Replay::open(&path, options).unwrap();
+    assert_eq!(replay.stats.skipped_corrupt_poses, 1);
+    assert_eq!(replay.len(), 3);
+    // Only frame 0 lies inside the remaining pose stream.
+    assert_eq!(replay.stats.frames_with_pose, 1);
+    for n in 0..3 {
+        replay.read_frame(n).unwrap();
+    }
+}

@@ -6,7 +6,7 @@
 //! `cargo install cargo-fuzz`, `rustup toolchain install nightly`):
 //!
 //! ```text
-//! cd fuzz && TMPDIR=/dev/shm cargo +nightly fuzz run reader corpus/reader seeds/reader -- -max_total_time=300
+//! cd fuzz && mkdir -p corpus/reader && TMPDIR=/dev/shm cargo +nightly fuzz run reader corpus/reader seeds/reader -- -max_total_time=300
 //! ```
 //!
 //! New inputs go to `fuzz/corpus/reader` (ignored by git); `fuzz/seeds/reader` holds a

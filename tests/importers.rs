@@ -328,3 +328,36 @@ fn redwood_reads_livingroom1_with_every_pose() {
         valid.len()
     );
 }
+
+#[test]
+fn raw_storage_decodes_to_the_same_pixels_as_compressed() {
+    use relume::recording::ImageEncoding;
+    use relume::recording::importers::StoreMode;
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("rw");
+    let trajectory: String = (0..3)
+        .map(|i| format!("{i} {i} {}\n{IDENTITY_RECORD}", i + 1))
+        .collect();
+    write_redwood(&dir, 3, &trajectory);
+    let mut frames = Vec::new();
+    for store in [StoreMode::Compressed, StoreMode::Raw] {
+        let out = tmp.path().join(format!("{store:?}.relume"));
+        let mut options = RedwoodOptions::default();
+        options.common.store = store;
+        redwood::import(&dir, &out, &options, &mut |_, _| {}).unwrap();
+        let replay = Replay::open(&out, ReplayOptions::default()).unwrap();
+        let f = replay.read_frame(2).unwrap();
+        let depth = f.depth.unwrap().image;
+        let expected = if store == StoreMode::Raw {
+            (ImageEncoding::RawU8, ImageEncoding::RawU16)
+        } else {
+            (ImageEncoding::Jpeg, ImageEncoding::Png)
+        };
+        assert_eq!((f.color.image.encoding, depth.encoding), expected);
+        frames.push((
+            codec::decode_color(&f.color.image).unwrap(),
+            codec::decode_depth(&depth, 0.001).unwrap(),
+        ));
+    }
+    assert_eq!(frames[0], frames[1]);
+}

@@ -408,3 +408,45 @@ fn ctrl_c_stops_after_the_frames_in_flight_and_keeps_complete_outputs() {
         "the timing table is still printed"
     );
 }
+
+#[test]
+fn the_main_job_runs_with_no_arguments_and_reuses_its_recording() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let o = ok(run_in(d, &[]));
+    let table = stdout(&o);
+    assert!(
+        table.starts_with(
+            "default on recordings/default.relume (<built-in pipelines/default.toml>):"
+        ),
+        "{table}"
+    );
+    assert!(table.contains("30 frames in"), "{table}");
+    assert!(
+        stderr(&o).contains("generating the built-in synthetic recording"),
+        "{}",
+        stderr(&o)
+    );
+    for product in ["color", "depth", "normals"] {
+        assert!(
+            d.join(format!("out/{product}/000029.png")).is_file(),
+            "{product}"
+        );
+    }
+    let inspect: serde_json::Value = serde_json::from_str(&stdout(&ok(run_in(
+        d,
+        &["inspect", "recordings/default.relume", "--json"],
+    ))))
+    .unwrap();
+    assert_eq!(
+        (
+            inspect["frames"].as_u64(),
+            inspect["frames_with_pose"].as_u64(),
+            inspect["frames_with_truth"].as_u64()
+        ),
+        (Some(30), Some(30), Some(30))
+    );
+    // The second run reuses the recording instead of rendering it again.
+    let o = ok(run_in(d, &["replay", "--frames", "0..2"]));
+    assert!(!stderr(&o).contains("generating"), "{}", stderr(&o));
+}

@@ -14,14 +14,15 @@ use std::path::PathBuf;
 /// configurable pipelines of stages, times every stage per frame, and compares runs
 /// frame by frame.
 ///
-/// Start with `relume replay`: it generates a built-in synthetic recording on first use
+/// Start with `relume` (or `relume replay`): it generates a built-in synthetic recording on first use
 /// (into recordings/default.relume), runs the default pipeline over it, writes the
 /// products to out/ and prints a timing table per stage.
 #[derive(Parser, Debug)]
 #[command(name = "relume", version, about, long_about, max_term_width = 100, after_help = EXAMPLES)]
 struct Cli {
+    /// With no command, `relume` runs `relume replay` with its defaults.
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -57,7 +58,10 @@ Examples:
 /// Runs the command line; returns the exit code.
 pub fn main() -> anyhow::Result<i32> {
     let cli = Cli::parse();
-    match cli.command {
+    let command = cli
+        .command
+        .unwrap_or_else(|| Command::Replay(replay::ReplayArgs::parse_from(["replay"])));
+    match command {
         Command::Synth(a) => produce::synth(a),
         Command::Import(c) => produce::import(c),
         Command::Inspect(a) => inspect::inspect(a),

@@ -2,7 +2,7 @@
 
 use super::{default_recording_path, produce, progress};
 use anyhow::{Context, bail};
-use clap::Args;
+use clap::{Args, Parser};
 use relume::graph::{Frame, Pipeline, Registry, RunFailure, RunOptions, RunReport, Stats, run};
 use relume::recording::{Replay, ReplayOptions};
 use std::io::Write;
@@ -31,7 +31,7 @@ pub struct RunArgs {
     seed: u64,
 }
 
-#[derive(Args, Debug)]
+#[derive(Parser, Debug)]
 pub struct ReplayArgs {
     #[command(flatten)]
     run: RunArgs,

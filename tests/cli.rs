@@ -157,12 +157,7 @@ fn a_failing_stage_exits_non_zero_naming_stage_and_frame() {
     assert_eq!(o.status.code(), Some(1));
     let err = stderr(&o);
     assert!(err.contains("error: replay of small.relume stopped: stage `fail` (debug.fail) failed at frame 5: debug.fail was asked to fail at frame 5"), "{err}");
-    let written: Vec<_> = std::fs::read_dir(d.join("out/depth"))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .collect();
-    let mut written = written;
-    written.sort();
+    let written = common::file_names(&d.join("out/depth"));
     assert_eq!(
         written,
         [
@@ -389,11 +384,7 @@ fn ctrl_c_stops_after_the_frames_in_flight_and_keeps_complete_outputs() {
     let o = child.wait_with_output().unwrap();
     assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
     assert!(stderr(&o).contains("interrupted:"), "{}", stderr(&o));
-    let mut written: Vec<String> = std::fs::read_dir(d.join("out/color"))
-        .unwrap()
-        .map(|e| e.unwrap().file_name().into_string().unwrap())
-        .collect();
-    written.sort();
+    let written = common::file_names(&d.join("out/color"));
     assert!((4..40).contains(&written.len()), "{written:?}");
     for (i, name) in written.iter().enumerate() {
         assert_eq!(

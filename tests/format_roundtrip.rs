@@ -152,15 +152,6 @@ fn replay_associates_and_reads_every_frame() {
 
 // ------------------------------------------------------------ atomic writing
 
-fn dir_entries(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
-}
-
 #[test]
 fn writer_publishes_only_on_finish_and_cleans_up_when_dropped() {
     let dir = tempfile::tempdir().unwrap();
@@ -173,16 +164,19 @@ fn writer_publishes_only_on_finish_and_cleans_up_when_dropped() {
             w.write(r).unwrap();
         }
         assert!(!path.exists(), "the final name appears before finish");
-        let names = dir_entries(dir.path());
+        let names = common::file_names(dir.path());
         assert_eq!(names.len(), 1, "{names:?}");
         assert!(names[0].starts_with(".import.relume.") && names[0].ends_with(".partial"));
     }
-    assert_eq!(dir_entries(dir.path()), Vec::<String>::new());
+    assert_eq!(common::file_names(dir.path()), Vec::<String>::new());
 
     // Finishing renames onto the final name and leaves nothing else behind.
     let written = write_recording(&path, &header(), &records());
     assert_eq!(written, path);
-    assert_eq!(dir_entries(dir.path()), vec!["import.relume".to_string()]);
+    assert_eq!(
+        common::file_names(dir.path()),
+        vec!["import.relume".to_string()]
+    );
 
     // Rewriting replaces the old file atomically: until finish, readers see the old one.
     let mut other = header();
@@ -194,7 +188,10 @@ fn writer_publishes_only_on_finish_and_cleans_up_when_dropped() {
     let rec = Recording::open(&path).unwrap();
     assert_eq!(rec.header(), &other);
     assert_eq!(rec.index().len(), 1);
-    assert_eq!(dir_entries(dir.path()), vec!["import.relume".to_string()]);
+    assert_eq!(
+        common::file_names(dir.path()),
+        vec!["import.relume".to_string()]
+    );
 }
 
 #[test]
@@ -210,7 +207,10 @@ fn a_failed_finish_leaves_no_temporary_file() {
         Err(RecordingError::Io { path: p, .. }) => assert_eq!(p, path),
         other => panic!("{other:?}"),
     }
-    assert_eq!(dir_entries(dir.path()), vec!["blocked.relume".to_string()]);
+    assert_eq!(
+        common::file_names(dir.path()),
+        vec!["blocked.relume".to_string()]
+    );
 }
 
 // ------------------------------------------------------- magic and versions

@@ -141,10 +141,7 @@ fn tum_error(edit: impl Fn(&Path)) -> String {
     let e = tum::import(&dir, &out, &ImportOptions::default(), &mut |_, _| {})
         .expect_err("import fails");
     assert!(!out.exists(), "no recording is left under the final name");
-    let leftovers: Vec<_> = std::fs::read_dir(tmp.path())
-        .unwrap()
-        .map(|e| e.unwrap().file_name())
-        .collect();
+    let leftovers = common::file_names(tmp.path());
     assert_eq!(
         leftovers.len(),
         1,
@@ -213,6 +210,18 @@ fn write_redwood(dir: &Path, frames: usize, trajectory: &str) {
     std::fs::write(dir.join("trajectory.log"), trajectory).unwrap();
 }
 
+/// The error of importing a two-frame Redwood directory with `trajectory`, after
+/// `edit`, with the directory prefix removed from paths.
+fn redwood_error(trajectory: &str, edit: impl Fn(&Path)) -> String {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("rw");
+    write_redwood(&dir, 2, trajectory);
+    edit(&dir);
+    let out = tmp.path().join("r.relume");
+    let e = redwood::import(&dir, &out, &RedwoodOptions::default(), &mut |_, _| {}).unwrap_err();
+    e.to_string().replace(&format!("{}/", dir.display()), "")
+}
+
 const IDENTITY_RECORD: &str = "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n";
 
 #[test]
@@ -236,37 +245,12 @@ fn redwood_errors_name_file_and_line() {
         ),
     ];
     for (trajectory, expected) in cases {
-        let tmp = tempfile::tempdir().unwrap();
-        let dir = tmp.path().join("rw");
-        write_redwood(&dir, 2, &trajectory);
-        let e = redwood::import(
-            &dir,
-            &tmp.path().join("r.relume"),
-            &RedwoodOptions::default(),
-            &mut |_, _| {},
-        )
-        .unwrap_err();
-        assert_eq!(
-            e.to_string().replace(&format!("{}/", dir.display()), ""),
-            expected
-        );
+        assert_eq!(redwood_error(&trajectory, |_| {}), expected);
     }
-    let tmp = tempfile::tempdir().unwrap();
-    let dir = tmp.path().join("rw");
-    write_redwood(&dir, 2, IDENTITY_RECORD);
-    std::fs::remove_file(dir.join("depth/00001.png")).unwrap();
-    let e = redwood::import(
-        &dir,
-        &tmp.path().join("r.relume"),
-        &RedwoodOptions::default(),
-        &mut |_, _| {},
-    )
-    .unwrap_err();
-    assert!(
-        e.to_string().ends_with("holds 2 images but")
-            || e.to_string().contains("holds 2 images but"),
-        "{e}"
-    );
+    let e = redwood_error(IDENTITY_RECORD, |dir| {
+        std::fs::remove_file(dir.join("depth/00001.png")).unwrap()
+    });
+    assert!(e.contains("holds 2 images but"), "{e}");
 }
 
 #[test]

@@ -5,14 +5,16 @@
 //! consistent with the index, and after a few bit flips every record that still reads
 //! back is the one that was written.
 
+mod common;
+
 use proptest::prelude::*;
 use proptest::sample::Index;
 use proptest::test_runner::RngSeed;
 use relume::raster::Image;
 use relume::recording::format::{FRAME_HEADER_LEN, MAX_PAYLOAD_LEN, PREAMBLE_LEN};
 use relume::recording::{
-    ColorRecord, DepthRecord, Header, Intrinsics, Pose, PoseRecord, Provenance, Record, Recording,
-    RecordingError, RecordingWriter, Replay, ReplayOptions, StreamKind, TruthRecord, codec,
+    ColorRecord, DepthRecord, Header, Pose, PoseRecord, Record, Recording, RecordingError,
+    RecordingWriter, Replay, ReplayOptions, TruthRecord, codec,
 };
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -35,25 +37,7 @@ fn sample() -> &'static Sample {
 }
 
 fn build_sample() -> Sample {
-    let intrinsics = Intrinsics::PRIMESENSE.scaled_to(4, 3);
-    let header = Header {
-        name: "props".into(),
-        provenance: Provenance {
-            tool: "relume test".into(),
-            ..Provenance::default()
-        },
-        color_intrinsics: intrinsics,
-        depth_intrinsics: intrinsics,
-        depth_unit_m: 0.001,
-        streams: vec![
-            StreamKind::Color,
-            StreamKind::Depth,
-            StreamKind::Pose,
-            StreamKind::Truth,
-        ],
-        ground_truth: None,
-        attachments: Vec::new(),
-    };
+    let header = common::sample::header();
     let mut records = Vec::new();
     for f in 0..3u8 {
         let stamp_ns = f as i64 * 33 * MS;

@@ -108,8 +108,10 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
             s.frames_with_truth
         );
         println!(
-            "  skipped   {} color records without depth within 20 ms, {} corrupt pose records",
-            s.skipped_no_depth, s.skipped_corrupt_poses
+            "  skipped   {} color records without depth within {} ms, {} corrupt pose records",
+            s.skipped_no_depth,
+            relume::recording::association::DEFAULT_TOLERANCE_NS / 1_000_000,
+            s.skipped_corrupt_poses
         );
         if let Some(gt) = &h.ground_truth {
             println!(

@@ -21,6 +21,16 @@ pub fn data_dir() -> PathBuf {
     dir
 }
 
+/// The names of the entries of `dir`, sorted.
+pub fn file_names(dir: &std::path::Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("cannot list {}: {e}", dir.display()))
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
 /// The `relume` binary built for these tests.
 pub fn relume() -> Command {
     Command::new(env!("CARGO_BIN_EXE_relume"))

@@ -13,6 +13,14 @@ pub struct Ray {
 }
 
 impl Ray {
+    /// A ray from `origin` along `direction` (not normalized here).
+    pub fn new(origin: impl Into<Vec3>, direction: impl Into<Vec3>) -> Ray {
+        Ray {
+            origin: origin.into(),
+            direction: direction.into(),
+        }
+    }
+
     /// The point at parameter `t`.
     #[inline]
     pub fn at(&self, t: f32) -> Vec3 {
@@ -108,34 +116,33 @@ pub fn ray_sphere(ray: &Ray, s: &Sphere, t_min: f32, t_max: f32) -> Option<f32> 
 mod tests {
     use super::*;
 
-    fn ray(o: [f32; 3], d: [f32; 3]) -> Ray {
-        Ray {
-            origin: Vec3::from_array(o),
-            direction: Vec3::from_array(d),
-        }
-    }
-
     #[test]
     fn ray_enters_box_through_the_facing_side() {
         let b = AxisBox {
             min: Vec3::new(-1.0, -1.0, 4.0),
             max: Vec3::new(1.0, 1.0, 6.0),
         };
-        let (t, n) = ray_box_entry(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), &b, 0.0, 100.0).unwrap();
+        let (t, n) =
+            ray_box_entry(&Ray::new([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), &b, 0.0, 100.0).unwrap();
         assert!((t - 4.0).abs() < 1e-6);
         assert_eq!(n, Vec3::NEG_Z);
         // Unnormalized direction: t is in multiples of its length.
-        let (t, _) = ray_box_entry(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 2.0]), &b, 0.0, 100.0).unwrap();
+        let (t, _) =
+            ray_box_entry(&Ray::new([0.0, 0.0, 0.0], [0.0, 0.0, 2.0]), &b, 0.0, 100.0).unwrap();
         assert!((t - 2.0).abs() < 1e-6);
         // From the side, through the +x face.
         let (t, n) =
-            ray_box_entry(&ray([3.0, 0.5, 5.0], [-1.0, 0.0, 0.0]), &b, 0.0, 100.0).unwrap();
+            ray_box_entry(&Ray::new([3.0, 0.5, 5.0], [-1.0, 0.0, 0.0]), &b, 0.0, 100.0).unwrap();
         assert!((t - 2.0).abs() < 1e-6);
         assert_eq!(n, Vec3::X);
         // Misses, beyond t_max, and from inside.
-        assert!(ray_box_entry(&ray([0.0, 2.0, 0.0], [0.0, 0.0, 1.0]), &b, 0.0, 100.0).is_none());
-        assert!(ray_box_entry(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), &b, 0.0, 3.9).is_none());
-        assert!(ray_box_entry(&ray([0.0, 0.0, 5.0], [0.0, 0.0, 1.0]), &b, 0.0, 100.0).is_none());
+        assert!(
+            ray_box_entry(&Ray::new([0.0, 2.0, 0.0], [0.0, 0.0, 1.0]), &b, 0.0, 100.0).is_none()
+        );
+        assert!(ray_box_entry(&Ray::new([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), &b, 0.0, 3.9).is_none());
+        assert!(
+            ray_box_entry(&Ray::new([0.0, 0.0, 5.0], [0.0, 0.0, 1.0]), &b, 0.0, 100.0).is_none()
+        );
     }
 
     #[test]
@@ -144,14 +151,14 @@ mod tests {
             center: Vec3::new(0.0, 0.0, 5.0),
             radius: 1.0,
         };
-        let t = ray_sphere(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), &s, 0.0, 100.0).unwrap();
+        let t = ray_sphere(&Ray::new([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]), &s, 0.0, 100.0).unwrap();
         assert!((t - 4.0).abs() < 1e-5);
-        let t = ray_sphere(&ray([0.0, 0.0, 0.0], [0.0, 0.0, 0.5]), &s, 0.0, 100.0).unwrap();
+        let t = ray_sphere(&Ray::new([0.0, 0.0, 0.0], [0.0, 0.0, 0.5]), &s, 0.0, 100.0).unwrap();
         assert!((t - 8.0).abs() < 1e-4);
         // From inside: the far root.
-        let t = ray_sphere(&ray([0.0, 0.0, 5.0], [1.0, 0.0, 0.0]), &s, 0.0, 100.0).unwrap();
+        let t = ray_sphere(&Ray::new([0.0, 0.0, 5.0], [1.0, 0.0, 0.0]), &s, 0.0, 100.0).unwrap();
         assert!((t - 1.0).abs() < 1e-5);
         // Tangent-ish miss.
-        assert!(ray_sphere(&ray([1.01, 0.0, 0.0], [0.0, 0.0, 1.0]), &s, 0.0, 100.0).is_none());
+        assert!(ray_sphere(&Ray::new([1.01, 0.0, 0.0], [0.0, 0.0, 1.0]), &s, 0.0, 100.0).is_none());
     }
 }

@@ -331,19 +331,12 @@ pub const ALL_OCCLUDERS: u32 = u32::MAX;
 mod tests {
     use super::*;
 
-    fn ray(o: [f32; 3], d: [f32; 3]) -> Ray {
-        Ray {
-            origin: Vec3::from_array(o),
-            direction: Vec3::from_array(d),
-        }
-    }
-
     #[test]
     fn rays_from_inside_leave_the_room_through_the_right_surface() {
         let room = Scene::room().room;
-        let (t, n, s) = ray_room_exit(&ray([0.0, 1.0, 0.0], [0.0, -1.0, 0.0]), &room).unwrap();
+        let (t, n, s) = ray_room_exit(&Ray::new([0.0, 1.0, 0.0], [0.0, -1.0, 0.0]), &room).unwrap();
         assert_eq!((t, n, s), (1.0, Vec3::Y, Surface::Floor));
-        let (t, n, s) = ray_room_exit(&ray([0.0, 1.0, 0.0], [1.0, 0.1, 0.0]), &room).unwrap();
+        let (t, n, s) = ray_room_exit(&Ray::new([0.0, 1.0, 0.0], [1.0, 0.1, 0.0]), &room).unwrap();
         assert!((t - 2.5).abs() < 1e-6);
         assert_eq!((n, s), (Vec3::NEG_X, Surface::EastWall));
     }
@@ -353,14 +346,14 @@ mod tests {
         let scene = Scene::room();
         // Straight up from the room centre: the ceiling light.
         let up = scene
-            .intersect(&ray([0.0, 1.0, 0.0], [0.0, 1.0, 0.0]), 0.0)
+            .intersect(&Ray::new([0.0, 1.0, 0.0], [0.0, 1.0, 0.0]), 0.0)
             .unwrap();
         assert_eq!(up.surface, Surface::Ceiling);
         assert_eq!(scene.material(&up).emission, scene.lights[0].radiance);
         // Towards the ball.
         let c = scene.ball.center;
         let hit = scene
-            .intersect(&ray([c.x, 2.0, c.z], [0.0, -1.0, 0.0]), 0.0)
+            .intersect(&Ray::new([c.x, 2.0, c.z], [0.0, -1.0, 0.0]), 0.0)
             .unwrap();
         assert_eq!(hit.surface, Surface::Ball);
         assert!((hit.position.y - (c.y + scene.ball.radius)).abs() < 1e-5);

@@ -9,6 +9,7 @@
 //! - [`raster`] and [`rng`]: the image buffer type and counter-based random numbers.
 
 pub mod graph;
+pub mod pinhole;
 pub mod raster;
 pub mod recording;
 pub mod rng;

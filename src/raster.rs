@@ -64,6 +64,10 @@ pub type Rgb8Image = Image<[u8; 3]>;
 pub type DepthImage = Image<f32>;
 /// A map of 3-vectors: camera-space positions (metres) or unit normals (zero = invalid).
 pub type Vec3Image = Image<Vec3>;
+/// One f32 per pixel: weights, confidences.
+pub type ScalarImage = Image<f32>;
+/// One small integer per pixel: counts, validity codes, coverage classes.
+pub type LabelImage = Image<u8>;
 
 /// True when a depth sample holds a measurement (finite and positive).
 #[inline]

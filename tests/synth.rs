@@ -302,10 +302,15 @@ fn exposure_spans_the_configured_range_and_frames_are_well_exposed() {
     let mut gains_seen = Vec::new();
     for (n, exposure) in exposures.iter().enumerate() {
         let m = replay.read_frame(n).unwrap().truth.unwrap().color_transform;
-        let gains: Vec<f32> = m
-            .chunks(3)
-            .map(|r| r.iter().sum::<f32>() / exposure)
-            .collect();
+        // M = exposure * MIX * diag(gains): the gains are the diagonal of MIX^-1 M / e.
+        let mix = glam::Mat3::from_cols_array(&camera::MIX).transpose();
+        let unmixed = mix.inverse() * glam::Mat3::from_cols_array(&m).transpose() / *exposure;
+        let gains: Vec<f32> = (0..3).map(|i| unmixed.col(i)[i]).collect();
+        let off_diagonal = (0..3)
+            .flat_map(|c| (0..3).filter(move |&r| r != c).map(move |r| (r, c)))
+            .map(|(r, c)| unmixed.col(c)[r].abs())
+            .fold(0.0, f32::max);
+        assert!(off_diagonal < 1e-4, "{unmixed:?}");
         assert!(
             gains.iter().all(|g| (0.8 - 1e-4..=1.2 + 1e-4).contains(g)),
             "{gains:?}"

@@ -4,15 +4,17 @@ pub mod config;
 pub mod frame;
 pub mod params;
 pub mod pipeline;
+pub mod product;
 pub mod registry;
 pub mod runtime;
 pub mod stage;
 pub mod timing;
 
 pub use config::{ConfigError, SourceFile};
-pub use frame::{Frame, Product, ProductKind};
+pub use frame::Frame;
 pub use params::{ParamDefault, ParamSpec, ParamValue, Params};
 pub use pipeline::{Feedback, Pipeline, ResolvedStage};
+pub use product::{Compensation, EnvCloud, PairCounts, Product, ProductKind};
 pub use registry::Registry;
 pub use runtime::{FrameSource, PipelineError, RunFailure, RunOptions, run};
 pub use stage::{BuildContext, Port, Ports, Stage, StageError, StageInfo};

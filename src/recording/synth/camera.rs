@@ -2,7 +2,7 @@
 //! (auto exposure, white balance, a fixed color mix, contrast, gamma 2.2, 8 bits).
 //!
 //! The color pipeline of frame t, per pixel, is
-//! `camera_linear = M_t * radiance` with `M_t = exposure_t * diag(gains_t) * MIX`
+//! `camera_linear = M_t * radiance` with `M_t = exposure_t * MIX * diag(gains_t)`
 //! (stored as the frame's `color_transform`), then `v = max(v, 0)^contrast_t`, then
 //! `v^(1 / 2.2)`, clipped to [0, 1] and rounded to 8 bits.
 
@@ -11,7 +11,9 @@ use crate::recording::types::Pose;
 use glam::{DMat3, DQuat, DVec3, Vec3};
 
 /// A fixed color-mixing matrix near identity (row-major, rows sum to 1 so grey stays
-/// grey): the sensor's channel crosstalk.
+/// grey): the camera's color-correction matrix. As in a real image signal processor, the
+/// white-balance gains act on the raw channels before it, so a white-balance change is
+/// not a per-channel gain of the output (`MIX * diag(g) * MIX^-1` has off-diagonal terms).
 pub const MIX: [f32; 9] = [0.90, 0.08, 0.02, 0.05, 0.90, 0.05, 0.02, 0.10, 0.88];
 
 /// Display gamma of the stored 8-bit color.
@@ -93,9 +95,9 @@ impl ColorResponse {
         }
     }
 
-    /// `M = exposure * diag(gains) * MIX`, row-major.
+    /// `M = exposure * MIX * diag(gains)`, row-major.
     pub fn color_transform(&self) -> [f32; 9] {
-        std::array::from_fn(|i| self.exposure * self.gains[i / 3] * MIX[i])
+        std::array::from_fn(|i| self.exposure * MIX[i] * self.gains[i % 3])
     }
 }
 
@@ -178,16 +180,16 @@ mod tests {
     }
 
     #[test]
-    fn transform_is_exposure_times_gains_times_mix() {
+    fn transform_is_exposure_times_mix_times_gains() {
         let r = ColorResponse {
             exposure: 2.0,
             gains: [1.1, 1.0, 0.9],
             contrast: 1.0,
         };
         let m = r.color_transform();
-        assert!((m[0] - 2.0 * 1.1 * MIX[0]).abs() < 1e-6);
-        assert!((m[5] - 2.0 * 1.0 * MIX[5]).abs() < 1e-6);
-        assert!((m[7] - 2.0 * 0.9 * MIX[7]).abs() < 1e-6);
+        assert!((m[0] - 2.0 * MIX[0] * 1.1).abs() < 1e-6);
+        assert!((m[5] - 2.0 * MIX[5] * 0.9).abs() < 1e-6);
+        assert!((m[7] - 2.0 * MIX[7] * 1.0).abs() < 1e-6);
         for row in MIX.chunks(3) {
             assert!((row.iter().sum::<f32>() - 1.0).abs() < 1e-6);
         }

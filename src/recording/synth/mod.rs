@@ -53,7 +53,7 @@ use std::path::{Path, PathBuf};
 
 /// Version of the generator's output: bumped whenever the same config would give
 /// different content, so cached recordings can be told apart.
-pub const GENERATOR_VERSION: &str = "1";
+pub const GENERATOR_VERSION: &str = "2";
 /// Metres per stored depth unit (TUM's scale: 5000 units per metre).
 pub const DEPTH_UNIT_M: f64 = 0.0002;
 /// Width and height of the environment-map attachment, in texels.

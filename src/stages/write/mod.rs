@@ -6,6 +6,13 @@
 //! | depth | 16-bit, millimetres, 0 = missing | Z, f32 metres, 0 = missing |
 //! | points | 16-bit, z in millimetres | X, Y, Z f32 metres |
 //! | normals | 8-bit RGB = (n + 1) / 2 for viewing, black = invalid | X, Y, Z f32 |
+//! | HDR radiance | 8-bit, clamped to [0, 1], gamma 1/2.2, for viewing | R, G, B f32 |
+//! | scalar map | 16-bit, value x 1000 (like depth in mm) | Y f32 |
+//! | label map | 8-bit gray, the raw values | Y f32 |
+//!
+//! A color compensation is saved as `<frame>.json` (row-major matrices, pair counts) and
+//! the environment-sample cloud as `<frame>.ply` (binary PLY, see [`ply`]), whatever
+//! the formats.
 //!
 //! Every file is written to a temporary name and renamed, so an interrupted run leaves
 //! complete files only.
@@ -19,11 +26,13 @@ use crate::recording::writer::write_file_atomic;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
+pub mod ply;
+
 const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
         "products",
         ParamDefault::StrList(&["depth", "normals"]),
-        "products to save (color images, depth, point or normal maps)",
+        "products to save: images, compensations (JSON) or clouds (PLY)",
     ),
     ParamSpec::new(
         "formats",
@@ -72,7 +81,7 @@ fn ports(params: &Params) -> Ports {
         inputs: params
             .str_list("products")
             .iter()
-            .map(|p| Port::new(p, p, ProductKind::IMAGES))
+            .map(|p| Port::new(p, p, ProductKind::WRITABLE))
             .collect(),
         outputs: Vec::new(),
     }
@@ -97,6 +106,10 @@ impl Stage for Write {
                 .get(name)
                 .ok_or_else(|| StageError::MissingInput(name.clone()))?;
             let stem = dir.join(format!("{:06}", frame.index));
+            if !product.kind().is_image() {
+                jobs.push((product, stem, false));
+                continue;
+            }
             if self.png {
                 jobs.push((product, stem.with_extension("png"), false));
             }
@@ -106,7 +119,9 @@ impl Stage for Write {
         }
         jobs.par_iter()
             .map(|(product, path, exr)| {
-                if *exr {
+                if !product.kind().is_image() {
+                    write_record(product, path)
+                } else if *exr {
                     write_exr(product, path)
                 } else {
                     write_png(product, path)
@@ -157,6 +172,36 @@ pub fn write_png(product: &Product, path: &Path) -> Result<(), StageError> {
                 image::RgbImage::from_raw(w, h, bytes).expect("size checked"),
             )
         }
+        Product::Radiance(r) => {
+            let bytes = r
+                .data
+                .iter()
+                .flat_map(|v| v.to_array().map(ply::display_level))
+                .collect();
+            image::DynamicImage::ImageRgb8(
+                image::RgbImage::from_raw(w, h, bytes).expect("size checked"),
+            )
+        }
+        Product::Scalar(s) => image::DynamicImage::ImageLuma16(
+            image::ImageBuffer::from_raw(
+                w,
+                h,
+                s.data
+                    .iter()
+                    .map(|&v| {
+                        if v.is_finite() {
+                            (v * 1000.0).round().clamp(0.0, 65535.0) as u16
+                        } else {
+                            0
+                        }
+                    })
+                    .collect(),
+            )
+            .expect("size checked"),
+        ),
+        Product::Labels(l) => image::DynamicImage::ImageLuma8(
+            image::GrayImage::from_raw(w, h, l.data.clone()).expect("size checked"),
+        ),
         _ => unreachable!("image_size accepts images only"),
     };
     let mut bytes = Vec::new();
@@ -170,6 +215,25 @@ pub fn write_png(product: &Product, path: &Path) -> Result<(), StageError> {
         path: path.to_path_buf(),
         source,
     })
+}
+
+/// Writes a non-image product next to `stem`: a compensation as `.json`, a cloud as
+/// `.ply`.
+pub fn write_record(product: &Product, stem: &Path) -> Result<(), StageError> {
+    let (path, bytes) = match product {
+        Product::Compensation(c) => (
+            stem.with_extension("json"),
+            serde_json::to_vec_pretty(&c.to_json()).expect("JSON of plain values"),
+        ),
+        Product::Cloud(cloud) => (stem.with_extension("ply"), ply::ply_bytes(cloud)),
+        other => {
+            return Err(StageError::Failed(format!(
+                "a {} cannot be written to a file",
+                other.kind().name()
+            )));
+        }
+    };
+    write_file_atomic(&path, &bytes).map_err(|source| StageError::Io { path, source })
 }
 
 /// Writes a product as EXR with f32 channels (see the module table).
@@ -193,6 +257,11 @@ pub fn write_exr(product: &Product, path: &Path) -> Result<(), StageError> {
         Product::Points(v) | Product::Normals(v) => (0..3)
             .map(|i| (["X", "Y", "Z"][i], v.data.iter().map(|p| p[i]).collect()))
             .collect(),
+        Product::Radiance(v) => (0..3)
+            .map(|i| (["R", "G", "B"][i], v.data.iter().map(|p| p[i]).collect()))
+            .collect(),
+        Product::Scalar(s) => vec![("Y", s.data.clone())],
+        Product::Labels(l) => vec![("Y", l.data.iter().map(|&v| v as f32).collect())],
         _ => {
             return Err(StageError::Failed(format!(
                 "a {} cannot be written as an image",
@@ -238,7 +307,9 @@ fn image_size(product: &Product) -> Result<(u32, u32), StageError> {
     match product {
         Product::Color(i) => Ok(size(i)),
         Product::Depth(i) => Ok(size(i)),
-        Product::Points(i) | Product::Normals(i) => Ok(size(i)),
+        Product::Points(i) | Product::Normals(i) | Product::Radiance(i) => Ok(size(i)),
+        Product::Scalar(i) => Ok(size(i)),
+        Product::Labels(i) => Ok(size(i)),
         other => Err(StageError::Failed(format!(
             "a {} cannot be written as an image",
             other.kind().name()

@@ -8,6 +8,7 @@
 //!   stage type the registry builds from config.
 //! - [`raster`] and [`rng`]: the image buffer type and counter-based random numbers.
 
+pub mod eval;
 pub mod graph;
 pub mod pinhole;
 pub mod raster;

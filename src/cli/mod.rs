@@ -2,6 +2,7 @@
 //! library's typed errors carry the file, line, frame or stage they concern.
 
 mod catalog;
+mod eval;
 mod inspect;
 mod produce;
 mod progress;
@@ -36,6 +37,8 @@ enum Command {
     Inspect(inspect::InspectArgs),
     /// Replay a recording through a pipeline (with no arguments: the built-in default).
     Replay(replay::ReplayArgs),
+    /// Run a pipeline and score its stages against the recording's ground truth.
+    Eval(eval::EvalArgs),
     /// Benchmark each stage of a pipeline: medians over repeated runs after a warm-up.
     Bench(replay::BenchArgs),
     /// List every stage kind with its inputs, outputs and parameters.
@@ -51,6 +54,7 @@ Examples:
   relume inspect lr.relume --json
   relume replay lr.relume -p pipelines/default.toml --frames 0..50 --out out/lr --trace t.json
   relume replay lr.relume --hash > run1.txt         one digest line per frame, to diff runs
+  relume eval recordings/default.relume -p pipelines/acquisition.toml --json
   relume bench lr.relume --repeat 5
   relume stages                                    what a pipeline can use
   relume validate my.toml";
@@ -66,6 +70,7 @@ pub fn main() -> anyhow::Result<i32> {
         Command::Import(c) => produce::import(c),
         Command::Inspect(a) => inspect::inspect(a),
         Command::Replay(a) => replay::replay(a),
+        Command::Eval(a) => eval::eval(a),
         Command::Bench(a) => replay::bench(a),
         Command::Stages(a) => catalog::stages(a),
         Command::Validate(a) => catalog::validate(a),

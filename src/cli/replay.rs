@@ -3,8 +3,13 @@
 use super::{default_recording_path, produce, progress};
 use anyhow::{Context, bail};
 use clap::{Args, Parser};
-use relume::graph::{Frame, Pipeline, Registry, RunFailure, RunOptions, RunReport, Stats, run};
+use relume::graph::{
+    Frame, Pipeline, Product, ProductKind, Registry, RunFailure, RunOptions, RunReport, Stats, run,
+};
+use relume::recording::writer::write_file_atomic;
 use relume::recording::{Replay, ReplayOptions};
+use relume::stages::write::ply::ply_bytes;
+use relume::stages::write::{write_exr, write_png, write_record};
 use std::io::Write;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -16,19 +21,19 @@ use std::sync::atomic::{AtomicBool, Ordering};
 pub struct RunArgs {
     /// The recording (.relume). Default: the built-in synthetic recording, generated into
     /// recordings/default.relume on first use.
-    recording: Option<PathBuf>,
+    pub(super) recording: Option<PathBuf>,
     /// Pipeline file (TOML). Default: the built-in pipelines/default.toml.
     #[arg(short, long)]
-    pipeline: Option<PathBuf>,
+    pub(super) pipeline: Option<PathBuf>,
     /// Frames to replay: A..B (B excluded), A.., ..B or a single index N.
     #[arg(long, value_parser = parse_frames)]
-    frames: Option<Range<usize>>,
+    pub(super) frames: Option<Range<usize>>,
     /// Skip (and count) frames with corrupt records instead of stopping with an error.
     #[arg(long)]
-    skip_corrupt: bool,
+    pub(super) skip_corrupt: bool,
     /// Seed for stages that draw random numbers.
     #[arg(long, default_value_t = 1)]
-    seed: u64,
+    pub(super) seed: u64,
 }
 
 #[derive(Parser, Debug)]
@@ -48,6 +53,18 @@ pub struct ReplayArgs {
     /// goes to stderr), to compare runs frame by frame.
     #[arg(long)]
     hash: bool,
+    /// Save these products of every frame into OUT/<product>/ (comma-separated names, or
+    /// `all` for every image, compensation and cloud in the frame), without editing the
+    /// pipeline. `relume stages` says what each stage produces.
+    #[arg(long, value_delimiter = ',', value_name = "PRODUCTS")]
+    save: Vec<String>,
+    /// File formats for --save: png (for viewing), exr (f32 values), or both.
+    #[arg(long, value_delimiter = ',', default_value = "png", value_parser = ["png", "exr"])]
+    save_format: Vec<String>,
+    /// After the run, save the last frame's environment-sample cloud as a binary PLY
+    /// (opens in MeshLab or CloudCompare).
+    #[arg(long, value_name = "FILE.ply")]
+    export_cloud: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -85,14 +102,14 @@ fn parse_frames(text: &str) -> Result<Range<usize>, String> {
 }
 
 /// A recording and pipeline loaded and checked, ready to run.
-struct Loaded {
-    replay: Replay,
-    pipeline: Pipeline,
+pub(super) struct Loaded {
+    pub(super) replay: Replay,
+    pub(super) pipeline: Pipeline,
     registry: Registry,
-    frames: Range<usize>,
+    pub(super) frames: Range<usize>,
 }
 
-fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
+pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
     let registry = Registry::builtin();
     let pipeline = match &args.pipeline {
         Some(p) => Pipeline::load(p, &registry)?,
@@ -146,7 +163,7 @@ fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
 }
 
 impl Loaded {
-    fn run_once(
+    pub(super) fn run_once(
         &self,
         out_dir: &Path,
         seed: u64,
@@ -178,7 +195,7 @@ impl Loaded {
 }
 
 /// Sets `stop` on the first Ctrl-C; exits on the second.
-fn stop_on_ctrl_c() -> Arc<AtomicBool> {
+pub(super) fn stop_on_ctrl_c() -> Arc<AtomicBool> {
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     let _ = ctrlc::set_handler(move || {
@@ -196,8 +213,23 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
     let bar = progress::bar(loaded.frames.len() as u64, "replaying");
     let stdout = std::io::stdout();
     let mut hash_error = None;
+    let mut save_error: Option<anyhow::Error> = None;
+    let mut last_cloud = None;
     let mut sink = |frame: Frame| {
         bar.inc(1);
+        if a.export_cloud.is_some()
+            && let Some((_, Product::Cloud(cloud))) = frame
+                .products()
+                .find(|(_, p)| p.kind() == ProductKind::Cloud)
+        {
+            last_cloud = Some(cloud.clone());
+        }
+        if !a.save.is_empty()
+            && save_error.is_none()
+            && let Err(e) = save_products(&frame, &a.save, &a.save_format, &a.out)
+        {
+            save_error = Some(e);
+        }
         if a.hash {
             let mut line = format!("{:06} {}", frame.index, frame.stamp_ns);
             for (name, product) in frame.products() {
@@ -242,6 +274,25 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             .write_trace(path)
             .with_context(|| format!("cannot write the trace to {}", path.display()))?;
     }
+    if let Some(e) = save_error {
+        return Err(e.context("--save stopped"));
+    }
+    if let Some(path) = &a.export_cloud {
+        let Some(cloud) = last_cloud else {
+            bail!(
+                "--export-cloud: pipeline `{}` produces no environment-sample cloud (add a \
+                 cloud.samples stage)",
+                loaded.pipeline.name
+            );
+        };
+        write_file_atomic(path, &ply_bytes(&cloud))
+            .with_context(|| format!("cannot write the cloud to {}", path.display()))?;
+        eprintln!(
+            "saved {} environment samples to {}",
+            cloud.len(),
+            path.display()
+        );
+    }
     if let Some(e) = hash_error {
         bail!("cannot write hash lines: {e}");
     }
@@ -256,6 +307,62 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
         return Ok(130);
     }
     Ok(0)
+}
+
+/// Saves the products named in `names` (or all writable ones for `all`) of `frame` into
+/// `out/<product>/<frame>.<ext>`.
+fn save_products(
+    frame: &Frame,
+    names: &[String],
+    formats: &[String],
+    out: &Path,
+) -> anyhow::Result<()> {
+    use rayon::prelude::*;
+    let all = names.iter().any(|n| n == "all");
+    let mut jobs = Vec::new();
+    for (name, product) in frame.products() {
+        if !(all || names.iter().any(|n| n == name)) || !product.kind().is_writable() {
+            continue;
+        }
+        let dir = out.join(name);
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create {}", dir.display()))?;
+        let stem = dir.join(format!("{:06}", frame.index));
+        if !product.kind().is_image() {
+            jobs.push((product, stem, None));
+            continue;
+        }
+        for f in formats {
+            jobs.push((product, stem.with_extension(f), Some(f.as_str())));
+        }
+    }
+    if !all {
+        for n in names {
+            match frame.get(n) {
+                None => bail!(
+                    "frame {} has no product `{n}`; it has: {}",
+                    frame.index,
+                    frame
+                        .products()
+                        .map(|(k, _)| k)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+                Some(p) if !p.kind().is_writable() => {
+                    bail!("`{n}` is a {} and cannot be saved", p.kind().name())
+                }
+                Some(_) => {}
+            }
+        }
+    }
+    jobs.par_iter()
+        .map(|(product, path, format)| match format {
+            None => write_record(product, path),
+            Some("exr") => write_exr(product, path),
+            Some(_) => write_png(product, path),
+        })
+        .collect::<Result<(), _>>()?;
+    Ok(())
 }
 
 pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {

@@ -66,6 +66,11 @@ impl ProductKind {
         Self::IMAGES.contains(&self)
     }
 
+    /// True for the kinds in [`ProductKind::WRITABLE`].
+    pub fn is_writable(self) -> bool {
+        Self::WRITABLE.contains(&self)
+    }
+
     /// The kinds the `write` stage can save: images, plus compensation (JSON) and the
     /// cloud (PLY).
     pub const WRITABLE: &'static [ProductKind] = &[

@@ -1,0 +1,98 @@
+//! `relume eval`: run a pipeline and score its stages against the recording's ground
+//! truth (see `relume::eval` for every key).
+
+use super::progress;
+use super::replay::{RunArgs, load, stop_on_ctrl_c};
+use anyhow::bail;
+use clap::Parser;
+use relume::eval::Evaluator;
+use serde_json::Value;
+use std::path::PathBuf;
+
+#[derive(Parser, Debug)]
+pub struct EvalArgs {
+    #[command(flatten)]
+    run: RunArgs,
+    /// Print the scores as JSON: {recording, pipeline, frames, ground_truth,
+    /// stages: {<stage name>: {kind, <score keys>}}}.
+    #[arg(long)]
+    json: bool,
+    /// Directory for files that `write` stages of the pipeline save (default: a temporary
+    /// directory, removed afterwards).
+    #[arg(short, long)]
+    out: Option<PathBuf>,
+}
+
+pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
+    let loaded = load(&a.run)?;
+    let header = loaded.replay.recording.header();
+    let mut evaluator = Evaluator::new(&loaded.pipeline, header);
+    if evaluator.is_empty() {
+        bail!(
+            "pipeline `{}` ({}) has no stage that eval can score: it scores depth.fuse, \
+             normals.*, color.compensate and gbuffer.splat",
+            loaded.pipeline.name,
+            loaded.pipeline.file
+        );
+    }
+    let scratch = std::env::temp_dir().join(format!("relume-eval-{}", std::process::id()));
+    let out_dir = a.out.clone().unwrap_or_else(|| scratch.clone());
+    let stop = stop_on_ctrl_c();
+    let bar = progress::bar(loaded.frames.len() as u64, "evaluating");
+    let mut truth_error = None;
+    let result = loaded.run_once(&out_dir, a.run.seed, a.run.skip_corrupt, &stop, &mut |f| {
+        bar.inc(1);
+        if truth_error.is_none()
+            && let Err(e) = evaluator.observe(&f)
+        {
+            truth_error = Some(e);
+        }
+    });
+    bar.finish_and_clear();
+    let _ = std::fs::remove_dir_all(&scratch);
+    let path = loaded.replay.recording.path().display().to_string();
+    if let Err(f) = result {
+        return Err(anyhow::Error::new(f.error).context(format!("evaluation of {path} stopped")));
+    }
+    if let Some(e) = truth_error {
+        bail!("{path}: {e}");
+    }
+    let mut report = evaluator.report();
+    let doc = report.as_object_mut().expect("an object");
+    doc.insert("recording".into(), path.clone().into());
+    doc.insert("pipeline".into(), loaded.pipeline.name.clone().into());
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(0);
+    }
+    println!(
+        "{} on {path}: {} frames",
+        loaded.pipeline.name, report["frames"]
+    );
+    if !evaluator.has_truth() {
+        println!(
+            "{path} has no ground truth: only self-consistency scores (depth warped from the \
+             previous frame, reference against the camera image) are reported"
+        );
+    }
+    if let Some(Value::Object(stages)) = report.get("stages") {
+        for (name, scores) in stages {
+            let Value::Object(scores) = scores else {
+                continue;
+            };
+            println!("{name} ({})", scores["kind"].as_str().unwrap_or("?"));
+            let mut any = false;
+            for (key, value) in scores.iter().filter(|(k, _)| *k != "kind") {
+                any = true;
+                match value.as_f64() {
+                    Some(v) if value.is_f64() => println!("  {key:<34} {v:.5}"),
+                    _ => println!("  {key:<34} {value}"),
+                }
+            }
+            if !any {
+                println!("  (nothing to score without ground truth)");
+            }
+        }
+    }
+    Ok(0)
+}

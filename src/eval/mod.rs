@@ -1,0 +1,151 @@
+//! `relume eval`: scores every stage of a pipeline that has something to be scored
+//! against, frame by frame as the frames leave the pipeline.
+//!
+//! | stage kind | keys | needs ground truth |
+//! |---|---|---|
+//! | `depth.fuse` | `rmse_raw_m`, `rmse_fused_m`, `holes_raw`, `holes_fused` | yes |
+//! | `depth.fuse` | `warp_rmse_raw_m`, `warp_rmse_fused_m`, `warp_overlap_raw`, `warp_overlap_fused` (frame t-1 forward-warped into frame t against raw depth t) | no |
+//! | `normals.*` | `mean_angle_deg`, `median_angle_deg`, `valid_fraction` | yes |
+//! | `color.compensate` | `transform_rel_error_median` (relative Frobenius error of c_t against `M_0 M_t^-1`), `gain_transform_rel_error_median` (the same for A_t), `image_rel_error_median`, `gain_image_rel_error_median` (relative RMS error of the compensated image, and of A_t applied instead, against the true reference image) | yes |
+//! | `color.compensate` | `frames`, `approximate_frames`, `pairs_kept_median` | no |
+//! | `gbuffer.splat` | `reference_psnr_db` (reference against the compensated camera image where both exist, peak 1), `coverage` | no |
+//!
+//! Ground truth comes from the recording's truth stream (synthetic recordings).
+
+mod color;
+mod depth;
+mod normals;
+mod truth;
+
+pub use depth::forward_warp;
+pub use truth::FrameTruth;
+
+use crate::graph::{Frame, Pipeline, ResolvedStage};
+use crate::recording::Header;
+use serde_json::{Map, Value, json};
+
+enum Scorer {
+    Depth(depth::DepthScorer),
+    Normals(normals::NormalsScorer),
+    Compensation(color::CompensationScorer),
+    Reference(color::ReferenceScorer),
+}
+
+/// Scores a pipeline's stages over the frames given to [`Evaluator::observe`].
+pub struct Evaluator {
+    scorers: Vec<(String, &'static str, Scorer)>,
+    frames: usize,
+    frames_with_truth: usize,
+}
+
+fn output(stage: &ResolvedStage, role: &str) -> String {
+    stage
+        .outputs
+        .get(role)
+        .cloned()
+        .unwrap_or_else(|| role.into())
+}
+
+fn input(stage: &ResolvedStage, role: &str) -> String {
+    stage
+        .inputs
+        .get(role)
+        .cloned()
+        .unwrap_or_else(|| role.into())
+}
+
+impl Evaluator {
+    /// An evaluator for the scorable stages of `pipeline` (see the module table).
+    pub fn new(pipeline: &Pipeline, header: &Header) -> Evaluator {
+        let compensated = pipeline
+            .stages
+            .iter()
+            .find(|s| s.kind == "color.compensate")
+            .map(|s| output(s, "compensated"));
+        let scorers = pipeline
+            .stages
+            .iter()
+            .filter_map(|s| {
+                let scorer = match s.kind {
+                    "depth.fuse" => Scorer::Depth(depth::DepthScorer::new(
+                        input(s, "depth"),
+                        output(s, "fused_depth"),
+                        input(s, "pose"),
+                        header.depth_intrinsics,
+                    )),
+                    k if k.starts_with("normals.") => {
+                        Scorer::Normals(normals::NormalsScorer::new(output(s, "normals")))
+                    }
+                    "color.compensate" => Scorer::Compensation(color::CompensationScorer::new(
+                        input(s, "color"),
+                        output(s, "compensated"),
+                        output(s, "compensation"),
+                    )),
+                    "gbuffer.splat" => Scorer::Reference(color::ReferenceScorer::new(
+                        output(s, "reference"),
+                        output(s, "reference_coverage"),
+                        compensated.clone(),
+                    )),
+                    _ => return None,
+                };
+                Some((s.name.clone(), s.kind, scorer))
+            })
+            .collect();
+        Evaluator {
+            scorers,
+            frames: 0,
+            frames_with_truth: 0,
+        }
+    }
+
+    /// True when no stage of the pipeline can be scored.
+    pub fn is_empty(&self) -> bool {
+        self.scorers.is_empty()
+    }
+
+    /// Scores one finished frame (frames must come in order). Fails only when the
+    /// recording's ground truth cannot be decoded.
+    pub fn observe(&mut self, frame: &Frame) -> Result<(), String> {
+        let truth = FrameTruth::of(frame)?;
+        self.frames += 1;
+        self.frames_with_truth += truth.is_some() as usize;
+        for (_, _, scorer) in &mut self.scorers {
+            match scorer {
+                Scorer::Depth(s) => s.observe(frame, truth.as_ref()),
+                Scorer::Normals(s) => s.observe(frame, truth.as_ref()),
+                Scorer::Compensation(s) => s.observe(frame, truth.as_ref()),
+                Scorer::Reference(s) => s.observe(frame),
+            }
+        }
+        Ok(())
+    }
+
+    /// True when every observed frame carried ground truth.
+    pub fn has_truth(&self) -> bool {
+        self.frames > 0 && self.frames_with_truth == self.frames
+    }
+
+    /// The scores: `{frames, ground_truth, stages: {<stage name>: {kind, <keys>}}}`.
+    pub fn report(&self) -> Value {
+        let mut stages = Map::new();
+        for (name, kind, scorer) in &self.scorers {
+            let scores = match scorer {
+                Scorer::Depth(s) => s.report(),
+                Scorer::Normals(s) => s.report().unwrap_or_else(|| json!({})),
+                Scorer::Compensation(s) => s.report(),
+                Scorer::Reference(s) => s.report(),
+            };
+            let mut entry = Map::new();
+            entry.insert("kind".into(), json!(kind));
+            if let Value::Object(scores) = scores {
+                entry.extend(scores);
+            }
+            stages.insert(name.clone(), Value::Object(entry));
+        }
+        json!({
+            "frames": self.frames,
+            "ground_truth": self.has_truth(),
+            "stages": stages,
+        })
+    }
+}

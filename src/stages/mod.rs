@@ -7,11 +7,15 @@
 //! | `decode` | [`decode`] | decodes color, depth and pose from the recording's records |
 //! | `depth.to_points` | [`points`] | back-projects depth to a camera-space position map |
 //! | `normals.cross` | [`normals`] | normals from the cross product of neighbouring positions |
+//! | `cloud.samples` | [`cloud`] | environment samples in a probabilistic hash grid, removed where the depth shows them gone |
+//! | `gbuffer.splat` | [`gbuffer`] | splats the cloud into the view with a depth test, fills holes by push-pull |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
+pub mod cloud;
 pub mod debug;
 pub mod decode;
+pub mod gbuffer;
 pub mod normals;
 pub mod points;
 pub mod write;
@@ -24,6 +28,8 @@ pub fn builtin() -> Vec<StageInfo> {
         decode::INFO,
         points::INFO,
         normals::CROSS_INFO,
+        cloud::INFO,
+        gbuffer::INFO,
         write::INFO,
         debug::NOOP_INFO,
         debug::SLEEP_INFO,

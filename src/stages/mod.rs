@@ -5,11 +5,13 @@
 //! | kind | module | what it does |
 //! |---|---|---|
 //! | `decode` | [`decode`] | decodes color, depth and pose from the recording's records |
+//! | `color.compensate` | [`compensate`] | color compensation c_t to the reference space, A_t / C_t of eq. (2) (paper 000 Sec. 4) |
 //! | `depth.to_points` | [`points`] | back-projects depth to a camera-space position map |
 //! | `normals.cross` | [`normals`] | normals from the cross product of neighbouring positions |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
+pub mod compensate;
 pub mod debug;
 pub mod decode;
 pub mod normals;
@@ -22,6 +24,7 @@ use crate::graph::{Port, Ports, ProductKind, StageInfo};
 pub fn builtin() -> Vec<StageInfo> {
     vec![
         decode::INFO,
+        compensate::INFO,
         points::INFO,
         normals::CROSS_INFO,
         write::INFO,

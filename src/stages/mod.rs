@@ -5,6 +5,7 @@
 //! | kind | module | what it does |
 //! |---|---|---|
 //! | `decode` | [`decode`] | decodes color, depth and pose from the recording's records |
+//! | `color.compensate` | [`compensate`] | color compensation c_t to the reference space, A_t / C_t of eq. (2) (paper 000 Sec. 4) |
 //! | `depth.to_points` | [`points`] | back-projects depth to a camera-space position map |
 //! | `normals.cross` | [`normals`] | normals from the cross product of neighbouring positions |
 //! | `cloud.samples` | [`cloud`] | environment samples in a probabilistic hash grid, removed where the depth shows them gone |
@@ -13,6 +14,7 @@
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
 pub mod cloud;
+pub mod compensate;
 pub mod debug;
 pub mod decode;
 pub mod gbuffer;
@@ -26,6 +28,7 @@ use crate::graph::{Port, Ports, ProductKind, StageInfo};
 pub fn builtin() -> Vec<StageInfo> {
     vec![
         decode::INFO,
+        compensate::INFO,
         points::INFO,
         normals::CROSS_INFO,
         cloud::INFO,

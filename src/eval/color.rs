@@ -82,6 +82,9 @@ impl CompensationScorer {
             return;
         };
         let true_map = m0 * truth.color_transform.inverse();
+        if std::env::var_os("RELUME_DEBUG_EVAL").is_some() {
+            eprintln!("frame {} kept {} err {:.4} gain-err {:.4} C {:?} T {:?}", frame.index, comp.pairs.kept, frobenius(comp.matrix - true_map) / frobenius(true_map), frobenius(Mat3::from_diagonal(comp.gains) - true_map) / frobenius(true_map), comp.matrix.to_cols_array(), true_map.to_cols_array());
+        }
         let norm = frobenius(true_map) as f64;
         self.matrix_errors
             .push(frobenius(comp.matrix - true_map) as f64 / norm);
@@ -145,7 +148,8 @@ impl CompensationScorer {
 pub struct ReferenceScorer {
     reference: String,
     coverage: String,
-    compensated: Option<String>,
+    /// The compensated image and the camera image it came from.
+    compensated: Option<(String, String)>,
     squared: f64,
     samples: u64,
     pixels: u64,
@@ -153,7 +157,7 @@ pub struct ReferenceScorer {
 }
 
 impl ReferenceScorer {
-    pub fn new(reference: String, coverage: String, compensated: Option<String>) -> Self {
+    pub fn new(reference: String, coverage: String, compensated: Option<(String, String)>) -> Self {
         ReferenceScorer {
             reference,
             coverage,
@@ -174,23 +178,22 @@ impl ReferenceScorer {
         };
         self.pixels += coverage.data.len() as u64;
         self.covered += coverage.data.iter().filter(|&&c| c > 0).count() as u64;
-        let Some(compensated) = self
-            .compensated
-            .as_ref()
-            .and_then(|n| frame.radiance(n).ok())
-        else {
+        let Some((compensated, color)) = self.compensated.as_ref().and_then(|(c, k)| {
+            Some((frame.radiance(c).ok()?, frame.color(k).ok()?))
+        }) else {
             return;
         };
-        if !compensated.same_size(reference) || !coverage.same_size(reference) {
+        if !compensated.same_size(reference)
+            || !coverage.same_size(reference)
+            || !color.same_size(reference)
+        {
             return;
         }
-        for ((r, c), &k) in reference
-            .data
-            .iter()
-            .zip(&compensated.data)
-            .zip(&coverage.data)
-        {
-            if k > 0 && r.is_finite() && c.is_finite() {
+        let pixels = reference.data.iter().zip(&compensated.data);
+        for (((r, c), &k), camera) in pixels.zip(&coverage.data).zip(&color.data) {
+            // Clipped camera pixels say nothing about the true color.
+            let clipped = camera.iter().any(|&v| v == 0 || v == 255);
+            if k > 0 && !clipped && r.is_finite() && c.is_finite() {
                 self.squared += (*r - *c).length_squared() as f64 / 3.0;
                 self.samples += 1;
             }

@@ -8,7 +8,7 @@
 //! | `normals.*` | `mean_angle_deg`, `median_angle_deg`, `valid_fraction` | yes |
 //! | `color.compensate` | `transform_rel_error_median` (relative Frobenius error of c_t against `M_0 M_t^-1`), `gain_transform_rel_error_median` (the same for A_t), `image_rel_error_median`, `gain_image_rel_error_median` (relative RMS error of the compensated image, and of A_t applied instead, against the true reference image) | yes |
 //! | `color.compensate` | `frames`, `approximate_frames`, `pairs_kept_median` | no |
-//! | `gbuffer.splat` | `reference_psnr_db` (reference against the compensated camera image where both exist, peak 1), `coverage` | no |
+//! | `gbuffer.splat` | `reference_psnr_db` (reference against the compensated camera image where both exist and the camera pixel is not clipped, peak 1), `coverage` | no |
 //!
 //! Ground truth comes from the recording's truth stream (synthetic recordings).
 
@@ -61,7 +61,7 @@ impl Evaluator {
             .stages
             .iter()
             .find(|s| s.kind == "color.compensate")
-            .map(|s| output(s, "compensated"));
+            .map(|s| (output(s, "compensated"), input(s, "color")));
         let scorers = pipeline
             .stages
             .iter()

@@ -7,12 +7,14 @@
 //! | `decode` | [`decode`] | decodes color, depth and pose from the recording's records |
 //! | `depth.to_points` | [`points`] | back-projects depth to a camera-space position map |
 //! | `normals.cross` | [`normals`] | normals from the cross product of neighbouring positions |
+//! | `normals.plane_fit` | [`plane_fit`] | normals and refined depth from per-pixel plane fits over disk neighbourhoods |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
 pub mod debug;
 pub mod decode;
 pub mod normals;
+pub mod plane_fit;
 pub mod points;
 pub mod write;
 
@@ -24,6 +26,7 @@ pub fn builtin() -> Vec<StageInfo> {
         decode::INFO,
         points::INFO,
         normals::CROSS_INFO,
+        plane_fit::INFO,
         write::INFO,
         debug::NOOP_INFO,
         debug::SLEEP_INFO,

@@ -8,6 +8,7 @@
 //! | `color.compensate` | [`compensate`] | color compensation c_t to the reference space, A_t / C_t of eq. (2) (paper 000 Sec. 4) |
 //! | `depth.to_points` | [`points`] | back-projects depth to a camera-space position map |
 //! | `normals.cross` | [`normals`] | normals from the cross product of neighbouring positions |
+//! | `normals.plane_fit` | [`plane_fit`] | normals and refined depth from per-pixel plane fits over disk neighbourhoods |
 //! | `cloud.samples` | [`cloud`] | environment samples in a probabilistic hash grid, removed where the depth shows them gone |
 //! | `gbuffer.splat` | [`gbuffer`] | splats the cloud into the view with a depth test, fills holes by push-pull |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
@@ -19,6 +20,7 @@ pub mod debug;
 pub mod decode;
 pub mod gbuffer;
 pub mod normals;
+pub mod plane_fit;
 pub mod points;
 pub mod write;
 
@@ -31,6 +33,7 @@ pub fn builtin() -> Vec<StageInfo> {
         compensate::INFO,
         points::INFO,
         normals::CROSS_INFO,
+        plane_fit::INFO,
         cloud::INFO,
         gbuffer::INFO,
         write::INFO,

@@ -35,7 +35,9 @@ fn bench_acquisition(c: &mut Criterion) {
     // RELUME_BENCH_PIPELINE measures another pipeline the same way.
     let pipeline_path = std::env::var_os("RELUME_BENCH_PIPELINE")
         .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/acquisition.toml"));
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/acquisition.toml")
+        });
     let pipeline = Pipeline::load(&pipeline_path, &registry).unwrap();
     let header = replay.recording.header().clone();
     let mut stages = pipeline
@@ -78,7 +80,11 @@ fn bench_acquisition(c: &mut Criterion) {
     }
 
     // gbuffer.splat over a cloud of 1M samples spread over the frame's surfaces.
-    if let Some(i) = pipeline.stages.iter().position(|s| s.kind == "gbuffer.splat") {
+    if let Some(i) = pipeline
+        .stages
+        .iter()
+        .position(|s| s.kind == "gbuffer.splat")
+    {
         let frame = &arriving[i];
         let cloud = million_samples(frame, &header);
         let mut input = frame.clone();
@@ -125,9 +131,7 @@ fn million_samples(frame: &Frame, header: &relume::recording::Header) -> EnvClou
         let p = camera.back_project(u, v, depth.data[i]);
         cloud.positions.push(pose.transform_point3(p + jitter));
         cloud.colors.push(Vec3::splat(0.3));
-        cloud
-            .normals
-            .push(pose.transform_vector3(-p.normalize()));
+        cloud.normals.push(pose.transform_vector3(-p.normalize()));
     }
     cloud
 }

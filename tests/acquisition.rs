@@ -64,8 +64,10 @@ fn evaluate(pipeline_toml: &str, path: &Path) -> Value {
 }
 
 fn acquisition_toml() -> String {
-    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/acquisition.toml"))
-        .unwrap()
+    std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/acquisition.toml"),
+    )
+    .unwrap()
 }
 
 fn score(report: &Value, stage: &str, key: &str) -> f64 {
@@ -85,16 +87,32 @@ fn acquisition_meets_the_depth_color_and_reference_targets() {
         score(&report, "depth.fuse", "holes_raw"),
         score(&report, "depth.fuse", "holes_fused"),
     );
-    assert!(rmse_fused <= 0.6 * rmse_raw, "rmse {rmse_fused} vs raw {rmse_raw}");
-    assert!(holes_fused <= 0.5 * holes_raw, "holes {holes_fused} vs raw {holes_raw}");
-    assert!(holes_raw > 0.01, "the recording must have holes to fill: {holes_raw}");
+    assert!(
+        rmse_fused <= 0.6 * rmse_raw,
+        "rmse {rmse_fused} vs raw {rmse_raw}"
+    );
+    assert!(
+        holes_fused <= 0.5 * holes_raw,
+        "holes {holes_fused} vs raw {holes_raw}"
+    );
+    assert!(
+        holes_raw > 0.01,
+        "the recording must have holes to fill: {holes_raw}"
+    );
 
     let linear = score(&report, "color.compensate", "transform_rel_error_median");
     assert!(linear <= 0.03, "transform error {linear}");
-    assert_eq!(score(&report, "color.compensate", "approximate_frames"), 0.0);
+    assert_eq!(
+        score(&report, "color.compensate", "approximate_frames"),
+        0.0
+    );
     // A per-channel gain cannot follow a white-balance change made before the camera's
     // color matrix.
-    let gain = score(&report, "color.compensate", "gain_transform_rel_error_median");
+    let gain = score(
+        &report,
+        "color.compensate",
+        "gain_transform_rel_error_median",
+    );
     assert!(gain > 1.5 * linear, "A_t {gain} vs C_t {linear}");
 
     let psnr = score(&report, "gbuffer.splat", "reference_psnr_db");
@@ -137,6 +155,9 @@ outputs = { normals = "fit_normals" }
     let report = evaluate(toml, &recording(0.0));
     let cross = score(&report, "normals.cross", "mean_angle_deg");
     let fit = score(&report, "normals.plane_fit", "mean_angle_deg");
-    assert!(fit <= 0.7 * cross, "plane fit {fit} deg vs cross {cross} deg");
+    assert!(
+        fit <= 0.7 * cross,
+        "plane fit {fit} deg vs cross {cross} deg"
+    );
     assert!(score(&report, "normals.plane_fit", "valid_fraction") > 0.9);
 }

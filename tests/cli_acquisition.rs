@@ -19,7 +19,9 @@ fn small_recording(dir: &Path, frames: usize) -> PathBuf {
     let frames = frames.to_string();
     ok(run_in(
         dir,
-        &["synth", "-o", "s.relume", "--frames", &frames, "--size", "160x120"],
+        &[
+            "synth", "-o", "s.relume", "--frames", &frames, "--size", "160x120",
+        ],
     ));
     dir.join("s.relume")
 }
@@ -29,7 +31,10 @@ fn eval_reports_every_acquisition_score_as_json() {
     let tmp = tempfile::tempdir().unwrap();
     small_recording(tmp.path(), 4);
     let p = acquisition();
-    let o = ok(run_in(tmp.path(), &["eval", "s.relume", "-p", &p, "--json"]));
+    let o = ok(run_in(
+        tmp.path(),
+        &["eval", "s.relume", "-p", &p, "--json"],
+    ));
     let report: Value = serde_json::from_str(&stdout(&o)).unwrap();
     assert_eq!(report["frames"], 4);
     assert_eq!(report["ground_truth"], true);
@@ -59,7 +64,10 @@ fn eval_reports_every_acquisition_score_as_json() {
     }
     // The text form names each stage and says nothing about missing ground truth.
     let text = stdout(&ok(run_in(tmp.path(), &["eval", "s.relume", "-p", &p])));
-    assert!(text.contains("normals.plane_fit (normals.plane_fit)"), "{text}");
+    assert!(
+        text.contains("normals.plane_fit (normals.plane_fit)"),
+        "{text}"
+    );
     assert!(!text.contains("no ground truth"), "{text}");
 }
 
@@ -153,7 +161,13 @@ fn acquisition_products_are_identical_across_thread_counts() {
     };
     let one = hashes("1");
     assert_eq!(one.lines().count(), 5);
-    for product in ["cloud=", "compensated=", "fused_depth=", "reference=", "normals="] {
+    for product in [
+        "cloud=",
+        "compensated=",
+        "fused_depth=",
+        "reference=",
+        "normals=",
+    ] {
         assert!(one.contains(product), "{one}");
     }
     assert_eq!(hashes("3"), one);
@@ -167,10 +181,19 @@ fn livingroom1_runs_through_acquisition_and_eval_reports_self_consistency() {
     let d = tmp.path();
     ok(run_in(
         d,
-        &["import", "redwood", data.to_str().unwrap(), "-o", "lr.relume"],
+        &[
+            "import",
+            "redwood",
+            data.to_str().unwrap(),
+            "-o",
+            "lr.relume",
+        ],
     ));
     let p = acquisition();
-    let o = ok(run_in(d, &["eval", "lr.relume", "-p", &p, "--frames", "0..12"]));
+    let o = ok(run_in(
+        d,
+        &["eval", "lr.relume", "-p", &p, "--frames", "0..12"],
+    ));
     let text = stdout(&o);
     assert!(text.contains("has no ground truth"), "{text}");
     let o = ok(run_in(
@@ -187,6 +210,14 @@ fn livingroom1_runs_through_acquisition_and_eval_reports_self_consistency() {
     );
     assert!(raw > 0.0 && fused > 0.0, "{fuse}");
     let compensate = &report["stages"]["color.compensate"];
-    assert!(compensate["approximate_frames"].as_u64().unwrap() < 12, "{compensate}");
-    assert!(report["stages"]["gbuffer.splat"]["reference_psnr_db"].as_f64().unwrap() > 10.0);
+    assert!(
+        compensate["approximate_frames"].as_u64().unwrap() < 12,
+        "{compensate}"
+    );
+    assert!(
+        report["stages"]["gbuffer.splat"]["reference_psnr_db"]
+            .as_f64()
+            .unwrap()
+            > 10.0
+    );
 }

@@ -82,9 +82,6 @@ impl CompensationScorer {
             return;
         };
         let true_map = m0 * truth.color_transform.inverse();
-        if std::env::var_os("RELUME_DEBUG_EVAL").is_some() {
-            eprintln!("frame {} kept {} err {:.4} gain-err {:.4} C {:?} T {:?}", frame.index, comp.pairs.kept, frobenius(comp.matrix - true_map) / frobenius(true_map), frobenius(Mat3::from_diagonal(comp.gains) - true_map) / frobenius(true_map), comp.matrix.to_cols_array(), true_map.to_cols_array());
-        }
         let norm = frobenius(true_map) as f64;
         self.matrix_errors
             .push(frobenius(comp.matrix - true_map) as f64 / norm);
@@ -178,9 +175,11 @@ impl ReferenceScorer {
         };
         self.pixels += coverage.data.len() as u64;
         self.covered += coverage.data.iter().filter(|&&c| c > 0).count() as u64;
-        let Some((compensated, color)) = self.compensated.as_ref().and_then(|(c, k)| {
-            Some((frame.radiance(c).ok()?, frame.color(k).ok()?))
-        }) else {
+        let Some((compensated, color)) = self
+            .compensated
+            .as_ref()
+            .and_then(|(c, k)| Some((frame.radiance(c).ok()?, frame.color(k).ok()?)))
+        else {
             return;
         };
         if !compensated.same_size(reference)

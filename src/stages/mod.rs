@@ -5,6 +5,7 @@
 //! | kind | module | what it does |
 //! |---|---|---|
 //! | `decode` | [`decode`] | decodes color, depth and pose from the recording's records |
+//! | `depth.fuse` | [`fuse`] | warps the previous fused depth into the view and merges it with the new depth |
 //! | `depth.to_points` | [`points`] | back-projects depth to a camera-space position map |
 //! | `normals.cross` | [`normals`] | normals from the cross product of neighbouring positions |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
@@ -12,6 +13,7 @@
 
 pub mod debug;
 pub mod decode;
+pub mod fuse;
 pub mod normals;
 pub mod points;
 pub mod write;
@@ -22,6 +24,7 @@ use crate::graph::{Port, Ports, ProductKind, StageInfo};
 pub fn builtin() -> Vec<StageInfo> {
     vec![
         decode::INFO,
+        fuse::INFO,
         points::INFO,
         normals::CROSS_INFO,
         write::INFO,

@@ -6,6 +6,7 @@
 //! |---|---|---|
 //! | `decode` | [`decode`] | decodes color, depth and pose from the recording's records |
 //! | `color.compensate` | [`compensate`] | color compensation c_t to the reference space, A_t / C_t of eq. (2) (paper 000 Sec. 4) |
+//! | `depth.fuse` | [`fuse`] | warps the previous fused depth into the view and merges it with the new depth |
 //! | `depth.to_points` | [`points`] | back-projects depth to a camera-space position map |
 //! | `normals.cross` | [`normals`] | normals from the cross product of neighbouring positions |
 //! | `normals.plane_fit` | [`plane_fit`] | normals and refined depth from per-pixel plane fits over disk neighbourhoods |
@@ -18,6 +19,7 @@ pub mod cloud;
 pub mod compensate;
 pub mod debug;
 pub mod decode;
+pub mod fuse;
 pub mod gbuffer;
 pub mod normals;
 pub mod plane_fit;
@@ -31,6 +33,7 @@ pub fn builtin() -> Vec<StageInfo> {
     vec![
         decode::INFO,
         compensate::INFO,
+        fuse::INFO,
         points::INFO,
         normals::CROSS_INFO,
         plane_fit::INFO,

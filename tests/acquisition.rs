@@ -121,13 +121,13 @@ fn acquisition_meets_the_depth_color_and_reference_targets() {
 
 #[test]
 fn gain_only_compensation_is_measurably_worse_on_white_balance_and_contrast_frames() {
-    let gain_toml = acquisition_toml().replace(
-        "kind = \"color.compensate\"",
-        "kind = \"color.compensate\"\nparams = { model = \"gain\" }",
-    );
+    let linear_toml = acquisition_toml();
+    let params = "kind = \"color.compensate\"\nparams = { ";
+    assert!(linear_toml.contains(params), "{linear_toml}");
+    let gain_toml = linear_toml.replace(params, &format!("{params}model = \"gain\", "));
     for contrast in [0.0, 0.25] {
         let path = recording(contrast);
-        let linear = evaluate(&acquisition_toml(), &path);
+        let linear = evaluate(&linear_toml, &path);
         let gain = evaluate(&gain_toml, &path);
         let key = "image_rel_error_median";
         let (l, g) = (

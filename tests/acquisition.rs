@@ -113,7 +113,7 @@ fn acquisition_meets_the_depth_color_and_reference_targets() {
         "color.compensate",
         "gain_transform_rel_error_median",
     );
-    assert!(gain > 1.5 * linear, "A_t {gain} vs C_t {linear}");
+    assert!(gain > 1.3 * linear, "A_t {gain} vs C_t {linear}");
 
     let psnr = score(&report, "gbuffer.splat", "reference_psnr_db");
     assert!(psnr > 20.0, "reference PSNR {psnr} dB");

@@ -26,6 +26,9 @@ pub struct FitParams {
     pub model: Model,
     /// Regularization weight gamma of eq. (2) towards A_t (0.05 in paper 000).
     pub gamma: f64,
+    /// Added to gamma per kept pair, so that the pull towards A_t does not fade as the
+    /// number of pairs (and the unnormalized sums of eq. (2)) grows.
+    pub gamma_per_pair: f64,
     /// Fewer kept pairs make the frame approximate (2000 in paper 000).
     pub min_pairs: u32,
 }
@@ -35,6 +38,7 @@ impl Default for FitParams {
         FitParams {
             model: Model::Linear,
             gamma: 0.05,
+            gamma_per_pair: 0.0,
             min_pairs: 2000,
         }
     }
@@ -94,7 +98,8 @@ pub fn estimate(moments: &PairMoments, previous: &Mat3, params: &FitParams) -> C
         Model::Gain => approximation,
         Model::Linear => {
             let pull = DVec3::select(gains.is_finite_mask(), gains, DVec3::ZERO);
-            linear_map(moments, pull, params.gamma)
+            let gamma = params.gamma + params.gamma_per_pair * moments.counts.kept as f64;
+            linear_map(moments, pull, gamma)
         }
     };
     let with_inverse = |m: Option<DMat3>| m.and_then(|m| Some((m, well_conditioned_inverse(m)?)));

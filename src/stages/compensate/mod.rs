@@ -97,6 +97,15 @@ const PARAMS: &[ParamSpec] = &[
     )
     .range(0.0, 1e9),
     ParamSpec::new(
+        "gamma_per_pair",
+        ParamDefault::Float(0.0),
+        "added to gamma per kept pair (0 = eq. (2) as in the paper): eq. (2)'s sums grow \
+         with the pairs, so a fixed gamma fades at video resolution; a per-pair pull keeps \
+         C_t near A_t in color directions the scene hardly spans (gray rooms), where C_t \
+         otherwise drifts through the feedback loop",
+    )
+    .range(0.0, 1e3),
+    ParamSpec::new(
         "min_pairs",
         ParamDefault::Int(2000),
         "fewer kept pairs make the frame approximate (c_t = A_t, no environment samples)",
@@ -179,6 +188,7 @@ impl CompensateParams {
                     Model::Linear
                 },
                 gamma: p.float("gamma"),
+                gamma_per_pair: p.float("gamma_per_pair"),
                 min_pairs: p.int("min_pairs").clamp(0, u32::MAX as i64) as u32,
             },
         }

@@ -89,11 +89,22 @@ const NOT_DRAWN: Projected = Projected {
     z: 0.0,
 };
 
-/// What pass 3 reads of a sample, copied in pass 2 so that it reads them in order.
+/// A sample's footprint as pass 3 draws it, set up once in pass 2: inverse depth
+/// `a x + b y + c` over the ellipse of centre (u, v) and radii (rx, ry) on rows
+/// `top..=bottom`, clamped to `[w_min, w_max]`.
 #[derive(Clone, Copy, Debug)]
-struct Entry {
-    position: Vec3,
-    normal: Vec3,
+struct Footprint {
+    u: f32,
+    v: f32,
+    rx: f32,
+    inv_ry2: f32,
+    a: f32,
+    b: f32,
+    c: f32,
+    w_min: f32,
+    w_max: f32,
+    top: u32,
+    bottom: u32,
     index: u32,
 }
 
@@ -102,7 +113,7 @@ struct Entry {
 #[derive(Debug, Default)]
 struct ChunkBins {
     starts: Vec<u32>,
-    entries: Vec<Entry>,
+    entries: Vec<Footprint>,
 }
 
 /// Buffers of [`splat`], kept across frames to avoid reallocation.
@@ -286,9 +297,18 @@ pub fn splat(
             for b in 0..bands {
                 bins.starts[b + 1] += bins.starts[b];
             }
-            let unused = Entry {
-                position: Vec3::ZERO,
-                normal: Vec3::ZERO,
+            let unused = Footprint {
+                u: 0.0,
+                v: 0.0,
+                rx: 0.0,
+                inv_ry2: 0.0,
+                a: 0.0,
+                b: 0.0,
+                c: 0.0,
+                w_min: 0.0,
+                w_max: 0.0,
+                top: 0,
+                bottom: 0,
                 index: 0,
             };
             bins.entries.resize(bins.starts[bands] as usize, unused);
@@ -296,10 +316,11 @@ pub fn splat(
             let first = first as usize;
             for (j, s) in projected.iter().enumerate() {
                 if drawn(s) {
-                    let entry = Entry {
-                        position: cloud.positions[first + j],
-                        normal: cloud.normals[first + j],
-                        index: (first + j) as u32,
+                    let i = first + j;
+                    let Some(entry) =
+                        raster.footprint(cloud.positions[i], cloud.normals[i], i as u32)
+                    else {
+                        continue;
                     };
                     let bands = s.top as usize / BAND_ROWS..=s.bottom as usize / BAND_ROWS;
                     for slot in &mut next[bands] {
@@ -328,8 +349,8 @@ pub fn splat(
             let y1 = y0 + keys.len() / w - 1;
             for chunk in bins {
                 let range = chunk.starts[band] as usize..chunk.starts[band + 1] as usize;
-                for e in &chunk.entries[range] {
-                    raster.footprint(e.position, e.normal, e.index, (y0, y1), keys);
+                for f in &chunk.entries[range] {
+                    draw(f, w, (y0, y1), keys);
                 }
             }
             let y0 = band * BAND_ROWS;
@@ -346,7 +367,7 @@ pub fn splat(
                 let n = (rotation * cloud.normals[i]).normalize_or_zero();
                 let ray = camera.ray(x as f32, y as f32);
                 color[k] = cloud.colors[i];
-                depth[k] = f32::from_bits((key >> 32) as u32);
+                depth[k] = 1.0 / f32::from_bits(!((key >> 32) as u32));
                 normals[k] = if n.dot(ray) > 0.0 { -n } else { n };
                 coverage[k] = COVERAGE_SPLAT;
             }
@@ -406,69 +427,86 @@ impl Raster<'_> {
         })
     }
 
-    /// Depth-tests sample `index` at world position `world` with world normal `normal`
-    /// into every pixel centre of rows `rows` (inclusive) inside its screen ellipse;
-    /// `keys` holds those rows.
+    /// The footprint of sample `index` at world position `world` with world normal
+    /// `normal` (`None` when it is not drawn): the depth along pixel (x, y)'s ray on the
+    /// tangent plane n . X = n . p is z = (n . p) / (n . ray(x, y)), and
+    /// n . ray(x, y) = a x + b y + c, so its inverse is linear in x and y. Near grazing,
+    /// the sample's own depth. Depths are clamped to p.z +- PLANE_DEPTH_SPAN r (and
+    /// beyond NEAR_M).
     #[inline]
-    fn footprint(
-        &self,
-        world: Vec3,
-        normal: Vec3,
-        index: u32,
-        rows: (usize, usize),
-        keys: &mut [u64],
-    ) {
-        let Some(s) = self.screen(world) else {
-            return;
-        };
+    fn footprint(&self, world: Vec3, normal: Vec3, index: u32) -> Option<Footprint> {
+        let s = self.screen(world)?;
         let cam = self.camera;
-        let (p, u, v, rx, ry) = (s.p, s.u, s.v, s.rx, s.ry);
-        // Depth along pixel (x, y)'s ray on the tangent plane n . X = n . p:
-        // z = (n . p) / (n . ray(x, y)), and n . ray(x, y) = a x + b y + c.
+        let p = s.p;
         let n = self.rotation * normal;
         let n_len = n.length();
         let n_dot_p = n.dot(p);
         let tangent = n_len > 0.0 && n_dot_p.abs() >= GRAZING_COS * n_len * p.length();
-        let (a, b, c) = (
-            n.x / cam.fx,
-            n.y / cam.fy,
-            n.z - n.x * cam.cx / cam.fx - n.y * cam.cy / cam.fy,
-        );
+        let (a, b, c) = if tangent {
+            let inv = 1.0 / n_dot_p;
+            (
+                n.x / cam.fx * inv,
+                n.y / cam.fy * inv,
+                (n.z - n.x * cam.cx / cam.fx - n.y * cam.cy / cam.fy) * inv,
+            )
+        } else {
+            (0.0, 0.0, 1.0 / p.z)
+        };
         let span = PLANE_DEPTH_SPAN * self.radius;
         let (near, far) = ((p.z - span).max(NEAR_M), p.z + span);
-        let low_index = index as u64;
-        let flat_key = ((p.z.to_bits() as u64) << 32) | low_index;
-        let width = cam.width as usize;
-        let last_x = width as i64 - 1;
-        let inv_ry2 = 1.0 / (ry * ry);
-        let (first_row, last_row) = (
-            (s.top as usize).max(rows.0),
-            (s.bottom as usize).min(rows.1),
+        Some(Footprint {
+            u: s.u,
+            v: s.v,
+            rx: s.rx,
+            inv_ry2: 1.0 / (s.ry * s.ry),
+            a,
+            b,
+            c,
+            w_min: 1.0 / far,
+            w_max: 1.0 / near,
+            top: s.top,
+            bottom: s.bottom,
+            index,
+        })
+    }
+}
+
+/// Depth-tests footprint `f` into every pixel centre of rows `rows` (inclusive) inside
+/// its screen ellipse; `keys` holds those rows of an image `width` wide. A key is the
+/// complemented inverse-depth bits << 32 | sample index: the smallest is the nearest
+/// sample, ties going to the lower index.
+#[inline]
+fn draw(f: &Footprint, width: usize, rows: (usize, usize), keys: &mut [u64]) {
+    let last_x = width as i64 - 1;
+    let low_index = f.index as u64;
+    let (first_row, last_row) = (
+        (f.top as usize).max(rows.0),
+        (f.bottom as usize).min(rows.1),
+    );
+    for y in first_row..=last_row {
+        let dy = y as f32 - f.v;
+        let half = f.rx * (1.0 - dy * dy * f.inv_ry2).max(0.0).sqrt();
+        let (left, right) = (
+            first_index_from(f.u - half),
+            last_index_to(f.u + half, last_x),
         );
-        for y in first_row..=last_row {
-            let dy = y as f32 - v;
-            let half = rx * (1.0 - dy * dy * inv_ry2).max(0.0).sqrt();
-            let (left, right) = (first_index_from(u - half), last_index_to(u + half, last_x));
-            if left > right {
-                continue;
-            }
-            let (left, right) = (left as usize, right as usize);
-            let start = (y - rows.0) * width;
-            let row = &mut keys[start + left..=start + right];
-            if tangent {
-                let row_term = b * y as f32 + c;
-                for (k, slot) in row.iter_mut().enumerate() {
-                    let z = n_dot_p / (a * (left + k) as f32 + row_term);
-                    // NaN and negative depths (ray past the plane's horizon) fall to `near`.
-                    let z = if z <= far { z.max(near) } else { far };
-                    let key = ((z.to_bits() as u64) << 32) | low_index;
-                    *slot = (*slot).min(key);
-                }
+        if left > right {
+            continue;
+        }
+        let (left, right) = (left as usize, right as usize);
+        let start = (y - rows.0) * width;
+        let row = &mut keys[start + left..=start + right];
+        let row_w = f.b * y as f32 + f.c;
+        for (k, slot) in row.iter_mut().enumerate() {
+            let w = f.a * (left + k) as f32 + row_w;
+            // Negative inverse depths (ray past the plane's horizon) and NaN fall to near.
+            let w = if w > 0.0 {
+                w.max(f.w_min).min(f.w_max)
             } else {
-                for slot in row.iter_mut() {
-                    *slot = (*slot).min(flat_key);
-                }
-            }
+                f.w_max
+            };
+            let key = ((!w.to_bits() as u64) << 32) | low_index;
+            *slot = (*slot).min(key);
         }
     }
 }

@@ -233,7 +233,11 @@ pub fn splat(
                 let (cu, cv) = (s.u + 0.5, s.v + 0.5);
                 let pixel = if cu >= 0.0 && cv >= 0.0 && cu < w as f32 && cv < h as f32 {
                     let i = cv as usize * w + cu as usize;
-                    centre[i].fetch_min(s.p.z.to_bits(), Relaxed);
+                    let z = s.p.z.to_bits();
+                    // A load first: most samples lose and need no locked instruction.
+                    if z < centre[i].load(Relaxed) {
+                        centre[i].fetch_min(z, Relaxed);
+                    }
                     i as u32
                 } else {
                     NO_PIXEL
@@ -353,23 +357,29 @@ pub fn splat(
                     draw(f, w, (y0, y1), keys);
                 }
             }
-            let y0 = band * BAND_ROWS;
-            for (k, key) in keys.iter().enumerate() {
-                let (x, y) = (k % w, y0 + k / w);
-                if *key == EMPTY_KEY {
-                    color[k] = Vec3::NAN;
-                    depth[k] = 0.0;
-                    normals[k] = Vec3::ZERO;
-                    coverage[k] = COVERAGE_NONE;
-                    continue;
+            let rows = color
+                .chunks_mut(w)
+                .zip(depth.chunks_mut(w))
+                .zip(normals.chunks_mut(w))
+                .zip(coverage.chunks_mut(w))
+                .zip(keys.chunks(w));
+            for (y, ((((color, depth), normals), coverage), keys)) in (y0..).zip(rows) {
+                for (x, key) in keys.iter().enumerate() {
+                    if *key == EMPTY_KEY {
+                        color[x] = Vec3::NAN;
+                        depth[x] = 0.0;
+                        normals[x] = Vec3::ZERO;
+                        coverage[x] = COVERAGE_NONE;
+                        continue;
+                    }
+                    let i = (key & 0xffff_ffff) as usize;
+                    let n = (rotation * cloud.normals[i]).normalize_or_zero();
+                    let ray = camera.ray(x as f32, y as f32);
+                    color[x] = cloud.colors[i];
+                    depth[x] = 1.0 / f32::from_bits(!((key >> 32) as u32));
+                    normals[x] = if n.dot(ray) > 0.0 { -n } else { n };
+                    coverage[x] = COVERAGE_SPLAT;
                 }
-                let i = (key & 0xffff_ffff) as usize;
-                let n = (rotation * cloud.normals[i]).normalize_or_zero();
-                let ray = camera.ray(x as f32, y as f32);
-                color[k] = cloud.colors[i];
-                depth[k] = 1.0 / f32::from_bits(!((key >> 32) as u32));
-                normals[k] = if n.dot(ray) > 0.0 { -n } else { n };
-                coverage[k] = COVERAGE_SPLAT;
             }
         });
     Ok(())

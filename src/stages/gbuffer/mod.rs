@@ -43,6 +43,12 @@ const PARAMS: &[ParamSpec] = &[
     )
     .range(0.75, 4096.0),
     ParamSpec::new(
+        "occlusion_margin",
+        ParamDefault::Float(splat::DEFAULT_OCCLUSION_MARGIN as f64),
+        "a sample whose centre lies this many metres behind the nearest sample centre of the 3x3 pixels around it is not splatted (occluded layers cost one projection)",
+    )
+    .range(0.0, 1e9),
+    ParamSpec::new(
         "push_pull",
         ParamDefault::Bool(true),
         "fill holes by push-pull (paper 000 Sec. 3)",
@@ -96,6 +102,7 @@ pub const INFO: StageInfo = StageInfo {
             splat: SplatParams {
                 radius: p.float("splat_radius") as f32,
                 max_radius_px: p.float("max_splat_radius_px") as f32,
+                occlusion_margin: p.float("occlusion_margin") as f32,
             },
             fill_levels: if p.bool("push_pull") {
                 p.int("max_fill_levels") as usize

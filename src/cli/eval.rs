@@ -9,7 +9,22 @@ use relume::eval::Evaluator;
 use serde_json::Value;
 use std::path::PathBuf;
 
+const SCORES: &str = "\
+Scores (per stage, keyed by the stage's name):
+  depth.fuse        rmse_raw_m, rmse_fused_m, holes_raw, holes_fused (fractions of pixels
+                    the truth sees); without truth: warp_rmse_{raw,fused}_m,
+                    warp_overlap_{raw,fused} (frame t-1 warped into frame t vs raw depth t)
+  normals.*         mean_angle_deg, median_angle_deg, valid_fraction
+  color.compensate  transform_rel_error_median (c_t vs the true map M_0 M_t^-1, relative
+                    Frobenius), image_rel_error_median, gain_* (the same for A_t),
+                    approximate_frames, pairs_kept_median
+  gbuffer.splat     reference_psnr_db (reference vs compensated camera image), coverage
+
+Example:
+  relume synth -o room.relume && relume eval room.relume -p pipelines/acquisition.toml";
+
 #[derive(Parser, Debug)]
+#[command(after_help = SCORES)]
 pub struct EvalArgs {
     #[command(flatten)]
     run: RunArgs,

@@ -195,8 +195,12 @@ impl DepthFusion {
             // Start over: merging with an empty warped map gives raw depth, weight 1.
             None => self.warped = WarpedDepth::new(w, h),
         }
-        let mut fused: DepthImage = Image::filled(w, h, 0.0);
-        let mut weight: ScalarImage = Image::filled(w, h, 0.0);
+        // The previous map has been warped: reuse its buffers when no frame holds them
+        // any more (merge_depth overwrites every pixel), saving two zeroed allocations.
+        let (mut fused, mut weight): (DepthImage, ScalarImage) = match self.state.take() {
+            Some(s) => (reuse_or_new(s.depth, w, h), reuse_or_new(s.weight, w, h)),
+            None => (Image::filled(w, h, 0.0), Image::filled(w, h, 0.0)),
+        };
         merge_depth(
             &self.warped.depth,
             &self.warped.weight,
@@ -213,6 +217,15 @@ impl DepthFusion {
         let out = (state.depth.clone(), state.weight.clone());
         self.state = Some(state);
         Ok(out)
+    }
+}
+
+/// The image inside `product` when it is unshared and `w` x `h` (depth or scalar), else
+/// a new zeroed one.
+fn reuse_or_new(product: Arc<Product>, w: u32, h: u32) -> Image<f32> {
+    match Arc::try_unwrap(product) {
+        Ok(Product::Depth(img) | Product::Scalar(img)) if img.width == w && img.height == h => img,
+        _ => Image::filled(w, h, 0.0),
     }
 }
 

@@ -174,6 +174,25 @@ pub fn warp_depth(
     Ok(())
 }
 
+/// The pixel indices `ceil(lo).max(0)..=floor(hi).min(last)` of the centres in
+/// `[lo, hi]`, or `None` when there are none (or a bound is NaN). Truncating casts
+/// instead of `floor`/`ceil`, which are library calls without SSE4.1.
+#[inline]
+fn centre_range(lo: f32, hi: f32, last: f32) -> Option<(usize, usize)> {
+    if !(hi >= 0.0 && lo <= last) {
+        return None;
+    }
+    // lo <= last and hi >= 0, so both casts are in range (hi saturates when huge).
+    let first = if lo > 0.0 {
+        let t = lo as usize;
+        t + ((t as f32) < lo) as usize
+    } else {
+        0
+    };
+    let end = (hi as usize).min(last as usize);
+    (first <= end).then_some((first, end))
+}
+
 /// The previous map as a mesh, with the transform into the current view.
 struct Mesh<'a> {
     depth: &'a [f32],
@@ -260,12 +279,13 @@ impl Mesh<'_> {
         }
         let (x_min, x_max) = (v0.x.min(v1.x).min(v2.x), v0.x.max(v1.x).max(v2.x));
         let (y_min, y_max) = (v0.y.min(v1.y).min(v2.y), v0.y.max(v1.y).max(v2.y));
-        let (x_lo, x_hi) = (x_min.ceil().max(0.0), x_max.floor().min(self.x_last));
-        let (y_lo, y_hi) = (y_min.ceil().max(0.0), y_max.floor().min(self.y_last));
         // Most triangles of a 1-pixel quad hold no pixel centre. Also false for NaN.
-        if !(x_lo <= x_hi && y_lo <= y_hi) {
+        let (Some((x_lo, x_hi)), Some((y_lo, y_hi))) = (
+            centre_range(x_min, x_max, self.x_last),
+            centre_range(y_min, y_max, self.y_last),
+        ) else {
             return;
-        }
+        };
         if x_max - x_min > MAX_TRIANGLE_SPAN_PX || y_max - y_min > MAX_TRIANGLE_SPAN_PX {
             return;
         }
@@ -277,9 +297,23 @@ impl Mesh<'_> {
             return;
         }
         let (sign, tolerance) = (area.signum(), -EDGE_TOLERANCE * area.abs());
-        for py in y_lo as usize..=y_hi as usize {
+        let inv_area = 1.0 / (area * sign);
+        let (inv_z_min, inv_z_max) = (
+            v0.inv_z.min(v1.inv_z).min(v2.inv_z),
+            v0.inv_z.max(v1.inv_z).max(v2.inv_z),
+        );
+        let (weight_min, weight_max) = (
+            v0.weight.min(v1.weight).min(v2.weight),
+            v0.weight.max(v1.weight).max(v2.weight),
+        );
+        let (wz0, wz1, wz2) = (
+            v0.weight * v0.inv_z,
+            v1.weight * v1.inv_z,
+            v2.weight * v2.inv_z,
+        );
+        for py in y_lo..=y_hi {
             let dy = py as f32 - v0.y;
-            for px in x_lo as usize..=x_hi as usize {
+            for px in x_lo..=x_hi {
                 let dx = px as f32 - v0.x;
                 let a1 = (dx * e2y - e2x * dy) * sign;
                 let a2 = (e1x * dy - dx * e1y) * sign;
@@ -287,23 +321,13 @@ impl Mesh<'_> {
                 if a0 < tolerance || a1 < tolerance || a2 < tolerance {
                     continue;
                 }
-                let inv_area = 1.0 / (area * sign);
                 let (b1, b2) = (a1 * inv_area, a2 * inv_area);
                 let b0 = 1.0 - b1 - b2;
-                let inv_z = (b0 * v0.inv_z + b1 * v1.inv_z + b2 * v2.inv_z).clamp(
-                    v0.inv_z.min(v1.inv_z).min(v2.inv_z),
-                    v0.inv_z.max(v1.inv_z).max(v2.inv_z),
-                );
+                let inv_z =
+                    (b0 * v0.inv_z + b1 * v1.inv_z + b2 * v2.inv_z).clamp(inv_z_min, inv_z_max);
                 let z = 1.0 / inv_z;
                 // Perspective-correct weight: interpolate weight / z, times z.
-                let weight = ((b0 * v0.weight * v0.inv_z
-                    + b1 * v1.weight * v1.inv_z
-                    + b2 * v2.weight * v2.inv_z)
-                    * z)
-                    .clamp(
-                        v0.weight.min(v1.weight).min(v2.weight),
-                        v0.weight.max(v1.weight).max(v2.weight),
-                    );
+                let weight = ((b0 * wz0 + b1 * wz1 + b2 * wz2) * z).clamp(weight_min, weight_max);
                 let key = ((z.to_bits() as u64) << 32) | weight.to_bits() as u64;
                 let slot = &self.keys[py * self.width + px];
                 // Keys only decrease: skip the atomic write when it cannot win.

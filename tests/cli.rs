@@ -58,19 +58,9 @@ fn hash_lines_are_identical_across_runs_and_thread_counts() {
 
 #[test]
 fn livingroom1_imports_inspects_and_replays() {
-    let data = common::data_dir().join("livingroom1");
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    ok(run_in(
-        d,
-        &[
-            "import",
-            "redwood",
-            data.to_str().unwrap(),
-            "-o",
-            "lr.relume",
-        ],
-    ));
+    common::import_livingroom1(d);
     let inspect: serde_json::Value =
         serde_json::from_str(&stdout(&ok(run_in(d, &["inspect", "lr.relume", "--json"])))).unwrap();
     assert_eq!(inspect["frames"], 211);

@@ -176,19 +176,9 @@ fn acquisition_products_are_identical_across_thread_counts() {
 
 #[test]
 fn livingroom1_runs_through_acquisition_and_eval_reports_self_consistency() {
-    let data = common::data_dir().join("livingroom1");
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    ok(run_in(
-        d,
-        &[
-            "import",
-            "redwood",
-            data.to_str().unwrap(),
-            "-o",
-            "lr.relume",
-        ],
-    ));
+    common::import_livingroom1(d);
     let p = acquisition();
     let o = ok(run_in(
         d,

@@ -56,3 +56,13 @@ pub(crate) fn fixed_ports(
         outputs: outputs.iter().map(|(r, k)| Port::new(r, r, k)).collect(),
     }
 }
+
+/// Runs `f` on a rayon pool of `threads` threads (determinism tests compare 1 and 3).
+#[cfg(test)]
+pub(crate) fn with_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("a thread pool")
+        .install(f)
+}

@@ -45,6 +45,21 @@ pub fn run_in(cwd: &std::path::Path, args: &[&str]) -> Output {
         .expect("run relume")
 }
 
+/// Imports the shared livingroom1 (Redwood layout) into `dir/lr.relume`.
+pub fn import_livingroom1(dir: &std::path::Path) {
+    let data = data_dir().join("livingroom1");
+    ok(run_in(
+        dir,
+        &[
+            "import",
+            "redwood",
+            data.to_str().unwrap(),
+            "-o",
+            "lr.relume",
+        ],
+    ));
+}
+
 pub fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }

@@ -241,13 +241,7 @@ fn run_sequence() -> EnvCloud {
 fn deterministic_for_any_thread_count() {
     let runs: Vec<EnvCloud> = [1, 3]
         .iter()
-        .map(|&n| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .unwrap()
-                .install(run_sequence)
-        })
+        .map(|&n| crate::stages::with_threads(n, run_sequence))
         .collect();
     assert!(!runs[0].is_empty());
     let bits = |c: &EnvCloud| -> Vec<u32> {

@@ -461,13 +461,7 @@ fn results_are_bit_identical_for_any_thread_count() {
     };
     let results: Vec<_> = [1, 3]
         .iter()
-        .map(|&n| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
-                .unwrap()
-                .install(run)
-        })
+        .map(|&n| crate::stages::with_threads(n, run))
         .collect();
     assert_eq!(results[0], results[1]);
 }

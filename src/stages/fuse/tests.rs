@@ -343,11 +343,7 @@ fn fusion_is_bit_identical_for_any_thread_count_and_survives_empty_input() {
     };
     let frames = synthetic_frames(&config);
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        crate::stages::with_threads(threads, || {
             let mut fusion = DepthFusion::new(config.intrinsics(), FuseParams::default());
             frames
                 .iter()

@@ -202,11 +202,7 @@ fn warping_is_bit_identical_for_any_thread_count() {
     let (depth, weight) = rough_scene(96, 72);
     let cur = pose([0.07, 0.02, -0.05], [0.2, 1.0, 0.3], 0.06);
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        crate::stages::with_threads(threads, || {
             let out = warp(
                 &depth,
                 &weight,

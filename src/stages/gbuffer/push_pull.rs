@@ -387,16 +387,8 @@ mod tests {
             push_pull(&mut g, &camera(), 16, &mut Pyramid::default()).unwrap();
             g
         };
-        let a = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap()
-            .install(run);
-        let b = rayon::ThreadPoolBuilder::new()
-            .num_threads(3)
-            .build()
-            .unwrap()
-            .install(run);
+        let a = crate::stages::with_threads(1, run);
+        let b = crate::stages::with_threads(3, run);
         assert_eq!(a.bits(), b.bits());
     }
 }

@@ -648,16 +648,8 @@ mod tests {
         cloud.colors.extend(&other.colors);
         cloud.normals.extend(&other.normals);
         let run = || splat_all(&cloud, &pose, &SplatParams::default());
-        let a = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap()
-            .install(run);
-        let b = rayon::ThreadPoolBuilder::new()
-            .num_threads(3)
-            .build()
-            .unwrap()
-            .install(run);
+        let a = crate::stages::with_threads(1, run);
+        let b = crate::stages::with_threads(3, run);
         assert_eq!(a.bits(), b.bits());
     }
 

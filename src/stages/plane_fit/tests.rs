@@ -304,11 +304,7 @@ fn same_bits_for_any_thread_count() {
     let (points, _) = noisy_plane(true);
     let p = params(3, 7.0, 16);
     let bits = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let out = pool.install(|| run(&points, &p));
+        let out = crate::stages::with_threads(threads, || run(&points, &p));
         let normals: Vec<[u32; 3]> = out
             .normals
             .data

@@ -50,16 +50,9 @@ impl ProductKind {
         }
     }
 
-    /// The kinds that are images and can be written to image files.
-    pub const IMAGES: &'static [ProductKind] = &[
-        ProductKind::Color,
-        ProductKind::Depth,
-        ProductKind::Points,
-        ProductKind::Normals,
-        ProductKind::Radiance,
-        ProductKind::Scalar,
-        ProductKind::Labels,
-    ];
+    /// The kinds that are images and can be written to image files: the first
+    /// [`ProductKind::WRITABLE`] kinds.
+    pub const IMAGES: &'static [ProductKind] = Self::WRITABLE.split_at(7).0;
 
     /// True for the kinds in [`ProductKind::IMAGES`].
     pub fn is_image(self) -> bool {
@@ -71,8 +64,8 @@ impl ProductKind {
         Self::WRITABLE.contains(&self)
     }
 
-    /// The kinds the `write` stage can save: images, plus compensation (JSON) and the
-    /// cloud (PLY).
+    /// The kinds the `write` stage can save: the images first, then compensation (JSON)
+    /// and the cloud (PLY).
     pub const WRITABLE: &'static [ProductKind] = &[
         ProductKind::Color,
         ProductKind::Depth,

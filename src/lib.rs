@@ -6,10 +6,14 @@
 //! - [`graph`]: pipeline configs, the stage registry, the threaded runtime and timing.
 //! - [`stages`]: the stage families, each as plain functions over buffers plus a thin
 //!   stage type the registry builds from config.
+//! - [`light`]: environment maps, importance-sample tables, area lights and SH9.
+//! - [`objects`]: virtual objects (meshes, primitives, materials) and ray queries.
 //! - [`raster`] and [`rng`]: the image buffer type and counter-based random numbers.
 
 pub mod eval;
 pub mod graph;
+pub mod light;
+pub mod objects;
 pub mod pinhole;
 pub mod raster;
 pub mod recording;

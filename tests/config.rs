@@ -208,6 +208,7 @@ fn every_builtin_kind_builds_from_its_defaults() {
             header: &header,
             out_dir: dir.path(),
             seed: 1,
+            objects: &Default::default(),
         };
         assert!(
             (info.build)(&ctx).is_ok(),

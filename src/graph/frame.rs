@@ -86,3 +86,6 @@ typed_getter!(scalar, Scalar, ScalarImage);
 typed_getter!(labels, Labels, LabelImage);
 typed_getter!(compensation, Compensation, Compensation);
 typed_getter!(cloud, Cloud, Arc<EnvCloud>);
+typed_getter!(environment, Environment, Arc<crate::light::EnvMap>);
+typed_getter!(light_table, LightTable, Arc<crate::light::LightTable>);
+typed_getter!(area_lights, AreaLights, Arc<crate::light::AreaLights>);

@@ -53,6 +53,8 @@ pub struct Pipeline {
     pub channel_capacity: usize,
     pub stages: Vec<ResolvedStage>,
     pub feedback: Vec<Feedback>,
+    /// The virtual objects of the `[[object]]` tables, in world space.
+    pub objects: std::sync::Arc<crate::objects::VirtualScene>,
 }
 
 impl Pipeline {
@@ -231,6 +233,7 @@ impl Pipeline {
             channel_capacity,
             stages,
             feedback,
+            objects: Default::default(),
         })
     }
 
@@ -259,6 +262,7 @@ impl Pipeline {
                     header,
                     out_dir,
                     seed,
+                    objects: &self.objects,
                 };
                 (info.build)(&ctx).map_err(|e| (s.name.clone(), e))
             })

@@ -1,5 +1,6 @@
 //! The values that flow between stages: [`Product`] and its [`ProductKind`].
 
+use crate::light::{AreaLights, EnvMap, LightTable};
 use crate::raster::{DepthImage, LabelImage, Rgb8Image, ScalarImage, Vec3Image};
 use crate::recording::{FrameRecords, Pose};
 use glam::{Mat3, Vec3};
@@ -30,6 +31,12 @@ pub enum ProductKind {
     Compensation,
     /// The world-space cloud of environment samples.
     Cloud,
+    /// An HDR lat-long environment map ([`crate::light::EnvMap`]).
+    Environment,
+    /// Importance samples of an environment map ([`crate::light::LightTable`]).
+    LightTable,
+    /// Virtual area lights and SH9 indirect light ([`crate::light::AreaLights`]).
+    AreaLights,
 }
 
 impl ProductKind {
@@ -47,6 +54,9 @@ impl ProductKind {
             ProductKind::Labels => "label map",
             ProductKind::Compensation => "color compensation",
             ProductKind::Cloud => "environment-sample cloud",
+            ProductKind::Environment => "environment map",
+            ProductKind::LightTable => "light sample table",
+            ProductKind::AreaLights => "set of area lights",
         }
     }
 
@@ -190,6 +200,9 @@ pub enum Product {
     Labels(LabelImage),
     Compensation(Compensation),
     Cloud(Arc<EnvCloud>),
+    Environment(Arc<EnvMap>),
+    LightTable(Arc<LightTable>),
+    AreaLights(Arc<AreaLights>),
 }
 
 impl Product {
@@ -206,6 +219,9 @@ impl Product {
             Product::Labels(_) => ProductKind::Labels,
             Product::Compensation(_) => ProductKind::Compensation,
             Product::Cloud(_) => ProductKind::Cloud,
+            Product::Environment(_) => ProductKind::Environment,
+            Product::LightTable(_) => ProductKind::LightTable,
+            Product::AreaLights(_) => ProductKind::AreaLights,
         }
     }
 
@@ -280,6 +296,30 @@ impl Product {
                 vec3s(&mut h, &cloud.positions);
                 vec3s(&mut h, &cloud.colors);
                 vec3s(&mut h, &cloud.normals);
+            }
+            Product::Environment(env) => {
+                dims(&mut h, env.width, env.height);
+                vec3s(&mut h, &env.radiance);
+                floats(&mut h, &env.distance);
+                floats(&mut h, &env.center.to_array());
+            }
+            Product::LightTable(table) => {
+                h.update(&(table.samples.len() as u64).to_le_bytes());
+                for s in &table.samples {
+                    floats(&mut h, &s.direction.to_array());
+                    floats(&mut h, &s.radiance.to_array());
+                    floats(&mut h, &[s.pdf]);
+                }
+            }
+            Product::AreaLights(set) => {
+                h.update(&(set.lights.len() as u64).to_le_bytes());
+                for l in &set.lights {
+                    floats(&mut h, &l.position.to_array());
+                    floats(&mut h, &l.normal.to_array());
+                    floats(&mut h, &l.intensity.to_array());
+                    floats(&mut h, &[l.area]);
+                }
+                vec3s(&mut h, &set.sh9);
             }
         }
         h.digest()

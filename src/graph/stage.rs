@@ -83,6 +83,8 @@ pub struct BuildContext<'a> {
     pub out_dir: &'a Path,
     /// The run's seed for counter-based random numbers.
     pub seed: u64,
+    /// The pipeline's virtual objects (`[[object]]` tables), in world space.
+    pub objects: &'a std::sync::Arc<crate::objects::VirtualScene>,
 }
 
 impl BuildContext<'_> {

@@ -24,6 +24,7 @@ pub mod gbuffer;
 pub mod normals;
 pub mod plane_fit;
 pub mod points;
+pub mod sample;
 pub mod write;
 
 use crate::graph::{Port, Ports, ProductKind, StageInfo};

@@ -357,6 +357,7 @@ fn build_stage(params: Params) -> Box<dyn Stage> {
         header: &header,
         out_dir: std::path::Path::new("."),
         seed: 1,
+        objects: &Default::default(),
     };
     (INFO.build)(&ctx).unwrap()
 }

@@ -215,6 +215,7 @@ fn the_stage_starts_from_raw_depth_and_restarts_on_a_new_size() {
         header: &header,
         out_dir: dir.path(),
         seed: 1,
+        objects: &Default::default(),
     };
     let mut stage = (INFO.build)(&ctx).unwrap();
     let run = |stage: &mut Box<dyn Stage>, index: usize, depth: DepthImage| {

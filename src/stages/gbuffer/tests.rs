@@ -25,6 +25,7 @@ fn stage(params: Params) -> Box<dyn Stage> {
         header: &header,
         out_dir: std::path::Path::new("."),
         seed: 1,
+        objects: &Default::default(),
     };
     (INFO.build)(&ctx).unwrap()
 }

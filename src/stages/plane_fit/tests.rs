@@ -409,6 +409,7 @@ fn stage_reads_points_and_writes_four_products() {
         header: &header,
         out_dir: &dir,
         seed: 1,
+        objects: &Default::default(),
     };
     let mut stage = (INFO.build)(&ctx).unwrap();
     let mut frame = Frame::new(0, 0);

@@ -1,0 +1,17 @@
+//! Environment light: the HDR lat-long map a pipeline lights with ([`EnvMap`]), its
+//! importance-sampling table ([`LightTable`], paper 001 Sec. 5.2), and the virtual area
+//! lights plus spherical harmonics of its direct and indirect parts ([`AreaLights`],
+//! paper 004 Secs. 4.2-4.4).
+//!
+//! Direction convention (shared with the synthetic recording's `environment`
+//! attachment): texel row r, column c of a W x H map looks along theta = (r + 0.5) / H *
+//! pi from world +y and phi = (c + 0.5) / W * 2 pi, d = (sin theta cos phi, cos theta,
+//! sin theta sin phi).
+
+pub mod envmap;
+pub mod table;
+pub mod val;
+
+pub use envmap::EnvMap;
+pub use table::{LightSample, LightTable};
+pub use val::{AreaLight, AreaLights};

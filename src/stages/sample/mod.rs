@@ -1,0 +1,3 @@
+//! Monte Carlo sampling of irradiance with and without the virtual objects.
+
+pub mod ssrt;

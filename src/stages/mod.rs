@@ -21,6 +21,7 @@ pub mod debug;
 pub mod decode;
 pub mod fuse;
 pub mod gbuffer;
+pub mod light;
 pub mod normals;
 pub mod plane_fit;
 pub mod points;

@@ -12,6 +12,7 @@
 //! | `normals.plane_fit` | [`plane_fit`] | normals and refined depth from per-pixel plane fits over disk neighbourhoods |
 //! | `cloud.samples` | [`cloud`] | environment samples in a probabilistic hash grid, removed where the depth shows them gone |
 //! | `gbuffer.splat` | [`gbuffer`] | splats the cloud into the view with a depth test, fills holes by push-pull |
+//! | `material.estimate` | [`material`] | diffuse reflectance of real surfaces, rho = pi L / E_R (paper 000 eq. 5) |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
@@ -22,6 +23,7 @@ pub mod decode;
 pub mod fuse;
 pub mod gbuffer;
 pub mod light;
+pub mod material;
 pub mod normals;
 pub mod plane_fit;
 pub mod points;
@@ -41,6 +43,7 @@ pub fn builtin() -> Vec<StageInfo> {
         plane_fit::INFO,
         cloud::INFO,
         gbuffer::INFO,
+        material::INFO,
         write::INFO,
         debug::NOOP_INFO,
         debug::SLEEP_INFO,

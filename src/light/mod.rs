@@ -9,9 +9,12 @@
 //! sin theta sin phi).
 
 pub mod envmap;
+pub mod kmeans;
+pub mod sh;
+pub mod split;
 pub mod table;
 pub mod val;
 
 pub use envmap::EnvMap;
 pub use table::{LightSample, LightTable};
-pub use val::{AreaLight, AreaLights};
+pub use val::{AreaLight, AreaLights, ValBuilder, ValParams};

@@ -12,6 +12,7 @@
 //! | `normals.plane_fit` | [`plane_fit`] | normals and refined depth from per-pixel plane fits over disk neighbourhoods |
 //! | `cloud.samples` | [`cloud`] | environment samples in a probabilistic hash grid, removed where the depth shows them gone |
 //! | `gbuffer.splat` | [`gbuffer`] | splats the cloud into the view with a depth test, fills holes by push-pull |
+//! | `sample.path` | [`sample::path`] | two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5) |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
@@ -41,6 +42,7 @@ pub fn builtin() -> Vec<StageInfo> {
         plane_fit::INFO,
         cloud::INFO,
         gbuffer::INFO,
+        sample::path::INFO,
         write::INFO,
         debug::NOOP_INFO,
         debug::SLEEP_INFO,

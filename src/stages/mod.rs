@@ -13,6 +13,7 @@
 //! | `cloud.samples` | [`cloud`] | environment samples in a probabilistic hash grid, removed where the depth shows them gone |
 //! | `gbuffer.splat` | [`gbuffer`] | splats the cloud into the view with a depth test, fills holes by push-pull |
 //! | `material.estimate` | [`material`] | diffuse reflectance of real surfaces, rho = pi L / E_R (paper 000 eq. 5) |
+//! | `sample.path` | [`sample::path`] | two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5) |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
@@ -44,6 +45,7 @@ pub fn builtin() -> Vec<StageInfo> {
         cloud::INFO,
         gbuffer::INFO,
         material::INFO,
+        sample::path::INFO,
         write::INFO,
         debug::NOOP_INFO,
         debug::SLEEP_INFO,

@@ -7,5 +7,6 @@
 //! | `sample.val` | [`val`] | shading from virtual area lights and SH9 (paper 004 Sec. 5) |
 
 pub mod path;
+pub mod pyramid;
 pub mod ssrt;
 pub mod val;

@@ -1,0 +1,582 @@
+//! `sample.path` (paper 001 Sec. 5, two-mode sampling): per pixel, Monte Carlo
+//! estimates of the irradiance with real geometry only (E_R) and with real and virtual
+//! geometry (E_RV), each split into direct and one-bounce indirect parts. Real geometry
+//! is the depth map, traced in screen space ([`ScreenTracer`], hierarchical over a
+//! min-max pyramid); virtual geometry is the pipeline's [`VirtualScene`].
+//!
+//! Per pixel:
+//! - **Primary samples** (`primary`, 4): jittered sub-pixel view rays. The real surface
+//!   along each is the pixel's depth (one per pixel); a primary is virtual when an
+//!   object is hit nearer than it. The mask M is the fraction of real primaries (1 where
+//!   the pixel has neither depth nor an object). `k_v` is the mean albedo of the virtual
+//!   primaries (0 where none); `world_position` / `world_normal` are the means over
+//!   primaries of the visible surface (world space; the normal renormalized).
+//! - **E_R** is always estimated at the real shading point (the pixel's depth-map point
+//!   and normal; NaN where either is missing), with `direct` + `indirect` samples per
+//!   primary (16 + 16 by default).
+//! - **Direct light** (units: irradiance, a constant environment L unoccluded gives
+//!   pi L): E^dir = mean of L V cos+ / pdf over samples of the importance table
+//!   ([`LightTable`], Sec. 5.2). Direct sample (j, k) reads stratum j * direct + k of
+//!   `primary * direct` equal strata of the table (the table is in stratified order), at
+//!   an offset hashed per pixel. V is 0 when the screen-space tracer meets a real
+//!   surface within `max_distance`, and for E_RV also when an object is hit at any
+//!   distance.
+//! - **Indirect light** (one bounce, next-event estimation style): cosine-weighted
+//!   directions, E^ind = pi * mean(L_hit). A ray that escapes (no real surface within
+//!   `max_distance`) brings 0: the environment is counted by direct light. A real hit
+//!   brings that pixel's `radiance` (the camera's compensated light of the room). For
+//!   E_RV, an object hit nearer than the real one brings the object's outgoing radiance
+//!   there: (k_V / pi) E^dir from one table sample with virtual (self) and real
+//!   visibility; glossy objects are taken as diffuse for this bounce (as paper 000
+//!   Sec. 6.4 does) and the light the room reflects onto the object is left out (one
+//!   bounce).
+//! - **Correlation**: at a real primary, E_RV's samples are E_R's samples (same random
+//!   numbers, same paths) with the objects added, and both sums are accumulated in the
+//!   same order, so E_RV == E_R bit for bit wherever no path meets an object; `touched`
+//!   is 1 where some path did (a virtual primary, a blocked direct sample, an indirect
+//!   ray reflected by an object, or an object-aware candidate that met one). The
+//!   virtual test runs only for rays inside the cone of the objects' bounding sphere
+//!   and then through their bounding box, so the RV work concentrates near them.
+//! - **At a virtual primary** E_RV is estimated at the object surface: direct from the
+//!   table with self-shadowing and real occlusion; indirect by cosine sampling (diffuse)
+//!   or Phong-lobe sampling about the mirror direction (glossy), each ray bringing the
+//!   nearer of the object (its outgoing radiance, as above) and the real surface.
+//!   Convention (paper 001 Sec. 3, "Glossy Virtual Objects"): the outgoing radiance of
+//!   a virtual pixel is `k_V * E_RV / pi` for both materials. For diffuse surfaces
+//!   E_RV is the irradiance; for glossy ones (normalized Phong,
+//!   f = k_V (n + 2) / (2 pi) cos^n(alpha)) E_RV is pi times the outgoing radiance per
+//!   unit albedo, pi * integral L f / k_V cos(theta), which also equals pi L under a
+//!   constant environment.
+//! - **Object-aware sampling** (paper 000 Sec. 7, `object_aware = true`): at real points,
+//!   E_RV^ind = E_R^ind + a differential estimated from `candidates` cosine directions:
+//!   those meeting the bounding box form H; at most `cache_size` of them (H_a, chosen
+//!   uniformly by reservoir sampling when |H| is larger) are traced, and their sum of
+//!   L_RV - L_R is scaled by pi (1 + |H_b| / |H_a|) / candidates. It is unbiased, and
+//!   E_RV == E_R still holds exactly where no candidate meets an object. Direct light
+//!   keeps the correlated table samples (they already follow the light, and a blocked
+//!   sample is exactly what a shadow needs).
+//! - `direct_min_distance` / `indirect_min_distance`: the smallest hit distance (metres)
+//!   of blocked direct samples / of indirect rays that hit something, over E_R and E_RV
+//!   paths; INFINITY where none (the filter's bandwidths need them).
+//! - Random numbers are counter-based per (seed, frame, pixel, stream, sample), so the
+//!   products are the same for any thread count.
+//!
+//! `max_distance` bounds the screen-space march (default 1 m): real geometry nearer
+//! than that occludes and reflects; beyond it the environment map stands for the room.
+//! It also bounds the cost of each march.
+
+mod kernel;
+pub mod sampling;
+
+pub use kernel::{MAX_CANDIDATES, PixelResult};
+
+use super::pyramid::DepthPyramid;
+use super::ssrt::{ScreenTracer, TraceParams};
+use crate::graph::{
+    Frame, ParamDefault, ParamSpec, Port, Ports, Product, ProductKind, Stage, StageError, StageInfo,
+};
+use crate::light::LightTable;
+use crate::objects::VirtualScene;
+use crate::pinhole::Pinhole;
+use crate::raster::{DepthImage, Image, LabelImage, ScalarImage, Vec3Image};
+use crate::recording::Intrinsics;
+use glam::{Affine3A, Vec3};
+use kernel::Kernel;
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Most primary, direct or indirect samples per pixel the stage accepts.
+pub const MAX_SAMPLES: u32 = 64;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec::new(
+        "primary",
+        ParamDefault::Int(4),
+        "primary samples (jittered view rays) per pixel: decide the mask and the shading point (paper 001: 4)",
+    )
+    .range(1.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "direct",
+        ParamDefault::Int(4),
+        "direct-light samples per primary sample (paper 001: 4, 16 per pixel)",
+    )
+    .range(0.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "indirect",
+        ParamDefault::Int(4),
+        "indirect (one-bounce) samples per primary sample (paper 001: 4, 16 per pixel)",
+    )
+    .range(0.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "object_aware",
+        ParamDefault::Bool(false),
+        "estimate E_RV^ind at real points as E_R^ind plus an object-aware differential (paper 000 Sec. 7)",
+    ),
+    ParamSpec::new(
+        "cache_size",
+        ParamDefault::Int(16),
+        "object-aware: most candidate directions traced per pixel, |H_a| (paper 000: 16 or 32)",
+    )
+    .range(1.0, MAX_CANDIDATES as f64),
+    ParamSpec::new(
+        "candidates",
+        ParamDefault::Int(64),
+        "object-aware: cosine directions tested against the objects' bounding box per pixel, N",
+    )
+    .range(1.0, MAX_CANDIDATES as f64),
+    ParamSpec::new(
+        "max_distance",
+        ParamDefault::Float(1.0),
+        "metres a screen-space ray marches: real geometry beyond it neither occludes nor reflects (the environment map stands for it)",
+    )
+    .range(0.01, 1000.0),
+    ParamSpec::new(
+        "normal_offset",
+        ParamDefault::Float(1.0),
+        "real ray origins are raised off the surface along its normal by this many pixel footprints (depth / focal length), so grazing rays do not hit their own surface between pixel centres",
+    )
+    .range(0.0, 16.0),
+    ParamSpec::new(
+        "thickness",
+        ParamDefault::Float(0.1),
+        "metres behind the depth map that still count as inside a real surface",
+    )
+    .range(0.001, 10.0),
+    ParamSpec::new(
+        "skip_pixels",
+        ParamDefault::Float(1.5),
+        "pixels skipped at the start of a screen-space march, against self-intersection",
+    )
+    .range(0.0, 64.0),
+];
+
+const INPUTS: [(&str, &str, &[ProductKind]); 5] = [
+    ("depth", "refined_depth", &[ProductKind::Depth]),
+    ("normals", "normals", &[ProductKind::Normals]),
+    ("pose", "pose", &[ProductKind::Pose]),
+    ("radiance", "compensated", &[ProductKind::Radiance]),
+    ("light_table", "light_table", &[ProductKind::LightTable]),
+];
+
+const OUTPUTS: [(&str, &[ProductKind]); 11] = [
+    ("e_r_dir", &[ProductKind::Radiance]),
+    ("e_r_ind", &[ProductKind::Radiance]),
+    ("e_rv_dir", &[ProductKind::Radiance]),
+    ("e_rv_ind", &[ProductKind::Radiance]),
+    ("mask", &[ProductKind::Scalar]),
+    ("k_v", &[ProductKind::Radiance]),
+    ("world_position", &[ProductKind::Points]),
+    ("world_normal", &[ProductKind::Normals]),
+    ("direct_min_distance", &[ProductKind::Scalar]),
+    ("indirect_min_distance", &[ProductKind::Scalar]),
+    ("touched", &[ProductKind::Labels]),
+];
+
+pub const INFO: StageInfo = StageInfo {
+    kind: "sample.path",
+    summary: "two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5)",
+    params: PARAMS,
+    ports: |_| Ports {
+        inputs: INPUTS
+            .iter()
+            .map(|(role, product, kinds)| Port::new(role, product, kinds))
+            .collect(),
+        outputs: OUTPUTS
+            .iter()
+            .map(|(role, kinds)| Port::new(role, role, kinds))
+            .collect(),
+    },
+    build: |ctx| {
+        let p = ctx.params;
+        let params = PathParams {
+            primary: p.int("primary") as u32,
+            direct: p.int("direct") as u32,
+            indirect: p.int("indirect") as u32,
+            seed: ctx.seed,
+            object_aware: p.bool("object_aware"),
+            cache_size: p.int("cache_size") as u32,
+            candidates: p.int("candidates") as u32,
+            trace: TraceParams {
+                thickness: p.float("thickness") as f32,
+                skip_pixels: p.float("skip_pixels") as f32,
+            },
+            max_distance: p.float("max_distance") as f32,
+            normal_offset: p.float("normal_offset") as f32,
+        };
+        params.check()?;
+        Ok(Box::new(PathStage {
+            inputs: INPUTS.map(|(role, _, _)| ctx.input(role)),
+            outputs: OUTPUTS.map(|(role, _)| ctx.output(role)),
+            params,
+            intrinsics: ctx.header.depth_intrinsics,
+            objects: Arc::clone(ctx.objects),
+        }))
+    },
+};
+
+/// What [`sample_path`] reads for one frame.
+#[derive(Clone, Copy)]
+pub struct PathInputs<'a> {
+    /// Depth in metres (0 or non-finite = missing): the real geometry.
+    pub depth: &'a DepthImage,
+    /// Camera-space unit normals facing the camera, zero = invalid.
+    pub normals: &'a Vec3Image,
+    /// Compensated linear camera radiance: what an indirect ray brings from a real hit.
+    pub radiance: &'a Vec3Image,
+    /// The depth camera, at the depth map's size.
+    pub camera: Pinhole,
+    pub camera_to_world: Affine3A,
+    /// Importance samples of the environment, in stratified order.
+    pub table: &'a LightTable,
+    pub objects: &'a VirtualScene,
+    /// The frame index (a key of the random numbers).
+    pub frame: u64,
+}
+
+/// Settings of [`sample_path`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathParams {
+    /// Primary samples per pixel.
+    pub primary: u32,
+    /// Direct samples per primary sample.
+    pub direct: u32,
+    /// Indirect samples per primary sample.
+    pub indirect: u32,
+    pub seed: u64,
+    /// Object-aware differential for E_RV^ind at real points (paper 000 Sec. 7).
+    pub object_aware: bool,
+    /// Object-aware: most directions traced per pixel (|H_a|).
+    pub cache_size: u32,
+    /// Object-aware: directions tested against the bounding box per pixel (N).
+    pub candidates: u32,
+    pub trace: TraceParams,
+    /// Metres a screen-space ray marches.
+    pub max_distance: f32,
+    /// Pixel footprints (depth / focal length) by which real ray origins are raised
+    /// along the normal.
+    pub normal_offset: f32,
+}
+
+impl Default for PathParams {
+    fn default() -> Self {
+        PathParams {
+            primary: 4,
+            direct: 4,
+            indirect: 4,
+            seed: 0,
+            object_aware: false,
+            cache_size: 16,
+            candidates: 64,
+            trace: TraceParams::default(),
+            max_distance: 1.0,
+            normal_offset: 1.0,
+        }
+    }
+}
+
+impl PathParams {
+    /// Checks the counts and distances; the error names the bad value.
+    pub fn check(&self) -> Result<(), StageError> {
+        let bad = |what: &str, value: String| {
+            Err(StageError::Failed(format!(
+                "sample.path: {what} is {value}"
+            )))
+        };
+        if !(1..=MAX_SAMPLES).contains(&self.primary) {
+            return bad(
+                "primary",
+                format!("{}, expected 1..={MAX_SAMPLES}", self.primary),
+            );
+        }
+        if self.direct > MAX_SAMPLES || self.indirect > MAX_SAMPLES {
+            return bad(
+                "direct or indirect",
+                format!(
+                    "{} / {}, expected 0..={MAX_SAMPLES}",
+                    self.direct, self.indirect
+                ),
+            );
+        }
+        let max = MAX_CANDIDATES as u32;
+        if !(1..=max).contains(&self.candidates) || !(1..=max).contains(&self.cache_size) {
+            return bad(
+                "candidates or cache_size",
+                format!(
+                    "{} / {}, expected 1..={max}",
+                    self.candidates, self.cache_size
+                ),
+            );
+        }
+        let distances_valid = self.max_distance > 0.0
+            && self.trace.thickness >= 0.0
+            && self.normal_offset >= 0.0
+            && self.normal_offset.is_finite();
+        if !distances_valid {
+            return bad(
+                "max_distance, thickness or normal_offset",
+                format!(
+                    "{} / {} / {}",
+                    self.max_distance, self.trace.thickness, self.normal_offset
+                ),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The products of [`sample_path`], one value per pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PathOutputs {
+    /// Irradiance, real geometry only, direct / indirect (NaN: no real shading point).
+    pub e_r_dir: Vec3Image,
+    pub e_r_ind: Vec3Image,
+    /// Irradiance with the virtual objects (NaN: no shading point at all).
+    pub e_rv_dir: Vec3Image,
+    pub e_rv_ind: Vec3Image,
+    /// Fraction of primary samples that see real geometry.
+    pub mask: ScalarImage,
+    /// Mean albedo of the virtual primaries (0 where none).
+    pub k_v: Vec3Image,
+    /// Mean world position / unit normal of the visible surfaces (NaN / zero: none).
+    pub world_position: Vec3Image,
+    pub world_normal: Vec3Image,
+    /// Metres to the nearest blocker of a direct sample / hit of an indirect ray.
+    pub direct_min_distance: ScalarImage,
+    pub indirect_min_distance: ScalarImage,
+    /// 1 where some path met a virtual object (E_RV may differ from E_R), else 0.
+    pub touched: LabelImage,
+}
+
+impl PathOutputs {
+    /// Buffers for a `width` x `height` frame.
+    pub fn new(width: u32, height: u32) -> PathOutputs {
+        let v = |value: Vec3| Image::filled(width, height, value);
+        PathOutputs {
+            e_r_dir: v(Vec3::NAN),
+            e_r_ind: v(Vec3::NAN),
+            e_rv_dir: v(Vec3::NAN),
+            e_rv_ind: v(Vec3::NAN),
+            mask: Image::filled(width, height, 1.0),
+            k_v: v(Vec3::ZERO),
+            world_position: v(Vec3::NAN),
+            world_normal: v(Vec3::ZERO),
+            direct_min_distance: Image::filled(width, height, f32::INFINITY),
+            indirect_min_distance: Image::filled(width, height, f32::INFINITY),
+            touched: Image::filled(width, height, 0),
+        }
+    }
+
+    /// The width and height of every buffer, if they agree.
+    fn size(&self) -> Option<(u32, u32)> {
+        let s = (self.e_r_dir.width, self.e_r_dir.height);
+        let all = [
+            self.e_r_ind.same_size(&self.e_r_dir),
+            self.e_rv_dir.same_size(&self.e_r_dir),
+            self.e_rv_ind.same_size(&self.e_r_dir),
+            self.mask.same_size(&self.e_r_dir),
+            self.k_v.same_size(&self.e_r_dir),
+            self.world_position.same_size(&self.e_r_dir),
+            self.world_normal.same_size(&self.e_r_dir),
+            self.direct_min_distance.same_size(&self.e_r_dir),
+            self.indirect_min_distance.same_size(&self.e_r_dir),
+            self.touched.same_size(&self.e_r_dir),
+        ];
+        all.iter().all(|&b| b).then_some(s)
+    }
+}
+
+/// One row of every output buffer.
+struct RowOut<'a> {
+    e_r_dir: &'a mut [Vec3],
+    e_r_ind: &'a mut [Vec3],
+    e_rv_dir: &'a mut [Vec3],
+    e_rv_ind: &'a mut [Vec3],
+    mask: &'a mut [f32],
+    k_v: &'a mut [Vec3],
+    world_position: &'a mut [Vec3],
+    world_normal: &'a mut [Vec3],
+    direct_min_distance: &'a mut [f32],
+    indirect_min_distance: &'a mut [f32],
+    touched: &'a mut [u8],
+}
+
+impl RowOut<'_> {
+    #[inline]
+    fn set(&mut self, x: usize, r: &PixelResult) {
+        self.e_r_dir[x] = r.e_r_dir;
+        self.e_r_ind[x] = r.e_r_ind;
+        self.e_rv_dir[x] = r.e_rv_dir;
+        self.e_rv_ind[x] = r.e_rv_ind;
+        self.mask[x] = r.mask;
+        self.k_v[x] = r.k_v;
+        self.world_position[x] = r.world_position;
+        self.world_normal[x] = r.world_normal;
+        self.direct_min_distance[x] = r.direct_min_distance;
+        self.indirect_min_distance[x] = r.indirect_min_distance;
+        self.touched[x] = r.touched as u8;
+    }
+}
+
+/// The rows of every output buffer, top to bottom.
+fn rows(out: &mut PathOutputs, width: usize) -> Vec<RowOut<'_>> {
+    let mut e_r_dir = out.e_r_dir.data.chunks_mut(width);
+    let mut e_r_ind = out.e_r_ind.data.chunks_mut(width);
+    let mut e_rv_dir = out.e_rv_dir.data.chunks_mut(width);
+    let mut e_rv_ind = out.e_rv_ind.data.chunks_mut(width);
+    let mut mask = out.mask.data.chunks_mut(width);
+    let mut k_v = out.k_v.data.chunks_mut(width);
+    let mut world_position = out.world_position.data.chunks_mut(width);
+    let mut world_normal = out.world_normal.data.chunks_mut(width);
+    let mut direct_min = out.direct_min_distance.data.chunks_mut(width);
+    let mut indirect_min = out.indirect_min_distance.data.chunks_mut(width);
+    let mut touched = out.touched.data.chunks_mut(width);
+    let mut rows = Vec::new();
+    while let (Some(a), Some(b), Some(c), Some(d), Some(e), Some(f)) = (
+        e_r_dir.next(),
+        e_r_ind.next(),
+        e_rv_dir.next(),
+        e_rv_ind.next(),
+        mask.next(),
+        k_v.next(),
+    ) {
+        let (Some(g), Some(h), Some(i), Some(j), Some(k)) = (
+            world_position.next(),
+            world_normal.next(),
+            direct_min.next(),
+            indirect_min.next(),
+            touched.next(),
+        ) else {
+            break;
+        };
+        rows.push(RowOut {
+            e_r_dir: a,
+            e_r_ind: b,
+            e_rv_dir: c,
+            e_rv_ind: d,
+            mask: e,
+            k_v: f,
+            world_position: g,
+            world_normal: h,
+            direct_min_distance: i,
+            indirect_min_distance: j,
+            touched: k,
+        });
+    }
+    rows
+}
+
+/// Estimates E_R and E_RV (direct and indirect), the mask, k_V, the mean visible
+/// surface and the minimum hit distances of every pixel (paper 001 Sec. 5; see the
+/// module docs). Builds the depth pyramid of the frame (O(pixels)) and fills `out`,
+/// which must be the depth map's size.
+pub fn sample_path(
+    inputs: &PathInputs,
+    params: &PathParams,
+    out: &mut PathOutputs,
+) -> Result<(), StageError> {
+    params.check()?;
+    let pyramid = DepthPyramid::new(inputs.depth);
+    sample_path_with_pyramid(inputs, params, &pyramid, out)
+}
+
+/// [`sample_path`] with the depth map's pyramid already built (a stage reuses its
+/// buffers across frames).
+pub fn sample_path_with_pyramid(
+    inputs: &PathInputs,
+    params: &PathParams,
+    pyramid: &DepthPyramid,
+    out: &mut PathOutputs,
+) -> Result<(), StageError> {
+    params.check()?;
+    let (w, h) = (inputs.depth.width, inputs.depth.height);
+    let sizes = [
+        ("normals", inputs.normals.width, inputs.normals.height),
+        ("radiance", inputs.radiance.width, inputs.radiance.height),
+        ("camera", inputs.camera.width, inputs.camera.height),
+    ];
+    for (what, ww, hh) in sizes {
+        if (ww, hh) != (w, h) {
+            return Err(StageError::Failed(format!(
+                "sample.path: {what} is {ww}x{hh}, depth is {w}x{h}"
+            )));
+        }
+    }
+    if out.size() != Some((w, h)) {
+        return Err(StageError::Failed(format!(
+            "sample.path: output buffers are not all {w}x{h}"
+        )));
+    }
+    if !inputs.camera_to_world.is_finite() {
+        return Err(StageError::Failed(
+            "sample.path: the camera pose is not finite".into(),
+        ));
+    }
+    if w == 0 || h == 0 {
+        return Ok(());
+    }
+    let tracer = ScreenTracer::with_pyramid(
+        inputs.depth,
+        pyramid,
+        inputs.camera,
+        inputs.camera_to_world,
+        params.trace,
+    );
+    let kernel = Kernel::new(inputs, params, tracer);
+    rows(out, w as usize)
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(y, mut row)| {
+            for x in 0..w {
+                row.set(x as usize, &kernel.shade_pixel(x, y as u32));
+            }
+        });
+    Ok(())
+}
+
+struct PathStage {
+    /// Product names of depth, normals, pose, radiance, light_table.
+    inputs: [String; 5],
+    outputs: [String; 11],
+    params: PathParams,
+    intrinsics: Intrinsics,
+    objects: Arc<VirtualScene>,
+}
+
+impl Stage for PathStage {
+    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
+        let [depth, normals, pose, radiance, table] = &self.inputs;
+        let depth = frame.depth(depth)?;
+        let inputs = PathInputs {
+            depth,
+            normals: frame.normals(normals)?,
+            radiance: frame.radiance(radiance)?,
+            camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
+            camera_to_world: Affine3A::from_mat4(frame.pose(pose)?.matrix().as_mat4()),
+            table: frame.light_table(table)?,
+            objects: &self.objects,
+            frame: frame.index as u64,
+        };
+        let mut out = PathOutputs::new(depth.width, depth.height);
+        sample_path(&inputs, &self.params, &mut out)?;
+        let products = [
+            Product::Radiance(out.e_r_dir),
+            Product::Radiance(out.e_r_ind),
+            Product::Radiance(out.e_rv_dir),
+            Product::Radiance(out.e_rv_ind),
+            Product::Scalar(out.mask),
+            Product::Radiance(out.k_v),
+            Product::Points(out.world_position),
+            Product::Normals(out.world_normal),
+            Product::Scalar(out.direct_min_distance),
+            Product::Scalar(out.indirect_min_distance),
+            Product::Labels(out.touched),
+        ];
+        for (name, product) in self.outputs.iter().zip(products) {
+            frame.insert(name, product);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests;

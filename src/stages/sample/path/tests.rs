@@ -1,0 +1,608 @@
+use super::*;
+use crate::graph::{BuildContext, Params};
+use crate::light::LightSample;
+use crate::objects::{Material, Triangle};
+use crate::recording::{Header, Pose};
+use crate::stages::with_threads;
+use glam::{DQuat, DVec3};
+use std::collections::BTreeMap;
+use std::f32::consts::PI;
+
+const W: u32 = 96;
+const H: u32 = 72;
+const SKY: Vec3 = Vec3::new(1.0, 0.5, 0.25);
+const WALL: Vec3 = Vec3::new(0.2, 0.3, 0.4);
+const SPHERE_CENTER: Vec3 = Vec3::new(0.0, 0.6, 1.0);
+const SPHERE_RADIUS: f32 = 0.3;
+
+fn camera() -> Pinhole {
+    Pinhole::new(&Intrinsics::PRIMESENSE, W, H)
+}
+
+/// The camera 1.5 m above the floor (world y = 0) at z = -2, looking down 30 degrees
+/// along +z (camera x = world -x).
+fn pose() -> Affine3A {
+    let (s, c) = (30f32.to_radians().sin(), 30f32.to_radians().cos());
+    let forward = Vec3::new(0.0, -s, c);
+    let right = Vec3::new(-1.0, 0.0, 0.0);
+    Affine3A::from_cols(
+        right.into(),
+        forward.cross(right).into(),
+        forward.into(),
+        Vec3::new(0.0, 1.5, -2.0).into(),
+    )
+}
+
+/// A floor-only scene: depth, camera-space normals and a constant camera radiance.
+struct Scene {
+    depth: DepthImage,
+    normals: Vec3Image,
+    radiance: Vec3Image,
+}
+
+fn floor_scene() -> Scene {
+    let cam = camera();
+    let pose = pose();
+    let up_camera = pose.inverse().transform_vector3(Vec3::Y);
+    let mut depth = Vec::new();
+    let mut normals = Vec::new();
+    for v in 0..H {
+        for u in 0..W {
+            let dir = pose.transform_vector3(cam.ray(u as f32, v as f32));
+            let hit = dir.y < 0.0;
+            depth.push(if hit { -1.5 / dir.y } else { 0.0 });
+            normals.push(if hit { up_camera } else { Vec3::ZERO });
+        }
+    }
+    Scene {
+        depth: Image::from_vec(W, H, depth).unwrap(),
+        normals: Image::from_vec(W, H, normals).unwrap(),
+        radiance: Image::filled(W, H, WALL),
+    }
+}
+
+/// No real geometry at all.
+fn void_scene() -> Scene {
+    Scene {
+        depth: Image::filled(W, H, 0.0),
+        normals: Image::filled(W, H, Vec3::ZERO),
+        radiance: Image::filled(W, H, Vec3::NAN),
+    }
+}
+
+/// A constant environment `SKY` sampled uniformly over the sphere, in stratified order:
+/// sample i lies in the i-th of N bands of equal solid angle from world +y down.
+fn uniform_table(n: usize) -> LightTable {
+    let golden = PI * (3.0 - 5f32.sqrt());
+    LightTable {
+        samples: (0..n)
+            .map(|i| {
+                let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+                let r = (1.0 - y * y).max(0.0).sqrt();
+                let (s, c) = (golden * i as f32).sin_cos();
+                LightSample {
+                    direction: Vec3::new(r * c, y, r * s),
+                    radiance: SKY,
+                    pdf: 1.0 / (4.0 * PI),
+                }
+            })
+            .collect(),
+    }
+}
+
+/// A UV sphere with smooth normals.
+fn sphere(center: Vec3, radius: f32, material: Material) -> VirtualScene {
+    let (nu, nv) = (16, 8);
+    let at = |i: u32, j: u32| {
+        let (theta, phi) = (PI * j as f32 / nv as f32, 2.0 * PI * i as f32 / nu as f32);
+        Vec3::new(
+            theta.sin() * phi.cos(),
+            theta.cos(),
+            theta.sin() * phi.sin(),
+        )
+    };
+    let mut triangles = Vec::new();
+    for j in 0..nv {
+        for i in 0..nu {
+            let [a, b, c, d] = [at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)];
+            for n in [[a, c, b], [b, c, d]] {
+                triangles.push(Triangle {
+                    vertices: n.map(|p| center + p * radius),
+                    normals: n,
+                    material: 0,
+                });
+            }
+        }
+    }
+    VirtualScene {
+        triangles,
+        materials: vec![material],
+    }
+}
+
+fn run(
+    scene: &Scene,
+    objects: &VirtualScene,
+    table: &LightTable,
+    params: &PathParams,
+) -> PathOutputs {
+    let inputs = PathInputs {
+        depth: &scene.depth,
+        normals: &scene.normals,
+        radiance: &scene.radiance,
+        camera: camera(),
+        camera_to_world: pose(),
+        table,
+        objects,
+        frame: 7,
+    };
+    let mut out = PathOutputs::new(W, H);
+    sample_path(&inputs, params, &mut out).unwrap();
+    out
+}
+
+/// The pixel where world point `p` is seen.
+fn pixel_of(p: Vec3) -> usize {
+    let (u, v) = camera()
+        .pixel_of(pose().inverse().transform_point3(p))
+        .unwrap();
+    (v * W + u) as usize
+}
+
+/// Every output as bits, for exact comparisons (NaN included).
+fn bits(out: &PathOutputs) -> Vec<u32> {
+    let mut b = Vec::new();
+    for image in [
+        &out.e_r_dir,
+        &out.e_r_ind,
+        &out.e_rv_dir,
+        &out.e_rv_ind,
+        &out.k_v,
+        &out.world_position,
+        &out.world_normal,
+    ] {
+        b.extend(
+            image
+                .data
+                .iter()
+                .flat_map(|v| v.to_array().map(f32::to_bits)),
+        );
+    }
+    for image in [
+        &out.mask,
+        &out.direct_min_distance,
+        &out.indirect_min_distance,
+    ] {
+        b.extend(image.data.iter().map(|v| v.to_bits()));
+    }
+    b.extend(out.touched.data.iter().map(|&t| t as u32));
+    b
+}
+
+fn same_bits(a: Vec3, b: Vec3) -> bool {
+    a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)
+}
+
+/// E_RV equals E_R bit for bit (both parts) at every untouched pixel; returns how many
+/// pixels were touched.
+fn assert_untouched_pixels_equal(out: &PathOutputs) -> usize {
+    let mut touched = 0;
+    for i in 0..out.touched.data.len() {
+        if out.touched.data[i] != 0 {
+            touched += 1;
+            continue;
+        }
+        assert!(
+            same_bits(out.e_rv_dir.data[i], out.e_r_dir.data[i]),
+            "pixel {i}"
+        );
+        assert!(
+            same_bits(out.e_rv_ind.data[i], out.e_r_ind.data[i]),
+            "pixel {i}"
+        );
+    }
+    touched
+}
+
+#[test]
+fn constant_environment_over_a_floor_gives_pi_l_and_no_indirect_light() {
+    let scene = floor_scene();
+    let table = uniform_table(4096);
+    for object_aware in [false, true] {
+        let params = PathParams {
+            object_aware,
+            ..Default::default()
+        };
+        let out = run(&scene, &VirtualScene::default(), &table, &params);
+        let (mut sum, mut n, mut worst) = (glam::DVec3::ZERO, 0, 0f32);
+        for i in 0..out.e_r_dir.data.len() {
+            if scene.depth.data[i] == 0.0 {
+                assert!(out.e_r_dir.data[i].is_nan() && out.e_rv_ind.data[i].is_nan());
+                assert!(out.world_position.data[i].is_nan());
+                continue;
+            }
+            let e = out.e_r_dir.data[i];
+            sum += e.as_dvec3();
+            n += 1;
+            worst = worst.max(((e / (PI * SKY)) - 1.0).abs().max_element());
+            assert_eq!(
+                out.e_r_ind.data[i],
+                Vec3::ZERO,
+                "nothing to hit above a floor"
+            );
+            assert_eq!(out.indirect_min_distance.data[i], f32::INFINITY);
+            assert_eq!(out.direct_min_distance.data[i], f32::INFINITY);
+            assert_eq!(out.mask.data[i], 1.0);
+            assert_eq!(out.k_v.data[i], Vec3::ZERO);
+            assert!(out.world_position.data[i].y.abs() < 1e-4);
+            assert!((out.world_normal.data[i] - Vec3::Y).length() < 1e-5);
+        }
+        let mean = (sum / n as f64).as_vec3() / (PI * SKY);
+        println!(
+            "object_aware {object_aware}: mean E_R^dir / (pi L) = {mean}, worst pixel {worst}"
+        );
+        assert!((mean - Vec3::ONE).abs().max_element() < 0.005, "{mean}");
+        assert!(worst < 0.12, "worst pixel off by {worst}");
+        assert_eq!(assert_untouched_pixels_equal(&out), 0);
+        assert!(bits(&out) == bits(&run(&scene, &VirtualScene::default(), &table, &params)));
+    }
+}
+
+/// The 3x3 block of pixels around the one that sees world point `p`.
+fn block_around(p: Vec3) -> Vec<usize> {
+    let c = pixel_of(p) as i64;
+    let w = W as i64;
+    [-w - 1, -w, -w + 1, -1, 0, 1, w - 1, w, w + 1]
+        .iter()
+        .map(|d| (c + d) as usize)
+        .collect()
+}
+
+#[test]
+fn a_sphere_above_the_floor_shadows_and_lights_it_and_nothing_else_changes() {
+    let scene = floor_scene();
+    let table = uniform_table(4096);
+    let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, Material::DIFFUSE_GRAY);
+    let below = block_around(Vec3::new(0.0, 0.0, 1.0));
+    for object_aware in [false, true] {
+        let (mut r, mut rv, mut ind) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+        for seed in 0..8 {
+            let params = PathParams {
+                object_aware,
+                seed,
+                ..Default::default()
+            };
+            let out = run(&scene, &objects, &table, &params);
+            let touched = assert_untouched_pixels_equal(&out);
+            assert!(
+                touched > 100 && touched < (W * H) as usize,
+                "{touched} touched"
+            );
+            // Blocking only darkens real points where every primary is real.
+            for i in 0..out.mask.data.len() {
+                if out.mask.data[i] == 1.0 && scene.depth.data[i] > 0.0 {
+                    assert!(
+                        out.e_rv_dir.data[i].cmple(out.e_r_dir.data[i]).all(),
+                        "pixel {i}"
+                    );
+                }
+            }
+            for &p in &below {
+                assert_eq!(
+                    out.mask.data[p], 1.0,
+                    "the floor is visible under the sphere"
+                );
+                assert_eq!(out.touched.data[p], 1);
+                assert_eq!(out.e_r_ind.data[p], Vec3::ZERO);
+                r += out.e_r_dir.data[p];
+                rv += out.e_rv_dir.data[p];
+                ind += out.e_rv_ind.data[p];
+            }
+            let nearest = below.iter().map(|&p| out.direct_min_distance.data[p]);
+            let nearest = nearest.fold(f32::INFINITY, f32::min);
+            assert!(
+                nearest > 0.25 && nearest < 0.4,
+                "sphere bottom 0.3 m up: {nearest}"
+            );
+            // Where the sphere is in front: a virtual pixel.
+            let centre = pixel_of(SPHERE_CENTER);
+            assert_eq!(out.mask.data[centre], 0.0);
+            assert_eq!(out.k_v.data[centre], Material::DIFFUSE_GRAY.albedo);
+            assert_eq!(out.touched.data[centre], 1);
+            let n = out.world_normal.data[centre];
+            let p = out.world_position.data[centre];
+            assert!(
+                ((p - SPHERE_CENTER).length() - SPHERE_RADIUS).abs() < 0.02,
+                "{p}"
+            );
+            assert!((n - (p - SPHERE_CENTER).normalize()).length() < 0.1, "{n}");
+            assert!(out.e_rv_dir.data[centre].min_element() > 0.0);
+        }
+        // Under the sphere it covers sin^2(30 deg) = 1/4 of the cosine-weighted sky.
+        let ratio = rv / r;
+        let ind = ind / (8 * below.len()) as f32;
+        println!("object_aware {object_aware}: E_RV/E_R under the sphere {ratio}, E_RV^ind {ind}");
+        assert!(
+            (ratio - Vec3::splat(0.75)).abs().max_element() < 0.05,
+            "{ratio}"
+        );
+        // The gray sphere reflects sky light onto the floor below it.
+        assert!(ind.min_element() > 0.0, "{ind}");
+    }
+}
+
+#[test]
+fn no_objects_means_e_rv_is_e_r_everywhere() {
+    let scene = floor_scene();
+    let mut radiance = scene.radiance.clone();
+    radiance.data[5] = Vec3::NAN;
+    let scene = Scene { radiance, ..scene };
+    // A table smaller than a multiple of the strata, odd sample counts, a missing
+    // radiance pixel.
+    let table = uniform_table(300);
+    for object_aware in [false, true] {
+        let params = PathParams {
+            object_aware,
+            primary: 2,
+            direct: 3,
+            indirect: 5,
+            ..Default::default()
+        };
+        let out = run(&scene, &VirtualScene::default(), &table, &params);
+        assert_eq!(assert_untouched_pixels_equal(&out), 0);
+        assert!(out.touched.data.iter().all(|&t| t == 0));
+    }
+}
+
+#[test]
+fn virtual_pixels_are_shaded_at_the_object_surface() {
+    // A large sphere in the void (no real geometry): where its surface faces the
+    // camera, E_RV^dir is pi L for diffuse and (by the convention of the module docs)
+    // for glossy materials too; nothing is there to bring indirect light.
+    let scene = void_scene();
+    let table = uniform_table(4096);
+    let camera_position = Vec3::from(pose().translation);
+    let center = Vec3::new(0.0, 0.9, 0.0);
+    for exponent in [0.0, 2.0] {
+        let material = Material {
+            albedo: Vec3::new(0.8, 0.5, 0.2),
+            exponent,
+        };
+        let objects = sphere(center, 0.5, material);
+        let (mut e, mut ind, mut n) = (glam::DVec3::ZERO, glam::DVec3::ZERO, 0);
+        for seed in 0..16 {
+            let params = PathParams {
+                seed,
+                ..Default::default()
+            };
+            let out = run(&scene, &objects, &table, &params);
+            for i in 0..out.mask.data.len() {
+                if out.mask.data[i] == 1.0 {
+                    assert!(out.e_r_dir.data[i].is_nan(), "no real shading point");
+                    if out.touched.data[i] == 0 {
+                        assert!(out.e_rv_dir.data[i].is_nan(), "nothing at all");
+                    }
+                    continue;
+                }
+                let (p, normal) = (out.world_position.data[i], out.world_normal.data[i]);
+                let facing = normal.dot((camera_position - p).normalize());
+                if out.mask.data[i] == 0.0 && facing > 0.98 {
+                    assert_eq!(out.k_v.data[i], material.albedo);
+                    e += out.e_rv_dir.data[i].as_dvec3();
+                    ind += out.e_rv_ind.data[i].as_dvec3();
+                    n += 1;
+                }
+            }
+        }
+        let e = (e / n as f64).as_vec3() / (PI * SKY);
+        let ind = (ind / n as f64).as_vec3() / (PI * SKY);
+        println!(
+            "exponent {exponent}: E_RV^dir / (pi L) = {e} over {n} pixel-runs, E_RV^ind {ind}"
+        );
+        assert!(n > 300, "{n}");
+        assert!((e - Vec3::ONE).abs().max_element() < 0.05, "{e}");
+        assert!(
+            ind.max_element() < 0.01,
+            "a convex object in the void: {ind}"
+        );
+    }
+}
+
+#[test]
+fn object_aware_sampling_is_unbiased_and_lowers_the_variance() {
+    let scene = floor_scene();
+    let table = uniform_table(4096);
+    let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, Material::DIFFUSE_GRAY);
+    // Floor pixels under and beside the sphere.
+    let blocks = [Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.45, 0.0, 0.9)].map(block_around);
+    let seeds = 40;
+    // Per mode: per block, the block mean of every seed; the per-pixel variance over
+    // seeds, pooled over the pixels of both blocks.
+    let mut block_means = [[[0f64; 40]; 2]; 2];
+    let mut pooled_variance = [0f64; 2];
+    for (mode, object_aware) in [false, true].into_iter().enumerate() {
+        let mut values = vec![[0f64; 40]; 18];
+        for seed in 0..seeds {
+            let params = PathParams {
+                seed: seed as u64,
+                object_aware,
+                ..Default::default()
+            };
+            let out = run(&scene, &objects, &table, &params);
+            for (b, block) in blocks.iter().enumerate() {
+                for (k, &p) in block.iter().enumerate() {
+                    let v = out.e_rv_ind.data[p].y as f64;
+                    values[b * 9 + k][seed] = v;
+                    block_means[mode][b][seed] += v / 9.0;
+                }
+            }
+        }
+        pooled_variance[mode] = values.iter().map(|xs| variance(xs)).sum::<f64>() / 18.0;
+    }
+    for (b, (correlated, aware)) in block_means[0].iter().zip(&block_means[1]).enumerate() {
+        let (m0, m1) = (mean(correlated), mean(aware));
+        let se = ((variance(correlated) + variance(aware)) / seeds as f64).sqrt();
+        println!(
+            "block {b}: mean E_RV^ind correlated {m0:.5}, object-aware {m1:.5} (se of the difference {se:.5})"
+        );
+        assert!(m0 > 0.0 && m1 > 0.0);
+        assert!((m0 - m1).abs() < 4.0 * se, "biased: {m0} vs {m1} (se {se})");
+    }
+    let [v0, v1] = pooled_variance;
+    println!(
+        "per-pixel sd of E_RV^ind: correlated {:.5}, object-aware {:.5}",
+        v0.sqrt(),
+        v1.sqrt()
+    );
+    assert!(
+        v1 < 0.8 * v0,
+        "object-aware sampling should lower the variance: {v1} vs {v0}"
+    );
+}
+
+fn mean(xs: &[f64]) -> f64 {
+    xs.iter().sum::<f64>() / xs.len() as f64
+}
+
+fn variance(xs: &[f64]) -> f64 {
+    let m = mean(xs);
+    xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (xs.len() - 1) as f64
+}
+
+#[test]
+fn outputs_are_identical_for_one_and_three_threads() {
+    let scene = floor_scene();
+    let table = uniform_table(1024);
+    let objects = sphere(
+        SPHERE_CENTER,
+        SPHERE_RADIUS,
+        Material {
+            albedo: Vec3::splat(0.6),
+            exponent: 8.0,
+        },
+    );
+    for object_aware in [false, true] {
+        let params = PathParams {
+            object_aware,
+            seed: 11,
+            ..Default::default()
+        };
+        let one = with_threads(1, || bits(&run(&scene, &objects, &table, &params)));
+        let three = with_threads(3, || bits(&run(&scene, &objects, &table, &params)));
+        assert!(one == three, "object_aware {object_aware}");
+    }
+}
+
+#[test]
+fn empty_tables_images_and_bad_sizes_are_handled() {
+    let scene = floor_scene();
+    let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, Material::DIFFUSE_GRAY);
+    let out = run(
+        &scene,
+        &objects,
+        &LightTable { samples: vec![] },
+        &PathParams::default(),
+    );
+    let valid = scene.depth.data.iter().position(|&z| z > 0.0).unwrap();
+    assert_eq!(out.e_r_dir.data[valid], Vec3::ZERO);
+    let empty = Image::filled(0, 0, 0.0);
+    let empty3 = Image::filled(0, 0, Vec3::ZERO);
+    let table = uniform_table(16);
+    let inputs = PathInputs {
+        depth: &empty,
+        normals: &empty3,
+        radiance: &empty3,
+        camera: Pinhole::new(&Intrinsics::PRIMESENSE, 0, 0),
+        camera_to_world: pose(),
+        table: &table,
+        objects: &objects,
+        frame: 0,
+    };
+    sample_path(&inputs, &PathParams::default(), &mut PathOutputs::new(0, 0)).unwrap();
+    let small = Image::filled(3, 2, Vec3::ZERO);
+    let bad = PathInputs {
+        depth: &scene.depth,
+        normals: &small,
+        radiance: &scene.radiance,
+        camera: camera(),
+        ..inputs
+    };
+    let err = sample_path(&bad, &PathParams::default(), &mut PathOutputs::new(W, H))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("normals is 3x2, depth is 96x72"), "{err}");
+    let params = PathParams {
+        primary: 0,
+        ..Default::default()
+    };
+    assert!(
+        params
+            .check()
+            .unwrap_err()
+            .to_string()
+            .contains("primary is 0")
+    );
+}
+
+#[test]
+fn the_stage_reads_its_products_and_writes_every_output() {
+    let scene = floor_scene();
+    let table = uniform_table(512);
+    let objects = Arc::new(sphere(SPHERE_CENTER, SPHERE_RADIUS, Material::DIFFUSE_GRAY));
+    let params = Params::defaults(PARAMS);
+    let header = Header::new("t", Intrinsics::PRIMESENSE, 0.001);
+    let ports = (INFO.ports)(&params);
+    let ctx = BuildContext {
+        stage_name: "path",
+        params: &params,
+        inputs: &ports
+            .inputs
+            .iter()
+            .map(|p| (p.role.clone(), p.default_product.clone()))
+            .collect(),
+        outputs: &BTreeMap::new(),
+        header: &header,
+        out_dir: std::path::Path::new("."),
+        seed: 3,
+        objects: &objects,
+    };
+    let mut stage = (INFO.build)(&ctx).unwrap();
+    assert_eq!(ports.inputs[0].default_product, "refined_depth");
+    assert_eq!(ports.inputs[3].default_product, "compensated");
+    let rotation = glam::Mat3::from(pose().matrix3).as_dmat3();
+    let pose_record = Pose::from_parts(DVec3::new(0.0, 1.5, -2.0), DQuat::from_mat3(&rotation));
+    let mut frame = Frame::new(7, 0);
+    frame.insert("refined_depth", Product::Depth(scene.depth.clone()));
+    frame.insert("normals", Product::Normals(scene.normals.clone()));
+    frame.insert("compensated", Product::Radiance(scene.radiance.clone()));
+    frame.insert("pose", Product::Pose(pose_record));
+    frame.insert("light_table", Product::LightTable(Arc::new(table.clone())));
+    stage.process(&mut frame).unwrap();
+    let inputs = PathInputs {
+        depth: &scene.depth,
+        normals: &scene.normals,
+        radiance: &scene.radiance,
+        camera: camera(),
+        camera_to_world: Affine3A::from_mat4(pose_record.matrix().as_mat4()),
+        table: &table,
+        objects: &objects,
+        frame: 7,
+    };
+    let mut direct = PathOutputs::new(W, H);
+    let p = PathParams {
+        seed: 3,
+        ..Default::default()
+    };
+    sample_path(&inputs, &p, &mut direct).unwrap();
+    let e = frame.radiance("e_rv_dir").unwrap();
+    assert!(
+        e.data
+            .iter()
+            .zip(&direct.e_rv_dir.data)
+            .all(|(a, b)| same_bits(*a, *b))
+    );
+    for (role, _) in OUTPUTS {
+        assert!(frame.get(role).is_some(), "{role}");
+    }
+    assert_eq!(frame.labels("touched").unwrap().data, direct.touched.data);
+}

@@ -1,0 +1,217 @@
+//! The min-max depth pyramid that the hierarchical screen-space tracer walks (paper 001
+//! Sec. 5, after the hierarchical traversal of Tevs et al. [TIS08]): level 0 holds each
+//! pixel's depth, every coarser texel the minimum and maximum valid depth of the 2x2
+//! texels below it. A texel with no valid depth below it is empty: min = +inf,
+//! max = -inf, so every "ray in front of the tile" test passes and the tile is skipped.
+
+use crate::raster::{DepthImage, depth_is_valid};
+use rayon::prelude::*;
+
+/// The (min, max) valid depth of an empty texel.
+pub const EMPTY_TEXEL: [f32; 2] = [f32::INFINITY, f32::NEG_INFINITY];
+
+/// One level of the pyramid: `width` x `height` texels starting at `offset` in
+/// [`DepthPyramid::texels`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PyramidLevel {
+    pub width: u32,
+    pub height: u32,
+    pub offset: usize,
+}
+
+/// Levels of 2x2 min and max of valid depth over one depth map, level 0 at full
+/// resolution, the last level a single texel. Built once per frame in O(pixels).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DepthPyramid {
+    levels: Vec<PyramidLevel>,
+    /// Every level's texels, row-major, level after level: [min, max] in metres.
+    texels: Vec<[f32; 2]>,
+}
+
+/// Rows per parallel task when reducing a level (a level is cheap: keep tasks big).
+const ROWS_PER_TASK: usize = 16;
+
+impl DepthPyramid {
+    /// The pyramid of `depth` (metres; 0 or non-finite = missing).
+    pub fn new(depth: &DepthImage) -> DepthPyramid {
+        let mut pyramid = DepthPyramid::default();
+        pyramid.rebuild(depth);
+        pyramid
+    }
+
+    /// Rebuilds the pyramid for `depth`, reusing the storage.
+    pub fn rebuild(&mut self, depth: &DepthImage) {
+        self.levels.clear();
+        let (mut w, mut h) = (depth.width, depth.height);
+        let mut total = 0usize;
+        loop {
+            self.levels.push(PyramidLevel {
+                width: w,
+                height: h,
+                offset: total,
+            });
+            total += w as usize * h as usize;
+            if w <= 1 && h <= 1 {
+                break;
+            }
+            (w, h) = (w.div_ceil(2), h.div_ceil(2));
+        }
+        self.texels.clear();
+        self.texels.resize(total, EMPTY_TEXEL);
+        if total == 0 {
+            return;
+        }
+        let level0 = &mut self.texels[..depth.data.len()];
+        level0
+            .par_chunks_mut(1 << 14)
+            .zip(depth.data.par_chunks(1 << 14))
+            .for_each(|(out, zs)| {
+                for (t, &z) in out.iter_mut().zip(zs) {
+                    *t = if depth_is_valid(z) {
+                        [z, z]
+                    } else {
+                        EMPTY_TEXEL
+                    };
+                }
+            });
+        for l in 1..self.levels.len() {
+            let (fine, coarse) = (self.levels[l - 1], self.levels[l]);
+            let (below, above) = self.texels.split_at_mut(coarse.offset);
+            let below = &below[fine.offset..];
+            let above = &mut above[..coarse.width as usize * coarse.height as usize];
+            reduce_level(below, fine, above, coarse);
+        }
+    }
+
+    /// Number of levels (level 0 is full resolution, the last one a single texel).
+    pub fn level_count(&self) -> u32 {
+        self.levels.len() as u32
+    }
+
+    /// The size and placement of level `level`.
+    pub fn level(&self, level: u32) -> PyramidLevel {
+        self.levels[level as usize]
+    }
+
+    /// [min, max] valid depth under texel (`x`, `y`) of level `level`
+    /// ([`EMPTY_TEXEL`] when none is valid). Panics when out of range.
+    #[inline]
+    pub fn texel(&self, level: u32, x: u32, y: u32) -> [f32; 2] {
+        let l = self.levels[level as usize];
+        debug_assert!(x < l.width && y < l.height);
+        self.texels[l.offset + y as usize * l.width as usize + x as usize]
+    }
+
+    /// The texel (`x`, `y`) of `level` (one of [`DepthPyramid::levels`]), for the
+    /// tracer's inner loop: coordinates must be in range (only slice indexing checks).
+    #[inline(always)]
+    pub(crate) fn texel_in(&self, level: &PyramidLevel, x: i32, y: i32) -> [f32; 2] {
+        self.texels[level.offset + y as usize * level.width as usize + x as usize]
+    }
+
+    /// The levels, finest first.
+    pub(crate) fn levels(&self) -> &[PyramidLevel] {
+        &self.levels
+    }
+}
+
+/// Fills `above` (level `coarse`) with the 2x2 min and max of `below` (level `fine`);
+/// children beyond the fine level's edge are ignored.
+fn reduce_level(
+    below: &[[f32; 2]],
+    fine: PyramidLevel,
+    above: &mut [[f32; 2]],
+    coarse: PyramidLevel,
+) {
+    let (fw, fh) = (fine.width as usize, fine.height as usize);
+    let cw = coarse.width as usize;
+    above
+        .par_chunks_mut(cw * ROWS_PER_TASK)
+        .enumerate()
+        .for_each(|(task, rows)| {
+            for (r, row) in rows.chunks_mut(cw).enumerate() {
+                let y = (task * ROWS_PER_TASK + r) * 2;
+                let y1 = (y + 1).min(fh - 1);
+                for (x, t) in row.iter_mut().enumerate() {
+                    let x0 = 2 * x;
+                    let x1 = (x0 + 1).min(fw - 1);
+                    let [a, b, c, d] = [
+                        below[y * fw + x0],
+                        below[y * fw + x1],
+                        below[y1 * fw + x0],
+                        below[y1 * fw + x1],
+                    ];
+                    *t = [
+                        a[0].min(b[0]).min(c[0].min(d[0])),
+                        a[1].max(b[1]).max(c[1].max(d[1])),
+                    ];
+                }
+            }
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::raster::Image;
+    use crate::rng::Counter;
+
+    /// Depth with holes (zeros and NaN) on an odd-sized image.
+    fn holey_depth(w: u32, h: u32) -> DepthImage {
+        let mut r = Counter::new(&[5, 1]);
+        let data = (0..w * h)
+            .map(|_| match r.next_f32() {
+                u if u < 0.1 => 0.0,
+                u if u < 0.15 => f32::NAN,
+                _ => 0.5 + 4.0 * r.next_f32(),
+            })
+            .collect();
+        Image::from_vec(w, h, data).unwrap()
+    }
+
+    #[test]
+    fn every_texel_is_the_min_and_max_of_valid_depth_beneath_it() {
+        let depth = holey_depth(37, 21);
+        let pyramid = DepthPyramid::new(&depth);
+        assert_eq!(
+            pyramid.level_count(),
+            7,
+            "37 -> 19 -> 10 -> 5 -> 3 -> 2 -> 1"
+        );
+        for level in 0..pyramid.level_count() {
+            let l = pyramid.level(level);
+            for y in 0..l.height {
+                for x in 0..l.width {
+                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                    for py in (y << level)..((y + 1) << level).min(depth.height) {
+                        for px in (x << level)..((x + 1) << level).min(depth.width) {
+                            let z = *depth.at(px, py);
+                            if depth_is_valid(z) {
+                                lo = lo.min(z);
+                                hi = hi.max(z);
+                            }
+                        }
+                    }
+                    assert_eq!(
+                        pyramid.texel(level, x, y),
+                        [lo, hi],
+                        "level {level} ({x}, {y})"
+                    );
+                }
+            }
+        }
+        let top = pyramid.level(pyramid.level_count() - 1);
+        assert_eq!((top.width, top.height), (1, 1));
+    }
+
+    #[test]
+    fn empty_and_all_invalid_maps_build() {
+        let empty = DepthPyramid::new(&Image::filled(0, 0, 0.0));
+        assert_eq!(empty.level_count(), 1);
+        let invalid = DepthPyramid::new(&Image::filled(5, 3, 0.0));
+        assert_eq!(invalid.texel(invalid.level_count() - 1, 0, 0), EMPTY_TEXEL);
+        let mut reused = invalid.clone();
+        reused.rebuild(&holey_depth(37, 21));
+        assert_eq!(reused, DepthPyramid::new(&holey_depth(37, 21)));
+    }
+}

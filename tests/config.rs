@@ -181,7 +181,7 @@ fn structure_errors() {
     let e = error("[pipline]\n");
     assert_eq!(
         e.hint.as_deref(),
-        Some("did you mean `pipeline`? allowed: pipeline, stage")
+        Some("did you mean `pipeline`? allowed: pipeline, stage, object")
     );
 }
 
@@ -221,4 +221,230 @@ fn every_builtin_kind_builds_from_its_defaults() {
             info.kind
         );
     }
+}
+
+const DECODE: &str = "[[stage]]\nkind = \"decode\"\n";
+
+#[test]
+fn objects_resolve_into_the_world_space_scene() {
+    let p = load(&format!(
+        "{DECODE}
+[[object]]
+name = \"torus\"
+shape = \"torus\"
+major_radius = 0.25
+minor_radius = 0.08
+translation = [0.0, 0.08, 0.0]
+rotation_deg = [0.0, 0.0, 0.0]
+albedo = [0.8, 0.3, 0.2]
+exponent = 0
+
+[[object]]
+shape = \"sphere\"
+radius = 0.1
+segments = 16
+translation = [1, 0.1, -1]
+exponent = 20
+
+[[object]]
+shape = \"box\"
+size = [0.2, 0.4, 0.2]
+rotation_deg = [0, 45, 0]
+translation = [-1, 0.2, 0]
+scale = 2
+"
+    ))
+    .unwrap();
+    let scene = &p.objects;
+    // 64 x 32 x 2 torus, 2 x 16 x 7 sphere, 12 box triangles.
+    assert_eq!(scene.triangles.len(), 4096 + 224 + 12);
+    assert!(scene.bvh.is_built_for(scene.triangles.len()));
+    assert_eq!(scene.materials.len(), 3);
+    assert_eq!(scene.materials[0].albedo.to_array(), [0.8, 0.3, 0.2]);
+    assert_eq!(scene.materials[1].exponent, 20.0);
+    assert_eq!(scene.materials[2].albedo.to_array(), [0.7; 3]);
+    let b = scene.bounds();
+    // The box, doubled to 0.4 x 0.8 x 0.4 and turned 45 degrees: half-diagonal 0.2 sqrt 2.
+    let half_diagonal = 0.2 * 2f32.sqrt();
+    assert!((b.min.x - (-1.0 - half_diagonal)).abs() < 1e-5, "{b:?}");
+    assert!((b.min.y - -0.2).abs() < 1e-6, "{b:?}");
+    assert!((b.max.x - 1.1).abs() < 1e-6, "{b:?}");
+    assert!((b.max.y - 0.6).abs() < 1e-6, "{b:?}");
+    assert!((b.min.z - -1.1).abs() < 1e-6, "{b:?}");
+    assert!((b.max.z - 0.33).abs() < 1e-6, "{b:?}");
+    // The torus lies on the floor: a ray down onto its tube stops at y = 0.16.
+    let hit = scene
+        .intersect(
+            glam::Vec3::new(0.25, 1.0, 0.0),
+            glam::Vec3::NEG_Y,
+            0.0,
+            f32::INFINITY,
+        )
+        .unwrap();
+    assert!((hit.t - 0.84).abs() < 1e-4, "{}", hit.t);
+
+    // No [[object]]: an empty scene.
+    assert!(load(DECODE).unwrap().objects.is_empty());
+}
+
+#[test]
+fn mesh_paths_resolve_against_the_pipeline_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("meshes")).unwrap();
+    std::fs::write(
+        dir.path().join("meshes/pyramid.obj"),
+        "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nv 0.5 1 0.5\nf 1 2 3 4\nf 1 5 2\nf 2 5 3\nf 3 5 4\nf 4 5 1\n",
+    )
+    .unwrap();
+    let pipeline = dir.path().join("p.toml");
+    std::fs::write(
+        &pipeline,
+        format!(
+            "{DECODE}[[object]]\nname = \"pyramid\"\nshape = \"mesh\"\npath = \"meshes/pyramid.obj\"\nscale = 0.5\ntranslation = [1, 0, 0]\n"
+        ),
+    )
+    .unwrap();
+    let p = Pipeline::load(&pipeline, &Registry::builtin()).unwrap();
+    assert_eq!(p.objects.triangles.len(), 6, "a quad base and four sides");
+    let b = p.objects.bounds();
+    assert_eq!(b.min.to_array(), [1.0, 0.0, 0.0]);
+    assert_eq!(b.max.to_array(), [1.5, 0.5, 0.5]);
+
+    // A mesh with an index past its vertices is rejected at the path, naming the file.
+    std::fs::write(
+        dir.path().join("meshes/bad.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n",
+    )
+    .unwrap();
+    let text = format!(
+        "{DECODE}[[object]]\nname = \"bad\"\nshape = \"mesh\"\npath = \"meshes/bad.obj\"\n"
+    );
+    std::fs::write(&pipeline, &text).unwrap();
+    let e = Pipeline::load(&pipeline, &Registry::builtin()).unwrap_err();
+    let mesh = dir.path().join("meshes/bad.obj");
+    assert_eq!(
+        e.message,
+        format!(
+            "object `bad`: the mesh `{}` is not a valid OBJ file: face vertex index out of bounds",
+            mesh.display()
+        )
+    );
+    assert_eq!((e.line, e.column), (6, 8));
+
+    // An empty file has no triangles.
+    std::fs::write(dir.path().join("meshes/bad.obj"), "# nothing\n").unwrap();
+    let e = Pipeline::load(&pipeline, &Registry::builtin()).unwrap_err();
+    assert_eq!(
+        e.message,
+        format!(
+            "object `bad`: the mesh `{}` has no triangles",
+            mesh.display()
+        )
+    );
+}
+
+#[test]
+fn object_errors_are_located_and_explained() {
+    let object = |body: &str| error(&format!("{DECODE}[[object]]\nname = \"ball\"\n{body}"));
+    let e = object("shape = \"sphere\"\nradus = 0.2\n");
+    assert_eq!((e.line, e.column), (6, 1));
+    assert_eq!(e.message, "unknown key `radus` for object `ball` (sphere)");
+    assert_eq!(
+        e.hint.as_deref(),
+        Some(
+            "did you mean `radius`? keys of a sphere: radius, segments; of every object: name, shape, translation, rotation_deg, scale, albedo, exponent"
+        )
+    );
+    // A key of another shape is unknown too.
+    let e = object("shape = \"box\"\nradius = 0.2\n");
+    assert_eq!(e.message, "unknown key `radius` for object `ball` (box)");
+
+    let e = object("shape = \"sphre\"\n");
+    assert_eq!(
+        (e.line, e.column, e.message.as_str()),
+        (5, 9, "unknown shape `sphre`")
+    );
+    assert_eq!(
+        e.hint.as_deref(),
+        Some("did you mean `sphere`? shapes: sphere, box, torus, quad, mesh")
+    );
+    let e = object("radius = 1\n");
+    assert_eq!(e.message, "this object has no `shape`");
+
+    let e = object("shape = \"sphere\"\nradius = \"big\"\n");
+    assert_eq!(
+        e.message,
+        "`radius` of object `ball` must be a float, found a string"
+    );
+    assert_eq!(e.hint.as_deref(), Some("metres; default 0.25"));
+    let e = object("shape = \"sphere\"\nsegments = 4.5\n");
+    assert_eq!(
+        e.message,
+        "`segments` of object `ball` must be an integer, found a float"
+    );
+    let e = object("shape = \"sphere\"\ntranslation = 1.0\n");
+    assert_eq!(
+        e.message,
+        "`translation` of object `ball` must be an array of 3 numbers, found a float"
+    );
+    let e = object("shape = \"sphere\"\ntranslation = [0, 1]\n");
+    assert_eq!(
+        e.message,
+        "`translation` of object `ball` must be an array of 3 numbers, found 2"
+    );
+    let e = object("shape = \"sphere\"\nalbedo = [0.5, \"red\", 0.5]\n");
+    assert_eq!((e.line, e.column), (6, 16));
+    assert_eq!(
+        e.message,
+        "`albedo` of object `ball` must hold numbers, found a string"
+    );
+    let e = object("shape = \"sphere\"\nalbedo = [0.5, 1.5, 0.5]\n");
+    assert_eq!((e.line, e.column), (6, 16));
+    assert_eq!(
+        e.message,
+        "`albedo` of object `ball` = 1.5 is out of range (0 to 1)"
+    );
+    assert!(
+        e.to_string()
+            .contains("6 | albedo = [0.5, 1.5, 0.5]\n  |                ^^^"),
+        "{e}"
+    );
+    let e = object("shape = \"sphere\"\nradius = 0\n");
+    assert_eq!(
+        e.message,
+        "`radius` of object `ball` = 0 is out of range (0.0001 to 1000)"
+    );
+    let e = object("shape = \"torus\"\nmajor_radius = 0.1\nminor_radius = 0.1\n");
+    assert_eq!((e.line, e.column), (7, 16));
+    assert_eq!(
+        e.message,
+        "`minor_radius` (0.1) of object `ball` must be smaller than `major_radius` (0.1)"
+    );
+
+    let e = object("shape = \"mesh\"\n");
+    assert_eq!(e.message, "object `ball` is a mesh but has no `path`");
+    let e = object("shape = \"mesh\"\npath = \"no/such.obj\"\n");
+    assert_eq!((e.line, e.column), (6, 8));
+    assert_eq!(
+        e.message,
+        "object `ball`: cannot read the mesh `pipelines/no/such.obj`: No such file or directory (os error 2)"
+    );
+    assert_eq!(
+        e.hint.as_deref(),
+        Some("relative paths resolve against the pipeline file's directory (`pipelines`)")
+    );
+
+    let e = error(&format!(
+        "{DECODE}[[object]]\nshape = \"box\"\n\n[[object]]\nshape = \"box\"\n"
+    ));
+    assert_eq!((e.line, e.column), (7, 9));
+    assert_eq!(
+        e.message,
+        "a second object named `box` (the first is on line 3)"
+    );
+    let e = error(&format!("object = 3\n{DECODE}"));
+    assert_eq!(
+        e.message,
+        "`object` must be an array of tables, written [[object]]"
+    );
 }

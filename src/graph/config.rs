@@ -15,6 +15,10 @@
 //! params = { step = 1 }         # checked against the kind's declaration
 //! inputs = { points = "points" }   # role = product; "name@prev" reads the previous frame's
 //! outputs = { normals = "normals" }
+//!
+//! [[object]]                    # virtual objects, see `crate::objects`
+//! shape = "torus"
+//! translation = [0.0, 0.08, 0.0]
 //! ```
 
 use super::params::a;
@@ -168,6 +172,14 @@ pub struct StageDecl {
     pub span: Range<usize>,
 }
 
+/// One `[[object]]` entry as written; checked in [`crate::objects::config::resolve`].
+#[derive(Clone, Debug)]
+pub struct ObjectDecl {
+    pub entries: Vec<(Located<String>, Located<RawValue>)>,
+    /// Span of the whole object table.
+    pub span: Range<usize>,
+}
+
 /// A pipeline file as written.
 #[derive(Clone, Debug)]
 pub struct PipelineDecl {
@@ -175,6 +187,7 @@ pub struct PipelineDecl {
     pub description: Option<String>,
     pub channel_capacity: Option<Located<i64>>,
     pub stages: Vec<StageDecl>,
+    pub objects: Vec<ObjectDecl>,
 }
 
 type DeTable<'i> = toml::de::DeTable<'i>;
@@ -190,12 +203,13 @@ pub fn parse(src: &SourceFile) -> Result<PipelineDecl, ConfigError> {
     })?;
     let doc_span = doc.span();
     let doc = doc.into_inner();
-    check_keys(src, &doc, &["pipeline", "stage"], "top-level key")?;
+    check_keys(src, &doc, &["pipeline", "stage", "object"], "top-level key")?;
     let mut decl = PipelineDecl {
         name: None,
         description: None,
         channel_capacity: None,
         stages: Vec::new(),
+        objects: parse_objects(src, &doc)?,
     };
     if let Some(p) = doc.get("pipeline") {
         let table = expect_table(src, p, "[pipeline]")?;
@@ -249,6 +263,32 @@ pub fn parse(src: &SourceFile) -> Result<PipelineDecl, ConfigError> {
         decl.stages.push(parse_stage(src, item)?);
     }
     Ok(decl)
+}
+
+/// The `[[object]]` tables, each as its raw key-value pairs.
+fn parse_objects(src: &SourceFile, doc: &DeTable<'_>) -> Result<Vec<ObjectDecl>, ConfigError> {
+    let Some(objects) = doc.get("object") else {
+        return Ok(Vec::new());
+    };
+    let DeValue::Array(list) = objects.get_ref() else {
+        return Err(src.error(
+            objects.span(),
+            "`object` must be an array of tables, written [[object]]",
+            None,
+        ));
+    };
+    list.iter()
+        .map(|item| {
+            let table = expect_table(src, item, "an [[object]] entry")?;
+            Ok(ObjectDecl {
+                entries: table
+                    .iter()
+                    .map(|(k, v)| (located_key(k), raw(v)))
+                    .collect(),
+                span: item.span(),
+            })
+        })
+        .collect()
 }
 
 fn parse_stage(src: &SourceFile, item: &Spanned<DeValue<'_>>) -> Result<StageDecl, ConfigError> {

@@ -53,7 +53,8 @@ pub struct Pipeline {
     pub channel_capacity: usize,
     pub stages: Vec<ResolvedStage>,
     pub feedback: Vec<Feedback>,
-    /// The virtual objects of the `[[object]]` tables, in world space.
+    /// The virtual objects of the `[[object]]` tables, in world space, BVH built (empty
+    /// when the config has none).
     pub objects: std::sync::Arc<crate::objects::VirtualScene>,
 }
 
@@ -226,6 +227,8 @@ impl Pipeline {
                 }
             }
         }
+        // Objects last: meshes are read from disk only for an otherwise valid pipeline.
+        let objects = crate::objects::config::resolve(&decl.objects, src)?;
         Ok(Pipeline {
             name: decl.name.clone().unwrap_or_else(|| src.name.clone()),
             description: decl.description.clone().unwrap_or_default(),
@@ -233,7 +236,7 @@ impl Pipeline {
             channel_capacity,
             stages,
             feedback,
-            objects: Default::default(),
+            objects: std::sync::Arc::new(objects),
         })
     }
 

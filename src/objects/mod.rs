@@ -1,5 +1,55 @@
 //! Virtual objects: triangle meshes with materials, placed in world space, and ray
-//! queries against them.
+//! queries against them through a BVH (the design guide's "Virtual objects"; paper 001
+//! Sec. 3 for the diffuse albedo k_V and Phong exponent of the differential composite).
+//!
+//! # `[[object]]` in pipeline configs
+//!
+//! A pipeline file lists its virtual objects as top-level `[[object]]` tables; they are
+//! built into one [`VirtualScene`] when the pipeline loads (`Pipeline.objects`, handed
+//! to every stage as `BuildContext.objects`). A pipeline without objects has an empty
+//! scene. World coordinates are those of the recording's poses, in metres; in the
+//! synthetic room y is up, the floor is y = 0 and (0, 0.3, 0) is free.
+//!
+//! ```toml
+//! [[object]]
+//! name = "torus"                 # optional, names it in messages; default: the shape
+//! shape = "torus"                # sphere | box | torus | quad | mesh
+//! major_radius = 0.25            # shape keys, see below
+//! minor_radius = 0.08
+//! translation = [0.0, 0.08, 0.0] # world position of the shape's origin; default 0
+//! rotation_deg = [0.0, 0.0, 0.0] # about world x, then y, then z: R = Rz Ry Rx
+//! scale = 1.0                    # uniform
+//! albedo = [0.8, 0.3, 0.2]       # diffuse k_V in [0, 1]; default 0.7 gray
+//! exponent = 0                   # Phong exponent; 0 = diffuse (default)
+//! ```
+//!
+//! A point p of the shape lands at `translation + R (scale p)`. Shapes are centred on
+//! their origin with y up (meshes keep the file's origin):
+//!
+//! | shape | keys (defaults) | triangles |
+//! |---|---|---|
+//! | `sphere` | `radius` (0.25), `segments` (48; half as many rings) | 2 s (s/2 - 1): 2208 |
+//! | `box` | `size` = [x, y, z] ([0.3, 0.3, 0.3]), flat normals | 12 |
+//! | `torus` | `major_radius` (0.25), `minor_radius` (0.08), `segments` (64), `minor_segments` (32); ring in the xz plane, shadows itself | 2 s m: 4096 |
+//! | `quad` | `size` = [x, z] ([1, 1]); in the xz plane facing +y | 2 |
+//! | `mesh` | `path` to a Wavefront OBJ file, relative to the pipeline file's directory; file normals when every corner has one, else area-weighted smooth normals; MTL files are ignored | as in the file |
+//!
+//! Every key is checked when the pipeline loads: unknown keys (with the closest
+//! spelling), unknown shapes, wrong types, values out of range, a torus whose tube is
+//! wider than its ring, duplicate names, and mesh files that cannot be read or hold no
+//! valid triangles are errors with the file, line and column of the offending value.
+//! The same objects can be built in code with [`ObjectSpec`] and
+//! [`VirtualScene::from_specs`].
+
+pub mod bvh;
+pub mod config;
+pub mod mesh;
+pub mod shapes;
+pub mod spec;
+
+pub use bvh::Bvh;
+pub use mesh::{load_obj, parse_obj};
+pub use spec::{ObjectError, ObjectSpec, Shape};
 
 use glam::Vec3;
 
@@ -53,6 +103,13 @@ pub struct Aabb {
     pub max: Vec3,
 }
 
+/// The empty box.
+impl Default for Aabb {
+    fn default() -> Self {
+        Aabb::EMPTY
+    }
+}
+
 impl Aabb {
     pub const EMPTY: Aabb = Aabb {
         min: Vec3::splat(f32::INFINITY),
@@ -87,20 +144,63 @@ impl Aabb {
 }
 
 /// The virtual objects of a pipeline, in world space.
-#[derive(Clone, Debug, Default, PartialEq)]
+///
+/// Build it with [`VirtualScene::new`] (or [`VirtualScene::from_specs`]), which builds the
+/// [`Bvh`] that [`VirtualScene::intersect`] and [`VirtualScene::occluded`] traverse. A
+/// scene written as a struct literal with `bvh: Bvh::default()` (or `..Default::default()`)
+/// still answers every query, by testing each triangle; so does one whose `triangles`
+/// changed length after the build. After editing triangles in place, call
+/// [`VirtualScene::rebuild`].
+#[derive(Clone, Debug, Default)]
 pub struct VirtualScene {
     pub triangles: Vec<Triangle>,
     pub materials: Vec<Material>,
+    /// The hierarchy over `triangles` (empty when not built).
+    pub bvh: Bvh,
+}
+
+/// Scenes are equal when their triangles and materials are: the BVH is derived data.
+impl PartialEq for VirtualScene {
+    fn eq(&self, other: &Self) -> bool {
+        self.triangles == other.triangles && self.materials == other.materials
+    }
 }
 
 impl VirtualScene {
+    /// A scene of `triangles` (world space) whose `material` fields index `materials`,
+    /// with its BVH built (deterministically: the same triangles give the same tree).
+    pub fn new(triangles: Vec<Triangle>, materials: Vec<Material>) -> VirtualScene {
+        let bvh = Bvh::build(&triangles);
+        VirtualScene {
+            triangles,
+            materials,
+            bvh,
+        }
+    }
+
+    /// Rebuilds the BVH after `triangles` were edited.
+    pub fn rebuild(&mut self) {
+        self.bvh = Bvh::build(&self.triangles);
+    }
+
+    /// The BVH when it was built for the current triangles.
+    fn hierarchy(&self) -> Option<&Bvh> {
+        self.bvh
+            .is_built_for(self.triangles.len())
+            .then_some(&self.bvh)
+    }
+
     /// True when there is nothing to hit.
     pub fn is_empty(&self) -> bool {
         self.triangles.is_empty()
     }
 
-    /// The bounding box of every triangle ([`Aabb::EMPTY`] when empty).
+    /// The bounding box of every triangle ([`Aabb::EMPTY`] when empty); kept by the BVH,
+    /// so it costs nothing per call once built.
     pub fn bounds(&self) -> Aabb {
+        if let Some(bvh) = self.hierarchy() {
+            return bvh.bounds();
+        }
         let mut b = Aabb::EMPTY;
         for t in &self.triangles {
             for v in t.vertices {
@@ -110,14 +210,32 @@ impl VirtualScene {
         b
     }
 
-    /// The nearest hit along `origin + t dir` with t in (t_min, t_max).
+    /// The nearest hit along `origin + t dir` with t in (t_min, t_max), through the BVH.
+    /// Of hits at exactly the same t, the triangle with the smaller index wins, as in
+    /// [`VirtualScene::intersect_brute_force`], so both give identical records.
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<VirtualHit> {
-        self.intersect_brute_force(origin, dir, t_min, t_max)
+        match self.hierarchy() {
+            Some(bvh) => bvh
+                .nearest(origin, dir, t_min, t_max)
+                .map(|(t, i, u, v)| self.hit_record(origin, dir, t, i, u, v)),
+            None => self.intersect_brute_force(origin, dir, t_min, t_max),
+        }
     }
 
-    /// True when anything is hit with t in (t_min, t_max).
+    /// True when anything is hit with t in (t_min, t_max) (any-hit traversal: stops at
+    /// the first triangle found).
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
-        self.intersect(origin, dir, t_min, t_max).is_some()
+        match self.hierarchy() {
+            Some(bvh) => bvh.any_hit(origin, dir, t_min, t_max),
+            None => self.occluded_brute_force(origin, dir, t_min, t_max),
+        }
+    }
+
+    /// [`VirtualScene::occluded`] by testing every triangle (the reference for tests).
+    pub fn occluded_brute_force(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> bool {
+        self.triangles
+            .iter()
+            .any(|tri| ray_triangle(origin, dir, &tri.vertices, t_min, t_max).is_some())
     }
 
     /// [`VirtualScene::intersect`] by testing every triangle (the reference for tests).
@@ -157,7 +275,11 @@ impl VirtualScene {
             t,
             position: origin + dir * t,
             normal,
-            material: self.materials[tri.material as usize],
+            material: self
+                .materials
+                .get(tri.material as usize)
+                .copied()
+                .unwrap_or(Material::DIFFUSE_GRAY),
             triangle: index,
         }
     }
@@ -177,15 +299,28 @@ pub fn ray_triangle(
     t_min: f32,
     t_max: f32,
 ) -> Option<(f32, f32, f32)> {
-    let e1 = v[1] - v[0];
-    let e2 = v[2] - v[0];
+    let (t, u, w) = ray_triangle_edges(origin, dir, v[0], v[1] - v[0], v[2] - v[0])?;
+    (t > t_min && t < t_max).then_some((t, u, w))
+}
+
+/// Moller-Trumbore on a triangle given as v0 and its edges e1 = v1 - v0, e2 = v2 - v0:
+/// (t, u, v) of the hit at any t. [`ray_triangle`] and the [`Bvh`] (which stores the
+/// edges) both call it, so they give bit-identical t, u and v.
+#[inline]
+pub fn ray_triangle_edges(
+    origin: Vec3,
+    dir: Vec3,
+    v0: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+) -> Option<(f32, f32, f32)> {
     let p = dir.cross(e2);
     let det = e1.dot(p);
     if det.abs() < 1e-12 {
         return None;
     }
     let inv = 1.0 / det;
-    let s = origin - v[0];
+    let s = origin - v0;
     let u = s.dot(p) * inv;
     if !(0.0..=1.0).contains(&u) {
         return None;
@@ -195,6 +330,5 @@ pub fn ray_triangle(
     if w < 0.0 || u + w > 1.0 {
         return None;
     }
-    let t = e2.dot(q) * inv;
-    (t > t_min && t < t_max).then_some((t, u, w))
+    Some((e2.dot(q) * inv, u, w))
 }

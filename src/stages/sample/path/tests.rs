@@ -114,10 +114,7 @@ fn sphere(center: Vec3, radius: f32, material: Material) -> VirtualScene {
             }
         }
     }
-    VirtualScene {
-        triangles,
-        materials: vec![material],
-    }
+    VirtualScene::new(triangles, vec![material])
 }
 
 fn run(

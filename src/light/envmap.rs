@@ -116,6 +116,46 @@ impl EnvMap {
         Self::direction_at(column, row, self.width, self.height)
     }
 
+    /// Multiplies every texel's radiance by `factor`.
+    pub fn scale_radiance(&mut self, factor: f32) {
+        self.radiance.iter_mut().for_each(|c| *c *= factor);
+    }
+
+    /// Turns the map about world +y by `degrees` (right-handed: +x turns towards -z, as
+    /// `Quat::from_rotation_y`), so that the radiance the map held along d it afterwards
+    /// holds along R d: texel column phi takes the old value at phi + angle. A multiple
+    /// of 360 / W degrees shifts whole columns exactly; other angles interpolate
+    /// linearly between the two nearest columns (distances are taken from the nearer
+    /// one, not blended).
+    pub fn rotate_about_y(&mut self, degrees: f64) {
+        let (w, h) = (self.width as usize, self.height as usize);
+        if w == 0 || h == 0 || degrees % 360.0 == 0.0 {
+            return;
+        }
+        // New column c reads old continuous column c + shift (texel units).
+        let shift = (degrees / 360.0 * w as f64).rem_euclid(w as f64);
+        let whole = shift.floor();
+        let t = (shift - whole) as f32;
+        let whole = whole as usize;
+        let mut radiance = vec![Vec3::ZERO; w];
+        let mut distance = vec![0.0f32; w];
+        for row in 0..h {
+            let r = &mut self.radiance[row * w..(row + 1) * w];
+            let d = &mut self.distance[row * w..(row + 1) * w];
+            for c in 0..w {
+                let (a, b) = ((c + whole) % w, (c + whole + 1) % w);
+                radiance[c] = if t == 0.0 {
+                    r[a]
+                } else {
+                    r[a] * (1.0 - t) + r[b] * t
+                };
+                distance[c] = if t <= 0.5 { d[a] } else { d[b] };
+            }
+            r.copy_from_slice(&radiance);
+            d.copy_from_slice(&distance);
+        }
+    }
+
     /// Irradiance on a surface with unit normal `n` by summing every texel (brute force:
     /// the reference the samplers are tested against).
     pub fn irradiance_brute_force(&self, n: Vec3) -> Vec3 {
@@ -145,6 +185,37 @@ mod tests {
         let total: f32 = (0..32).map(|r| map.texel_solid_angle(r) * 64.0).sum();
         assert!((total - 4.0 * PI).abs() < 1e-4, "{total}");
         assert!((EnvMap::direction_at(0.0, 0.0, 64, 32) - Vec3::Y).length() < 1e-6);
+    }
+
+    #[test]
+    fn rotation_about_y_moves_radiance_with_the_right_hand_rule() {
+        let sun = Vec3::new(0.6, 0.5, 0.2).normalize();
+        let original = EnvMap::from_fn(64, 32, |d| Vec3::splat(d.dot(sun).max(0.0).powi(8)));
+        for degrees in [90.0f64, -33.75, 360.0 + 45.0] {
+            let mut turned = original.clone();
+            turned.rotate_about_y(degrees);
+            let q = glam::Quat::from_rotation_y(degrees.to_radians() as f32);
+            for index in 0..original.radiance.len() {
+                let d = original.texel_direction(index);
+                assert_eq!(
+                    turned.radiance(q * d),
+                    original.radiance[index],
+                    "{degrees} deg, texel {index}"
+                );
+            }
+        }
+        // An angle between columns interpolates, and the energy stays the same.
+        let mut half = original.clone();
+        half.rotate_about_y(360.0 / 64.0 / 2.0);
+        let sum = |m: &EnvMap| m.radiance.iter().map(|c| c.x as f64).sum::<f64>();
+        assert!((sum(&half) / sum(&original) - 1.0).abs() < 1e-5);
+        assert_eq!(
+            half.radiance[5],
+            (original.radiance[5] + original.radiance[6]) * 0.5
+        );
+        let mut scaled = original.clone();
+        scaled.scale_radiance(2.0);
+        assert_eq!(scaled.radiance[100], original.radiance[100] * 2.0);
     }
 
     #[test]

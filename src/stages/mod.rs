@@ -12,6 +12,9 @@
 //! | `normals.plane_fit` | [`plane_fit`] | normals and refined depth from per-pixel plane fits over disk neighbourhoods |
 //! | `cloud.samples` | [`cloud`] | environment samples in a probabilistic hash grid, removed where the depth shows them gone |
 //! | `gbuffer.splat` | [`gbuffer`] | splats the cloud into the view with a depth test, fills holes by push-pull |
+//! | `light.envmap` | [`light::source`] | an HDR lat-long environment map from the recording's attachment or an EXR/.hdr file |
+//! | `light.impostor` | [`light::impostor`] | a distance impostor splatted from the environment-sample cloud (paper 000 Sec. 6.1) |
+//! | `light.importance` | [`light::importance`] | the table of environment importance samples (paper 001 Sec. 5.2) |
 //! | `material.estimate` | [`material`] | diffuse reflectance of real surfaces, rho = pi L / E_R (paper 000 eq. 5) |
 //! | `sample.path` | [`sample::path`] | two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5) |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
@@ -44,6 +47,9 @@ pub fn builtin() -> Vec<StageInfo> {
         plane_fit::INFO,
         cloud::INFO,
         gbuffer::INFO,
+        light::source::INFO,
+        light::impostor::INFO,
+        light::importance::INFO,
         material::INFO,
         sample::path::INFO,
         write::INFO,

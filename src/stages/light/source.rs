@@ -1,1 +1,231 @@
-//! (being written)
+//! `light.envmap`: the environment light from an HDR lat-long map, either the
+//! recording's attachment (the synthetic recording's ground-truth environment, seen from
+//! the object position) or a file (OpenEXR, also tiled multi-resolution, or Radiance
+//! `.hdr`; see [`crate::light::loaders`] for the layout). The map is loaded once when
+//! the pipeline is built, so a bad path or a missing attachment fails before the run;
+//! every frame then carries the same `Arc<EnvMap>`, which lets `light.importance` keep
+//! its table.
+
+use crate::graph::{
+    BuildContext, Frame, ParamDefault, ParamSpec, Product, ProductKind, Stage, StageError,
+    StageInfo,
+};
+use crate::light::EnvMap;
+use crate::light::loaders::{LoadedEnvMap, environment_from_header, load_envmap_counted};
+use std::path::Path;
+use std::sync::Arc;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec::new(
+        "source",
+        ParamDefault::Str("attachment"),
+        "attachment: the recording's lat-long map (seen from ground_truth.object_position); file: `path`",
+    )
+    .choices(&["attachment", "file"]),
+    ParamSpec::new(
+        "path",
+        ParamDefault::Str(""),
+        "OpenEXR or Radiance .hdr lat-long map for source = \"file\" (relative to the working directory); row 0 = zenith, column c at phi = (c + 0.5) / W 2 pi from +x towards +z",
+    ),
+    ParamSpec::new(
+        "attachment",
+        ParamDefault::Str("environment"),
+        "name of the recording's envmap/latlong attachment for source = \"attachment\"",
+    ),
+    ParamSpec::new(
+        "scale",
+        ParamDefault::Float(1.0),
+        "multiplies the map's radiance (exposure of the probe relative to the scene)",
+    )
+    .range(0.0, 1e12),
+    ParamSpec::new(
+        "rotation_deg",
+        ParamDefault::Float(0.0),
+        "turns the map about world +y, right-handed (+x towards -z); 90 turns OpenEXR's own latlong convention into relume's",
+    )
+    .range(-3600.0, 3600.0),
+];
+
+pub const INFO: StageInfo = StageInfo {
+    kind: "light.envmap",
+    summary: "an HDR lat-long environment map from the recording's attachment or an EXR/.hdr file, loaded once",
+    params: PARAMS,
+    ports: |_| super::super::fixed_ports(&[], &[("environment", &[ProductKind::Environment])]),
+    build: |ctx| {
+        let map = load(ctx)?;
+        Ok(Box::new(EnvironmentSource {
+            environment: ctx.output("environment"),
+            map,
+        }))
+    },
+};
+
+/// Loads, scales and turns the map the stage's parameters ask for; errors name the stage
+/// and the file or attachment.
+fn load(ctx: &BuildContext) -> Result<Arc<EnvMap>, StageError> {
+    let p = ctx.params;
+    let stage = ctx.stage_name;
+    let fail = |what: String| StageError::Failed(format!("stage `{stage}` (light.envmap): {what}"));
+    let LoadedEnvMap {
+        mut map,
+        replaced_texels,
+    } = match p.str("source") {
+        "file" => {
+            let path = p.str("path");
+            if path.is_empty() {
+                return Err(fail(
+                    "source = \"file\" needs `path` = an OpenEXR or .hdr lat-long map".into(),
+                ));
+            }
+            let mut loaded =
+                load_envmap_counted(Path::new(path)).map_err(|e| fail(e.to_string()))?;
+            loaded.map.center = super::impostor::object_center(ctx).unwrap_or_default();
+            loaded
+        }
+        _ => environment_from_header(ctx.header, p.str("attachment"))
+            .map_err(|e| fail(e.to_string()))?,
+    };
+    if replaced_texels > 0 {
+        eprintln!(
+            "stage `{stage}` (light.envmap): {replaced_texels} of {} texels were non-finite or negative and are 0",
+            map.radiance.len()
+        );
+    }
+    let scale = p.float("scale") as f32;
+    if scale != 1.0 {
+        map.scale_radiance(scale);
+    }
+    map.rotate_about_y(p.float("rotation_deg"));
+    Ok(Arc::new(map))
+}
+
+struct EnvironmentSource {
+    environment: String,
+    map: Arc<EnvMap>,
+}
+
+impl Stage for EnvironmentSource {
+    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
+        frame.insert(
+            &self.environment,
+            Product::Environment(Arc::clone(&self.map)),
+        );
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::{ParamValue, Params};
+    use crate::recording::codec::encode_floats;
+    use crate::recording::{Attachment, Header, Intrinsics, SceneTruth};
+    use glam::Vec3;
+    use std::collections::BTreeMap;
+
+    fn header(with_attachment: bool) -> Header {
+        let mut h = Header::new("room", Intrinsics::PRIMESENSE, 0.001);
+        h.ground_truth = Some(SceneTruth {
+            object_position: [0.0, 0.3, 0.0],
+            description: String::new(),
+        });
+        if with_attachment {
+            let samples: Vec<f32> = (0..8 * 4).flat_map(|i| [i as f32, 1.0, 2.0]).collect();
+            h.attachments.push(Attachment {
+                name: "environment".into(),
+                kind: "envmap/latlong".into(),
+                image: encode_floats(8, 4, 3, &samples, false),
+            });
+        }
+        h
+    }
+
+    fn build(header: &Header, set: &[(&str, ParamValue)]) -> Result<Box<dyn Stage>, StageError> {
+        let mut params = Params::defaults(PARAMS);
+        for (name, value) in set {
+            params.set(name, value.clone());
+        }
+        let ctx = BuildContext {
+            stage_name: "env",
+            params: &params,
+            inputs: &BTreeMap::new(),
+            outputs: &BTreeMap::new(),
+            header,
+            out_dir: Path::new("."),
+            seed: 1,
+            objects: &Default::default(),
+        };
+        (INFO.build)(&ctx)
+    }
+
+    fn environment(stage: &mut Box<dyn Stage>) -> Arc<EnvMap> {
+        let mut frame = Frame::new(0, 0);
+        stage.process(&mut frame).unwrap();
+        Arc::clone(frame.environment("environment").unwrap())
+    }
+
+    #[test]
+    fn attachment_is_loaded_once_scaled_turned_and_shared_by_every_frame() {
+        let header = header(true);
+        let mut stage = build(
+            &header,
+            &[
+                ("scale", ParamValue::Float(2.0)),
+                // One column of an 8-wide map: column c takes the old column c + 1.
+                ("rotation_deg", ParamValue::Float(45.0)),
+            ],
+        )
+        .unwrap();
+        let first = environment(&mut stage);
+        assert_eq!((first.width, first.height), (8, 4));
+        assert_eq!(first.center, Vec3::new(0.0, 0.3, 0.0));
+        assert_eq!(first.radiance[0], Vec3::new(2.0, 2.0, 4.0));
+        assert_eq!(first.radiance[7], Vec3::new(0.0, 2.0, 4.0));
+        assert!(Arc::ptr_eq(&first, &environment(&mut stage)));
+    }
+
+    #[test]
+    fn missing_attachment_and_bad_file_fail_at_build_naming_the_stage() {
+        let message = build(&header(false), &[]).err().unwrap().to_string();
+        assert!(
+            message.contains("`env`")
+                && message.contains("it has none")
+                && message.contains("source = \"file\""),
+            "{message}"
+        );
+        let source = ("source", ParamValue::Str("file".into()));
+        let message = build(&header(false), std::slice::from_ref(&source))
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(message.contains("needs `path`"), "{message}");
+        let path = ("path", ParamValue::Str("/nonexistent/probe.exr".into()));
+        let message = build(&header(false), &[source, path])
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            message.contains("`env`") && message.contains("/nonexistent/probe.exr"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn file_source_loads_an_exr_seen_from_the_object_position() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("probe.exr");
+        exr::prelude::write_rgb_file(&path, 16, 8, |x, y| (x as f32, y as f32, 1.0)).unwrap();
+        let mut stage = build(
+            &header(false),
+            &[
+                ("source", ParamValue::Str("file".into())),
+                ("path", ParamValue::Str(path.to_string_lossy().into_owned())),
+            ],
+        )
+        .unwrap();
+        let map = environment(&mut stage);
+        assert_eq!((map.width, map.height), (16, 8));
+        assert_eq!(map.radiance[2 * 16 + 5], Vec3::new(5.0, 2.0, 1.0));
+        assert_eq!(map.center, Vec3::new(0.0, 0.3, 0.0));
+    }
+}

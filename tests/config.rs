@@ -188,7 +188,17 @@ fn structure_errors() {
 #[test]
 fn every_builtin_kind_builds_from_its_defaults() {
     let registry = Registry::builtin();
-    let header = Header::new("t", Intrinsics::PRIMESENSE, 0.001);
+    // The light stages need an environment attachment and a place for the object.
+    let mut header = Header::new("t", Intrinsics::PRIMESENSE, 0.001);
+    header.ground_truth = Some(relume::recording::SceneTruth {
+        object_position: [0.0, 0.3, 0.0],
+        description: String::new(),
+    });
+    header.attachments.push(relume::recording::Attachment {
+        name: "environment".into(),
+        kind: "envmap/latlong".into(),
+        image: relume::recording::codec::encode_floats(8, 4, 3, &[1.0; 96], false),
+    });
     let dir = tempfile::tempdir().unwrap();
     for info in registry.kinds() {
         let params = Params::defaults(info.params);

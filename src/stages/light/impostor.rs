@@ -243,8 +243,8 @@ mod tests {
             center_of(&mut build(&header, &none, "").unwrap()),
             Vec3::new(0.0, 0.3, 0.0)
         );
-        let objects = Arc::new(VirtualScene {
-            triangles: vec![Triangle {
+        let objects = Arc::new(VirtualScene::new(
+            vec![Triangle {
                 vertices: [
                     Vec3::new(1.0, 0.0, 0.0),
                     Vec3::new(2.0, 1.0, 0.0),
@@ -253,8 +253,8 @@ mod tests {
                 normals: [Vec3::Y; 3],
                 material: 0,
             }],
-            materials: vec![Material::DIFFUSE_GRAY],
-        });
+            vec![Material::DIFFUSE_GRAY],
+        ));
         assert_eq!(
             center_of(&mut build(&header, &objects, "").unwrap()),
             Vec3::new(1.5, 0.5, 1.0)

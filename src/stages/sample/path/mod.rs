@@ -73,7 +73,8 @@ pub use kernel::{MAX_CANDIDATES, PixelResult};
 use super::pyramid::DepthPyramid;
 use super::ssrt::{ScreenTracer, TraceParams};
 use crate::graph::{
-    Frame, ParamDefault, ParamSpec, Port, Ports, Product, ProductKind, Stage, StageError, StageInfo,
+    Frame, ParamDefault, ParamSpec, Params, Port, Ports, Product, ProductKind, Stage, StageError,
+    StageInfo,
 };
 use crate::light::LightTable;
 use crate::objects::VirtualScene;
@@ -187,22 +188,7 @@ pub const INFO: StageInfo = StageInfo {
             .collect(),
     },
     build: |ctx| {
-        let p = ctx.params;
-        let params = PathParams {
-            primary: p.int("primary") as u32,
-            direct: p.int("direct") as u32,
-            indirect: p.int("indirect") as u32,
-            seed: ctx.seed,
-            object_aware: p.bool("object_aware"),
-            cache_size: p.int("cache_size") as u32,
-            candidates: p.int("candidates") as u32,
-            trace: TraceParams {
-                thickness: p.float("thickness") as f32,
-                skip_pixels: p.float("skip_pixels") as f32,
-            },
-            max_distance: p.float("max_distance") as f32,
-            normal_offset: p.float("normal_offset") as f32,
-        };
+        let params = PathParams::from_params(ctx.params, ctx.seed);
         params.check()?;
         Ok(Box::new(PathStage {
             inputs: INPUTS.map(|(role, _, _)| ctx.input(role)),
@@ -275,6 +261,26 @@ impl Default for PathParams {
 }
 
 impl PathParams {
+    /// The settings of a `sample.path` stage with (checked) parameters `p`, run with
+    /// `seed` (`relume eval` re-runs the stage's math with them).
+    pub fn from_params(p: &Params, seed: u64) -> PathParams {
+        PathParams {
+            primary: p.int("primary") as u32,
+            direct: p.int("direct") as u32,
+            indirect: p.int("indirect") as u32,
+            seed,
+            object_aware: p.bool("object_aware"),
+            cache_size: p.int("cache_size") as u32,
+            candidates: p.int("candidates") as u32,
+            trace: TraceParams {
+                thickness: p.float("thickness") as f32,
+                skip_pixels: p.float("skip_pixels") as f32,
+            },
+            max_distance: p.float("max_distance") as f32,
+            normal_offset: p.float("normal_offset") as f32,
+        }
+    }
+
     /// Checks the counts and distances; the error names the bad value.
     pub fn check(&self) -> Result<(), StageError> {
         let bad = |what: &str, value: String| {

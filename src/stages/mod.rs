@@ -12,6 +12,9 @@
 //! | `normals.plane_fit` | [`plane_fit`] | normals and refined depth from per-pixel plane fits over disk neighbourhoods |
 //! | `cloud.samples` | [`cloud`] | environment samples in a probabilistic hash grid, removed where the depth shows them gone |
 //! | `gbuffer.splat` | [`gbuffer`] | splats the cloud into the view with a depth test, fills holes by push-pull |
+//! | `light.split` | [`light::split`] | direct and indirect parts of the environment light by an energy ratio per channel (paper 004 Sec. 4.2) |
+//! | `light.val` | [`light::val`] | virtual area lights (importance samples + k-means + eq. 7) and SH9 of the indirect part (paper 004 Secs. 4.3-4.4) |
+//! | `sample.val` | [`sample::val`] | noise-free E_R / E_RV from the area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5) |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
@@ -41,6 +44,9 @@ pub fn builtin() -> Vec<StageInfo> {
         plane_fit::INFO,
         cloud::INFO,
         gbuffer::INFO,
+        light::split::INFO,
+        light::val::INFO,
+        sample::val::INFO,
         write::INFO,
         debug::NOOP_INFO,
         debug::SLEEP_INFO,

@@ -240,7 +240,7 @@ mod tests {
         let mut assignment = Vec::new();
         let report = kmeans(&samples, &mut centres, 50, 1.0, &mut assignment);
         assert!(report.reseeded >= 1, "{report:?}");
-        assert!(assignment.iter().any(|&a| a == 1) && assignment.iter().any(|&a| a == 0));
+        assert!(assignment.contains(&1) && assignment.contains(&0));
         // All samples identical: seeding stops at one centre; extra centres stay finite.
         let same = vec![samples[0]; 20];
         assert_eq!(seed_centres(&same, 4, 1.0, 1).len(), 1);

@@ -15,8 +15,11 @@
 //! | `light.envmap` | [`light::source`] | an HDR lat-long environment map from the recording's attachment or an EXR/.hdr file |
 //! | `light.impostor` | [`light::impostor`] | a distance impostor splatted from the environment-sample cloud (paper 000 Sec. 6.1) |
 //! | `light.importance` | [`light::importance`] | the table of environment importance samples (paper 001 Sec. 5.2) |
-//! | `material.estimate` | [`material`] | diffuse reflectance of real surfaces, rho = pi L / E_R (paper 000 eq. 5) |
+//! | `light.split` | [`light::split`] | direct and indirect parts of the environment light by an energy ratio per channel (paper 004 Sec. 4.2) |
+//! | `light.val` | [`light::val`] | virtual area lights (importance samples + k-means + eq. 7) and SH9 of the indirect part (paper 004 Secs. 4.3-4.4) |
 //! | `sample.path` | [`sample::path`] | two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5) |
+//! | `sample.val` | [`sample::val`] | noise-free E_R / E_RV from the area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5) |
+//! | `material.estimate` | [`material`] | diffuse reflectance of real surfaces, rho = pi L / E_R (paper 000 eq. 5) |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
@@ -50,8 +53,11 @@ pub fn builtin() -> Vec<StageInfo> {
         light::source::INFO,
         light::impostor::INFO,
         light::importance::INFO,
-        material::INFO,
+        light::split::INFO,
+        light::val::INFO,
         sample::path::INFO,
+        sample::val::INFO,
+        material::INFO,
         write::INFO,
         debug::NOOP_INFO,
         debug::SLEEP_INFO,

@@ -1,0 +1,505 @@
+//! `sample.val` (paper 004 Sec. 5, eqs. 6, 12, 13; in irradiance form as in paper 001
+//! eq. 2): the cheap, noise-free counterpart of `sample.path`, with the same output roles
+//! so the two are interchangeable in a pipeline.
+//!
+//! Per pixel, the real surface point comes from the depth map and the normal map; the
+//! virtual objects are rasterized into the camera (one sample at the pixel centre, the
+//! hit refined by a ray-triangle test), so `mask` is 0 or 1. Direct light comes from the
+//! virtual area lights (`light.val`): E_j = I_j cos(theta_j)+ cos(theta)+ / r^2 (eq. 6,
+//! r^2 clamped below at A_j / pi), E_R^dir = sum V_j E_j and E_RV^dir = sum V_j V^_j E_j
+//! (eqs. 12-13), V_j the visibility of light j through the real scene and V^_j through
+//! the virtual objects. Both come from two shadow maps per light over a frustum fitted
+//! to the objects' bounding sphere (see `shadow.rs`); outside a light's frustum both are 1.
+//! Consequences: E_RV^dir = E_R^dir bit for bit wherever no virtual object shadows the
+//! point (both sums add the same f32 terms in the same order), and E_R^dir carries real
+//! shadows only inside the frustums (elsewhere it is the irradiance unshadowed by real
+//! geometry); so E_R alone is not a real-shadow estimate, but the ratio E_RV / E_R that
+//! the differential composite uses is exact there (1) and correct near the objects.
+//! A real occluder between a light and a receiver (V_j = 0) keeps the object from
+//! shadowing that receiver again (no double shadow, paper 004 Fig. 9).
+//!
+//! Indirect light is the SH9 irradiance of the indirect part at the normal:
+//! E_R^ind = E_RV^ind at real pixels. As in paper 004 (eq. 13 subtracts direct light
+//! only) the occlusion of indirect light by the virtual objects is ignored on real
+//! surfaces; on the objects, their self-occlusion of indirect light (the paper's PRT
+//! transfer C_vk, eq. 11) is ignored too. Virtual pixels: E_RV at the object's surface
+//! (self-shadowing through V^_j, real occluders through V_j), E_R at the real point
+//! behind it (NaN where the depth has none); `k_v` is the albedo (with E in irradiance
+//! units the Lambertian outgoing radiance is k_V E_RV / pi; glossy lobes are not
+//! evaluated, a glossy object is shaded as diffuse).
+//! `indirect_min_distance` is INFINITY everywhere (no indirect rays);
+//! `direct_min_distance` is the distance to the nearest shadow-map occluder of a light
+//! that faces the point. Pixels with no surface (no depth, or a zero normal, and no
+//! object) get NaN irradiance.
+
+mod pixel;
+mod raster;
+mod shade;
+mod shadow;
+#[cfg(test)]
+mod tests;
+
+use crate::graph::{
+    Frame, ParamDefault, ParamSpec, Product, ProductKind, Stage, StageError, StageInfo,
+};
+use crate::light::AreaLights;
+use crate::objects::VirtualScene;
+use crate::pinhole::Pinhole;
+use crate::raster::{DepthImage, Image, ScalarImage, Vec3Image, depth_is_valid};
+use crate::recording::Intrinsics;
+use glam::{Affine3A, Vec2, Vec3, Vec3A};
+use pixel::{PixelContext, sampling_of};
+use raster::{DepthTarget, NO_ID, raster_view_triangle};
+use rayon::prelude::*;
+use shade::{Biases, Maps, PreparedLight, Sh9Irradiance};
+use shadow::{ShadowFrustum, TILE, Tile, real_shadow_map, tile_of, virtual_shadow_map};
+use std::sync::Arc;
+
+const PARAMS: &[ParamSpec] = &[
+    ParamSpec::new(
+        "shadow_map_size",
+        ParamDefault::Int(128),
+        "texels per side of each light's two shadow maps (virtual and real), over a frustum fitted to the objects",
+    )
+    .range(8.0, 4096.0),
+    ParamSpec::new(
+        "virtual_bias",
+        ParamDefault::Float(0.005),
+        "metres a receiver must lie behind the virtual shadow map's depth to be in the objects' shadow",
+    )
+    .range(0.0, 10.0),
+    ParamSpec::new(
+        "real_bias",
+        ParamDefault::Float(0.02),
+        "metres a receiver must lie behind the real shadow map's depth to be in real shadow (covers depth noise)",
+    )
+    .range(0.0, 10.0),
+    ParamSpec::new(
+        "slope_bias",
+        ParamDefault::Float(1.5),
+        "extra bias in texel footprints times tan(angle of incidence), against shadow acne on oblique receivers",
+    )
+    .range(0.0, 100.0),
+    ParamSpec::new(
+        "real_occluder_reach",
+        ParamDefault::Float(1.0),
+        "real points count as occluders only from this many metres in front of the objects (seen from the light) onward, so the emitter's own wall or a distant light's room does not shadow everything",
+    )
+    .range(0.0, 1e6),
+];
+
+/// The output roles, in [`ValOutputs`] order.
+const OUTPUTS: [(&str, &[ProductKind]); 10] = [
+    ("e_r_dir", &[ProductKind::Radiance]),
+    ("e_r_ind", &[ProductKind::Radiance]),
+    ("e_rv_dir", &[ProductKind::Radiance]),
+    ("e_rv_ind", &[ProductKind::Radiance]),
+    ("mask", &[ProductKind::Scalar]),
+    ("k_v", &[ProductKind::Radiance]),
+    ("world_position", &[ProductKind::Points]),
+    ("world_normal", &[ProductKind::Normals]),
+    ("direct_min_distance", &[ProductKind::Scalar]),
+    ("indirect_min_distance", &[ProductKind::Scalar]),
+];
+
+pub const INFO: StageInfo = StageInfo {
+    kind: "sample.val",
+    summary: "noise-free E_R / E_RV from virtual area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5)",
+    params: PARAMS,
+    ports: |_| {
+        let mut ports = super::super::fixed_ports(
+            &[
+                ("depth", &[ProductKind::Depth]),
+                ("normals", &[ProductKind::Normals]),
+                ("pose", &[ProductKind::Pose]),
+                ("lights", &[ProductKind::AreaLights]),
+            ],
+            &OUTPUTS,
+        );
+        ports.inputs[0].default_product = "refined_depth".into();
+        ports
+    },
+    build: |ctx| {
+        let p = ctx.params;
+        Ok(Box::new(SampleVal {
+            inputs: ["depth", "normals", "pose", "lights"].map(|r| ctx.input(r)),
+            outputs: OUTPUTS.map(|(r, _)| ctx.output(r)),
+            intrinsics: ctx.header.depth_intrinsics,
+            objects: ctx.objects.clone(),
+            params: ValShadingParams {
+                shadow_map_size: p.int("shadow_map_size") as usize,
+                virtual_bias: p.float("virtual_bias") as f32,
+                real_bias: p.float("real_bias") as f32,
+                slope_bias: p.float("slope_bias") as f32,
+                real_occluder_reach: p.float("real_occluder_reach") as f32,
+            },
+            renderer: ValRenderer::default(),
+        }))
+    },
+};
+
+/// Settings of [`ValRenderer::render`] (the stage's parameters).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValShadingParams {
+    pub shadow_map_size: usize,
+    pub virtual_bias: f32,
+    pub real_bias: f32,
+    pub slope_bias: f32,
+    pub real_occluder_reach: f32,
+}
+
+impl Default for ValShadingParams {
+    fn default() -> Self {
+        ValShadingParams {
+            shadow_map_size: 128,
+            virtual_bias: 0.005,
+            real_bias: 0.02,
+            slope_bias: 1.5,
+            real_occluder_reach: 1.0,
+        }
+    }
+}
+
+/// One frame's inputs.
+#[derive(Clone, Copy)]
+pub struct ValInputs<'a> {
+    /// Metres, 0 or non-finite = missing.
+    pub depth: &'a DepthImage,
+    /// Camera-space unit normals facing the camera (zero = invalid), same size.
+    pub normals: &'a Vec3Image,
+    /// The camera of `depth` (rescaled to its size).
+    pub camera: Pinhole,
+    pub camera_to_world: Affine3A,
+    pub lights: &'a AreaLights,
+    pub objects: &'a VirtualScene,
+}
+
+/// The products of [`ValRenderer::render`], under the names of the stage's roles.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ValOutputs {
+    pub e_r_dir: Vec3Image,
+    pub e_r_ind: Vec3Image,
+    pub e_rv_dir: Vec3Image,
+    pub e_rv_ind: Vec3Image,
+    /// 1 where real geometry is visible, 0 where a virtual object is.
+    pub mask: ScalarImage,
+    pub k_v: Vec3Image,
+    pub world_position: Vec3Image,
+    pub world_normal: Vec3Image,
+    pub direct_min_distance: ScalarImage,
+    pub indirect_min_distance: ScalarImage,
+}
+
+impl ValOutputs {
+    pub fn new(width: u32, height: u32) -> ValOutputs {
+        let v = |x| Image::filled(width, height, x);
+        let s = |x| Image::filled(width, height, x);
+        ValOutputs {
+            e_r_dir: v(Vec3::ZERO),
+            e_r_ind: v(Vec3::ZERO),
+            e_rv_dir: v(Vec3::ZERO),
+            e_rv_ind: v(Vec3::ZERO),
+            mask: s(1.0),
+            k_v: v(Vec3::ZERO),
+            world_position: v(Vec3::NAN),
+            world_normal: v(Vec3::ZERO),
+            direct_min_distance: s(f32::INFINITY),
+            indirect_min_distance: s(f32::INFINITY),
+        }
+    }
+
+    fn size(&self) -> (u32, u32) {
+        (self.mask.width, self.mask.height)
+    }
+}
+
+/// Shades frames with reusable buffers (real points, camera raster, shadow maps).
+#[derive(Default)]
+pub struct ValRenderer {
+    real_points: Vec<Vec3A>,
+    real_normals: Vec<Vec3A>,
+    camera_depth: Vec<f32>,
+    camera_ids: Vec<u32>,
+    /// Bounding spheres of the real points per tile (row-major tile grid).
+    tiles: Vec<Option<Tile>>,
+    /// Per tile, bit j set when the tile's real points may be inside light j's frustum.
+    lookup: Vec<u64>,
+    maps: Vec<f32>,
+}
+
+/// The near plane of the camera raster, metres.
+const CAMERA_NEAR: f32 = 1e-3;
+
+impl ValRenderer {
+    /// Computes every output for one frame (see the module docs for the model).
+    pub fn render(
+        &mut self,
+        inputs: &ValInputs,
+        params: &ValShadingParams,
+        out: &mut ValOutputs,
+    ) -> Result<(), StageError> {
+        let (w, h) = (inputs.depth.width, inputs.depth.height);
+        if !inputs.depth.same_size(inputs.normals) || out.size() != (w, h) {
+            return Err(StageError::Failed(format!(
+                "sample.val: depth is {w}x{h}, normals {}x{}, outputs {}x{}",
+                inputs.normals.width,
+                inputs.normals.height,
+                out.size().0,
+                out.size().1
+            )));
+        }
+        if (inputs.camera.width, inputs.camera.height) != (w, h) {
+            return Err(StageError::Failed(format!(
+                "sample.val: the camera is {}x{} but the depth map {w}x{h}",
+                inputs.camera.width, inputs.camera.height
+            )));
+        }
+        if params.shadow_map_size == 0 {
+            return Err(StageError::Failed(
+                "sample.val: shadow_map_size must be at least 1".into(),
+            ));
+        }
+        let (wu, hu) = (w as usize, h as usize);
+        self.real_surface(inputs);
+        self.camera_raster(inputs);
+        self.build_tiles(wu, hu);
+        let lights = self.shadow_maps(inputs, params);
+        let size = params.shadow_map_size;
+        let maps = Maps {
+            data: &self.maps,
+            stride: 3 * size * size,
+            texels: size * size,
+        };
+        let biases = Biases {
+            virtual_bias: params.virtual_bias,
+            real_bias: params.real_bias,
+            slope: params.slope_bias,
+        };
+        let sh = Sh9Irradiance::new(&inputs.lights.sh9);
+        let context = PixelContext {
+            inputs,
+            real_points: &self.real_points,
+            real_normals: &self.real_normals,
+            lookup: &self.lookup,
+            tiles_per_row: wu.div_ceil(TILE),
+            ids: &self.camera_ids,
+            lights: &lights,
+            maps,
+            biases,
+            sh,
+            sampling: sampling_of(inputs),
+        };
+        (
+            out.e_r_dir.data.par_chunks_mut(wu.max(1)),
+            out.e_r_ind.data.par_chunks_mut(wu.max(1)),
+            out.e_rv_dir.data.par_chunks_mut(wu.max(1)),
+            out.e_rv_ind.data.par_chunks_mut(wu.max(1)),
+            out.mask.data.par_chunks_mut(wu.max(1)),
+            out.k_v.data.par_chunks_mut(wu.max(1)),
+            out.world_position.data.par_chunks_mut(wu.max(1)),
+            out.world_normal.data.par_chunks_mut(wu.max(1)),
+            out.direct_min_distance.data.par_chunks_mut(wu.max(1)),
+            out.indirect_min_distance.data.par_chunks_mut(wu.max(1)),
+        )
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(y, row)| {
+                let (e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask, k_v, pos, nrm, dmin, imin) = row;
+                for x in 0..wu {
+                    let p = context.pixel(x, y);
+                    e_r_dir[x] = p.e_r_dir;
+                    e_r_ind[x] = p.e_r_ind;
+                    e_rv_dir[x] = p.e_rv_dir;
+                    e_rv_ind[x] = p.e_rv_ind;
+                    mask[x] = p.mask;
+                    k_v[x] = p.k_v;
+                    pos[x] = p.position;
+                    nrm[x] = p.normal;
+                    dmin[x] = p.direct_min_distance;
+                    imin[x] = f32::INFINITY;
+                }
+            });
+        Ok(())
+    }
+
+    /// World points and normals of the real surface (NaN / zero where missing).
+    fn real_surface(&mut self, inputs: &ValInputs) {
+        let (w, n) = (inputs.depth.width as usize, inputs.depth.len());
+        self.real_points.resize(n, Vec3A::NAN);
+        self.real_normals.resize(n, Vec3A::ZERO);
+        let m = inputs.camera_to_world;
+        let camera = inputs.camera;
+        self.real_points
+            .par_chunks_mut(w.max(1))
+            .zip(self.real_normals.par_chunks_mut(w.max(1)))
+            .enumerate()
+            .for_each(|(y, (points, normals))| {
+                for (x, (p, nrm)) in points.iter_mut().zip(normals.iter_mut()).enumerate() {
+                    let i = y * w + x;
+                    let z = inputs.depth.data[i];
+                    *p = if depth_is_valid(z) {
+                        m.transform_point3a(camera.back_project(x as f32, y as f32, z).into())
+                    } else {
+                        Vec3A::NAN
+                    };
+                    let n_cam = inputs.normals.data[i];
+                    *nrm = if n_cam != Vec3::ZERO && n_cam.is_finite() {
+                        m.transform_vector3a(n_cam.into()).normalize_or_zero()
+                    } else {
+                        Vec3A::ZERO
+                    };
+                }
+            });
+    }
+
+    /// The nearest virtual triangle per pixel centre (sequential over triangles; the
+    /// objects cover a small part of the view).
+    fn camera_raster(&mut self, inputs: &ValInputs) {
+        let n = inputs.depth.len();
+        self.camera_depth.clear();
+        self.camera_depth.resize(n, f32::INFINITY);
+        self.camera_ids.clear();
+        self.camera_ids.resize(n, NO_ID);
+        if inputs.objects.is_empty() {
+            return;
+        }
+        let to_camera = inputs.camera_to_world.inverse();
+        let c = inputs.camera;
+        let mut target = DepthTarget {
+            width: c.width as usize,
+            height: c.height as usize,
+            depth: &mut self.camera_depth,
+            ids: Some(&mut self.camera_ids),
+        };
+        let project = |p: Vec3| Vec2::new(c.fx * p.x / p.z + c.cx, c.fy * p.y / p.z + c.cy);
+        for (i, tri) in inputs.objects.triangles.iter().enumerate() {
+            let view = tri.vertices.map(|v| to_camera.transform_point3(v));
+            raster_view_triangle(&mut target, &view, CAMERA_NEAR, project, i as u32);
+        }
+    }
+
+    /// Bounding spheres of the real points per TILE x TILE block.
+    fn build_tiles(&mut self, w: usize, h: usize) {
+        let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
+        let points = &self.real_points;
+        self.tiles = (0..tx * ty)
+            .into_par_iter()
+            .map(|t| {
+                let (x0, y0) = ((t % tx) * TILE, (t / tx) * TILE);
+                tile_of(points, w, x0, (x0 + TILE).min(w), y0, (y0 + TILE).min(h))
+            })
+            .collect();
+    }
+
+    /// Fits each light's frustum and builds its two shadow maps (in parallel over
+    /// lights); returns the lights prepared for shading.
+    fn shadow_maps(&mut self, inputs: &ValInputs, params: &ValShadingParams) -> Vec<PreparedLight> {
+        let size = params.shadow_map_size;
+        let bounds = inputs.objects.bounds();
+        let frusta: Vec<Option<ShadowFrustum>> = inputs
+            .lights
+            .lights
+            .iter()
+            .map(|l| {
+                if inputs.objects.is_empty() {
+                    return None;
+                }
+                ShadowFrustum::fit(
+                    l.position,
+                    l.normal,
+                    &bounds,
+                    size,
+                    params.real_occluder_reach,
+                )
+            })
+            .collect();
+        let stride = 3 * size * size;
+        self.maps.resize(stride * frusta.len(), f32::INFINITY);
+        let (points, tiles, width) = (&self.real_points, &self.tiles, inputs.depth.width as usize);
+        let sampling = sampling_of(inputs);
+        self.maps
+            .par_chunks_mut(stride)
+            .zip(frusta.par_iter())
+            .for_each(|(maps, frustum)| {
+                let Some(f) = frustum else { return };
+                let (virtual_map, rest) = maps.split_at_mut(size * size);
+                let (real_map, scratch) = rest.split_at_mut(size * size);
+                virtual_shadow_map(f, inputs.objects, virtual_map);
+                real_shadow_map(f, points, width, tiles, sampling, real_map, scratch);
+            });
+        // Which tiles need shadow-map lookups for which lights.
+        self.lookup = self
+            .tiles
+            .par_iter()
+            .map(|tile| {
+                let Some(tile) = tile else { return 0 };
+                let mut mask = 0u64;
+                for (j, f) in frusta.iter().enumerate().take(64) {
+                    if f.is_some_and(|f| f.may_hold(tile.centre, tile.radius, 0.0)) {
+                        mask |= 1 << j;
+                    }
+                }
+                mask
+            })
+            .collect();
+        inputs
+            .lights
+            .lights
+            .iter()
+            .zip(frusta)
+            .map(|(l, f)| PreparedLight::new(l, f))
+            .collect()
+    }
+}
+
+/// [`ValRenderer::render`] with fresh buffers (for `relume eval` and one-off use).
+pub fn sample_val(inputs: &ValInputs, params: &ValShadingParams) -> Result<ValOutputs, StageError> {
+    let mut out = ValOutputs::new(inputs.depth.width, inputs.depth.height);
+    ValRenderer::default().render(inputs, params, &mut out)?;
+    Ok(out)
+}
+
+struct SampleVal {
+    inputs: [String; 4],
+    outputs: [String; 10],
+    intrinsics: Intrinsics,
+    objects: Arc<VirtualScene>,
+    params: ValShadingParams,
+    renderer: ValRenderer,
+}
+
+impl Stage for SampleVal {
+    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
+        let [depth, normals, pose, lights] = &self.inputs;
+        let depth = frame.depth(depth)?;
+        let normals = frame.normals(normals)?;
+        let pose = frame.pose(pose)?;
+        let lights = frame.area_lights(lights)?;
+        let inputs = ValInputs {
+            depth,
+            normals,
+            camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
+            camera_to_world: Affine3A::from_mat4(pose.matrix().as_mat4()),
+            lights,
+            objects: &self.objects,
+        };
+        let mut out = ValOutputs::new(depth.width, depth.height);
+        self.renderer.render(&inputs, &self.params, &mut out)?;
+        let products = [
+            Product::Radiance(out.e_r_dir),
+            Product::Radiance(out.e_r_ind),
+            Product::Radiance(out.e_rv_dir),
+            Product::Radiance(out.e_rv_ind),
+            Product::Scalar(out.mask),
+            Product::Radiance(out.k_v),
+            Product::Points(out.world_position),
+            Product::Normals(out.world_normal),
+            Product::Scalar(out.direct_min_distance),
+            Product::Scalar(out.indirect_min_distance),
+        ];
+        for (name, product) in self.outputs.iter().zip(products) {
+            frame.insert(name, product);
+        }
+        Ok(())
+    }
+}

@@ -41,7 +41,7 @@ pub struct EvalArgs {
 pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     let loaded = load(&a.run)?;
     let header = loaded.replay.recording.header();
-    let mut evaluator = Evaluator::new(&loaded.pipeline, header);
+    let mut evaluator = Evaluator::new(&loaded.pipeline, header, a.run.seed);
     if evaluator.is_empty() {
         bail!(
             "pipeline `{}` ({}) has no stage that eval can score: it scores depth.fuse, \

@@ -9,12 +9,17 @@
 //! | `color.compensate` | `transform_rel_error_median` (relative Frobenius error of c_t against `M_0 M_t^-1`), `gain_transform_rel_error_median` (the same for A_t), `image_rel_error_median`, `gain_image_rel_error_median` (relative RMS error of the compensated image, and of A_t applied instead, against the true reference image) | yes |
 //! | `color.compensate` | `frames`, `approximate_frames`, `pairs_kept_median` | no |
 //! | `gbuffer.splat` | `reference_psnr_db` (reference against the compensated camera image where both exist and the camera pixel is not clipped, peak 1), `coverage` | no |
+//! | `light.importance` | `pdf_integral`, `irradiance_rel_error`, `maps_scored` (against brute-force integration of each map; see [`light`]) | no |
+//! | `light.val` | `sh_irradiance_rel_error`, `val_center_drift_m`, `environment_static`, `lights` | no |
+//! | `sample.path` | `ratio_rmse`, `ratio_rmse_alternative`, `object_aware`, `unbiased_p`, `frames_scored`, `region_pixels` (against 1024-sample references; see [`sampling`]) | no |
 //!
 //! Ground truth comes from the recording's truth stream (synthetic recordings).
 
 mod color;
 mod depth;
+pub mod light;
 mod normals;
+pub mod sampling;
 mod truth;
 
 pub use depth::forward_warp;
@@ -29,6 +34,9 @@ enum Scorer {
     Normals(normals::NormalsScorer),
     Compensation(color::CompensationScorer),
     Reference(color::ReferenceScorer),
+    Importance(light::ImportanceScorer),
+    Val(light::ValScorer),
+    Path(Box<sampling::PathScorer>),
 }
 
 /// Scores a pipeline's stages over the frames given to [`Evaluator::observe`].
@@ -55,8 +63,9 @@ fn input(stage: &ResolvedStage, role: &str) -> String {
 }
 
 impl Evaluator {
-    /// An evaluator for the scorable stages of `pipeline` (see the module table).
-    pub fn new(pipeline: &Pipeline, header: &Header) -> Evaluator {
+    /// An evaluator for the scorable stages of `pipeline` run with `seed` (see the
+    /// module table).
+    pub fn new(pipeline: &Pipeline, header: &Header, seed: u64) -> Evaluator {
         let compensated = pipeline
             .stages
             .iter()
@@ -86,6 +95,20 @@ impl Evaluator {
                         output(s, "reference_coverage"),
                         compensated.clone(),
                     )),
+                    "light.importance" => Scorer::Importance(light::ImportanceScorer::new(
+                        input(s, "environment"),
+                        output(s, "light_table"),
+                    )),
+                    "light.val" => Scorer::Val(light::ValScorer::new(
+                        input(s, "indirect_light"),
+                        output(s, "lights"),
+                    )),
+                    "sample.path" => Scorer::Path(Box::new(sampling::PathScorer::new(
+                        s,
+                        pipeline.objects.clone(),
+                        header.depth_intrinsics,
+                        seed,
+                    ))),
                     _ => return None,
                 };
                 Some((s.name.clone(), s.kind, scorer))
@@ -115,6 +138,9 @@ impl Evaluator {
                 Scorer::Normals(s) => s.observe(frame, truth.as_ref()),
                 Scorer::Compensation(s) => s.observe(frame, truth.as_ref()),
                 Scorer::Reference(s) => s.observe(frame),
+                Scorer::Importance(s) => s.observe(frame),
+                Scorer::Val(s) => s.observe(frame),
+                Scorer::Path(s) => s.observe(frame)?,
             }
         }
         Ok(())
@@ -134,6 +160,9 @@ impl Evaluator {
                 Scorer::Normals(s) => s.report().unwrap_or_else(|| json!({})),
                 Scorer::Compensation(s) => s.report(),
                 Scorer::Reference(s) => s.report(),
+                Scorer::Importance(s) => s.report(),
+                Scorer::Val(s) => s.report(),
+                Scorer::Path(s) => s.report(),
             };
             let mut entry = Map::new();
             entry.insert("kind".into(), json!(kind));

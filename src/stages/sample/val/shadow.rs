@@ -344,10 +344,10 @@ mod tests {
             normals: [Vec3::Y; 3],
             material: 0,
         };
-        let scene = VirtualScene {
-            triangles: vec![tri(v[0], v[1], v[2]), tri(v[0], v[2], v[3])],
-            materials: vec![Material::DIFFUSE_GRAY],
-        };
+        let scene = VirtualScene::new(
+            vec![tri(v[0], v[1], v[2]), tri(v[0], v[2], v[3])],
+            vec![Material::DIFFUSE_GRAY],
+        );
         let mut map = vec![0.0; 64 * 64];
         virtual_shadow_map(&f, &scene, &mut map);
         let centre = f.texel(f.light_space(Vec3A::new(0.0, 0.0, 0.0))).unwrap();

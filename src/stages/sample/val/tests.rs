@@ -59,13 +59,13 @@ fn sphere_at(centre: Vec3, radius: f32) -> VirtualScene {
             }
         }
     }
-    VirtualScene {
+    VirtualScene::new(
         triangles,
-        materials: vec![Material {
+        vec![Material {
             albedo: ALBEDO,
             exponent: 0.0,
         }],
-    }
+    )
 }
 
 /// The real scene: the floor y = 0 and, optionally, a horizontal slab at `SLAB_Y` over

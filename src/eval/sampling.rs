@@ -1,0 +1,246 @@
+//! Scores of `sample.path` against references computed with many more samples.
+//!
+//! On a scored frame (every [`SCORE_EVERY`]-th, at most [`MAX_SCORED_FRAMES`]) the
+//! scorer re-runs the stage's own math on the frame's inputs:
+//! - a reference with 4 x 64 direct and 4 x 64 indirect samples per primary sample, from
+//!   four independent seeds (1024 samples per pixel and layer, 64 times the default);
+//! - `ratio_rmse`: RMSE of the stage's E_RV / E_R (channel means of direct + indirect)
+//!   against the reference ratio, over real pixels where a reference path met the
+//!   object (elsewhere the ratio is exactly 1 by construction);
+//! - `ratio_rmse_alternative`: the same for the other scheme (object-aware on when the
+//!   stage has it off, and the reverse) at the stage's sample counts, and
+//!   `object_aware` which of the two the stage runs: what the object-aware scheme buys;
+//! - `unbiased_p`: the stage's estimator run with 8 further seeds; the mean of E_RV
+//!   over that region is compared with the reference by a z-test (standard error from
+//!   the spread of the 8 runs and the reference's share of it); a p-value far below
+//!   0.01 says the estimator converges to something else. Pooled over scored frames.
+
+use crate::graph::{Frame, ResolvedStage};
+use crate::objects::VirtualScene;
+use crate::pinhole::Pinhole;
+use crate::recording::Intrinsics;
+use crate::rng;
+use crate::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
+use glam::{Affine3A, Vec3};
+use serde_json::{Value, json};
+use std::sync::Arc;
+
+/// Every how many frames `sample.path` is scored (frames 14, 29, ...: late enough that
+/// the cloud-lit environment exists).
+pub const SCORE_EVERY: usize = 15;
+/// The most frames scored (each costs about 70 runs of the stage).
+pub const MAX_SCORED_FRAMES: usize = 2;
+/// Independent reference runs, each with 64 + 64 samples per primary sample.
+const REFERENCE_RUNS: u64 = 4;
+const REFERENCE_SAMPLES: u32 = 64;
+/// Further runs of the stage's own configuration for the bias test.
+const BIAS_RUNS: u64 = 8;
+/// Salts of the scorer's seeds (distinct from the stage's).
+const REFERENCE_SALT: u64 = 0x5245_4645;
+const BIAS_SALT: u64 = 0x4249_4153;
+
+fn channel_mean(v: Vec3) -> f64 {
+    ((v.x + v.y + v.z) / 3.0) as f64
+}
+
+/// Two-sided p-value of a standard normal z (erfc by Numerical Recipes' Chebyshev
+/// fit, relative error below 1.2e-7).
+pub fn two_sided_p(z: f64) -> f64 {
+    let x = z.abs() / std::f64::consts::SQRT_2;
+    let t = 1.0 / (1.0 + 0.5 * x);
+    let poly = -x * x - 1.265_512_23
+        + t * (1.000_023_68
+            + t * (0.374_091_96
+                + t * (0.096_784_18
+                    + t * (-0.186_288_06
+                        + t * (0.278_868_07
+                            + t * (-1.135_203_98
+                                + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
+    (t * poly.exp()).min(1.0)
+}
+
+/// Scores a `sample.path` stage.
+pub struct PathScorer {
+    /// depth, normals, pose, radiance, light_table.
+    inputs: [String; 5],
+    /// e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask.
+    outputs: [String; 5],
+    params: PathParams,
+    objects: Arc<VirtualScene>,
+    intrinsics: Intrinsics,
+    frames_scored: usize,
+    pixels: u64,
+    squared: f64,
+    alternative_squared: f64,
+    z_scores: Vec<f64>,
+}
+
+impl PathScorer {
+    pub fn new(
+        stage: &ResolvedStage,
+        objects: Arc<VirtualScene>,
+        intrinsics: Intrinsics,
+        seed: u64,
+    ) -> Self {
+        let get = |map: &std::collections::BTreeMap<String, String>, role: &str| {
+            map.get(role).cloned().unwrap_or_else(|| role.to_string())
+        };
+        PathScorer {
+            inputs: ["depth", "normals", "pose", "radiance", "light_table"]
+                .map(|r| get(&stage.inputs, r)),
+            outputs: ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind", "mask"]
+                .map(|r| get(&stage.outputs, r)),
+            params: PathParams::from_params(&stage.params, seed),
+            objects,
+            intrinsics,
+            frames_scored: 0,
+            pixels: 0,
+            squared: 0.0,
+            alternative_squared: 0.0,
+            z_scores: Vec::new(),
+        }
+    }
+
+    pub fn observe(&mut self, frame: &Frame) -> Result<(), String> {
+        if self.frames_scored >= MAX_SCORED_FRAMES || frame.index % SCORE_EVERY != SCORE_EVERY - 1 {
+            return Ok(());
+        }
+        let [depth, normals, pose, radiance, table] = &self.inputs;
+        let [e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask] = &self.outputs;
+        let (Ok(depth), Ok(normals), Ok(pose), Ok(radiance), Ok(table)) = (
+            frame.depth(depth),
+            frame.normals(normals),
+            frame.pose(pose),
+            frame.radiance(radiance),
+            frame.light_table(table),
+        ) else {
+            return Ok(());
+        };
+        let (Ok(e_r_dir), Ok(e_r_ind), Ok(e_rv_dir), Ok(e_rv_ind), Ok(mask)) = (
+            frame.radiance(e_r_dir),
+            frame.radiance(e_r_ind),
+            frame.radiance(e_rv_dir),
+            frame.radiance(e_rv_ind),
+            frame.scalar(mask),
+        ) else {
+            return Ok(());
+        };
+        let inputs = PathInputs {
+            depth,
+            normals,
+            radiance,
+            camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
+            camera_to_world: Affine3A::from_mat4(pose.matrix().as_mat4()),
+            table,
+            objects: &self.objects,
+            frame: frame.index as u64,
+        };
+        let n = depth.data.len();
+        let run = |params: &PathParams| -> Result<PathOutputs, String> {
+            let mut out = PathOutputs::new(depth.width, depth.height);
+            sample_path(&inputs, params, &mut out).map_err(|e| e.to_string())?;
+            Ok(out)
+        };
+        // The reference: mean E_R and E_RV over independent high-sample runs.
+        let mut ref_r = vec![0.0f64; n];
+        let mut ref_rv = vec![0.0f64; n];
+        let mut region = vec![false; n];
+        for k in 0..REFERENCE_RUNS {
+            let params = PathParams {
+                direct: REFERENCE_SAMPLES,
+                indirect: REFERENCE_SAMPLES,
+                object_aware: false,
+                seed: rng::hash(&[self.params.seed, REFERENCE_SALT, k]),
+                ..self.params
+            };
+            let out = run(&params)?;
+            for i in 0..n {
+                ref_r[i] += channel_mean(out.e_r_dir.data[i] + out.e_r_ind.data[i]);
+                ref_rv[i] += channel_mean(out.e_rv_dir.data[i] + out.e_rv_ind.data[i]);
+                region[i] |= out.touched.data[i] != 0;
+            }
+        }
+        for i in 0..n {
+            region[i] &= mask.data[i] == 1.0 && ref_r[i].is_finite() && ref_r[i] > 1e-6;
+        }
+        let ratio = |r: Vec3, rv: Vec3| channel_mean(rv) / channel_mean(r);
+        let alternative = run(&PathParams {
+            object_aware: !self.params.object_aware,
+            ..self.params
+        })?;
+        for i in (0..n).filter(|&i| region[i]) {
+            let reference = ref_rv[i] / ref_r[i];
+            let own = ratio(
+                e_r_dir.data[i] + e_r_ind.data[i],
+                e_rv_dir.data[i] + e_rv_ind.data[i],
+            );
+            let alt = ratio(
+                alternative.e_r_dir.data[i] + alternative.e_r_ind.data[i],
+                alternative.e_rv_dir.data[i] + alternative.e_rv_ind.data[i],
+            );
+            if own.is_finite() && alt.is_finite() {
+                self.pixels += 1;
+                self.squared += (own - reference).powi(2);
+                self.alternative_squared += (alt - reference).powi(2);
+            }
+        }
+        // The bias test: region means of E_RV over further runs of the stage's estimator.
+        let region_mean = |values: &dyn Fn(usize) -> f64| {
+            let (sum, count) = (0..n)
+                .filter(|&i| region[i])
+                .map(values)
+                .filter(|v| v.is_finite())
+                .fold((0.0, 0usize), |(s, c), v| (s + v, c + 1));
+            sum / count.max(1) as f64
+        };
+        let reference_mean = region_mean(&|i| ref_rv[i] / REFERENCE_RUNS as f64);
+        let mut means = Vec::new();
+        for k in 0..BIAS_RUNS {
+            let out = run(&PathParams {
+                seed: rng::hash(&[self.params.seed, BIAS_SALT, k]),
+                ..self.params
+            })?;
+            means.push(region_mean(&|i| {
+                channel_mean(out.e_rv_dir.data[i] + out.e_rv_ind.data[i])
+            }));
+        }
+        let m = means.iter().sum::<f64>() / means.len() as f64;
+        let var = means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (means.len() - 1) as f64;
+        // The reference holds REFERENCE_RUNS * 16 times the samples of one run.
+        let reference_share =
+            (REFERENCE_RUNS * (REFERENCE_SAMPLES / self.params.direct.max(1)) as u64) as f64;
+        let se = (var / BIAS_RUNS as f64 + var / reference_share).sqrt();
+        if se > 0.0 && region.iter().any(|&r| r) {
+            self.z_scores.push((m - reference_mean) / se);
+        }
+        self.frames_scored += 1;
+        Ok(())
+    }
+
+    pub fn report(&self) -> Value {
+        let rmse = |sq: f64| (sq / self.pixels.max(1) as f64).sqrt();
+        let pooled_z =
+            self.z_scores.iter().sum::<f64>() / (self.z_scores.len().max(1) as f64).sqrt();
+        json!({
+            "frames_scored": self.frames_scored,
+            "region_pixels": self.pixels,
+            "object_aware": self.params.object_aware,
+            "ratio_rmse": if self.pixels > 0 { rmse(self.squared) } else { f64::NAN },
+            "ratio_rmse_alternative": if self.pixels > 0 { rmse(self.alternative_squared) } else { f64::NAN },
+            "unbiased_p": if self.z_scores.is_empty() { f64::NAN } else { two_sided_p(pooled_z) },
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::two_sided_p;
+
+    #[test]
+    fn p_values_of_the_normal_distribution() {
+        assert!((two_sided_p(0.0) - 1.0).abs() < 1e-6);
+        assert!((two_sided_p(1.959_964) - 0.05).abs() < 1e-6);
+        assert!((two_sided_p(-2.575_829) - 0.01).abs() < 1e-6);
+        assert!(two_sided_p(8.0) < 1e-14);
+    }
+}

@@ -221,9 +221,10 @@ mod tests {
             )
         });
         let error = sh_irradiance_rel_error(&map, &normals(200));
+        eprintln!("smooth map: SH9 mean relative irradiance error {error}");
         assert!(error < 0.01, "mean relative error {error}");
         // A degree-2 polynomial map is band-limited: the error is the quadrature's only.
-        assert!(error < 2e-3, "mean relative error {error}");
+        assert!(error < 1e-4, "mean relative error {error}");
     }
 
     #[test]
@@ -234,6 +235,7 @@ mod tests {
                 + Vec3::splat(5.0) * d.dot(Vec3::Y).max(0.0).powi(8)
         });
         let error = sh_irradiance_rel_error(&map, &normals(100));
+        eprintln!("sky with sun: SH9 mean relative irradiance error {error}");
         assert!(error > 1e-3 && error < 0.06, "mean relative error {error}");
     }
 

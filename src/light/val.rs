@@ -438,6 +438,7 @@ mod tests {
                 .sum();
             let reference = direct.irradiance_brute_force(n);
             let error = (e - reference).abs().max_element() / reference.max_element();
+            eprintln!("VAL irradiance at the centre, n = {n}: relative error {error}");
             assert!(error < 0.03, "n {n}: {e} vs {reference}");
         }
     }

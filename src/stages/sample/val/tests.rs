@@ -296,7 +296,8 @@ fn missing_depth_and_normals_give_nan_irradiance_not_a_failure() {
     depth.data[0] = 0.0;
     normals.data[1] = Vec3::ZERO;
     let empty_lights = lights(Vec::new());
-    let out = render(&depth, &normals, &empty_lights, &sphere());
+    let scene_for_empty = sphere();
+    let out = render(&depth, &normals, &empty_lights, &scene_for_empty);
     assert!(out.e_r_dir.data[0].is_nan() && out.e_rv_dir.data[1].is_nan());
     assert!(out.world_position.data[0].is_nan());
     assert!(out.world_position.data[1].is_finite());
@@ -319,6 +320,28 @@ fn missing_depth_and_normals_give_nan_irradiance_not_a_failure() {
     };
     let err = sample_val(&inputs, &ValShadingParams::default()).unwrap_err();
     assert!(err.to_string().contains("normals 4x4"), "{err}");
+    // An empty frame renders to empty outputs (shadow maps are still built).
+    let one_light = lights(vec![light(LAMP, 10.0)]);
+    let (empty_depth, empty_normals) = (Image::filled(0, 0, 0.0), Image::filled(0, 0, Vec3::ZERO));
+    let inputs = ValInputs {
+        depth: &empty_depth,
+        normals: &empty_normals,
+        camera: Pinhole {
+            width: 0,
+            height: 0,
+            ..camera
+        },
+        objects: &scene_for_empty,
+        lights: &one_light,
+        ..inputs
+    };
+    assert!(
+        sample_val(&inputs, &ValShadingParams::default())
+            .unwrap()
+            .mask
+            .data
+            .is_empty()
+    );
 }
 
 #[test]

@@ -51,7 +51,7 @@ fn evaluate(pipeline_toml: &str, path: &Path) -> Value {
     let stages = pipeline
         .build(&registry, &header, out.path(), 1)
         .unwrap_or_else(|(s, e)| panic!("{s}: {e}"));
-    let mut evaluator = Evaluator::new(&pipeline, &header);
+    let mut evaluator = Evaluator::new(&pipeline, &header, 1);
     let options = RunOptions::default();
     run(&pipeline, stages, &replay, &options, &mut |f| {
         evaluator.observe(&f).unwrap()

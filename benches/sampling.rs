@@ -1,0 +1,165 @@
+//! Per-frame cost of the light and sampling stages of
+//! `pipelines/mixed-reality-sampling.toml` at 640x480 on the synthetic recording, with
+//! the state (fused depth, cloud, lights) built up over the preceding frames.
+//!
+//! - `stage/<name>`: every stage's `process` on a copy of the frame as it arrives there.
+//!   Stages that reuse their output while their input map is unchanged (light.importance,
+//!   light.split, light.val) measure that reuse here; their update cost is measured
+//!   directly below.
+//! - `sample.path/plain` and `sample.path/object_aware`: the sampling math alone, with
+//!   the stage's defaults (16 direct + 16 indirect samples per pixel), the object-aware
+//!   scheme off and on.
+//! - `light.val/update`: one warm-started update at 16 lights (the stage's work whenever
+//!   the environment changes).
+//! - `light.importance/build`: the 4096-sample table of the frame's environment.
+//!
+//! `RELUME_BENCH_PIPELINE=FILE cargo bench --bench sampling` measures another pipeline.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use glam::Affine3A;
+use relume::graph::{Frame, FrameSource, Pipeline, Product, Registry};
+use relume::light::{LightTable, ValBuilder, ValParams};
+use relume::pinhole::Pinhole;
+use relume::recording::synth::{SynthConfig, generate};
+use relume::recording::{Replay, ReplayOptions};
+use relume::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Frames replayed before the measured one.
+const WARM_FRAMES: usize = 12;
+
+fn bench_sampling(c: &mut Criterion) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("synth.relume");
+    let config = SynthConfig {
+        frames: WARM_FRAMES + 1,
+        ..SynthConfig::default()
+    };
+    generate(&config, &path).unwrap();
+    let replay = Replay::open(&path, ReplayOptions::default()).unwrap();
+    let registry = Registry::builtin();
+    let pipeline_path = std::env::var_os("RELUME_BENCH_PIPELINE")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/mixed-reality-sampling.toml")
+        });
+    let pipeline = Pipeline::load(&pipeline_path, &registry).unwrap();
+    let header = replay.recording.header().clone();
+    let mut stages = pipeline
+        .build(&registry, &header, dir.path(), 1)
+        .map_err(|(s, e)| format!("{s}: {e}"))
+        .unwrap();
+
+    // Replays frames in this thread, feeding `product@prev` inputs from the previous
+    // frame; keeps the last frame as each stage received it.
+    let mut previous: BTreeMap<String, Arc<Product>> = BTreeMap::new();
+    let mut arriving = Vec::new();
+    let mut last = None;
+    for n in 0..=WARM_FRAMES {
+        let mut frame = replay.read(n).unwrap();
+        for (name, product) in &previous {
+            frame.insert_shared(&format!("{name}@prev"), product.clone());
+        }
+        arriving.clear();
+        for stage in stages.iter_mut() {
+            arriving.push(frame.clone());
+            stage.process(&mut frame).unwrap();
+        }
+        previous = pipeline
+            .feedback
+            .iter()
+            .filter_map(|f| Some((f.product.clone(), frame.get_shared(&f.product)?.clone())))
+            .collect();
+        last = Some(frame);
+    }
+    let done = last.expect("at least one frame");
+
+    let mut group = c.benchmark_group("sampling_640x480");
+    group.sample_size(10);
+    for (i, stage) in stages.iter_mut().enumerate() {
+        let spec = &pipeline.stages[i];
+        group.bench_function(format!("stage/{}", spec.name), |b| {
+            b.iter(|| {
+                let mut frame: Frame = arriving[i].clone();
+                stage.process(&mut frame).unwrap();
+                frame
+            })
+        });
+    }
+
+    // The sampling math alone, both schemes.
+    if let Some(spec) = pipeline.stages.iter().find(|s| s.kind == "sample.path") {
+        let depth = done.depth(&spec.inputs["depth"]).unwrap();
+        let mask = done.scalar(&spec.outputs["mask"]).unwrap();
+        let covered =
+            mask.data.iter().map(|&m| 1.0 - m as f64).sum::<f64>() / mask.data.len() as f64;
+        eprintln!(
+            "sample.path: the objects cover {:.1} % of the image",
+            covered * 100.0
+        );
+        let inputs = PathInputs {
+            depth,
+            normals: done.normals(&spec.inputs["normals"]).unwrap(),
+            radiance: done.radiance(&spec.inputs["radiance"]).unwrap(),
+            camera: Pinhole::new(&header.depth_intrinsics, depth.width, depth.height),
+            camera_to_world: Affine3A::from_mat4(
+                done.pose(&spec.inputs["pose"]).unwrap().matrix().as_mat4(),
+            ),
+            table: done.light_table(&spec.inputs["light_table"]).unwrap(),
+            objects: &pipeline.objects,
+            frame: WARM_FRAMES as u64,
+        };
+        for object_aware in [false, true] {
+            let params = PathParams {
+                object_aware,
+                seed: 1,
+                ..PathParams::from_params(&spec.params, 1)
+            };
+            let name = if object_aware {
+                "object_aware"
+            } else {
+                "plain"
+            };
+            let mut out = PathOutputs::new(depth.width, depth.height);
+            group.bench_function(format!("sample.path/{name}"), |b| {
+                b.iter(|| sample_path(&inputs, &params, &mut out).unwrap())
+            });
+        }
+    }
+
+    // light.val's update and light.importance's table on the frame's maps.
+    if let Some(spec) = pipeline.stages.iter().find(|s| s.kind == "light.val") {
+        let direct = done
+            .environment(&spec.inputs["direct_light"])
+            .unwrap()
+            .clone();
+        let indirect = done
+            .environment(&spec.inputs["indirect_light"])
+            .unwrap()
+            .clone();
+        let mut builder = ValBuilder::new(ValParams::default());
+        builder.update(&direct, &indirect);
+        group.bench_function("light.val/update", |b| {
+            b.iter(|| builder.update(&direct, &indirect))
+        });
+    }
+    if let Some(spec) = pipeline
+        .stages
+        .iter()
+        .find(|s| s.kind == "light.importance")
+    {
+        let env = done
+            .environment(&spec.inputs["environment"])
+            .unwrap()
+            .clone();
+        group.bench_function("light.importance/build", |b| {
+            b.iter(|| LightTable::build(&env, 4096, 1))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_sampling);
+criterion_main!(benches);

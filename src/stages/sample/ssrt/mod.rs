@@ -14,11 +14,12 @@
 //! of 2^L x 2^L pixels (and its neighbour across the minor axis, which they cross at
 //! most once) are skipped whole when the ray is in front of the tiles' minimum depth,
 //! behind their maximum by more than the thickness, or the tiles are empty; otherwise
-//! the march descends a level, and it climbs again after each skip. The
-//! skip tests are conservative in floating point too (the ray's 1/z is monotonic along
-//! the samples, and products and sums round monotonically), so the hierarchical march
-//! returns exactly the first hit of the sample-by-sample march,
-//! [`ScreenTracer::trace_linear`]: the same pixel and the same t, bit for bit.
+//! the march descends a level, and after each skip it climbs again (one level, or as
+//! many as the next sample starts a tile of). The skip tests are conservative in
+//! floating point too (the ray's 1/z is monotonic along the samples, and products and
+//! sums round monotonically), so the hierarchical march returns exactly the first hit
+//! of the sample-by-sample march, [`ScreenTracer::trace_linear`]: the same pixel and
+//! the same t, bit for bit.
 //!
 //! Documented limits shared by both marches: only the current depth map is seen (no
 //! off-screen geometry: samples outside the image never hit); a ray whose origin
@@ -436,8 +437,9 @@ impl<'a> ScreenTracer<'a> {
     /// (a tile along the major axis: the samples' minor pixels cross into at most one
     /// neighbouring tile, which is tested with it) and skips them when the ray is in
     /// front of the tiles' nearest surface, behind their farthest one by more than the
-    /// thickness, or the tiles are empty; the march then climbs a level, else it
-    /// descends, and a sample not skipped at level 0 is a hit.
+    /// thickness, or the tiles are empty; the march then climbs (a level, or more when
+    /// the next sample starts a larger tile), else it descends, and a sample not
+    /// skipped at level 0 is a hit.
     #[inline]
     fn march<const TRANSPOSED: bool, const FORWARD: bool>(
         &self,
@@ -491,7 +493,10 @@ impl<'a> ScreenTracer<'a> {
             // A branch, not a select: when predicted, the next step starts early.
             if skip {
                 a = ae + step;
-                level = (level + 1).min(top);
+                // Climb at least one level, and as far as the new sample starts a
+                // tile along the march.
+                let aligned = if FORWARD { a } else { a + 1 }.trailing_zeros() as i32;
+                level = (level + 1).max(aligned).min(top);
             } else {
                 level -= 1;
             }

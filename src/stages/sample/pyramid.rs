@@ -1,5 +1,5 @@
 //! The min-max depth pyramid that the hierarchical screen-space tracer walks (paper 001
-//! Sec. 5, after the hierarchical traversal of Tevs et al. [TIS08]): level 0 holds each
+//! Sec. 5, after the hierarchical traversal of Tevs et al., TIS08): level 0 holds each
 //! pixel's depth, every coarser texel the minimum and maximum valid depth of the 2x2
 //! texels below it. A texel with no valid depth below it is empty: min = +inf,
 //! max = -inf, so every "ray in front of the tile" test passes and the tile is skipped.
@@ -10,13 +10,25 @@ use rayon::prelude::*;
 /// The (min, max) valid depth of an empty texel.
 pub const EMPTY_TEXEL: [f32; 2] = [f32::INFINITY, f32::NEG_INFINITY];
 
-/// One level of the pyramid: `width` x `height` texels starting at `offset` in
-/// [`DepthPyramid::texels`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// One level of the pyramid: `width` x `height` texels, stored with a border of one
+/// empty texel on every side, so texel (x, y) for x in -1..=width and y in
+/// -1..=height is at `origin + y * stride + x` in the pyramid's texel storage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct PyramidLevel {
     pub width: u32,
     pub height: u32,
-    pub offset: usize,
+    /// Texels per stored row (width + 2).
+    pub stride: usize,
+    /// Index of texel (0, 0).
+    pub origin: usize,
+}
+
+impl PyramidLevel {
+    /// The index of texel (x, y), x in -1..=width, y in -1..=height.
+    #[inline(always)]
+    pub fn index(&self, x: i32, y: i32) -> usize {
+        (self.origin as isize + y as isize * self.stride as isize + x as isize) as usize
+    }
 }
 
 /// Levels of 2x2 min and max of valid depth over one depth map, level 0 at full
@@ -24,7 +36,8 @@ pub struct PyramidLevel {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DepthPyramid {
     levels: Vec<PyramidLevel>,
-    /// Every level's texels, row-major, level after level: [min, max] in metres.
+    /// Every level's texels with their borders, row-major, level after level:
+    /// [min, max] in metres.
     texels: Vec<[f32; 2]>,
 }
 
@@ -45,12 +58,14 @@ impl DepthPyramid {
         let (mut w, mut h) = (depth.width, depth.height);
         let mut total = 0usize;
         loop {
+            let stride = w as usize + 2;
             self.levels.push(PyramidLevel {
                 width: w,
                 height: h,
-                offset: total,
+                stride,
+                origin: total + stride + 1,
             });
-            total += w as usize * h as usize;
+            total += stride * (h as usize + 2);
             if w <= 1 && h <= 1 {
                 break;
             }
@@ -58,13 +73,14 @@ impl DepthPyramid {
         }
         self.texels.clear();
         self.texels.resize(total, EMPTY_TEXEL);
-        if total == 0 {
+        let (w, h) = (depth.width as usize, depth.height as usize);
+        if w == 0 || h == 0 {
             return;
         }
-        let level0 = &mut self.texels[..depth.data.len()];
-        level0
-            .par_chunks_mut(1 << 14)
-            .zip(depth.data.par_chunks(1 << 14))
+        let l0 = self.levels[0];
+        let rows = &mut self.texels[l0.origin..l0.origin + (h - 1) * l0.stride + w];
+        rows.par_chunks_mut(l0.stride)
+            .zip(depth.data.par_chunks(w))
             .for_each(|(out, zs)| {
                 for (t, &z) in out.iter_mut().zip(zs) {
                     *t = if depth_is_valid(z) {
@@ -76,10 +92,13 @@ impl DepthPyramid {
             });
         for l in 1..self.levels.len() {
             let (fine, coarse) = (self.levels[l - 1], self.levels[l]);
-            let (below, above) = self.texels.split_at_mut(coarse.offset);
-            let below = &below[fine.offset..];
-            let above = &mut above[..coarse.width as usize * coarse.height as usize];
-            reduce_level(below, fine, above, coarse);
+            let (below, above) = self.texels.split_at_mut(coarse.origin);
+            reduce_level(
+                below,
+                fine,
+                &mut above[..(coarse.height as usize - 1) * coarse.stride + coarse.width as usize],
+                coarse,
+            );
         }
     }
 
@@ -94,19 +113,21 @@ impl DepthPyramid {
     }
 
     /// [min, max] valid depth under texel (`x`, `y`) of level `level`
-    /// ([`EMPTY_TEXEL`] when none is valid). Panics when out of range.
+    /// ([`EMPTY_TEXEL`] when none is valid, and on the border: x or y = -1, width or
+    /// height). Panics when out of range.
     #[inline]
-    pub fn texel(&self, level: u32, x: u32, y: u32) -> [f32; 2] {
+    pub fn texel(&self, level: u32, x: i32, y: i32) -> [f32; 2] {
         let l = self.levels[level as usize];
-        debug_assert!(x < l.width && y < l.height);
-        self.texels[l.offset + y as usize * l.width as usize + x as usize]
+        assert!((-1..=l.width as i32).contains(&x) && (-1..=l.height as i32).contains(&y));
+        self.texels[l.index(x, y)]
     }
 
     /// The texel (`x`, `y`) of `level` (one of [`DepthPyramid::levels`]), for the
-    /// tracer's inner loop: coordinates must be in range (only slice indexing checks).
+    /// tracer's inner loop: coordinates must be within the border (only slice indexing
+    /// checks).
     #[inline(always)]
     pub(crate) fn texel_in(&self, level: &PyramidLevel, x: i32, y: i32) -> [f32; 2] {
-        self.texels[level.offset + y as usize * level.width as usize + x as usize]
+        self.texels[level.index(x, y)]
     }
 
     /// The levels, finest first.
@@ -115,31 +136,30 @@ impl DepthPyramid {
     }
 }
 
-/// Fills `above` (level `coarse`) with the 2x2 min and max of `below` (level `fine`);
-/// children beyond the fine level's edge are ignored.
+/// Fills the texels of level `coarse` (`above` starts at its texel (0, 0)) with the 2x2
+/// min and max of level `fine` in `below`; children beyond the fine level's edge are
+/// its empty border.
 fn reduce_level(
     below: &[[f32; 2]],
     fine: PyramidLevel,
     above: &mut [[f32; 2]],
     coarse: PyramidLevel,
 ) {
-    let (fw, fh) = (fine.width as usize, fine.height as usize);
     let cw = coarse.width as usize;
     above
-        .par_chunks_mut(cw * ROWS_PER_TASK)
+        .par_chunks_mut(coarse.stride * ROWS_PER_TASK)
         .enumerate()
         .for_each(|(task, rows)| {
-            for (r, row) in rows.chunks_mut(cw).enumerate() {
-                let y = (task * ROWS_PER_TASK + r) * 2;
-                let y1 = (y + 1).min(fh - 1);
-                for (x, t) in row.iter_mut().enumerate() {
-                    let x0 = 2 * x;
-                    let x1 = (x0 + 1).min(fw - 1);
+            for (r, row) in rows.chunks_mut(coarse.stride).enumerate() {
+                let y = ((task * ROWS_PER_TASK + r) * 2) as i32;
+                let n = cw.min(row.len());
+                for (x, t) in row[..n].iter_mut().enumerate() {
+                    let x = 2 * x as i32;
                     let [a, b, c, d] = [
-                        below[y * fw + x0],
-                        below[y * fw + x1],
-                        below[y1 * fw + x0],
-                        below[y1 * fw + x1],
+                        below[fine.index(x, y)],
+                        below[fine.index(x + 1, y)],
+                        below[fine.index(x, y + 1)],
+                        below[fine.index(x + 1, y + 1)],
                     ];
                     *t = [
                         a[0].min(b[0]).min(c[0].min(d[0])),
@@ -192,16 +212,24 @@ mod tests {
                             }
                         }
                     }
-                    assert_eq!(
-                        pyramid.texel(level, x, y),
-                        [lo, hi],
-                        "level {level} ({x}, {y})"
-                    );
+                    let t = pyramid.texel(level, x as i32, y as i32);
+                    assert_eq!(t, [lo, hi], "level {level} ({x}, {y})");
                 }
             }
         }
         let top = pyramid.level(pyramid.level_count() - 1);
         assert_eq!((top.width, top.height), (1, 1));
+        for level in 0..pyramid.level_count() {
+            let l = pyramid.level(level);
+            let (w, h) = (l.width as i32, l.height as i32);
+            for (x, y) in [(-1, 0), (w, 0), (0, -1), (0, h), (-1, -1), (w, h)] {
+                assert_eq!(
+                    pyramid.texel(level, x, y),
+                    EMPTY_TEXEL,
+                    "border of level {level}"
+                );
+            }
+        }
     }
 
     #[test]

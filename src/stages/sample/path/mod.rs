@@ -63,10 +63,21 @@
 //!
 //! `max_distance` bounds the screen-space march (default 1 m): real geometry nearer
 //! than that occludes and reflects; beyond it the environment map stands for the room.
-//! It also bounds the cost of each march.
+//! It also bounds the cost of each march. Real ray origins are raised along the normal
+//! by `normal_offset` pixel footprints (default 1) so that grazing rays do not hit
+//! their own surface between pixel centres.
+//!
+//! Cost: the screen-space marches dominate. Per valid pixel there are up to
+//! primary x (direct + indirect) = 32 of them (direct samples below the horizon are not
+//! traced); a 1 m ray at 640x480 takes about 9 iterations of the hierarchical march
+//! where the sample-by-sample march would test about 150 pixels. The virtual objects
+//! cost a cone test per ray, then a box test and the BVH only for rays inside the cone
+//! of their bounding sphere.
 
+mod bounds;
 mod kernel;
 pub mod sampling;
+mod virtual_paths;
 
 pub use kernel::{MAX_CANDIDATES, PixelResult};
 
@@ -584,5 +595,7 @@ impl Stage for PathStage {
     }
 }
 
+#[cfg(test)]
+mod stage_tests;
 #[cfg(test)]
 mod tests;

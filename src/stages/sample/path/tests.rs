@@ -1,27 +1,26 @@
+//! Tests of the estimates against constant environments, a sphere over a floor, and
+//! determinism.
+
 use super::*;
-use crate::graph::{BuildContext, Params};
 use crate::light::LightSample;
 use crate::objects::{Material, Triangle};
-use crate::recording::{Header, Pose};
 use crate::stages::with_threads;
-use glam::{DQuat, DVec3};
-use std::collections::BTreeMap;
 use std::f32::consts::PI;
 
-const W: u32 = 96;
-const H: u32 = 72;
-const SKY: Vec3 = Vec3::new(1.0, 0.5, 0.25);
-const WALL: Vec3 = Vec3::new(0.2, 0.3, 0.4);
-const SPHERE_CENTER: Vec3 = Vec3::new(0.0, 0.6, 1.0);
-const SPHERE_RADIUS: f32 = 0.3;
+pub(super) const W: u32 = 96;
+pub(super) const H: u32 = 72;
+pub(super) const SKY: Vec3 = Vec3::new(1.0, 0.5, 0.25);
+pub(super) const WALL: Vec3 = Vec3::new(0.2, 0.3, 0.4);
+pub(super) const SPHERE_CENTER: Vec3 = Vec3::new(0.0, 0.6, 1.0);
+pub(super) const SPHERE_RADIUS: f32 = 0.3;
 
-fn camera() -> Pinhole {
+pub(super) fn camera() -> Pinhole {
     Pinhole::new(&Intrinsics::PRIMESENSE, W, H)
 }
 
 /// The camera 1.5 m above the floor (world y = 0) at z = -2, looking down 30 degrees
 /// along +z (camera x = world -x).
-fn pose() -> Affine3A {
+pub(super) fn pose() -> Affine3A {
     let (s, c) = (30f32.to_radians().sin(), 30f32.to_radians().cos());
     let forward = Vec3::new(0.0, -s, c);
     let right = Vec3::new(-1.0, 0.0, 0.0);
@@ -34,13 +33,13 @@ fn pose() -> Affine3A {
 }
 
 /// A floor-only scene: depth, camera-space normals and a constant camera radiance.
-struct Scene {
-    depth: DepthImage,
-    normals: Vec3Image,
-    radiance: Vec3Image,
+pub(super) struct Scene {
+    pub depth: DepthImage,
+    pub normals: Vec3Image,
+    pub radiance: Vec3Image,
 }
 
-fn floor_scene() -> Scene {
+pub(super) fn floor_scene() -> Scene {
     let cam = camera();
     let pose = pose();
     let up_camera = pose.inverse().transform_vector3(Vec3::Y);
@@ -62,7 +61,7 @@ fn floor_scene() -> Scene {
 }
 
 /// No real geometry at all.
-fn void_scene() -> Scene {
+pub(super) fn void_scene() -> Scene {
     Scene {
         depth: Image::filled(W, H, 0.0),
         normals: Image::filled(W, H, Vec3::ZERO),
@@ -72,7 +71,7 @@ fn void_scene() -> Scene {
 
 /// A constant environment `SKY` sampled uniformly over the sphere, in stratified order:
 /// sample i lies in the i-th of N bands of equal solid angle from world +y down.
-fn uniform_table(n: usize) -> LightTable {
+pub(super) fn uniform_table(n: usize) -> LightTable {
     let golden = PI * (3.0 - 5f32.sqrt());
     LightTable {
         samples: (0..n)
@@ -91,7 +90,7 @@ fn uniform_table(n: usize) -> LightTable {
 }
 
 /// A UV sphere with smooth normals.
-fn sphere(center: Vec3, radius: f32, material: Material) -> VirtualScene {
+pub(super) fn sphere(center: Vec3, radius: f32, material: Material) -> VirtualScene {
     let (nu, nv) = (16, 8);
     let at = |i: u32, j: u32| {
         let (theta, phi) = (PI * j as f32 / nv as f32, 2.0 * PI * i as f32 / nu as f32);
@@ -117,7 +116,7 @@ fn sphere(center: Vec3, radius: f32, material: Material) -> VirtualScene {
     VirtualScene::new(triangles, vec![material])
 }
 
-fn run(
+pub(super) fn run(
     scene: &Scene,
     objects: &VirtualScene,
     table: &LightTable,
@@ -139,7 +138,7 @@ fn run(
 }
 
 /// The pixel where world point `p` is seen.
-fn pixel_of(p: Vec3) -> usize {
+pub(super) fn pixel_of(p: Vec3) -> usize {
     let (u, v) = camera()
         .pixel_of(pose().inverse().transform_point3(p))
         .unwrap();
@@ -147,7 +146,7 @@ fn pixel_of(p: Vec3) -> usize {
 }
 
 /// Every output as bits, for exact comparisons (NaN included).
-fn bits(out: &PathOutputs) -> Vec<u32> {
+pub(super) fn bits(out: &PathOutputs) -> Vec<u32> {
     let mut b = Vec::new();
     for image in [
         &out.e_r_dir,
@@ -176,7 +175,7 @@ fn bits(out: &PathOutputs) -> Vec<u32> {
     b
 }
 
-fn same_bits(a: Vec3, b: Vec3) -> bool {
+pub(super) fn same_bits(a: Vec3, b: Vec3) -> bool {
     a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)
 }
 
@@ -488,118 +487,4 @@ fn outputs_are_identical_for_one_and_three_threads() {
         let three = with_threads(3, || bits(&run(&scene, &objects, &table, &params)));
         assert!(one == three, "object_aware {object_aware}");
     }
-}
-
-#[test]
-fn empty_tables_images_and_bad_sizes_are_handled() {
-    let scene = floor_scene();
-    let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, Material::DIFFUSE_GRAY);
-    let out = run(
-        &scene,
-        &objects,
-        &LightTable { samples: vec![] },
-        &PathParams::default(),
-    );
-    let valid = scene.depth.data.iter().position(|&z| z > 0.0).unwrap();
-    assert_eq!(out.e_r_dir.data[valid], Vec3::ZERO);
-    let empty = Image::filled(0, 0, 0.0);
-    let empty3 = Image::filled(0, 0, Vec3::ZERO);
-    let table = uniform_table(16);
-    let inputs = PathInputs {
-        depth: &empty,
-        normals: &empty3,
-        radiance: &empty3,
-        camera: Pinhole::new(&Intrinsics::PRIMESENSE, 0, 0),
-        camera_to_world: pose(),
-        table: &table,
-        objects: &objects,
-        frame: 0,
-    };
-    sample_path(&inputs, &PathParams::default(), &mut PathOutputs::new(0, 0)).unwrap();
-    let small = Image::filled(3, 2, Vec3::ZERO);
-    let bad = PathInputs {
-        depth: &scene.depth,
-        normals: &small,
-        radiance: &scene.radiance,
-        camera: camera(),
-        ..inputs
-    };
-    let err = sample_path(&bad, &PathParams::default(), &mut PathOutputs::new(W, H))
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("normals is 3x2, depth is 96x72"), "{err}");
-    let params = PathParams {
-        primary: 0,
-        ..Default::default()
-    };
-    assert!(
-        params
-            .check()
-            .unwrap_err()
-            .to_string()
-            .contains("primary is 0")
-    );
-}
-
-#[test]
-fn the_stage_reads_its_products_and_writes_every_output() {
-    let scene = floor_scene();
-    let table = uniform_table(512);
-    let objects = Arc::new(sphere(SPHERE_CENTER, SPHERE_RADIUS, Material::DIFFUSE_GRAY));
-    let params = Params::defaults(PARAMS);
-    let header = Header::new("t", Intrinsics::PRIMESENSE, 0.001);
-    let ports = (INFO.ports)(&params);
-    let ctx = BuildContext {
-        stage_name: "path",
-        params: &params,
-        inputs: &ports
-            .inputs
-            .iter()
-            .map(|p| (p.role.clone(), p.default_product.clone()))
-            .collect(),
-        outputs: &BTreeMap::new(),
-        header: &header,
-        out_dir: std::path::Path::new("."),
-        seed: 3,
-        objects: &objects,
-    };
-    let mut stage = (INFO.build)(&ctx).unwrap();
-    assert_eq!(ports.inputs[0].default_product, "refined_depth");
-    assert_eq!(ports.inputs[3].default_product, "compensated");
-    let rotation = glam::Mat3::from(pose().matrix3).as_dmat3();
-    let pose_record = Pose::from_parts(DVec3::new(0.0, 1.5, -2.0), DQuat::from_mat3(&rotation));
-    let mut frame = Frame::new(7, 0);
-    frame.insert("refined_depth", Product::Depth(scene.depth.clone()));
-    frame.insert("normals", Product::Normals(scene.normals.clone()));
-    frame.insert("compensated", Product::Radiance(scene.radiance.clone()));
-    frame.insert("pose", Product::Pose(pose_record));
-    frame.insert("light_table", Product::LightTable(Arc::new(table.clone())));
-    stage.process(&mut frame).unwrap();
-    let inputs = PathInputs {
-        depth: &scene.depth,
-        normals: &scene.normals,
-        radiance: &scene.radiance,
-        camera: camera(),
-        camera_to_world: Affine3A::from_mat4(pose_record.matrix().as_mat4()),
-        table: &table,
-        objects: &objects,
-        frame: 7,
-    };
-    let mut direct = PathOutputs::new(W, H);
-    let p = PathParams {
-        seed: 3,
-        ..Default::default()
-    };
-    sample_path(&inputs, &p, &mut direct).unwrap();
-    let e = frame.radiance("e_rv_dir").unwrap();
-    assert!(
-        e.data
-            .iter()
-            .zip(&direct.e_rv_dir.data)
-            .all(|(a, b)| same_bits(*a, *b))
-    );
-    for (role, _) in OUTPUTS {
-        assert!(frame.get(role).is_some(), "{role}");
-    }
-    assert_eq!(frame.labels("touched").unwrap().data, direct.touched.data);
 }

@@ -1,0 +1,209 @@
+//! The light and sampling pipeline from the command line: the four irradiance layers
+//! saved as EXR on the synthetic room and on livingroom1 (light from the reconstructed
+//! cloud, no light probe), the eval scores, and determinism across thread counts.
+
+mod common;
+
+use common::{ok, run_in, stdout};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+fn pipeline(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("pipelines")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+/// A small synthetic recording in `dir`.
+fn small_recording(dir: &Path, frames: usize) -> PathBuf {
+    let frames = frames.to_string();
+    ok(run_in(
+        dir,
+        &[
+            "synth", "-o", "s.relume", "--frames", &frames, "--size", "160x120",
+        ],
+    ));
+    dir.join("s.relume")
+}
+
+/// The channels of an EXR file as (name, f32 samples), and its size.
+fn read_exr(path: &Path) -> (usize, Vec<(String, Vec<f32>)>) {
+    use exr::prelude::*;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let layer = image.layer_data;
+    let width = layer.size.width();
+    let channels = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            let samples = match &c.sample_data {
+                FlatSamples::F32(v) => v.clone(),
+                FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
+                FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
+            };
+            (c.name.to_string(), samples)
+        })
+        .collect();
+    (width, channels)
+}
+
+/// Per-pixel channel means (R, G, B averaged) of a saved irradiance layer.
+fn layer(dir: &Path, product: &str, frame: usize) -> Vec<f32> {
+    let (_, channels) = read_exr(&dir.join(product).join(format!("{frame:06}.exr")));
+    let n = channels[0].1.len();
+    (0..n)
+        .map(|i| channels.iter().map(|(_, v)| v[i]).sum::<f32>() / channels.len() as f32)
+        .collect()
+}
+
+/// Bit patterns of every channel of a saved layer.
+fn bits(dir: &Path, product: &str, frame: usize) -> Vec<Vec<u32>> {
+    let (_, channels) = read_exr(&dir.join(product).join(format!("{frame:06}.exr")));
+    channels
+        .iter()
+        .map(|(_, v)| v.iter().map(|x| x.to_bits()).collect())
+        .collect()
+}
+
+/// Checks the saved layers of `frame`: E_RV equals E_R bit for bit wherever no path met
+/// an object, and the objects darken the real pixels they touch (their shadow).
+/// Returns (touched real pixels, mean E_RV / E_R over them).
+fn check_layers(out: &Path, frame: usize) -> (usize, f64) {
+    for (r, rv) in [("e_r_dir", "e_rv_dir"), ("e_r_ind", "e_rv_ind")] {
+        let (r, rv) = (bits(out, r, frame), bits(out, rv, frame));
+        let touched = layer(out, "touched", frame);
+        for (cr, crv) in r.iter().zip(&rv) {
+            for i in (0..cr.len()).filter(|&i| touched[i] == 0.0) {
+                assert_eq!(cr[i], crv[i], "pixel {i}: E_RV differs from E_R untouched");
+            }
+        }
+    }
+    let e_r: Vec<f32> = layer(out, "e_r_dir", frame)
+        .iter()
+        .zip(layer(out, "e_r_ind", frame))
+        .map(|(a, b)| a + b)
+        .collect();
+    let e_rv: Vec<f32> = layer(out, "e_rv_dir", frame)
+        .iter()
+        .zip(layer(out, "e_rv_ind", frame))
+        .map(|(a, b)| a + b)
+        .collect();
+    let mask = layer(out, "mask", frame);
+    let touched = layer(out, "touched", frame);
+    let (mut sum_r, mut sum_rv, mut n) = (0.0f64, 0.0f64, 0usize);
+    for i in 0..e_r.len() {
+        if touched[i] == 1.0 && mask[i] == 1.0 && e_r[i].is_finite() && e_rv[i].is_finite() {
+            sum_r += e_r[i] as f64;
+            sum_rv += e_rv[i] as f64;
+            n += 1;
+        }
+    }
+    (n, sum_rv / sum_r)
+}
+
+const LAYERS: &str = "e_r_dir,e_r_ind,e_rv_dir,e_rv_ind,mask,touched";
+
+#[test]
+fn synthetic_room_saves_four_irradiance_layers_with_the_objects_shadow() {
+    let tmp = tempfile::tempdir().unwrap();
+    small_recording(tmp.path(), 8);
+    let p = pipeline("mixed-reality-sampling.toml");
+    ok(run_in(
+        tmp.path(),
+        &[
+            "replay", "s.relume", "-p", &p, "--out", "o", "--save", LAYERS, "--save-format",
+            "exr",
+        ],
+    ));
+    let out = tmp.path().join("o");
+    for frame in [3, 7] {
+        let (touched, ratio) = check_layers(&out, frame);
+        assert!(touched > 200, "frame {frame}: {touched} touched pixels");
+        assert!(ratio < 0.97, "frame {frame}: E_RV / E_R = {ratio} under the objects");
+    }
+    // The objects are visible: the mask is below 1 on a part of the image.
+    let mask = layer(&out, "mask", 7);
+    let virtual_fraction = mask.iter().map(|&m| 1.0 - m as f64).sum::<f64>() / mask.len() as f64;
+    assert!(
+        (0.02..0.4).contains(&virtual_fraction),
+        "objects cover {virtual_fraction}"
+    );
+}
+
+#[test]
+fn eval_scores_the_light_and_sampling_stages() {
+    let tmp = tempfile::tempdir().unwrap();
+    small_recording(tmp.path(), 15);
+    let p = pipeline("mixed-reality-sampling.toml");
+    let o = ok(run_in(tmp.path(), &["eval", "s.relume", "-p", &p, "--json"]));
+    let report: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let stages = &report["stages"];
+    let importance = &stages["light.importance"];
+    let pdf = importance["pdf_integral"].as_f64().unwrap();
+    assert!((pdf - 1.0).abs() < 1e-3, "{importance}");
+    assert!(importance["irradiance_rel_error"].as_f64().unwrap() < 0.02, "{importance}");
+    let val = &stages["light.val"];
+    assert!(val["sh_irradiance_rel_error"].as_f64().unwrap() < 0.05, "{val}");
+    assert!(val["val_center_drift_m"].as_f64().unwrap() < 0.25, "{val}");
+    let path = &stages["sample.path"];
+    assert_eq!(path["frames_scored"], 1, "{path}");
+    let ratio_rmse = path["ratio_rmse"].as_f64().unwrap();
+    assert!(ratio_rmse > 0.0 && ratio_rmse < 0.3, "{path}");
+    assert!(path["ratio_rmse_alternative"].as_f64().unwrap() > 0.0, "{path}");
+    assert!(path["unbiased_p"].as_f64().unwrap() > 1e-3, "{path}");
+}
+
+#[test]
+fn sampling_products_are_identical_across_thread_counts() {
+    let tmp = tempfile::tempdir().unwrap();
+    small_recording(tmp.path(), 3);
+    let p = pipeline("mixed-reality-sampling.toml");
+    let hashes = |threads: &str| {
+        let mut cmd = common::relume();
+        cmd.args(["replay", "s.relume", "-p", &p, "--hash", "--out", "o"])
+            .current_dir(tmp.path())
+            .env("RAYON_NUM_THREADS", threads);
+        stdout(&ok(cmd.output().unwrap()))
+    };
+    let one = hashes("1");
+    for product in [
+        "environment=",
+        "light_table=",
+        "lights=",
+        "e_rv_dir=",
+        "e_rv_ind=",
+        "val_e_rv_dir=",
+        "real_albedo=",
+    ] {
+        assert!(one.contains(product), "{product} missing from {one}");
+    }
+    assert_eq!(hashes("2"), one);
+}
+
+#[test]
+fn livingroom1_is_lit_from_its_own_cloud_and_the_objects_shade_its_floor() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    common::import_livingroom1(d);
+    let p = pipeline("mixed-reality-sampling-livingroom1.toml");
+    ok(run_in(
+        d,
+        &[
+            "replay", "lr.relume", "-p", &p, "--frames", "0..10", "--out", "o", "--save",
+            LAYERS, "--save-format", "exr",
+        ],
+    ));
+    let (touched, ratio) = check_layers(&d.join("o"), 9);
+    assert!(touched > 1000, "{touched} touched pixels");
+    assert!(ratio < 0.97, "E_RV / E_R = {ratio} under the objects");
+}

@@ -121,7 +121,15 @@ fn synthetic_room_saves_four_irradiance_layers_with_the_objects_shadow() {
     ok(run_in(
         tmp.path(),
         &[
-            "replay", "s.relume", "-p", &p, "--out", "o", "--save", LAYERS, "--save-format",
+            "replay",
+            "s.relume",
+            "-p",
+            &p,
+            "--out",
+            "o",
+            "--save",
+            LAYERS,
+            "--save-format",
             "exr",
         ],
     ));
@@ -129,7 +137,10 @@ fn synthetic_room_saves_four_irradiance_layers_with_the_objects_shadow() {
     for frame in [3, 7] {
         let (touched, ratio) = check_layers(&out, frame);
         assert!(touched > 200, "frame {frame}: {touched} touched pixels");
-        assert!(ratio < 0.97, "frame {frame}: E_RV / E_R = {ratio} under the objects");
+        assert!(
+            ratio < 0.97,
+            "frame {frame}: E_RV / E_R = {ratio} under the objects"
+        );
     }
     // The objects are visible: the mask is below 1 on a part of the image.
     let mask = layer(&out, "mask", 7);
@@ -145,21 +156,33 @@ fn eval_scores_the_light_and_sampling_stages() {
     let tmp = tempfile::tempdir().unwrap();
     small_recording(tmp.path(), 15);
     let p = pipeline("mixed-reality-sampling.toml");
-    let o = ok(run_in(tmp.path(), &["eval", "s.relume", "-p", &p, "--json"]));
+    let o = ok(run_in(
+        tmp.path(),
+        &["eval", "s.relume", "-p", &p, "--json"],
+    ));
     let report: Value = serde_json::from_str(&stdout(&o)).unwrap();
     let stages = &report["stages"];
     let importance = &stages["light.importance"];
     let pdf = importance["pdf_integral"].as_f64().unwrap();
     assert!((pdf - 1.0).abs() < 1e-3, "{importance}");
-    assert!(importance["irradiance_rel_error"].as_f64().unwrap() < 0.02, "{importance}");
+    assert!(
+        importance["irradiance_rel_error"].as_f64().unwrap() < 0.02,
+        "{importance}"
+    );
     let val = &stages["light.val"];
-    assert!(val["sh_irradiance_rel_error"].as_f64().unwrap() < 0.05, "{val}");
+    assert!(
+        val["sh_irradiance_rel_error"].as_f64().unwrap() < 0.05,
+        "{val}"
+    );
     assert!(val["val_center_drift_m"].as_f64().unwrap() < 0.25, "{val}");
     let path = &stages["sample.path"];
     assert_eq!(path["frames_scored"], 1, "{path}");
     let ratio_rmse = path["ratio_rmse"].as_f64().unwrap();
     assert!(ratio_rmse > 0.0 && ratio_rmse < 0.3, "{path}");
-    assert!(path["ratio_rmse_alternative"].as_f64().unwrap() > 0.0, "{path}");
+    assert!(
+        path["ratio_rmse_alternative"].as_f64().unwrap() > 0.0,
+        "{path}"
+    );
     assert!(path["unbiased_p"].as_f64().unwrap() > 1e-3, "{path}");
 }
 
@@ -199,11 +222,21 @@ fn livingroom1_is_lit_from_its_own_cloud_and_the_objects_shade_its_floor() {
     ok(run_in(
         d,
         &[
-            "replay", "lr.relume", "-p", &p, "--frames", "0..10", "--out", "o", "--save",
-            LAYERS, "--save-format", "exr",
+            "replay",
+            "lr.relume",
+            "-p",
+            &p,
+            "--frames",
+            "0..6",
+            "--out",
+            "o",
+            "--save",
+            LAYERS,
+            "--save-format",
+            "exr",
         ],
     ));
-    let (touched, ratio) = check_layers(&d.join("o"), 9);
+    let (touched, ratio) = check_layers(&d.join("o"), 5);
     assert!(touched > 1000, "{touched} touched pixels");
     assert!(ratio < 0.97, "E_RV / E_R = {ratio} under the objects");
 }

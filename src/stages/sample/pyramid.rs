@@ -122,12 +122,23 @@ impl DepthPyramid {
         self.texels[l.index(x, y)]
     }
 
-    /// The texel (`x`, `y`) of `level` (one of [`DepthPyramid::levels`]), for the
-    /// tracer's inner loop: coordinates must be within the border (only slice indexing
-    /// checks).
+    /// The texel (`x`, `y`) of `level` without a bounds check, for the tracer's inner
+    /// loop.
+    ///
+    /// # Safety
+    /// `level` is one of [`DepthPyramid::levels`] and x in -1..=width, y in -1..=height
+    /// of that level (checked in debug builds).
     #[inline(always)]
-    pub(crate) fn texel_in(&self, level: &PyramidLevel, x: i32, y: i32) -> [f32; 2] {
-        self.texels[level.index(x, y)]
+    pub(crate) unsafe fn texel_unchecked(&self, level: &PyramidLevel, x: i32, y: i32) -> [f32; 2] {
+        debug_assert!(
+            (-1..=level.width as i32).contains(&x) && (-1..=level.height as i32).contains(&y),
+            "texel ({x}, {y}) outside {}x{} and its border",
+            level.width,
+            level.height
+        );
+        // SAFETY: the caller keeps (x, y) within the level's border, whose texels are
+        // all stored.
+        unsafe { *self.texels.get_unchecked(level.index(x, y)) }
     }
 
     /// The levels, finest first.

@@ -14,8 +14,8 @@
 //! of 2^L x 2^L pixels (and its neighbour across the minor axis, which they cross at
 //! most once) are skipped whole when the ray is in front of the tiles' minimum depth,
 //! behind their maximum by more than the thickness, or the tiles are empty; otherwise
-//! the march descends a level, and after each skip it climbs again (one level, or as
-//! many as the next sample starts a tile of). The skip tests are conservative in
+//! the march descends a level, and after each skip it climbs again, to the largest tile
+//! the next sample starts. The skip tests are conservative in
 //! floating point too (the ray's 1/z is monotonic along the samples, and products and
 //! sums round monotonically), so the hierarchical march returns exactly the first hit
 //! of the sample-by-sample march, [`ScreenTracer::trace_linear`]: the same pixel and
@@ -178,6 +178,8 @@ fn ceil_i32(x: f32) -> i32 {
 impl<'a> ScreenTracer<'a> {
     /// A tracer over `depth` (metres, 0 = missing) seen by `camera` placed by
     /// `camera_to_world`; builds the depth pyramid (O(pixels)).
+    ///
+    /// Panics when `camera` is not the size of `depth` (a programming error).
     pub fn new(
         depth: &'a DepthImage,
         camera: Pinhole,
@@ -195,8 +197,8 @@ impl<'a> ScreenTracer<'a> {
 
     /// A tracer over `depth` with its prebuilt `pyramid` (built from the same map).
     ///
-    /// Panics when the pyramid's finest level is not the size of `depth` (a
-    /// programming error).
+    /// Panics when the pyramid's finest level or `camera` is not the size of `depth`
+    /// (a programming error).
     pub fn with_pyramid(
         depth: &'a DepthImage,
         pyramid: &'a DepthPyramid,
@@ -226,6 +228,11 @@ impl<'a> ScreenTracer<'a> {
         camera_to_world: Affine3A,
         params: TraceParams,
     ) -> Self {
+        assert_eq!(
+            (camera.width, camera.height),
+            (depth.width, depth.height),
+            "the camera and the depth map differ in size"
+        );
         let skip = params.skip_pixels;
         ScreenTracer {
             depth,
@@ -437,9 +444,9 @@ impl<'a> ScreenTracer<'a> {
     /// (a tile along the major axis: the samples' minor pixels cross into at most one
     /// neighbouring tile, which is tested with it) and skips them when the ray is in
     /// front of the tiles' nearest surface, behind their farthest one by more than the
-    /// thickness, or the tiles are empty; the march then climbs (a level, or more when
-    /// the next sample starts a larger tile), else it descends, and a sample not
-    /// skipped at level 0 is a hit.
+    /// thickness, or the tiles are empty; the march then climbs to the largest tile the
+    /// next sample starts (staying at this level when it starts none larger), else it
+    /// descends, and a sample not skipped at level 0 is a hit.
     #[inline]
     fn march<const TRANSPOSED: bool, const FORWARD: bool>(
         &self,
@@ -460,7 +467,10 @@ impl<'a> ScreenTracer<'a> {
         let (mut a, mut level) = (m.first, 0i32);
         loop {
             *iterations += 1;
-            let lv = &levels[level as usize];
+            debug_assert!((0..=top).contains(&level));
+            // SAFETY: `level` stays in 0..=top: it climbs at most to `top` and descends
+            // only above level 0.
+            let lv = unsafe { levels.get_unchecked(level as usize) };
             let inv_a = m.inv_depth(a);
             let ta = a >> level;
             let tb = m.minor_index(a) >> level;
@@ -473,8 +483,16 @@ impl<'a> ScreenTracer<'a> {
             let tb_end = m.minor_index(ae) >> level;
             let inv_e = m.inv_depth(ae);
             let ((x0, y0), (x1, y1)) = (xy(ta, tb), xy(ta, tb_end));
-            let t0 = self.pyramid.texel_in(lv, x0, y0);
-            let t1 = self.pyramid.texel_in(lv, x1, y1);
+            // SAFETY: the samples' major coordinates lie in [0, extent) (`setup` clips
+            // them to the image, whose size is the pyramid's: checked in `build`), so
+            // their tiles lie in [0, level extent); minor indices are clamped to
+            // -1..=extent, whose tiles lie within the level's border.
+            let (t0, t1) = unsafe {
+                (
+                    self.pyramid.texel_unchecked(lv, x0, y0),
+                    self.pyramid.texel_unchecked(lv, x1, y1),
+                )
+            };
             // Plain comparisons (none of these is NaN) compile to one instruction each.
             let zmin = if t0[0] < t1[0] { t0[0] } else { t1[0] };
             let zmax = if t0[1] > t1[1] { t0[1] } else { t1[1] };
@@ -493,10 +511,14 @@ impl<'a> ScreenTracer<'a> {
             // A branch, not a select: when predicted, the next step starts early.
             if skip {
                 a = ae + step;
-                // Climb at least one level, and as far as the new sample starts a
-                // tile along the march.
+                // Climb as far as the new sample starts a tile along the march. After a
+                // skip it starts a tile of this level at least; where it starts no
+                // larger one (it enters the second half of its parent tile), the parent
+                // would test the same samples against a looser bound, so the march
+                // stays at this level.
                 let aligned = if FORWARD { a } else { a + 1 }.trailing_zeros() as i32;
-                level = (level + 1).max(aligned).min(top);
+                debug_assert!(aligned >= level, "a skip ends at a tile boundary");
+                level = aligned.min(top);
             } else {
                 level -= 1;
             }

@@ -9,8 +9,10 @@
 //! - `sample.path/plain` and `sample.path/object_aware`: the sampling math alone, with
 //!   the stage's defaults (16 direct + 16 indirect samples per pixel), the object-aware
 //!   scheme off and on.
-//! - `light.val/update`: one warm-started update at 16 lights (the stage's work whenever
-//!   the environment changes).
+//! - `light.val/update_warm` and `light.val/update_cold`: one update at 16 lights,
+//!   warm-started on an unchanged map and from a cold start (the stage's work whenever
+//!   the environment changes lies between the two).
+//! - `light.impostor/build`: the cube map splatted from the frame's cloud.
 //! - `light.importance/build`: the 4096-sample table of the frame's environment.
 //!
 //! `RELUME_BENCH_PIPELINE=FILE cargo bench --bench sampling` measures another pipeline.
@@ -18,7 +20,7 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Affine3A;
 use relume::graph::{Frame, FrameSource, Pipeline, Product, Registry};
-use relume::light::{LightTable, ValBuilder, ValParams};
+use relume::light::{ImpostorBuilder, ImpostorParams, LightTable, ValBuilder, ValParams};
 use relume::pinhole::Pinhole;
 use relume::recording::synth::{SynthConfig, generate};
 use relume::recording::{Replay, ReplayOptions};
@@ -141,8 +143,23 @@ fn bench_sampling(c: &mut Criterion) {
             .clone();
         let mut builder = ValBuilder::new(ValParams::default());
         builder.update(&direct, &indirect);
-        group.bench_function("light.val/update", |b| {
+        // Warm-started on the same map (static light: k-means is already at its fixed
+        // point) and from a cold start (k-means++ seeding, up to 100 iterations): the
+        // per-frame cost under changing light lies between the two.
+        group.bench_function("light.val/update_warm", |b| {
             b.iter(|| builder.update(&direct, &indirect))
+        });
+        group.bench_function("light.val/update_cold", |b| {
+            b.iter(|| ValBuilder::new(ValParams::default()).update(&direct, &indirect))
+        });
+    }
+    if let Some(spec) = pipeline.stages.iter().find(|s| s.kind == "light.impostor") {
+        let cloud = done.cloud(&spec.inputs["cloud"]).unwrap().clone();
+        let center = pipeline.objects.bounds().center();
+        let mut builder = ImpostorBuilder::new(ImpostorParams::default()).unwrap();
+        eprintln!("light.impostor: a cloud of {} samples", cloud.len());
+        group.bench_function("light.impostor/build", |b| {
+            b.iter(|| builder.build(&cloud, center).unwrap())
         });
     }
     if let Some(spec) = pipeline

@@ -240,3 +240,15 @@ fn livingroom1_is_lit_from_its_own_cloud_and_the_objects_shade_its_floor() {
     assert!(touched > 1000, "{touched} touched pixels");
     assert!(ratio < 0.97, "E_RV / E_R = {ratio} under the objects");
 }
+
+#[test]
+fn validate_reports_the_pipelines_virtual_objects() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = pipeline("mixed-reality-sampling.toml");
+    let text = stdout(&ok(run_in(tmp.path(), &["validate", &p])));
+    // A torus of 64 x 32 segments (4096 triangles) and a sphere of 48 segments (2208).
+    assert!(
+        text.contains("objects: 6304 triangles in 2 materials"),
+        "{text}"
+    );
+}

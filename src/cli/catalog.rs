@@ -90,5 +90,20 @@ pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
             fb.product, pipeline.stages[fb.producer].name, pipeline.stages[fb.consumer].name
         );
     }
+    let objects = &pipeline.objects;
+    if !objects.is_empty() {
+        let b = objects.bounds();
+        println!(
+            "  objects: {} triangles in {} materials, bounds [{:.3}, {:.3}, {:.3}] .. [{:.3}, {:.3}, {:.3}] m",
+            objects.triangles.len(),
+            objects.materials.len(),
+            b.min.x,
+            b.min.y,
+            b.min.z,
+            b.max.x,
+            b.max.y,
+            b.max.z
+        );
+    }
     Ok(0)
 }

@@ -8,63 +8,27 @@
 //! Each stage is measured on a copy of the frame as it arrives at that stage, so the
 //! figures are the stage's own cost, free of the pipeline's thread contention.
 
+mod common;
+
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Vec3;
-use relume::graph::{EnvCloud, Frame, FrameSource, Pipeline, Product, Registry};
+use relume::graph::{EnvCloud, Frame, Product};
 use relume::pinhole::Pinhole;
-use relume::recording::synth::{SynthConfig, generate};
-use relume::recording::{Replay, ReplayOptions};
 use relume::rng;
-use std::collections::BTreeMap;
-use std::path::Path;
 use std::sync::Arc;
 
 /// Frames replayed before the measured one.
 const WARM_FRAMES: usize = 12;
 
 fn bench_acquisition(c: &mut Criterion) {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("synth.relume");
-    let config = SynthConfig {
-        frames: WARM_FRAMES + 1,
-        ..SynthConfig::default()
-    };
-    generate(&config, &path).unwrap();
-    let replay = Replay::open(&path, ReplayOptions::default()).unwrap();
-    let registry = Registry::builtin();
-    // RELUME_BENCH_PIPELINE measures another pipeline the same way.
-    let pipeline_path = std::env::var_os("RELUME_BENCH_PIPELINE")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/acquisition.toml")
-        });
-    let pipeline = Pipeline::load(&pipeline_path, &registry).unwrap();
-    let header = replay.recording.header().clone();
-    let mut stages = pipeline
-        .build(&registry, &header, dir.path(), 1)
-        .map_err(|(s, e)| format!("{s}: {e}"))
-        .unwrap();
-
-    // Replays frames in this thread, stage after stage, feeding `product@prev` inputs
-    // from the previous frame; keeps the last frame as each stage received it.
-    let mut previous: BTreeMap<String, Arc<Product>> = BTreeMap::new();
-    let mut arriving = Vec::new();
-    for n in 0..=WARM_FRAMES {
-        let mut frame = replay.read(n).unwrap();
-        for (name, product) in &previous {
-            frame.insert_shared(&format!("{name}@prev"), product.clone());
-        }
-        arriving.clear();
-        for stage in stages.iter_mut() {
-            arriving.push(frame.clone());
-            stage.process(&mut frame).unwrap();
-        }
-        previous = pipeline
-            .feedback
-            .iter()
-            .filter_map(|f| Some((f.product.clone(), frame.get_shared(&f.product)?.clone())))
-            .collect();
-    }
+    let common::WarmedUp {
+        pipeline,
+        header,
+        mut stages,
+        arriving,
+        _dir,
+        ..
+    } = common::warm_up("acquisition.toml", WARM_FRAMES + 1);
 
     let mut group = c.benchmark_group("acquisition_640x480");
     group.sample_size(20);

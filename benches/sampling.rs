@@ -17,66 +17,27 @@
 //!
 //! `RELUME_BENCH_PIPELINE=FILE cargo bench --bench sampling` measures another pipeline.
 
+mod common;
+
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Affine3A;
-use relume::graph::{Frame, FrameSource, Pipeline, Product, Registry};
+use relume::graph::Frame;
 use relume::light::{ImpostorBuilder, ImpostorParams, LightTable, ValBuilder, ValParams};
 use relume::pinhole::Pinhole;
-use relume::recording::synth::{SynthConfig, generate};
-use relume::recording::{Replay, ReplayOptions};
 use relume::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
-use std::collections::BTreeMap;
-use std::path::Path;
-use std::sync::Arc;
 
 /// Frames replayed before the measured one.
 const WARM_FRAMES: usize = 12;
 
 fn bench_sampling(c: &mut Criterion) {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("synth.relume");
-    let config = SynthConfig {
-        frames: WARM_FRAMES + 1,
-        ..SynthConfig::default()
-    };
-    generate(&config, &path).unwrap();
-    let replay = Replay::open(&path, ReplayOptions::default()).unwrap();
-    let registry = Registry::builtin();
-    let pipeline_path = std::env::var_os("RELUME_BENCH_PIPELINE")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/mixed-reality-sampling.toml")
-        });
-    let pipeline = Pipeline::load(&pipeline_path, &registry).unwrap();
-    let header = replay.recording.header().clone();
-    let mut stages = pipeline
-        .build(&registry, &header, dir.path(), 1)
-        .map_err(|(s, e)| format!("{s}: {e}"))
-        .unwrap();
-
-    // Replays frames in this thread, feeding `product@prev` inputs from the previous
-    // frame; keeps the last frame as each stage received it.
-    let mut previous: BTreeMap<String, Arc<Product>> = BTreeMap::new();
-    let mut arriving = Vec::new();
-    let mut last = None;
-    for n in 0..=WARM_FRAMES {
-        let mut frame = replay.read(n).unwrap();
-        for (name, product) in &previous {
-            frame.insert_shared(&format!("{name}@prev"), product.clone());
-        }
-        arriving.clear();
-        for stage in stages.iter_mut() {
-            arriving.push(frame.clone());
-            stage.process(&mut frame).unwrap();
-        }
-        previous = pipeline
-            .feedback
-            .iter()
-            .filter_map(|f| Some((f.product.clone(), frame.get_shared(&f.product)?.clone())))
-            .collect();
-        last = Some(frame);
-    }
-    let done = last.expect("at least one frame");
+    let common::WarmedUp {
+        pipeline,
+        header,
+        mut stages,
+        arriving,
+        done,
+        _dir,
+    } = common::warm_up("mixed-reality-sampling.toml", WARM_FRAMES + 1);
 
     let mut group = c.benchmark_group("sampling_640x480");
     group.sample_size(10);

@@ -152,13 +152,7 @@ fn acquisition_products_are_identical_across_thread_counts() {
     let tmp = tempfile::tempdir().unwrap();
     small_recording(tmp.path(), 5);
     let p = acquisition();
-    let hashes = |threads: &str| {
-        let mut cmd = common::relume();
-        cmd.args(["replay", "s.relume", "-p", &p, "--hash", "--out", "o"])
-            .current_dir(tmp.path())
-            .env("RAYON_NUM_THREADS", threads);
-        stdout(&ok(cmd.output().unwrap()))
-    };
+    let hashes = |threads: &str| common::replay_hashes(tmp.path(), "s.relume", &p, threads);
     let one = hashes("1");
     assert_eq!(one.lines().count(), 5);
     for product in [

@@ -191,13 +191,7 @@ fn sampling_products_are_identical_across_thread_counts() {
     let tmp = tempfile::tempdir().unwrap();
     small_recording(tmp.path(), 3);
     let p = pipeline("mixed-reality-sampling.toml");
-    let hashes = |threads: &str| {
-        let mut cmd = common::relume();
-        cmd.args(["replay", "s.relume", "-p", &p, "--hash", "--out", "o"])
-            .current_dir(tmp.path())
-            .env("RAYON_NUM_THREADS", threads);
-        stdout(&ok(cmd.output().unwrap()))
-    };
+    let hashes = |threads: &str| common::replay_hashes(tmp.path(), "s.relume", &p, threads);
     let one = hashes("1");
     for product in [
         "environment=",

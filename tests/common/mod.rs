@@ -45,6 +45,21 @@ pub fn run_in(cwd: &std::path::Path, args: &[&str]) -> Output {
         .expect("run relume")
 }
 
+/// `relume replay REC -p PIPELINE --hash` in `cwd` on a rayon pool of `threads`
+/// threads: one digest line per frame and product.
+pub fn replay_hashes(
+    cwd: &std::path::Path,
+    recording: &str,
+    pipeline: &str,
+    threads: &str,
+) -> String {
+    let mut cmd = relume();
+    cmd.args(["replay", recording, "-p", pipeline, "--hash", "--out", "o"])
+        .current_dir(cwd)
+        .env("RAYON_NUM_THREADS", threads);
+    stdout(&ok(cmd.output().expect("run relume")))
+}
+
 /// Imports the shared livingroom1 (Redwood layout) into `dir/lr.relume`.
 pub fn import_livingroom1(dir: &std::path::Path) {
     let data = data_dir().join("livingroom1");

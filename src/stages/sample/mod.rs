@@ -10,3 +10,23 @@ pub mod path;
 pub mod pyramid;
 pub mod ssrt;
 pub mod val;
+
+#[cfg(test)]
+mod tests {
+    use crate::graph::{Params, Port};
+
+    fn outputs(info: &crate::graph::StageInfo) -> Vec<Port> {
+        (info.ports)(&Params::defaults(info.params)).outputs
+    }
+
+    /// `sample.val` stands in for `sample.path` with a one-line change only if it writes
+    /// the same roles, under the same default names and kinds (all but `touched`).
+    #[test]
+    fn sample_val_writes_the_roles_of_sample_path() {
+        let path = outputs(&super::path::INFO);
+        let val = outputs(&super::val::INFO);
+        let shared: Vec<&Port> = path.iter().filter(|p| p.role != "touched").collect();
+        assert_eq!(shared.len(), 10);
+        assert_eq!(shared, val.iter().collect::<Vec<_>>());
+    }
+}

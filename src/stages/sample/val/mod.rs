@@ -49,7 +49,7 @@ use crate::raster::{DepthImage, Image, ScalarImage, Vec3Image, depth_is_valid};
 use crate::recording::Intrinsics;
 use glam::{Affine3A, Vec2, Vec3, Vec3A};
 use pixel::{PixelContext, sampling_of};
-use raster::{DepthTarget, NO_ID, raster_view_triangle};
+use raster::{DepthTarget, NO_ID, ScreenTriangle, raster_screen_triangle, screen_triangles};
 use rayon::prelude::*;
 use shade::{Biases, Maps, PreparedLight, Sh9Irradiance};
 use shadow::{ShadowFrustum, TILE, Tile, real_shadow_map, tile_of, virtual_shadow_map};
@@ -220,6 +220,8 @@ pub struct ValRenderer {
     real_normals: Vec<Vec3A>,
     camera_depth: Vec<f32>,
     camera_ids: Vec<u32>,
+    /// The virtual triangles clipped and projected into the camera.
+    screen: Vec<ScreenTriangle>,
     /// Bounding spheres of the real points per tile (row-major tile grid).
     tiles: Vec<Option<Tile>>,
     /// Per tile, bit j set when the tile's real points may be inside light j's frustum.
@@ -229,6 +231,9 @@ pub struct ValRenderer {
 
 /// The near plane of the camera raster, metres.
 const CAMERA_NEAR: f32 = 1e-3;
+
+/// Rows per band of the parallel camera raster.
+const RASTER_BAND_ROWS: usize = 16;
 
 impl ValRenderer {
     /// Computes every output for one frame (see the module docs for the model).
@@ -352,8 +357,10 @@ impl ValRenderer {
             });
     }
 
-    /// The nearest virtual triangle per pixel centre (sequential over triangles; the
-    /// objects cover a small part of the view).
+    /// The nearest virtual triangle per pixel centre: the triangles are clipped and
+    /// projected once, then rasterized in parallel over bands of rows, each band taking
+    /// every triangle in index order (so ties resolve as in one sequential pass and the
+    /// result does not depend on the thread count).
     fn camera_raster(&mut self, inputs: &ValInputs) {
         let n = inputs.depth.len();
         self.camera_depth.clear();
@@ -365,17 +372,33 @@ impl ValRenderer {
         }
         let to_camera = inputs.camera_to_world.inverse();
         let c = inputs.camera;
-        let mut target = DepthTarget {
-            width: c.width as usize,
-            height: c.height as usize,
-            depth: &mut self.camera_depth,
-            ids: Some(&mut self.camera_ids),
-        };
         let project = |p: Vec3| Vec2::new(c.fx * p.x / p.z + c.cx, c.fy * p.y / p.z + c.cy);
+        self.screen.clear();
         for (i, tri) in inputs.objects.triangles.iter().enumerate() {
             let view = tri.vertices.map(|v| to_camera.transform_point3(v));
-            raster_view_triangle(&mut target, &view, CAMERA_NEAR, project, i as u32);
+            screen_triangles(&view, CAMERA_NEAR, project, i as u32, |t| {
+                self.screen.push(t)
+            });
         }
+        let (width, height) = (c.width as usize, c.height as usize);
+        let band = RASTER_BAND_ROWS * width.max(1);
+        let screen = &self.screen;
+        self.camera_depth
+            .par_chunks_mut(band)
+            .zip(self.camera_ids.par_chunks_mut(band))
+            .enumerate()
+            .for_each(|(b, (depth, ids))| {
+                let mut target = DepthTarget {
+                    width,
+                    height,
+                    first_row: b * RASTER_BAND_ROWS,
+                    depth,
+                    ids: Some(ids),
+                };
+                for &(tri, id) in screen {
+                    raster_screen_triangle(&mut target, tri, id);
+                }
+            });
     }
 
     /// Bounding spheres of the real points per TILE x TILE block.

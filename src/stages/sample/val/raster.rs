@@ -10,13 +10,20 @@ use glam::{Vec2, Vec3};
 /// No triangle covers the pixel.
 pub(crate) const NO_ID: u32 = u32::MAX;
 
-/// A depth buffer (view-space z, `INFINITY` = empty) with optional triangle ids.
+/// A depth buffer (view-space z, `INFINITY` = empty) with optional triangle ids: rows
+/// `first_row..first_row + depth.len() / width` of a `width` x `height` image (a band,
+/// so that bands can be rasterized in parallel; the pixels written do not depend on
+/// the banding).
 pub(crate) struct DepthTarget<'a> {
     pub width: usize,
     pub height: usize,
+    pub first_row: usize,
     pub depth: &'a mut [f32],
     pub ids: Option<&'a mut [u32]>,
 }
+
+/// A triangle ready to rasterize: (pixel position, 1/z) per vertex, and its id.
+pub(crate) type ScreenTriangle = ([(Vec2, f32); 3], u32);
 
 /// Clips a view-space triangle (z forward) to z >= `near` (Sutherland-Hodgman with one
 /// plane): the clipped convex polygon's vertices in `out`, and how many (0, 3 or 4).
@@ -48,6 +55,20 @@ pub(crate) fn raster_view_triangle(
     project: impl Fn(Vec3) -> Vec2,
     id: u32,
 ) {
+    screen_triangles(view, near, project, id, |t| {
+        raster_screen_triangle(target, t.0, t.1)
+    });
+}
+
+/// Clips a view-space triangle at `near` and projects it with `project`: the one or
+/// two screen triangles of [`raster_view_triangle`], in its order, passed to `emit`.
+pub(crate) fn screen_triangles(
+    view: &[Vec3; 3],
+    near: f32,
+    project: impl Fn(Vec3) -> Vec2,
+    id: u32,
+    mut emit: impl FnMut(ScreenTriangle),
+) {
     let mut polygon = [Vec3::ZERO; 4];
     let n = clip_near(view, near, &mut polygon);
     if n < 3 {
@@ -55,7 +76,7 @@ pub(crate) fn raster_view_triangle(
     }
     let screen = polygon.map(|p| (project(p), 1.0 / p.z));
     for k in 1..n - 1 {
-        raster_screen_triangle(target, [screen[0], screen[k], screen[k + 1]], id);
+        emit(([screen[0], screen[k], screen[k + 1]], id));
     }
 }
 
@@ -66,7 +87,7 @@ fn edge(a: Vec2, b: Vec2, p: Vec2) -> f32 {
 }
 
 /// Rasterizes one screen-space triangle given as (pixel position, 1/z) per vertex.
-fn raster_screen_triangle(target: &mut DepthTarget, v: [(Vec2, f32); 3], id: u32) {
+pub(crate) fn raster_screen_triangle(target: &mut DepthTarget, v: [(Vec2, f32); 3], id: u32) {
     let [(s0, iz0), (s1, iz1), (s2, iz2)] = v;
     let area = edge(s0, s1, s2);
     if area.is_nan() || area.abs() <= 1e-12 {
@@ -84,8 +105,12 @@ fn raster_screen_triangle(target: &mut DepthTarget, v: [(Vec2, f32); 3], id: u32
     if !(x0 <= x1 && y0 <= y1) {
         return;
     }
+    // The rows of the band held by the target.
+    let rows = target.depth.len() / target.width.max(1);
+    let first = (y0 as usize).max(target.first_row);
+    let end = (y1 as usize + 1).min(target.first_row + rows);
     let inv_area = 1.0 / area;
-    for y in y0 as usize..=y1 as usize {
+    for y in first..end {
         for x in x0 as usize..=x1 as usize {
             let p = Vec2::new(x as f32, y as f32);
             let b0 = edge(s1, s2, p) * inv_area;
@@ -99,7 +124,7 @@ fn raster_screen_triangle(target: &mut DepthTarget, v: [(Vec2, f32); 3], id: u32
                 continue;
             }
             let z = 1.0 / inv_z;
-            let i = y * target.width + x;
+            let i = (y - target.first_row) * target.width + x;
             if z < target.depth[i] {
                 target.depth[i] = z;
                 if let Some(ids) = target.ids.as_deref_mut() {
@@ -118,6 +143,7 @@ mod tests {
         DepthTarget {
             width: 8,
             height: 8,
+            first_row: 0,
             depth,
             ids: Some(ids),
         }

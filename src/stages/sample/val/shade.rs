@@ -116,6 +116,16 @@ pub(crate) fn shade_point(
                 let base = j * maps.stride;
                 let z_virtual = maps.data[base + t];
                 let z_real = maps.data[base + maps.texels + t];
+                // The slope terms below are never negative, so a texel that passes both
+                // tests without them passes them with them (the same comparisons, so the
+                // same bits): most receivers skip the sqrt and divisions.
+                let virtual_may_occlude = z_virtual < l.z - biases.virtual_bias;
+                let real_may_occlude = z_real < l.z - biases.real_bias;
+                if biases.slope >= 0.0 && !virtual_may_occlude && !real_may_occlude {
+                    e_r += e;
+                    e_rv += e;
+                    continue;
+                }
                 // tan of the angle of incidence, with cos clamped at 0.1.
                 let cos = (n.dot(v) / r2.sqrt()).clamp(0.1, 1.0);
                 let tan = (1.0 - cos * cos).sqrt() / cos;

@@ -127,6 +127,7 @@ pub(crate) fn virtual_shadow_map(frustum: &ShadowFrustum, scene: &VirtualScene, 
     let mut target = DepthTarget {
         width: frustum.size,
         height: frustum.size,
+        first_row: 0,
         depth: map,
         ids: None,
     };

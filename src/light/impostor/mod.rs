@@ -31,6 +31,8 @@
 
 use super::EnvMap;
 use crate::graph::EnvCloud;
+// Push-pull hole filling shares the G-buffer's bilinear upsampling taps.
+use crate::stages::gbuffer::push_pull::taps;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -481,22 +483,6 @@ fn ceil_non_negative(x: f32) -> usize {
 fn offer(texel: &AtomicU64, key: u64) {
     if key < texel.load(Ordering::Relaxed) {
         texel.fetch_min(key, Ordering::Relaxed);
-    }
-}
-
-/// The two coarse neighbours of fine index `x` along one axis with their bilinear
-/// weights (3/4 for the parent, 1/4 for the next one on the side of `x`, 0 outside).
-#[inline]
-fn taps(x: usize, n: usize) -> [(usize, f32); 2] {
-    let parent = x / 2;
-    let side = if x % 2 == 0 {
-        parent.checked_sub(1)
-    } else {
-        Some(parent + 1).filter(|&s| s < n)
-    };
-    match side {
-        Some(s) => [(parent, 0.75), (s, 0.25)],
-        None => [(parent, 0.75), (parent, 0.0)],
     }
 }
 

@@ -89,7 +89,7 @@ impl Sum {
 /// weights (3/4 for the parent, 1/4 for the next one on the side of `x`); a neighbour
 /// outside [0, n) gets weight 0 (its index is clamped).
 #[inline]
-fn taps(x: usize, n: usize) -> [(usize, f32); 2] {
+pub(crate) fn taps(x: usize, n: usize) -> [(usize, f32); 2] {
     let parent = x / 2;
     let side = if x % 2 == 0 {
         parent.checked_sub(1)

@@ -26,7 +26,7 @@ mod tests {
         let path = outputs(&super::path::INFO);
         let val = outputs(&super::val::INFO);
         let shared: Vec<&Port> = path.iter().filter(|p| p.role != "touched").collect();
-        assert_eq!(shared.len(), 10);
+        assert_eq!(shared.len(), 11);
         assert_eq!(shared, val.iter().collect::<Vec<_>>());
     }
 }

@@ -28,6 +28,7 @@ pub struct PixelResult {
     pub e_rv_ind: Vec3,
     pub mask: f32,
     pub k_v: Vec3,
+    pub exponent: f32,
     pub world_position: Vec3,
     pub world_normal: Vec3,
     pub direct_min_distance: f32,
@@ -152,7 +153,7 @@ impl<'a> Kernel<'a> {
             touched: false,
             bounces: 0,
         };
-        let (mut virtual_count, mut albedo) = (0u32, Vec3::ZERO);
+        let (mut virtual_count, mut albedo, mut exponent) = (0u32, Vec3::ZERO, 0.0f32);
         let (mut surfaces, mut position, mut normal) = (0u32, Vec3::ZERO, Vec3::ZERO);
         let primary_stream = rng.stream(StreamId::Primary);
         let direct_stream = rng.stream(StreamId::Direct);
@@ -184,6 +185,7 @@ impl<'a> Kernel<'a> {
                 Some((hit, view)) => {
                     virtual_count += 1;
                     albedo += hit.material.albedo;
+                    exponent += hit.material.exponent;
                     surfaces += 1;
                     position += hit.position;
                     normal += hit.normal;
@@ -254,6 +256,11 @@ impl<'a> Kernel<'a> {
                 albedo / virtual_count as f32
             } else {
                 Vec3::ZERO
+            },
+            exponent: if virtual_count > 0 {
+                exponent / virtual_count as f32
+            } else {
+                0.0
             },
             world_position: if any_surface {
                 position / surfaces as f32

@@ -9,7 +9,8 @@
 //!   along each is the pixel's depth (one per pixel); a primary is virtual when an
 //!   object is hit nearer than it. The mask M is the fraction of real primaries (1 where
 //!   the pixel has neither depth nor an object). `k_v` is the mean albedo of the virtual
-//!   primaries (0 where none); `world_position` / `world_normal` are the means over
+//!   primaries (0 where none), `exponent` their mean Phong exponent (0 where none or
+//!   diffuse; the filter's bandwidths need it); `world_position` / `world_normal` are the means over
 //!   primaries of the visible surface (world space; the normal renormalized).
 //! - **E_R** is always estimated at the real shading point (the pixel's depth-map point
 //!   and normal; NaN where either is missing), with `direct` + `indirect` samples per
@@ -170,13 +171,14 @@ const INPUTS: [(&str, &str, &[ProductKind]); 5] = [
     ("light_table", "light_table", &[ProductKind::LightTable]),
 ];
 
-const OUTPUTS: [(&str, &[ProductKind]); 11] = [
+const OUTPUTS: [(&str, &[ProductKind]); 12] = [
     ("e_r_dir", &[ProductKind::Radiance]),
     ("e_r_ind", &[ProductKind::Radiance]),
     ("e_rv_dir", &[ProductKind::Radiance]),
     ("e_rv_ind", &[ProductKind::Radiance]),
     ("mask", &[ProductKind::Scalar]),
     ("k_v", &[ProductKind::Radiance]),
+    ("exponent", &[ProductKind::Scalar]),
     ("world_position", &[ProductKind::Points]),
     ("world_normal", &[ProductKind::Normals]),
     ("direct_min_distance", &[ProductKind::Scalar]),
@@ -354,6 +356,9 @@ pub struct PathOutputs {
     pub mask: ScalarImage,
     /// Mean albedo of the virtual primaries (0 where none).
     pub k_v: Vec3Image,
+    /// Mean Phong exponent of the virtual primaries (0 where none, or diffuse): the
+    /// filter's B_rho (paper 001 eq. 17) and B_h (eq. 18).
+    pub exponent: ScalarImage,
     /// Mean world position / unit normal of the visible surfaces (NaN / zero: none).
     pub world_position: Vec3Image,
     pub world_normal: Vec3Image,
@@ -375,6 +380,7 @@ impl PathOutputs {
             e_rv_ind: v(Vec3::NAN),
             mask: Image::filled(width, height, 1.0),
             k_v: v(Vec3::ZERO),
+            exponent: Image::filled(width, height, 0.0),
             world_position: v(Vec3::NAN),
             world_normal: v(Vec3::ZERO),
             direct_min_distance: Image::filled(width, height, f32::INFINITY),
@@ -392,6 +398,7 @@ impl PathOutputs {
             self.e_rv_ind.same_size(&self.e_r_dir),
             self.mask.same_size(&self.e_r_dir),
             self.k_v.same_size(&self.e_r_dir),
+            self.exponent.same_size(&self.e_r_dir),
             self.world_position.same_size(&self.e_r_dir),
             self.world_normal.same_size(&self.e_r_dir),
             self.direct_min_distance.same_size(&self.e_r_dir),
@@ -410,6 +417,7 @@ struct RowOut<'a> {
     e_rv_ind: &'a mut [Vec3],
     mask: &'a mut [f32],
     k_v: &'a mut [Vec3],
+    exponent: &'a mut [f32],
     world_position: &'a mut [Vec3],
     world_normal: &'a mut [Vec3],
     direct_min_distance: &'a mut [f32],
@@ -426,6 +434,7 @@ impl RowOut<'_> {
         self.e_rv_ind[x] = r.e_rv_ind;
         self.mask[x] = r.mask;
         self.k_v[x] = r.k_v;
+        self.exponent[x] = r.exponent;
         self.world_position[x] = r.world_position;
         self.world_normal[x] = r.world_normal;
         self.direct_min_distance[x] = r.direct_min_distance;
@@ -442,6 +451,7 @@ fn rows(out: &mut PathOutputs, width: usize) -> Vec<RowOut<'_>> {
     let mut e_rv_ind = out.e_rv_ind.data.chunks_mut(width);
     let mut mask = out.mask.data.chunks_mut(width);
     let mut k_v = out.k_v.data.chunks_mut(width);
+    let mut exponent = out.exponent.data.chunks_mut(width);
     let mut world_position = out.world_position.data.chunks_mut(width);
     let mut world_normal = out.world_normal.data.chunks_mut(width);
     let mut direct_min = out.direct_min_distance.data.chunks_mut(width);
@@ -456,7 +466,8 @@ fn rows(out: &mut PathOutputs, width: usize) -> Vec<RowOut<'_>> {
         mask.next(),
         k_v.next(),
     ) {
-        let (Some(g), Some(h), Some(i), Some(j), Some(k)) = (
+        let (Some(exponent), Some(g), Some(h), Some(i), Some(j), Some(k)) = (
+            exponent.next(),
             world_position.next(),
             world_normal.next(),
             direct_min.next(),
@@ -472,6 +483,7 @@ fn rows(out: &mut PathOutputs, width: usize) -> Vec<RowOut<'_>> {
             e_rv_ind: d,
             mask: e,
             k_v: f,
+            exponent,
             world_position: g,
             world_normal: h,
             direct_min_distance: i,
@@ -553,7 +565,7 @@ pub fn sample_path_with_pyramid(
 struct PathStage {
     /// Product names of depth, normals, pose, radiance, light_table.
     inputs: [String; 5],
-    outputs: [String; 11],
+    outputs: [String; 12],
     params: PathParams,
     intrinsics: Intrinsics,
     objects: Arc<VirtualScene>,
@@ -582,6 +594,7 @@ impl Stage for PathStage {
             Product::Radiance(out.e_rv_ind),
             Product::Scalar(out.mask),
             Product::Radiance(out.k_v),
+            Product::Scalar(out.exponent),
             Product::Points(out.world_position),
             Product::Normals(out.world_normal),
             Product::Scalar(out.direct_min_distance),

@@ -230,6 +230,7 @@ fn constant_environment_over_a_floor_gives_pi_l_and_no_indirect_light() {
             assert_eq!(out.direct_min_distance.data[i], f32::INFINITY);
             assert_eq!(out.mask.data[i], 1.0);
             assert_eq!(out.k_v.data[i], Vec3::ZERO);
+            assert_eq!(out.exponent.data[i], 0.0);
             assert!(out.world_position.data[i].y.abs() < 1e-4);
             assert!((out.world_normal.data[i] - Vec3::Y).length() < 1e-5);
         }
@@ -384,6 +385,7 @@ fn virtual_pixels_are_shaded_at_the_object_surface() {
                 let facing = normal.dot((camera_position - p).normalize());
                 if out.mask.data[i] == 0.0 && facing > 0.98 {
                     assert_eq!(out.k_v.data[i], material.albedo);
+                    assert_eq!(out.exponent.data[i], exponent);
                     e += out.e_rv_dir.data[i].as_dvec3();
                     ind += out.e_rv_ind.data[i].as_dvec3();
                     n += 1;

@@ -26,7 +26,7 @@
 //! (self-shadowing through V^_j, real occluders through V_j), E_R at the real point
 //! behind it (NaN where the depth has none); `k_v` is the albedo (with E in irradiance
 //! units the Lambertian outgoing radiance is k_V E_RV / pi; glossy lobes are not
-//! evaluated, a glossy object is shaded as diffuse).
+//! evaluated, a glossy object is shaded as diffuse, so `exponent` is 0 everywhere).
 //! `indirect_min_distance` is INFINITY everywhere (no indirect rays);
 //! `direct_min_distance` is the distance to the nearest shadow-map occluder of a light
 //! that faces the point. Pixels with no surface (no depth, or a zero normal, and no
@@ -89,13 +89,14 @@ const PARAMS: &[ParamSpec] = &[
 ];
 
 /// The output roles, in [`ValOutputs`] order.
-const OUTPUTS: [(&str, &[ProductKind]); 10] = [
+const OUTPUTS: [(&str, &[ProductKind]); 11] = [
     ("e_r_dir", &[ProductKind::Radiance]),
     ("e_r_ind", &[ProductKind::Radiance]),
     ("e_rv_dir", &[ProductKind::Radiance]),
     ("e_rv_ind", &[ProductKind::Radiance]),
     ("mask", &[ProductKind::Scalar]),
     ("k_v", &[ProductKind::Radiance]),
+    ("exponent", &[ProductKind::Scalar]),
     ("world_position", &[ProductKind::Points]),
     ("world_normal", &[ProductKind::Normals]),
     ("direct_min_distance", &[ProductKind::Scalar]),
@@ -184,6 +185,8 @@ pub struct ValOutputs {
     /// 1 where real geometry is visible, 0 where a virtual object is.
     pub mask: ScalarImage,
     pub k_v: Vec3Image,
+    /// The Phong exponent the shading used: 0 (glossy objects are shaded as diffuse).
+    pub exponent: ScalarImage,
     pub world_position: Vec3Image,
     pub world_normal: Vec3Image,
     pub direct_min_distance: ScalarImage,
@@ -201,6 +204,7 @@ impl ValOutputs {
             e_rv_ind: v(Vec3::ZERO),
             mask: s(1.0),
             k_v: v(Vec3::ZERO),
+            exponent: s(0.0),
             world_position: v(Vec3::NAN),
             world_normal: v(Vec3::ZERO),
             direct_min_distance: s(f32::INFINITY),
@@ -484,7 +488,7 @@ pub fn sample_val(inputs: &ValInputs, params: &ValShadingParams) -> Result<ValOu
 
 struct SampleVal {
     inputs: [String; 4],
-    outputs: [String; 10],
+    outputs: [String; 11],
     intrinsics: Intrinsics,
     objects: Arc<VirtualScene>,
     params: ValShadingParams,
@@ -515,6 +519,7 @@ impl Stage for SampleVal {
             Product::Radiance(out.e_rv_ind),
             Product::Scalar(out.mask),
             Product::Radiance(out.k_v),
+            Product::Scalar(out.exponent),
             Product::Points(out.world_position),
             Product::Normals(out.world_normal),
             Product::Scalar(out.direct_min_distance),

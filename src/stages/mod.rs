@@ -19,12 +19,14 @@
 //! | `light.val` | [`light::val`] | virtual area lights (importance samples + k-means + eq. 7) and SH9 of the indirect part (paper 004 Secs. 4.3-4.4) |
 //! | `sample.path` | [`sample::path`] | two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5) |
 //! | `sample.val` | [`sample::val`] | noise-free E_R / E_RV from the area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5) |
+//! | `composite.differential` | [`composite`] | the finished frame by the differential composite, back in the camera's colors (paper 001 eq. 2, paper 000 Sec. 6.6) |
 //! | `material.estimate` | [`material`] | diffuse reflectance of real surfaces, rho = pi L / E_R (paper 000 eq. 5) |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
 pub mod cloud;
 pub mod compensate;
+pub mod composite;
 pub mod debug;
 pub mod decode;
 pub mod fuse;
@@ -58,6 +60,7 @@ pub fn builtin() -> Vec<StageInfo> {
         sample::path::INFO,
         sample::val::INFO,
         material::INFO,
+        composite::INFO,
         write::INFO,
         debug::NOOP_INFO,
         debug::SLEEP_INFO,

@@ -12,11 +12,15 @@
 //! | `light.importance` | `pdf_integral`, `irradiance_rel_error`, `maps_scored` (against brute-force integration of each map; see [`light`]) | no |
 //! | `light.val` | `sh_irradiance_rel_error`, `val_center_drift_m`, `environment_static`, `lights` | no |
 //! | `sample.path` | `ratio_rmse`, `ratio_rmse_alternative`, `object_aware`, `unbiased_p`, `frames_scored`, `region_pixels` (against 1024-sample references; see [`sampling`]) | no |
+//! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `temporal_flicker`, `temporal_flicker_spatial_only`, `frames_scored` (against the same references; see [`filter`]) | no |
+//! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `frames_scored` (against a composite of the references; see [`composite`]) | no |
 //!
 //! Ground truth comes from the recording's truth stream (synthetic recordings).
 
 mod color;
+pub mod composite;
 mod depth;
+pub mod filter;
 pub mod light;
 mod normals;
 pub mod sampling;
@@ -37,6 +41,8 @@ enum Scorer {
     Importance(light::ImportanceScorer),
     Val(light::ValScorer),
     Path(Box<sampling::PathScorer>),
+    Filter(Box<filter::FilterScorer>),
+    Composite(Box<composite::CompositeScorer>),
 }
 
 /// Scores a pipeline's stages over the frames given to [`Evaluator::observe`].
@@ -71,6 +77,10 @@ impl Evaluator {
             .iter()
             .find(|s| s.kind == "color.compensate")
             .map(|s| (output(s, "compensated"), input(s, "color")));
+        let sampler = pipeline.stages.iter().find(|s| s.kind == "sample.path");
+        let runner = sampler.map(|s| {
+            sampling::PathRunner::new(s, pipeline.objects.clone(), header.depth_intrinsics, seed)
+        });
         let scorers = pipeline
             .stages
             .iter()
@@ -109,6 +119,16 @@ impl Evaluator {
                         header.depth_intrinsics,
                         seed,
                     ))),
+                    "filter.axis_aligned" => Scorer::Filter(Box::new(filter::FilterScorer::new(
+                        s,
+                        header,
+                        pipeline.objects.clone(),
+                        seed,
+                        runner.clone().zip(sampler.cloned()),
+                    ))),
+                    "composite.differential" => {
+                        Scorer::Composite(Box::new(composite::CompositeScorer::new(s, sampler)))
+                    }
                     _ => return None,
                 };
                 Some((s.name.clone(), s.kind, scorer))
@@ -132,6 +152,9 @@ impl Evaluator {
         let truth = FrameTruth::of(frame)?;
         self.frames += 1;
         self.frames_with_truth += truth.is_some() as usize;
+        // The 1024-sample reference layers, when the sampling scorer computed them for
+        // this frame; the filter and composite scorers compare against them.
+        let mut reference = None;
         for (_, _, scorer) in &mut self.scorers {
             match scorer {
                 Scorer::Depth(s) => s.observe(frame, truth.as_ref()),
@@ -140,7 +163,9 @@ impl Evaluator {
                 Scorer::Reference(s) => s.observe(frame),
                 Scorer::Importance(s) => s.observe(frame),
                 Scorer::Val(s) => s.observe(frame),
-                Scorer::Path(s) => s.observe(frame)?,
+                Scorer::Path(s) => reference = s.observe(frame)?.or(reference),
+                Scorer::Filter(s) => s.observe(frame, reference.as_deref())?,
+                Scorer::Composite(s) => s.observe(frame, reference.as_deref())?,
             }
         }
         Ok(())
@@ -163,6 +188,8 @@ impl Evaluator {
                 Scorer::Importance(s) => s.report(),
                 Scorer::Val(s) => s.report(),
                 Scorer::Path(s) => s.report(),
+                Scorer::Filter(s) => s.report(),
+                Scorer::Composite(s) => s.report(),
             };
             let mut entry = Map::new();
             entry.insert("kind".into(), json!(kind));

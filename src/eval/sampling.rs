@@ -18,6 +18,7 @@
 use crate::graph::{Frame, ResolvedStage};
 use crate::objects::VirtualScene;
 use crate::pinhole::Pinhole;
+use crate::raster::{Image, Vec3Image};
 use crate::recording::Intrinsics;
 use crate::rng;
 use crate::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
@@ -59,15 +60,136 @@ pub fn two_sided_p(z: f64) -> f64 {
     (t * poly.exp()).min(1.0)
 }
 
-/// Scores a `sample.path` stage.
-pub struct PathScorer {
+/// Re-runs a pipeline's `sample.path` math on the inputs a finished frame holds, with
+/// other parameters (more samples, other seeds).
+#[derive(Clone)]
+pub struct PathRunner {
     /// depth, normals, pose, radiance, light_table.
     inputs: [String; 5],
-    /// e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask.
-    outputs: [String; 5],
-    params: PathParams,
+    /// The stage's own settings.
+    pub params: PathParams,
     objects: Arc<VirtualScene>,
     intrinsics: Intrinsics,
+}
+
+impl PathRunner {
+    pub fn new(
+        stage: &ResolvedStage,
+        objects: Arc<VirtualScene>,
+        intrinsics: Intrinsics,
+        seed: u64,
+    ) -> PathRunner {
+        PathRunner {
+            inputs: ["depth", "normals", "pose", "radiance", "light_table"].map(|r| {
+                stage
+                    .inputs
+                    .get(r)
+                    .cloned()
+                    .unwrap_or_else(|| r.to_string())
+            }),
+            params: PathParams::from_params(&stage.params, seed),
+            objects,
+            intrinsics,
+        }
+    }
+
+    /// The stage's outputs with `params` on `frame`'s inputs; `None` when the frame
+    /// lacks one of them.
+    pub fn run(&self, frame: &Frame, params: &PathParams) -> Option<Result<PathOutputs, String>> {
+        let [depth, normals, pose, radiance, table] = &self.inputs;
+        let (Ok(depth), Ok(normals), Ok(pose), Ok(radiance), Ok(table)) = (
+            frame.depth(depth),
+            frame.normals(normals),
+            frame.pose(pose),
+            frame.radiance(radiance),
+            frame.light_table(table),
+        ) else {
+            return None;
+        };
+        let inputs = PathInputs {
+            depth,
+            normals,
+            radiance,
+            camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
+            camera_to_world: Affine3A::from_mat4(pose.matrix().as_mat4()),
+            table,
+            objects: &self.objects,
+            frame: frame.index as u64,
+        };
+        let mut out = PathOutputs::new(depth.width, depth.height);
+        Some(
+            sample_path(&inputs, params, &mut out)
+                .map(|()| out)
+                .map_err(|e| e.to_string()),
+        )
+    }
+}
+
+/// The four irradiance layers of a frame with 1024 samples per pixel and layer: the
+/// mean of [`REFERENCE_RUNS`] independent runs with 64 + 64 samples per primary
+/// sample. `filter.axis_aligned` and `composite.differential` are scored against it too.
+pub struct ReferenceLayers {
+    pub frame: usize,
+    pub e_r_dir: Vec3Image,
+    pub e_r_ind: Vec3Image,
+    pub e_rv_dir: Vec3Image,
+    pub e_rv_ind: Vec3Image,
+    /// Where some reference path met an object.
+    pub touched: Vec<bool>,
+}
+
+impl ReferenceLayers {
+    /// The reference of `frame` for the stage's configuration in `runner`; `None` when
+    /// the frame lacks an input.
+    pub fn compute(runner: &PathRunner, frame: &Frame) -> Option<Result<ReferenceLayers, String>> {
+        let mut sums: Option<ReferenceLayers> = None;
+        for k in 0..REFERENCE_RUNS {
+            let params = PathParams {
+                direct: REFERENCE_SAMPLES,
+                indirect: REFERENCE_SAMPLES,
+                object_aware: false,
+                seed: rng::hash(&[runner.params.seed, REFERENCE_SALT, k]),
+                ..runner.params
+            };
+            let out = match runner.run(frame, &params)? {
+                Ok(out) => out,
+                Err(e) => return Some(Err(e)),
+            };
+            let sums = sums.get_or_insert_with(|| {
+                let zero = Image::filled(out.e_r_dir.width, out.e_r_dir.height, Vec3::ZERO);
+                ReferenceLayers {
+                    frame: frame.index,
+                    e_r_dir: zero.clone(),
+                    e_r_ind: zero.clone(),
+                    e_rv_dir: zero.clone(),
+                    e_rv_ind: zero,
+                    touched: vec![false; out.touched.data.len()],
+                }
+            });
+            let layers = [
+                (&mut sums.e_r_dir, &out.e_r_dir),
+                (&mut sums.e_r_ind, &out.e_r_ind),
+                (&mut sums.e_rv_dir, &out.e_rv_dir),
+                (&mut sums.e_rv_ind, &out.e_rv_ind),
+            ];
+            for (sum, run) in layers {
+                for (s, v) in sum.data.iter_mut().zip(&run.data) {
+                    *s += *v / REFERENCE_RUNS as f32;
+                }
+            }
+            for (t, &o) in sums.touched.iter_mut().zip(&out.touched.data) {
+                *t |= o != 0;
+            }
+        }
+        sums.map(Ok)
+    }
+}
+
+/// Scores a `sample.path` stage.
+pub struct PathScorer {
+    runner: PathRunner,
+    /// e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask.
+    outputs: [String; 5],
     frames_scored: usize,
     pixels: u64,
     squared: f64,
@@ -82,17 +204,15 @@ impl PathScorer {
         intrinsics: Intrinsics,
         seed: u64,
     ) -> Self {
-        let get = |map: &std::collections::BTreeMap<String, String>, role: &str| {
-            map.get(role).cloned().unwrap_or_else(|| role.to_string())
-        };
         PathScorer {
-            inputs: ["depth", "normals", "pose", "radiance", "light_table"]
-                .map(|r| get(&stage.inputs, r)),
-            outputs: ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind", "mask"]
-                .map(|r| get(&stage.outputs, r)),
-            params: PathParams::from_params(&stage.params, seed),
-            objects,
-            intrinsics,
+            runner: PathRunner::new(stage, objects, intrinsics, seed),
+            outputs: ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind", "mask"].map(|r| {
+                stage
+                    .outputs
+                    .get(r)
+                    .cloned()
+                    .unwrap_or_else(|| r.to_string())
+            }),
             frames_scored: 0,
             pixels: 0,
             squared: 0.0,
@@ -101,21 +221,18 @@ impl PathScorer {
         }
     }
 
-    pub fn observe(&mut self, frame: &Frame) -> Result<(), String> {
+    /// The stage's math, for scorers of the stages after it.
+    pub fn runner(&self) -> &PathRunner {
+        &self.runner
+    }
+
+    /// Scores a scored frame and returns its reference layers (`None` on other frames
+    /// and where the frame lacks the stage's inputs or outputs).
+    pub fn observe(&mut self, frame: &Frame) -> Result<Option<Arc<ReferenceLayers>>, String> {
         if self.frames_scored >= MAX_SCORED_FRAMES || frame.index % SCORE_EVERY != SCORE_EVERY - 1 {
-            return Ok(());
+            return Ok(None);
         }
-        let [depth, normals, pose, radiance, table] = &self.inputs;
         let [e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask] = &self.outputs;
-        let (Ok(depth), Ok(normals), Ok(pose), Ok(radiance), Ok(table)) = (
-            frame.depth(depth),
-            frame.normals(normals),
-            frame.pose(pose),
-            frame.radiance(radiance),
-            frame.light_table(table),
-        ) else {
-            return Ok(());
-        };
         let (Ok(e_r_dir), Ok(e_r_ind), Ok(e_rv_dir), Ok(e_rv_ind), Ok(mask)) = (
             frame.radiance(e_r_dir),
             frame.radiance(e_r_ind),
@@ -123,50 +240,38 @@ impl PathScorer {
             frame.radiance(e_rv_ind),
             frame.scalar(mask),
         ) else {
-            return Ok(());
+            return Ok(None);
         };
-        let inputs = PathInputs {
-            depth,
-            normals,
-            radiance,
-            camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
-            camera_to_world: Affine3A::from_mat4(pose.matrix().as_mat4()),
-            table,
-            objects: &self.objects,
-            frame: frame.index as u64,
+        let Some(reference) = ReferenceLayers::compute(&self.runner, frame) else {
+            return Ok(None);
         };
-        let n = depth.data.len();
-        let run = |params: &PathParams| -> Result<PathOutputs, String> {
-            let mut out = PathOutputs::new(depth.width, depth.height);
-            sample_path(&inputs, params, &mut out).map_err(|e| e.to_string())?;
-            Ok(out)
-        };
-        // The reference: mean E_R and E_RV over independent high-sample runs.
-        let mut ref_r = vec![0.0f64; n];
-        let mut ref_rv = vec![0.0f64; n];
-        let mut region = vec![false; n];
-        for k in 0..REFERENCE_RUNS {
-            let params = PathParams {
-                direct: REFERENCE_SAMPLES,
-                indirect: REFERENCE_SAMPLES,
-                object_aware: false,
-                seed: rng::hash(&[self.params.seed, REFERENCE_SALT, k]),
-                ..self.params
-            };
-            let out = run(&params)?;
-            for i in 0..n {
-                ref_r[i] += channel_mean(out.e_r_dir.data[i] + out.e_r_ind.data[i]);
-                ref_rv[i] += channel_mean(out.e_rv_dir.data[i] + out.e_rv_ind.data[i]);
-                region[i] |= out.touched.data[i] != 0;
-            }
-        }
-        for i in 0..n {
-            region[i] &= mask.data[i] == 1.0 && ref_r[i].is_finite() && ref_r[i] > 1e-6;
-        }
+        let reference = Arc::new(reference?);
+        let n = reference.touched.len();
+        let sum_of = |a: &Vec3Image, b: &Vec3Image, i: usize| channel_mean(a.data[i] + b.data[i]);
+        let ref_r: Vec<f64> = (0..n)
+            .map(|i| sum_of(&reference.e_r_dir, &reference.e_r_ind, i))
+            .collect();
+        let ref_rv: Vec<f64> = (0..n)
+            .map(|i| sum_of(&reference.e_rv_dir, &reference.e_rv_ind, i))
+            .collect();
+        let region: Vec<bool> = (0..n)
+            .map(|i| {
+                reference.touched[i]
+                    && mask.data[i] == 1.0
+                    && ref_r[i].is_finite()
+                    && ref_r[i] > 1e-6
+            })
+            .collect();
         let ratio = |r: Vec3, rv: Vec3| channel_mean(rv) / channel_mean(r);
+        let params = self.runner.params;
+        let run = |params: &PathParams| -> Result<PathOutputs, String> {
+            self.runner
+                .run(frame, params)
+                .unwrap_or_else(|| Err("the frame lost its inputs".into()))
+        };
         let alternative = run(&PathParams {
-            object_aware: !self.params.object_aware,
-            ..self.params
+            object_aware: !params.object_aware,
+            ..params
         })?;
         for i in (0..n).filter(|&i| region[i]) {
             let reference = ref_rv[i] / ref_r[i];
@@ -193,12 +298,12 @@ impl PathScorer {
                 .fold((0.0, 0usize), |(s, c), v| (s + v, c + 1));
             sum / count.max(1) as f64
         };
-        let reference_mean = region_mean(&|i| ref_rv[i] / REFERENCE_RUNS as f64);
+        let reference_mean = region_mean(&|i| ref_rv[i]);
         let mut means = Vec::new();
         for k in 0..BIAS_RUNS {
             let out = run(&PathParams {
-                seed: rng::hash(&[self.params.seed, BIAS_SALT, k]),
-                ..self.params
+                seed: rng::hash(&[params.seed, BIAS_SALT, k]),
+                ..params
             })?;
             means.push(region_mean(&|i| {
                 channel_mean(out.e_rv_dir.data[i] + out.e_rv_ind.data[i])
@@ -208,13 +313,13 @@ impl PathScorer {
         let var = means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (means.len() - 1) as f64;
         // The reference holds REFERENCE_RUNS * 16 times the samples of one run.
         let reference_share =
-            (REFERENCE_RUNS * (REFERENCE_SAMPLES / self.params.direct.max(1)) as u64) as f64;
+            (REFERENCE_RUNS * (REFERENCE_SAMPLES / params.direct.max(1)) as u64) as f64;
         let se = (var / BIAS_RUNS as f64 + var / reference_share).sqrt();
         if se > 0.0 && region.iter().any(|&r| r) {
             self.z_scores.push((m - reference_mean) / se);
         }
         self.frames_scored += 1;
-        Ok(())
+        Ok(Some(reference))
     }
 
     pub fn report(&self) -> Value {
@@ -224,7 +329,7 @@ impl PathScorer {
         json!({
             "frames_scored": self.frames_scored,
             "region_pixels": self.pixels,
-            "object_aware": self.params.object_aware,
+            "object_aware": self.runner.params.object_aware,
             "ratio_rmse": if self.pixels > 0 { rmse(self.squared) } else { f64::NAN },
             "ratio_rmse_alternative": if self.pixels > 0 { rmse(self.alternative_squared) } else { f64::NAN },
             "unbiased_p": if self.z_scores.is_empty() { f64::NAN } else { two_sided_p(pooled_z) },

@@ -1,0 +1,166 @@
+//! Scores of `composite.differential` against a reference composite: the same camera
+//! image, mask, k_V and compensation composited from the 1024-sample reference layers
+//! (see [`super::sampling`]), on the frames the `sample.path` scorer scores.
+//!
+//! - `psnr_db`: PSNR of the stage's 8-bit `final` image against the reference composite
+//!   (peak 255, over all pixels and channels);
+//! - `psnr_db_unfiltered`: the same for a composite of the sampling's unfiltered layers
+//!   (what the filter buys; absent without a `sample.path`).
+//!
+//! There is no score against a ground-truth render with the objects really in the
+//! room: the synthetic generator renders the room without them.
+
+use super::sampling::ReferenceLayers;
+use crate::graph::{Frame, ResolvedStage};
+use crate::raster::Rgb8Image;
+use crate::stages::composite::{
+    CompositeInputs, CompositeOutputs, CompositeParams, GammaEncoder, composite,
+};
+use glam::Vec3;
+use serde_json::{Value, json};
+
+/// Scores a `composite.differential` stage.
+pub struct CompositeScorer {
+    stage: ResolvedStage,
+    params: CompositeParams,
+    encoder: GammaEncoder,
+    /// The sampling's unfiltered layers: e_r_dir, e_r_ind, e_rv_dir, e_rv_ind.
+    unfiltered: Option<[String; 4]>,
+    frames_scored: usize,
+    squared: f64,
+    squared_unfiltered: f64,
+    values: u64,
+}
+
+impl CompositeScorer {
+    pub fn new(stage: &ResolvedStage, sampler: Option<&ResolvedStage>) -> CompositeScorer {
+        let params = CompositeParams::from_params(&stage.params);
+        CompositeScorer {
+            stage: stage.clone(),
+            encoder: GammaEncoder::new(params.gamma),
+            params,
+            unfiltered: sampler.map(|s| {
+                ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind"]
+                    .map(|r| s.outputs.get(r).cloned().unwrap_or_else(|| r.into()))
+            }),
+            frames_scored: 0,
+            squared: 0.0,
+            squared_unfiltered: 0.0,
+            values: 0,
+        }
+    }
+
+    fn name(map: &std::collections::BTreeMap<String, String>, role: &str) -> String {
+        map.get(role).cloned().unwrap_or_else(|| role.into())
+    }
+
+    /// The composite of `layers` with the stage's other inputs on `frame`.
+    fn composite_of(
+        &self,
+        frame: &Frame,
+        layers: [&crate::raster::Vec3Image; 4],
+    ) -> Result<Rgb8Image, String> {
+        let input = |role: &str| Self::name(&self.stage.inputs, role);
+        let e = |e: crate::graph::StageError| e.to_string();
+        let radiance = frame.radiance(&input("radiance")).map_err(e)?;
+        let inputs = CompositeInputs {
+            e_r_dir: layers[0],
+            e_r_ind: layers[1],
+            e_rv_dir: layers[2],
+            e_rv_ind: layers[3],
+            mask: frame.scalar(&input("mask")).map_err(e)?,
+            k_v: frame.radiance(&input("k_v")).map_err(e)?,
+            radiance,
+            inverse_compensation: frame
+                .compensation(&input("compensation"))
+                .map_err(e)?
+                .inverse,
+        };
+        let mut out = CompositeOutputs::new(radiance.width, radiance.height);
+        composite(&inputs, &self.params, &self.encoder, &mut out).map_err(|e| e.to_string())?;
+        Ok(out.final_color)
+    }
+
+    /// Scores `frame` when `reference` holds its reference layers.
+    pub fn observe(
+        &mut self,
+        frame: &Frame,
+        reference: Option<&ReferenceLayers>,
+    ) -> Result<(), String> {
+        let Some(reference) = reference.filter(|r| r.frame == frame.index) else {
+            return Ok(());
+        };
+        let Ok(own) = frame.color(&Self::name(&self.stage.outputs, "final")) else {
+            return Ok(());
+        };
+        let truth = self.composite_of(
+            frame,
+            [
+                &reference.e_r_dir,
+                &reference.e_r_ind,
+                &reference.e_rv_dir,
+                &reference.e_rv_ind,
+            ],
+        )?;
+        self.squared += squared_error(own, &truth);
+        if let Some(names) = &self.unfiltered {
+            let layers: Vec<_> = names.iter().map(|n| frame.radiance(n)).collect();
+            if let [Ok(a), Ok(b), Ok(c), Ok(d)] = layers.as_slice() {
+                let unfiltered = self.composite_of(frame, [a, b, c, d])?;
+                self.squared_unfiltered += squared_error(&unfiltered, &truth);
+            } else {
+                self.unfiltered = None;
+            }
+        }
+        self.values += own.data.len() as u64 * 3;
+        self.frames_scored += 1;
+        Ok(())
+    }
+
+    pub fn report(&self) -> Value {
+        let psnr = |squared: f64| {
+            if self.values == 0 {
+                f64::NAN
+            } else {
+                psnr_db(squared / self.values as f64)
+            }
+        };
+        let mut report = json!({
+            "frames_scored": self.frames_scored,
+            "psnr_db": psnr(self.squared),
+        });
+        if self.unfiltered.is_some() {
+            report["psnr_db_unfiltered"] = json!(psnr(self.squared_unfiltered));
+        }
+        report
+    }
+}
+
+/// The sum of squared 8-bit differences over all pixels and channels.
+fn squared_error(a: &Rgb8Image, b: &Rgb8Image) -> f64 {
+    a.data
+        .iter()
+        .zip(&b.data)
+        .map(|(p, q)| {
+            let d = Vec3::from_array(p.map(f32::from)) - Vec3::from_array(q.map(f32::from));
+            d.length_squared() as f64
+        })
+        .sum()
+}
+
+/// PSNR in dB of a mean squared error on the 8-bit scale (infinite when 0).
+pub fn psnr_db(mse: f64) -> f64 {
+    10.0 * (255.0f64 * 255.0 / mse).log10()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::psnr_db;
+
+    #[test]
+    fn psnr_of_known_errors() {
+        assert!((psnr_db(1.0) - 48.1308).abs() < 1e-3);
+        assert!((psnr_db(255.0 * 255.0) - 0.0).abs() < 1e-9);
+        assert_eq!(psnr_db(0.0), f64::INFINITY);
+    }
+}

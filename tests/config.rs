@@ -19,22 +19,41 @@ fn error(text: &str) -> ConfigError {
 }
 
 #[test]
-fn the_default_pipeline_chains_the_four_stages() {
+fn the_default_pipeline_is_the_mixed_reality_chain() {
     let p = Pipeline::builtin_default(&Registry::builtin()).unwrap();
     let kinds: Vec<&str> = p.stages.iter().map(|s| s.kind).collect();
     assert_eq!(
         kinds,
-        ["decode", "depth.to_points", "normals.cross", "write"]
+        [
+            "decode",
+            "gbuffer.splat",
+            "color.compensate",
+            "depth.fuse",
+            "depth.to_points",
+            "normals.plane_fit",
+            "cloud.samples",
+            "light.impostor",
+            "light.importance",
+            "sample.path",
+            "filter.axis_aligned",
+            "composite.differential",
+            "write"
+        ]
     );
-    let on_disk = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/pipelines/default.toml"
-    ))
-    .unwrap();
+    assert!(!p.objects.is_empty(), "the default scene has virtual objects");
+    let file = |name: &str| {
+        std::fs::read_to_string(format!("{}/pipelines/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    };
+    let on_disk = file("default.toml");
     assert_eq!(
         on_disk,
         relume::graph::pipeline::DEFAULT_PIPELINE_TOML,
         "the built-in copy is the file"
+    );
+    assert_eq!(
+        on_disk.replacen("name = \"default\"", "name = \"mixed-reality\"", 1),
+        file("mixed-reality.toml"),
+        "default.toml is mixed-reality.toml under another name"
     );
 }
 

@@ -27,10 +27,20 @@ Scores (per stage, keyed by the stage's name):
                     met an object), ratio_rmse_alternative (the other scheme, object-aware
                     on/off), unbiased_p (z-test of 8 more seeds vs the reference); scored on
                     frames 14 and 29, each costing about 70 runs of the stage
+  filter.axis_aligned
+                    mse_unfiltered, mse_filtered, mse_gaussian_same_radius (a plain image
+                    Gaussian over the same window) against the same references, on the
+                    same frames; temporal_flicker, temporal_flicker_spatial_only (variance
+                    per pixel over 4 re-sampled frames of a still camera, with and
+                    without the temporal extension)
+  composite.differential
+                    psnr_db of the final image against the composite of the references;
+                    psnr_db_unfiltered (the composite of the unfiltered layers)
 
 Example:
   relume synth -o room.relume && relume eval room.relume -p pipelines/acquisition.toml
-  relume eval room.relume -p pipelines/mixed-reality-sampling.toml --json";
+  relume eval room.relume -p pipelines/mixed-reality-sampling.toml --json
+  relume eval room.relume --json                    the default (mixed-reality) pipeline";
 
 #[derive(Parser, Debug)]
 #[command(after_help = SCORES)]
@@ -54,8 +64,8 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     if evaluator.is_empty() {
         bail!(
             "pipeline `{}` ({}) has no stage that eval can score: it scores depth.fuse, \
-             normals.*, color.compensate, gbuffer.splat, light.importance, light.val and \
-             sample.path",
+             normals.*, color.compensate, gbuffer.splat, light.importance, light.val, \
+             sample.path, filter.axis_aligned and composite.differential",
             loaded.pipeline.name,
             loaded.pipeline.file
         );

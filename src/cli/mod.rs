@@ -16,8 +16,9 @@ use std::path::PathBuf;
 /// frame by frame.
 ///
 /// Start with `relume` (or `relume replay`): it generates a built-in synthetic recording on first use
-/// (into recordings/default.relume), runs the default pipeline over it, writes the
-/// products to out/ and prints a timing table per stage.
+/// (into recordings/default.relume), runs the default pipeline over it (mixed reality:
+/// virtual objects in the footage, lit by the room), writes the finished frames to
+/// out/final/ and prints a timing table per stage.
 #[derive(Parser, Debug)]
 #[command(name = "relume", version, about, long_about, max_term_width = 100, after_help = EXAMPLES)]
 struct Cli {
@@ -52,9 +53,10 @@ Examples:
   relume replay                                    the built-in recording and pipeline
   relume import redwood DATA/livingroom1 -o lr.relume
   relume inspect lr.relume --json
-  relume replay lr.relume -p pipelines/default.toml --frames 0..50 --out out/lr --trace t.json
+  relume replay lr.relume -p pipelines/mixed-reality-livingroom1.toml --frames 0..50 --out out/lr
+  relume replay lr.relume -p pipelines/geometry.toml --frames 0..50 --trace t.json
   relume replay lr.relume --hash > run1.txt         one digest line per frame, to diff runs
-  relume eval recordings/default.relume -p pipelines/acquisition.toml --json
+  relume eval recordings/default.relume --json      scores of the default pipeline's stages
   relume bench lr.relume --repeat 5
   relume stages                                    what a pipeline can use
   relume validate my.toml";

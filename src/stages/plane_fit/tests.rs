@@ -425,12 +425,13 @@ fn stage_reads_points_and_writes_four_products() {
 }
 
 #[test]
-fn swaps_with_normals_cross_in_the_default_pipeline() {
-    use crate::graph::{Pipeline, Registry, SourceFile, pipeline::DEFAULT_PIPELINE_TOML};
+fn swaps_with_normals_cross_in_the_geometry_pipeline() {
+    use crate::graph::{Pipeline, Registry, SourceFile};
+    const GEOMETRY: &str = include_str!("../../../pipelines/geometry.toml");
     let cross = "kind = \"normals.cross\"\nparams = { step = 1, difference = \"forward\", \
                  max_depth_jump = 0.1 }\n";
-    assert!(DEFAULT_PIPELINE_TOML.contains(cross));
-    let text = DEFAULT_PIPELINE_TOML.replace(cross, "kind = \"normals.plane_fit\"\n");
+    assert!(GEOMETRY.contains(cross));
+    let text = GEOMETRY.replace(cross, "kind = \"normals.plane_fit\"\n");
     let src = SourceFile {
         name: "pipelines/plane_fit.toml".into(),
         text,

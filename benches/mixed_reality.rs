@@ -1,0 +1,43 @@
+//! Per-frame cost of every stage of `pipelines/mixed-reality.toml` (the default
+//! pipeline) at 640x480 on the synthetic recording, with the state (fused depth, cloud,
+//! the filter's previous frame) built up over the preceding frames: `stage/<name>` is
+//! that stage's `process` on a copy of the frame as it arrives there. The sum of the
+//! medians bounds the pipeline's frame time from above on one core; `relume bench`
+//! measures the pipelined throughput.
+//!
+//! `RELUME_BENCH_PIPELINE=FILE cargo bench --bench mixed_reality` measures another
+//! pipeline.
+
+mod common;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use relume::graph::Frame;
+
+/// Frames replayed before the measured one.
+const WARM_FRAMES: usize = 12;
+
+fn bench_mixed_reality(c: &mut Criterion) {
+    let common::WarmedUp {
+        pipeline,
+        mut stages,
+        arriving,
+        _dir,
+        ..
+    } = common::warm_up("mixed-reality.toml", WARM_FRAMES + 1);
+    let mut group = c.benchmark_group("mixed_reality_640x480");
+    group.sample_size(10);
+    for (i, stage) in stages.iter_mut().enumerate() {
+        let spec = &pipeline.stages[i];
+        group.bench_function(format!("stage/{}", spec.name), |b| {
+            b.iter(|| {
+                let mut frame: Frame = arriving[i].clone();
+                stage.process(&mut frame).unwrap();
+                frame
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_mixed_reality);
+criterion_main!(benches);

@@ -125,7 +125,9 @@ pub fn screen_curvature(
     kappa_x: &mut ScalarImage,
     kappa_y: &mut ScalarImage,
 ) -> Result<(), StageError> {
-    if !positions.same_size(normals) || !positions.same_size(kappa_x) || !positions.same_size(kappa_y)
+    if !positions.same_size(normals)
+        || !positions.same_size(kappa_x)
+        || !positions.same_size(kappa_y)
     {
         return Err(StageError::Failed(format!(
             "filter curvature: positions {}x{}, normals {}x{}, outputs {}x{} / {}x{} differ",
@@ -178,13 +180,7 @@ pub(super) fn curvature_row(
                 .or_else(|| bwd.and_then(|j| curvature_to(pc, nc, p[j], n[j])))
                 .unwrap_or(0.0)
         };
-        kx_row[x] = along(
-            (x + 1 < w).then_some(i + 1),
-            (x > 0).then(|| i - 1),
-        );
-        ky_row[x] = along(
-            (y + 1 < h).then_some(i + w),
-            (y > 0).then(|| i - w),
-        );
+        kx_row[x] = along((x + 1 < w).then_some(i + 1), (x > 0).then(|| i - 1));
+        ky_row[x] = along((y + 1 < h).then_some(i + w), (y > 0).then(|| i - w));
     }
 }

@@ -294,7 +294,11 @@ impl AxisAlignedFilter {
 
     /// Filters one frame into `out` (sized like the inputs) and keeps what the next
     /// frame's temporal filter needs.
-    pub fn filter(&mut self, input: &FilterInputs, out: &mut FilterOutputs) -> Result<(), StageError> {
+    pub fn filter(
+        &mut self,
+        input: &FilterInputs,
+        out: &mut FilterOutputs,
+    ) -> Result<(), StageError> {
         let first = input.layers[0];
         let (w, h) = (first.width, first.height);
         let sizes = [
@@ -303,8 +307,14 @@ impl AxisAlignedFilter {
             (input.layers[3].width, input.layers[3].height),
             (input.world_position.width, input.world_position.height),
             (input.world_normal.width, input.world_normal.height),
-            (input.direct_min_distance.width, input.direct_min_distance.height),
-            (input.indirect_min_distance.width, input.indirect_min_distance.height),
+            (
+                input.direct_min_distance.width,
+                input.direct_min_distance.height,
+            ),
+            (
+                input.indirect_min_distance.width,
+                input.indirect_min_distance.height,
+            ),
             (input.exponent.width, input.exponent.height),
             (out.layers[0].width, out.layers[0].height),
             (out.layers[1].width, out.layers[1].height),
@@ -353,7 +363,9 @@ impl AxisAlignedFilter {
         let radius = self.params.radius;
         planes::x_pass(&self.rows, radius, &self.mask, &mut self.current);
         let previous = if self.params.temporal {
-            self.previous_view.as_ref().map(|view| (&self.previous, view))
+            self.previous_view
+                .as_ref()
+                .map(|view| (&self.previous, view))
         } else {
             None
         };
@@ -379,8 +391,19 @@ struct FilterStage {
 
 impl Stage for FilterStage {
     fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
-        let [e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, position, normal, zd, zi, exponent, env, pose] =
-            &self.inputs;
+        let [
+            e_r_dir,
+            e_r_ind,
+            e_rv_dir,
+            e_rv_ind,
+            position,
+            normal,
+            zd,
+            zi,
+            exponent,
+            env,
+            pose,
+        ] = &self.inputs;
         let params = self.filter.params;
         let layers = [
             frame.radiance(e_r_dir)?,

@@ -10,7 +10,7 @@
 //! kept as they are: its X-filtered values serve as E'_X of eq. 26.
 
 use super::bandwidth::{brdf_bandwidth, curvature_row, direct_bandwidth, indirect_bandwidth};
-use super::gaussian::{LANES, Sums, Target, Taps, VALUE_PLANES, accumulate};
+use super::gaussian::{LANES, Sums, Taps, Target, VALUE_PLANES, accumulate};
 use super::temporal::{PreviousView, find_previous};
 use crate::raster::{ScalarImage, Vec3Image};
 use glam::Vec3;
@@ -180,7 +180,11 @@ pub fn prepare(
                     let bx = direct_bandwidth(kx[x], zd, settings.b_f, b_rho, settings.b_e);
                     let by = direct_bandwidth(ky[x], zd, settings.b_f, b_rho, settings.b_e);
                     let bi = indirect_bandwidth(zi, m);
-                    let stored = if has_position { p } else { Vec3::splat(MISSING_POSITION) };
+                    let stored = if has_position {
+                        p
+                    } else {
+                        Vec3::splat(MISSING_POSITION)
+                    };
                     block[at(PX)] = stored.x;
                     block[at(PY)] = stored.y;
                     block[at(PZ)] = stored.z;
@@ -200,7 +204,11 @@ pub fn prepare(
                         }
                     }
                     let sigma = |b: f32| 1.0 / b;
-                    wd[x] = if has_position { 0.5 * (sigma(bx) + sigma(by)) } else { f32::NAN };
+                    wd[x] = if has_position {
+                        0.5 * (sigma(bx) + sigma(by))
+                    } else {
+                        f32::NAN
+                    };
                     wi[x] = if has_position { sigma(bi) } else { f32::NAN };
                 }
             },
@@ -312,9 +320,11 @@ pub fn y_pass(
                         .any(|&q| get(q) > 0.0);
                     if any_valid {
                         let matched = previous.and_then(|(planes, view)| {
-                            find_previous(p, view, planes).map(|(xp, yp)| (block_of(planes, xp), yp))
+                            find_previous(p, view, planes)
+                                .map(|(xp, yp)| (block_of(planes, xp), yp))
                         });
-                        for (k, (kind, b2)) in [(DIR, B2Y_DIR), (IND, B2_IND)].into_iter().enumerate()
+                        for (k, (kind, b2)) in
+                            [(DIR, B2Y_DIR), (IND, B2_IND)].into_iter().enumerate()
                         {
                             let valid = [get(kind + 6), get(kind + 7)];
                             if valid[0] == 0.0 && valid[1] == 0.0 {
@@ -328,7 +338,8 @@ pub fn y_pass(
                             let t = taps(block, cs, cp + y - radius, count, b2, kind, mask);
                             accumulate(target, &t, &mut sums);
                             if let Some((prev_block, yp)) = matched {
-                                let t = taps(prev_block, cs, cp + yp - radius, count, b2, kind, mask);
+                                let t =
+                                    taps(prev_block, cs, cp + yp - radius, count, b2, kind, mask);
                                 accumulate(target, &t, &mut sums);
                             }
                             results[k] = normalize(&sums, valid, f32::NAN);

@@ -24,7 +24,11 @@ pub struct PreviousView {
 /// row order). `None` when `p` is behind the previous camera or projects off-screen, or
 /// when no pixel of the window has a position.
 #[inline]
-pub fn find_previous(p: Vec3, view: &PreviousView, previous: &ColumnPlanes) -> Option<(usize, usize)> {
+pub fn find_previous(
+    p: Vec3,
+    view: &PreviousView,
+    previous: &ColumnPlanes,
+) -> Option<(usize, usize)> {
     let c = view.world_to_camera.transform_point3(p);
     if !(c.z > 0.0) {
         return None;

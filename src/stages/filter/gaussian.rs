@@ -11,7 +11,7 @@ pub const LANES: usize = 4;
 pub const EXP_CUTOFF: f32 = 87.0;
 
 // Taylor coefficients of 2^f = e^(f ln 2), f in [-0.5, 0.5]: ln2^n / n!.
-const C1: f32 = 0.693_147_2;
+const C1: f32 = std::f32::consts::LN_2;
 const C2: f32 = 0.240_226_5;
 const C3: f32 = 0.055_504_11;
 const C4: f32 = 0.009_618_129;
@@ -81,7 +81,7 @@ impl Sums {
 pub fn accumulate(target: Target, taps: &Taps, sums: &mut Sums) {
     let n = taps.px.len() / LANES;
     fn lanes(s: &[f32], n: usize) -> &[[f32; LANES]] {
-        &s.as_chunks::<LANES>().0[..n]
+        bytemuck::cast_slice(&s[..n * LANES])
     }
     let chunks = |s| lanes(s, n);
     let (px, py, pz) = (chunks(taps.px), chunks(taps.py), chunks(taps.pz));

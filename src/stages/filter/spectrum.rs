@@ -71,7 +71,7 @@ pub fn environment_bandwidth(map: &EnvMap) -> f32 {
             bins.push((omega_phi.hypot(omega_theta), energy));
         }
     }
-    if !(total > 0.0) || !total.is_finite() {
+    if total <= 0.0 || !total.is_finite() {
         return 0.0;
     }
     bins.sort_by(|a, b| a.0.total_cmp(&b.0));

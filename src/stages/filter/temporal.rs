@@ -30,7 +30,7 @@ pub fn find_previous(
     previous: &ColumnPlanes,
 ) -> Option<(usize, usize)> {
     let c = view.world_to_camera.transform_point3(p);
-    if !(c.z > 0.0) {
+    if c.z.is_nan() || c.z <= 0.0 {
         return None;
     }
     let cam = &view.camera;

@@ -16,9 +16,7 @@ use relume::pinhole::Pinhole;
 use relume::raster::{Image, ScalarImage, Vec3Image};
 use relume::recording::{Intrinsics, Pose};
 use relume::rng::{hash, unit_f32};
-use relume::stages::filter::planes::{
-    self, BandwidthSettings, ColumnPlanes, PrepareInputs, RowPlanes, tap_count,
-};
+use relume::stages::filter::planes::{self, BandwidthSettings, Lines, PrepareInputs, TapMasks};
 use relume::stages::filter::temporal::PreviousView;
 use relume::stages::filter::{
     AxisAlignedFilter, FilterInputs, FilterOutputs, FilterParams, environment_bandwidth,
@@ -160,22 +158,20 @@ fn bench_filter(c: &mut Criterion) {
         exponent: &input.exponent,
     };
     let settings = BandwidthSettings { b_f: 1.0, b_e: 4.0 };
-    let mut rows = RowPlanes::new(w, h, RADIUS);
+    let mut rows = Lines::new(h, w, RADIUS);
     let mut width_dir = Image::filled(W, H, 0.0);
     let mut width_ind = Image::filled(W, H, 0.0);
     group.bench_function("pass/prepare", |b| {
         b.iter(|| planes::prepare(&prep, settings, &mut rows, &mut width_dir, &mut width_ind))
     });
-    let mask: Vec<f32> = (0..tap_count(RADIUS))
-        .map(|k| if k <= 2 * RADIUS { 1.0 } else { 0.0 })
-        .collect();
-    let mut columns = ColumnPlanes::new(w, h, RADIUS);
+    let masks = TapMasks::new(RADIUS);
+    let mut columns = Lines::new(w, h, RADIUS);
     group.bench_function("pass/x", |b| {
-        b.iter(|| planes::x_pass(&rows, RADIUS, &mask, &mut columns))
+        b.iter(|| planes::x_pass(&rows, &masks, &mut columns))
     });
     let mut out: [Vec3Image; 4] = std::array::from_fn(|_| Image::filled(W, H, Vec3::ZERO));
     group.bench_function("pass/y_spatial", |b| {
-        b.iter(|| planes::y_pass(&columns, None, RADIUS, &mask, &mut out))
+        b.iter(|| planes::y_pass(&columns, None, &masks, &mut out))
     });
     let view = PreviousView {
         world_to_camera: Affine3A::IDENTITY,
@@ -183,7 +179,7 @@ fn bench_filter(c: &mut Criterion) {
     };
     let previous = columns.clone();
     group.bench_function("pass/y_temporal", |b| {
-        b.iter(|| planes::y_pass(&columns, Some((&previous, &view)), RADIUS, &mask, &mut out))
+        b.iter(|| planes::y_pass(&columns, Some((&previous, &view)), &masks, &mut out))
     });
     let map = EnvMap::from_fn(512, 256, |d| {
         Vec3::splat(1.0 + (4.0 * d.x).sin().abs() + 10.0 * d.y.max(0.0).powi(8))

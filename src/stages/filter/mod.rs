@@ -60,7 +60,7 @@ use crate::pinhole::Pinhole;
 use crate::raster::{Image, ScalarImage, Vec3Image};
 use crate::recording::{Intrinsics, Pose};
 use glam::{Affine3A, Vec3};
-use planes::{BandwidthSettings, ColumnPlanes, PrepareInputs, RowPlanes, tap_count};
+use planes::{BandwidthSettings, ColumnPlanes, Lines, PrepareInputs, RowPlanes, TapMasks};
 use std::sync::Arc;
 use temporal::PreviousView;
 
@@ -250,23 +250,20 @@ pub struct AxisAlignedFilter {
     current: ColumnPlanes,
     previous: ColumnPlanes,
     previous_view: Option<PreviousView>,
-    mask: Vec<f32>,
+    masks: TapMasks,
     /// B_e of the last environment map, keyed by its `Arc`.
     environment_cache: Option<(Arc<EnvMap>, f32)>,
 }
 
 impl AxisAlignedFilter {
     pub fn new(params: FilterParams) -> AxisAlignedFilter {
-        let taps = tap_count(params.radius);
         AxisAlignedFilter {
             params,
             rows: RowPlanes::default(),
             current: ColumnPlanes::default(),
             previous: ColumnPlanes::default(),
             previous_view: None,
-            mask: (0..taps)
-                .map(|k| if k <= 2 * params.radius { 1.0 } else { 0.0 })
-                .collect(),
+            masks: TapMasks::new(params.radius),
             environment_cache: None,
         }
     }
@@ -335,10 +332,10 @@ impl AxisAlignedFilter {
         }
         let b_e = self.environment_bandwidth(input.environment)?;
         let (wu, hu) = (w as usize, h as usize);
-        if self.rows.width != wu || self.rows.height != hu {
-            self.rows = RowPlanes::new(wu, hu, self.params.radius);
-            self.current = ColumnPlanes::new(wu, hu, self.params.radius);
-            self.previous = ColumnPlanes::new(wu, hu, self.params.radius);
+        if self.rows.length != wu || self.rows.count != hu {
+            self.rows = Lines::new(hu, wu, self.params.radius);
+            self.current = Lines::new(wu, hu, self.params.radius);
+            self.previous = Lines::new(wu, hu, self.params.radius);
             self.previous_view = None;
         }
         let settings = BandwidthSettings {
@@ -360,8 +357,7 @@ impl AxisAlignedFilter {
             &mut out.width_dir,
             &mut out.width_ind,
         );
-        let radius = self.params.radius;
-        planes::x_pass(&self.rows, radius, &self.mask, &mut self.current);
+        planes::x_pass(&self.rows, &self.masks, &mut self.current);
         let previous = if self.params.temporal {
             self.previous_view
                 .as_ref()
@@ -369,7 +365,7 @@ impl AxisAlignedFilter {
         } else {
             None
         };
-        planes::y_pass(&self.current, previous, radius, &self.mask, &mut out.layers);
+        planes::y_pass(&self.current, previous, &self.masks, &mut out.layers);
         std::mem::swap(&mut self.current, &mut self.previous);
         self.previous_view = match (self.params.temporal, input.view) {
             (true, Some((pose, camera))) => Some(PreviousView {

@@ -2,15 +2,15 @@
 //! preparation (bandwidths, cleaned values), the X pass (eq. 21) into column-major planes,
 //! and the Y pass (eq. 22) with the temporal taps of the previous frame (eq. 26).
 //!
-//! Layout: every pass reads its taps as contiguous slices. The X pass reads row-major
-//! planes ([`RowPlanes`], one block of [`NPLANES`] padded rows per image row); it writes
-//! column-major planes ([`ColumnPlanes`], one block of padded columns per image column),
-//! which the Y pass reads along columns. The padding (never written, always zero
-//! weight) spares the loops any border test. The previous frame's [`ColumnPlanes`] are
+//! Layout: every pass reads its taps as contiguous chunks ([`Lines`]). The X pass reads
+//! the planes by image row ([`RowPlanes`]); it writes them by image column
+//! ([`ColumnPlanes`]), which the Y pass reads along columns. The padding (never written,
+//! always zero weight) spares the loops any border test. The previous frame's [`ColumnPlanes`] are
 //! kept as they are: its X-filtered values serve as E'_X of eq. 26.
 
 use super::bandwidth::{brdf_bandwidth, curvature_row, direct_bandwidth, indirect_bandwidth};
-use super::gaussian::{LANES, Sums, Taps, Target, VALUE_PLANES, accumulate};
+pub use super::gaussian::NPLANES;
+use super::gaussian::{Chunk, LANES, Sums, Target, VALUE_PLANES, accumulate};
 use super::temporal::{PreviousView, find_previous};
 use crate::raster::{ScalarImage, Vec3Image};
 use glam::Vec3;
@@ -26,7 +26,6 @@ pub const B2Y_DIR: usize = 4;
 pub const B2_IND: usize = 5;
 pub const DIR: usize = 6;
 pub const IND: usize = DIR + VALUE_PLANES;
-pub const NPLANES: usize = IND + VALUE_PLANES;
 
 /// A missing world position is stored as this coordinate: far from every real point, so
 /// its weight is exactly 0, yet finite (no NaN in the tap loop).
@@ -36,93 +35,110 @@ pub const MISSING_POSITION: f32 = 1e15;
 const COLUMN_BAND: usize = 16;
 const ROW_BAND: usize = 8;
 
-/// Taps per pass for radius `radius`: 2 radius + 1 rounded up to a multiple of [`LANES`].
-pub fn tap_count(radius: usize) -> usize {
-    (2 * radius + 1).div_ceil(LANES) * LANES
-}
-
-/// Padding on each side of a row or column: room for every tap of [`tap_count`].
-fn padding(radius: usize) -> usize {
-    radius + LANES
-}
-
-/// Row-major planes: pixel (x, y) of plane q at `y * block + q * stride + pad + x`.
+/// Lines (image rows or columns) of planes, each a sequence of [`Chunk`]s with `pad`
+/// pixels of zero padding (never written: valid 0, so zero weight) before and after the
+/// pixels, so that every tap window lies inside its line.
 #[derive(Clone, Debug, Default)]
-pub struct RowPlanes {
-    pub width: usize,
-    pub height: usize,
+pub struct Lines {
+    /// Number of lines.
+    pub count: usize,
+    /// Pixels per line.
+    pub length: usize,
     pad: usize,
-    stride: usize,
-    data: Vec<f32>,
+    chunks_per_line: usize,
+    data: Vec<Chunk>,
 }
 
-/// Column-major planes: pixel (x, y) of plane q at `x * block + q * stride + pad + y`.
-#[derive(Clone, Debug, Default)]
-pub struct ColumnPlanes {
-    pub width: usize,
-    pub height: usize,
-    pad: usize,
-    stride: usize,
-    data: Vec<f32>,
-}
+/// Planes by image row (pixel (x, y) is position x of line y): the X pass's input.
+pub type RowPlanes = Lines;
+/// Planes by image column (pixel (x, y) is position y of line x): the Y pass's input.
+pub type ColumnPlanes = Lines;
 
-impl RowPlanes {
-    pub fn new(width: usize, height: usize, radius: usize) -> RowPlanes {
-        let pad = padding(radius);
-        let stride = width + 2 * pad;
-        RowPlanes {
-            width,
-            height,
-            pad,
-            stride,
-            data: vec![0.0; height * NPLANES * stride],
-        }
-    }
-}
-
-impl ColumnPlanes {
+impl Lines {
     /// Squared distances at or above this mean the position is missing.
     pub const MISSING_DISTANCE2: f32 = 1e28;
 
-    pub fn new(width: usize, height: usize, radius: usize) -> ColumnPlanes {
-        let pad = padding(radius);
-        let stride = height + 2 * pad;
-        ColumnPlanes {
-            width,
-            height,
+    /// Zeroed lines for filter radius `radius`.
+    pub fn new(count: usize, length: usize, radius: usize) -> Lines {
+        let pad = radius + 2 * LANES;
+        let chunks_per_line = (length + 2 * pad).div_ceil(LANES);
+        Lines {
+            count,
+            length,
             pad,
-            stride,
-            data: vec![0.0; width * NPLANES * stride],
+            chunks_per_line,
+            data: vec![[[0.0; LANES]; NPLANES]; count * chunks_per_line],
         }
     }
 
-    /// Plane `q` at pixel (x, y).
+    /// The chunks of line `i`.
     #[inline]
-    pub fn at(&self, q: usize, x: usize, y: usize) -> f32 {
-        self.data[x * NPLANES * self.stride + q * self.stride + self.pad + y]
+    pub fn line(&self, i: usize) -> &[Chunk] {
+        &self.data[i * self.chunks_per_line..(i + 1) * self.chunks_per_line]
+    }
+
+    /// Plane `q` at position `pos` of line `line`.
+    #[inline]
+    pub fn at(&self, q: usize, line: usize, pos: usize) -> f32 {
+        let t = pos + self.pad;
+        self.data[line * self.chunks_per_line + t / LANES][q][t % LANES]
     }
 }
 
-/// The taps of one kind (`values` = [`DIR`] or [`IND`], squared bandwidth plane `b2`) in
-/// a block of planes, starting at offset `start` of each plane.
+/// Plane `q` at padded position `t` of a line.
 #[inline(always)]
-fn taps<'a>(
-    block: &'a [f32],
-    stride: usize,
-    start: usize,
-    count: usize,
-    b2: usize,
-    values: usize,
-    mask: &'a [f32],
-) -> Taps<'a> {
-    let plane = |q: usize| &block[q * stride + start..q * stride + start + count];
-    Taps {
-        px: plane(PX),
-        py: plane(PY),
-        pz: plane(PZ),
-        b2: plane(b2),
-        mask,
-        values: std::array::from_fn(|i| plane(values + i)),
+fn get(line: &[Chunk], q: usize, t: usize) -> f32 {
+    line[t / LANES][q][t % LANES]
+}
+
+#[inline(always)]
+fn put(line: &mut [Chunk], q: usize, t: usize, v: f32) {
+    line[t / LANES][q][t % LANES] = v;
+}
+
+/// The tap masks of radius R: for each alignment m = (t - R) mod 4 of a window's first
+/// tap, `chunks` chunks of lanes that are 1 for the taps |i| <= R of the window and 0 for
+/// the others in the same chunks.
+#[derive(Clone, Debug)]
+pub struct TapMasks {
+    pub radius: usize,
+    pub chunks: usize,
+    masks: Vec<[f32; LANES]>,
+}
+
+impl TapMasks {
+    pub fn new(radius: usize) -> TapMasks {
+        let chunks = (2 * radius + 1 + LANES - 1).div_ceil(LANES);
+        let masks = (0..LANES)
+            .flat_map(|m| {
+                (0..chunks).map(move |c| {
+                    std::array::from_fn(|l| {
+                        let k = c * LANES + l;
+                        if k >= m && k <= m + 2 * radius {
+                            1.0
+                        } else {
+                            0.0
+                        }
+                    })
+                })
+            })
+            .collect();
+        TapMasks {
+            radius,
+            chunks,
+            masks,
+        }
+    }
+
+    /// The chunks of `line` and their masks for the window around padded position `t`.
+    #[inline(always)]
+    fn window<'a>(&'a self, line: &'a [Chunk], t: usize) -> (&'a [Chunk], &'a [[f32; LANES]]) {
+        let s = t - self.radius;
+        let (c0, m) = (s / LANES, s % LANES);
+        (
+            &line[c0..c0 + self.chunks],
+            &self.masks[m * self.chunks..(m + 1) * self.chunks],
+        )
     }
 }
 
@@ -154,22 +170,22 @@ pub fn prepare(
     width_dir: &mut ScalarImage,
     width_ind: &mut ScalarImage,
 ) {
-    let (w, stride, pad) = (rows.width, rows.stride, rows.pad);
-    if w == 0 || rows.height == 0 {
+    let (w, pad) = (rows.length, rows.pad);
+    if w == 0 || rows.count == 0 {
         return;
     }
     rows.data
-        .par_chunks_mut(NPLANES * stride)
+        .par_chunks_mut(rows.chunks_per_line)
         .zip(width_dir.data.par_chunks_mut(w))
         .zip(width_ind.data.par_chunks_mut(w))
         .enumerate()
         .for_each_init(
             || (vec![0.0f32; w], vec![0.0f32; w]),
-            |(kx, ky), (y, ((block, wd), wi))| {
+            |(kx, ky), (y, ((line, wd), wi))| {
                 curvature_row(input.world_position, input.world_normal, y, kx, ky);
                 for x in 0..w {
                     let i = y * w + x;
-                    let at = |q: usize| q * stride + pad + x;
+                    let t = x + pad;
                     let p = input.world_position.data[i];
                     let has_position = p.is_finite();
                     let m = input.exponent.data[i];
@@ -180,27 +196,29 @@ pub fn prepare(
                     let bx = direct_bandwidth(kx[x], zd, settings.b_f, b_rho, settings.b_e);
                     let by = direct_bandwidth(ky[x], zd, settings.b_f, b_rho, settings.b_e);
                     let bi = indirect_bandwidth(zi, m);
+                    let chunk = &mut line[t / LANES];
+                    let l = t % LANES;
                     let stored = if has_position {
                         p
                     } else {
                         Vec3::splat(MISSING_POSITION)
                     };
-                    block[at(PX)] = stored.x;
-                    block[at(PY)] = stored.y;
-                    block[at(PZ)] = stored.z;
+                    chunk[PX][l] = stored.x;
+                    chunk[PY][l] = stored.y;
+                    chunk[PZ][l] = stored.z;
                     let keep = |b: f32| if has_position { b * b } else { 0.0 };
-                    block[at(B2X_DIR)] = keep(bx);
-                    block[at(B2Y_DIR)] = keep(by);
-                    block[at(B2_IND)] = keep(bi);
+                    chunk[B2X_DIR][l] = keep(bx);
+                    chunk[B2Y_DIR][l] = keep(by);
+                    chunk[B2_IND][l] = keep(bi);
                     for (kind, r, rv) in [(DIR, 0, 2), (IND, 1, 3)] {
                         for (slot, layer) in [(0, r), (3, rv)] {
                             let v = input.layers[layer].data[i];
                             let ok = has_position && v.is_finite();
                             let v = if ok { v } else { Vec3::ZERO };
-                            block[at(kind + slot)] = v.x;
-                            block[at(kind + slot + 1)] = v.y;
-                            block[at(kind + slot + 2)] = v.z;
-                            block[at(kind + 6 + slot / 3)] = if ok { 1.0 } else { 0.0 };
+                            chunk[kind + slot][l] = v.x;
+                            chunk[kind + slot + 1][l] = v.y;
+                            chunk[kind + slot + 2][l] = v.z;
+                            chunk[kind + 6 + slot / 3][l] = if ok { 1.0 } else { 0.0 };
                         }
                     }
                     let sigma = |b: f32| 1.0 / b;
@@ -215,8 +233,8 @@ pub fn prepare(
         );
 }
 
-/// Normalizes the sums of one kind into `out` (E_R rgb, E_RV rgb, valid_R, valid_RV);
-/// a layer whose target has no value (`valid` 0) gets `missing`.
+/// Normalizes the sums of one kind (E_R rgb, E_RV rgb, valid_R, valid_RV); a layer whose
+/// target has no value (`valid` 0) gets `missing`.
 #[inline]
 fn normalize(sums: &Sums, valid: [f32; 2], missing: f32) -> [f32; VALUE_PLANES] {
     let mut out = [missing; VALUE_PLANES];
@@ -232,46 +250,63 @@ fn normalize(sums: &Sums, valid: [f32; 2], missing: f32) -> [f32; VALUE_PLANES] 
     out
 }
 
+/// The tap sums of one kind for the target at padded position `t` of `line`, plus those
+/// of `previous` (a line of the previous frame and a padded position) when given.
+#[inline(always)]
+fn kind_sums<const B2: usize, const VALUES: usize>(
+    masks: &TapMasks,
+    line: &[Chunk],
+    t: usize,
+    previous: Option<(&[Chunk], usize)>,
+) -> [f32; VALUE_PLANES] {
+    let valid = [get(line, VALUES + 6, t), get(line, VALUES + 7, t)];
+    if valid == [0.0, 0.0] {
+        return [0.0; VALUE_PLANES];
+    }
+    let target = Target {
+        position: [get(line, PX, t), get(line, PY, t), get(line, PZ, t)],
+        b2: get(line, B2, t),
+    };
+    let mut sums = Sums::default();
+    let (chunks, mask) = masks.window(line, t);
+    accumulate::<B2, VALUES>(target, chunks, mask, &mut sums);
+    if let Some((prev_line, tp)) = previous {
+        let (chunks, mask) = masks.window(prev_line, tp);
+        accumulate::<B2, VALUES>(target, chunks, mask, &mut sums);
+    }
+    normalize(&sums, valid, f32::NAN)
+}
+
 /// The X pass, eq. 21: filters both kinds of `rows` along image rows and writes the
-/// results, with the positions and the Y bandwidths, into `columns`.
-pub fn x_pass(rows: &RowPlanes, radius: usize, mask: &[f32], columns: &mut ColumnPlanes) {
-    let (w, h) = (rows.width, rows.height);
+/// results (0 with valid 0 where a layer has no value), with the positions and the Y
+/// bandwidths, into `columns`.
+pub fn x_pass(rows: &RowPlanes, masks: &TapMasks, columns: &mut ColumnPlanes) {
+    let (w, h) = (rows.length, rows.count);
     if w == 0 || h == 0 {
         return;
     }
-    let count = tap_count(radius);
-    let (rs, rp) = (rows.stride, rows.pad);
-    let (cs, cp) = (columns.stride, columns.pad);
+    let (rp, cp, cpl) = (rows.pad, columns.pad, columns.chunks_per_line);
     columns
         .data
-        .par_chunks_mut(COLUMN_BAND * NPLANES * cs)
+        .par_chunks_mut(COLUMN_BAND * cpl)
         .enumerate()
         .for_each(|(band, out)| {
             let x0 = band * COLUMN_BAND;
-            let x1 = (x0 + COLUMN_BAND).min(w);
             for y in 0..h {
-                let block = &rows.data[y * NPLANES * rs..(y + 1) * NPLANES * rs];
-                for x in x0..x1 {
-                    let get = |q: usize| block[q * rs + rp + x];
-                    let col = &mut out[(x - x0) * NPLANES * cs..(x - x0 + 1) * NPLANES * cs];
-                    let mut put = |q: usize, v: f32| col[q * cs + cp + y] = v;
+                let line = rows.line(y);
+                let tc = y + cp;
+                for (dx, col) in out.chunks_mut(cpl).enumerate() {
+                    let t = x0 + dx + rp;
                     for q in [PX, PY, PZ, B2Y_DIR, B2_IND] {
-                        put(q, get(q));
+                        put(col, q, tc, get(line, q, t));
                     }
-                    let target = |b2: usize| Target {
-                        position: [get(PX), get(PY), get(PZ)],
-                        b2: get(b2),
-                    };
-                    for (kind, b2) in [(DIR, B2X_DIR), (IND, B2_IND)] {
-                        let valid = [get(kind + 6), get(kind + 7)];
-                        let mut sums = Sums::default();
-                        if valid[0] > 0.0 || valid[1] > 0.0 {
-                            let t = taps(block, rs, rp + x - radius, count, b2, kind, mask);
-                            accumulate(target(b2), &t, &mut sums);
-                        }
-                        for (q, v) in normalize(&sums, valid, 0.0).into_iter().enumerate() {
-                            put(kind + q, v);
-                        }
+                    let dir = kind_sums::<B2X_DIR, DIR>(masks, line, t, None);
+                    let ind = kind_sums::<B2_IND, IND>(masks, line, t, None);
+                    for q in 0..VALUE_PLANES {
+                        // A missing value (NaN) is stored as 0 with valid 0.
+                        let clean = |v: f32| if v.is_nan() { 0.0 } else { v };
+                        put(col, DIR + q, tc, clean(dir[q]));
+                        put(col, IND + q, tc, clean(ind[q]));
                     }
                 }
             }
@@ -284,20 +319,14 @@ pub fn x_pass(rows: &RowPlanes, radius: usize, mask: &[f32], columns: &mut Colum
 pub fn y_pass(
     columns: &ColumnPlanes,
     previous: Option<(&ColumnPlanes, &PreviousView)>,
-    radius: usize,
-    mask: &[f32],
+    masks: &TapMasks,
     out: &mut [Vec3Image; 4],
 ) {
-    let (w, h) = (columns.width, columns.height);
+    let (w, h) = (columns.count, columns.length);
     if w == 0 || h == 0 {
         return;
     }
-    let count = tap_count(radius);
-    let (cs, cp) = (columns.stride, columns.pad);
-    fn block_of(planes: &ColumnPlanes, x: usize) -> &[f32] {
-        let size = NPLANES * planes.stride;
-        &planes.data[x * size..(x + 1) * size]
-    }
+    let cp = columns.pad;
     let [er_dir, er_ind, erv_dir, erv_ind] = out;
     er_dir
         .data
@@ -309,49 +338,44 @@ pub fn y_pass(
         .for_each(|(band, (((o_r_dir, o_r_ind), o_rv_dir), o_rv_ind))| {
             let y0 = band * ROW_BAND;
             for x in 0..w {
-                let block = block_of(columns, x);
-                for (dy, i) in (0..o_r_dir.len() / w).map(|dy| (dy, dy * w + x)) {
-                    let y = y0 + dy;
-                    let get = |q: usize| block[q * cs + cp + y];
-                    let p = Vec3::new(get(PX), get(PY), get(PZ));
-                    let mut results = [[f32::NAN; VALUE_PLANES]; 2];
-                    let any_valid = [DIR + 6, DIR + 7, IND + 6, IND + 7]
-                        .iter()
-                        .any(|&q| get(q) > 0.0);
-                    if any_valid {
-                        let matched = previous.and_then(|(planes, view)| {
-                            find_previous(p, view, planes)
-                                .map(|(xp, yp)| (block_of(planes, xp), yp))
-                        });
-                        for (k, (kind, b2)) in
-                            [(DIR, B2Y_DIR), (IND, B2_IND)].into_iter().enumerate()
-                        {
-                            let valid = [get(kind + 6), get(kind + 7)];
-                            if valid[0] == 0.0 && valid[1] == 0.0 {
-                                continue;
-                            }
-                            let target = Target {
-                                position: p.to_array(),
-                                b2: get(b2),
-                            };
-                            let mut sums = Sums::default();
-                            let t = taps(block, cs, cp + y - radius, count, b2, kind, mask);
-                            accumulate(target, &t, &mut sums);
-                            if let Some((prev_block, yp)) = matched {
-                                let t =
-                                    taps(prev_block, cs, cp + yp - radius, count, b2, kind, mask);
-                                accumulate(target, &t, &mut sums);
-                            }
-                            results[k] = normalize(&sums, valid, f32::NAN);
-                        }
-                    }
+                let line = columns.line(x);
+                for dy in 0..o_r_dir.len() / w {
+                    let (i, t) = (dy * w + x, y0 + dy + cp);
                     let rgb = |r: &[f32; VALUE_PLANES], layer: usize| {
                         Vec3::new(r[3 * layer], r[3 * layer + 1], r[3 * layer + 2])
                     };
-                    o_r_dir[i] = rgb(&results[0], 0);
-                    o_rv_dir[i] = rgb(&results[0], 1);
-                    o_r_ind[i] = rgb(&results[1], 0);
-                    o_rv_ind[i] = rgb(&results[1], 1);
+                    let valid = [DIR + 6, DIR + 7, IND + 6, IND + 7].map(|q| get(line, q, t));
+                    let (dir, ind) = if valid == [0.0; 4] {
+                        ([f32::NAN; VALUE_PLANES], [f32::NAN; VALUE_PLANES])
+                    } else {
+                        let p = Vec3::new(get(line, PX, t), get(line, PY, t), get(line, PZ, t));
+                        let matched = previous.and_then(|(planes, view)| {
+                            find_previous(p, view, planes)
+                                .map(|(xp, yp)| (planes.line(xp), yp + planes.pad))
+                        });
+                        let nan_if_missing = |mut r: [f32; VALUE_PLANES], ok: [f32; 2]| {
+                            for (layer, &ok) in ok.iter().enumerate() {
+                                if ok == 0.0 {
+                                    r[3 * layer..3 * layer + 3].fill(f32::NAN);
+                                }
+                            }
+                            r
+                        };
+                        (
+                            nan_if_missing(
+                                kind_sums::<B2Y_DIR, DIR>(masks, line, t, matched),
+                                [valid[0], valid[1]],
+                            ),
+                            nan_if_missing(
+                                kind_sums::<B2_IND, IND>(masks, line, t, matched),
+                                [valid[2], valid[3]],
+                            ),
+                        )
+                    };
+                    o_r_dir[i] = rgb(&dir, 0);
+                    o_rv_dir[i] = rgb(&dir, 1);
+                    o_r_ind[i] = rgb(&ind, 0);
+                    o_rv_ind[i] = rgb(&ind, 1);
                 }
             }
         });

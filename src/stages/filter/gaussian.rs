@@ -1,0 +1,110 @@
+//! The world-space Gaussian kernel of paper 001 eq. 23 and its weighted tap sums
+//! (eqs. 21-22, 24-26): a fast `exp` and a branch-free, auto-vectorized accumulation over
+//! contiguous chunks of taps that computes each weight once for the two layers (E_R and
+//! E_RV) that share it.
+//!
+//! Taps are stored as an array of structures of arrays: a line (an image row or column)
+//! is a sequence of [`Chunk`]s, each holding [`LANES`] consecutive pixels of every plane
+//! (see [`super::planes`]), so one pointer and constant offsets reach every plane of a
+//! chunk and the four lanes load as one SSE2 vector.
+
+/// SIMD width the tap loop is written for (four f32 lanes: SSE2 on baseline x86-64).
+pub const LANES: usize = 4;
+
+/// Arguments at or above this give a weight of exactly 0: e^-40 ~ 4e-18, far below the
+/// f32 resolution of a sum that holds the target's own weight 1 (and the products stay
+/// clear of subnormal floats, which are slow).
+pub const EXP_CUTOFF: f32 = 40.0;
+
+// 2^f ~ 1 + C1 f + C2 f^2 + C3 f^3 + C4 f^4 on f in [-0.5, 0.5]: relative-error minimax
+// coefficients (iteratively reweighted least squares, constant term pinned to 1 so that
+// exp(0) = 1 exactly); max relative error 2.8e-6 in exact arithmetic.
+const C1: f32 = 0.693_124_2;
+const C2: f32 = 0.240_241_0;
+const C3: f32 = 0.055_906_43;
+const C4: f32 = 0.009_582_807;
+
+/// 1.5 * 2^23: adding it rounds a float of magnitude < 2^22 to an integer, which then
+/// sits in the low mantissa bits.
+const ROUNDING_MAGIC: f32 = 12_582_912.0;
+
+/// e^-a for a >= 0, branch-free and without float-to-int conversion, for the Gaussian
+/// weights of eq. 23.
+///
+/// 2^y, y = -a log2(e), is split into 2^k (exponent bits) times 2^f, f = y - k in
+/// [-0.5, 0.5], by a degree-4 minimax polynomial (2.8e-6 relative); k = round(y) comes
+/// from the mantissa of y + 1.5 * 2^23. Measured max relative error against f64 `exp`
+/// (test `fast_exp_accuracy`): 2.9e-6 on [0, 1], 4.7e-6 over [0, 40) (the rounding of
+/// y adds up to ~6e-8 a). exp(0) is exactly 1;
+/// a >= [`EXP_CUTOFF`] or NaN gives exactly 0.
+#[inline(always)]
+pub fn exp_neg(a: f32) -> f32 {
+    let y = a * -std::f32::consts::LOG2_E;
+    let t = y + ROUNDING_MAGIC;
+    let f = y - (t - ROUNDING_MAGIC);
+    let p = 1.0 + f * (C1 + f * (C2 + f * (C3 + f * C4)));
+    // t's low bits hold k (two's complement); shifted into the exponent field, plus the
+    // bias 127, they make 2^k. Only used for k >= -58 (a < 40).
+    let scale = f32::from_bits((t.to_bits() << 23).wrapping_add(127 << 23));
+    let r = p * scale;
+    if a < EXP_CUTOFF { r } else { 0.0 }
+}
+
+/// Number of value planes per filtered kind: E_R rgb, E_RV rgb, valid_R, valid_RV.
+pub const VALUE_PLANES: usize = 8;
+
+/// Planes per chunk: world position (3), squared bandwidths (3), two kinds of values.
+pub const NPLANES: usize = 6 + 2 * VALUE_PLANES;
+
+/// [`LANES`] consecutive pixels of every plane.
+pub type Chunk = [[f32; LANES]; NPLANES];
+
+/// The pixel a tap sum is for: its world position and squared bandwidth B^2.
+#[derive(Clone, Copy, Debug)]
+pub struct Target {
+    pub position: [f32; 3],
+    pub b2: f32,
+}
+
+/// Lane-wise running sums of w * value for each value plane (so for the valid planes,
+/// the sums of weights). Reduced over lanes in a fixed order by [`Sums::total`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Sums(pub [[f32; LANES]; VALUE_PLANES]);
+
+impl Sums {
+    /// The sum of plane `q` over the lanes, always in the same order.
+    #[inline]
+    pub fn total(&self, q: usize) -> f32 {
+        let s = &self.0[q];
+        (s[0] + s[1]) + (s[2] + s[3])
+    }
+}
+
+/// Adds w * value over the taps in `chunks` to `sums`, with
+/// w = exp(-2 Bbar^2 |p - p_i|^2), Bbar^2 = (B^2(target) + B^2(source)) / 2 (paper 001
+/// eq. 23), times `mask` (1 for the taps inside the radius, 0 for the others that share
+/// their chunks). Squared bandwidths are read from plane `B2`, values from the
+/// [`VALUE_PLANES`] planes from `VALUES` on. Positions are plane 0..3.
+#[inline(always)]
+pub fn accumulate<const B2: usize, const VALUES: usize>(
+    target: Target,
+    chunks: &[Chunk],
+    mask: &[[f32; LANES]],
+    sums: &mut Sums,
+) {
+    let [tx, ty, tz] = target.position;
+    let acc = &mut sums.0;
+    for (chunk, mask) in chunks.iter().zip(mask) {
+        let mut w = [0.0f32; LANES];
+        for l in 0..LANES {
+            let (dx, dy, dz) = (chunk[0][l] - tx, chunk[1][l] - ty, chunk[2][l] - tz);
+            let d2 = dx * dx + dy * dy + dz * dz;
+            w[l] = exp_neg((target.b2 + chunk[B2][l]) * d2) * mask[l];
+        }
+        for q in 0..VALUE_PLANES {
+            for l in 0..LANES {
+                acc[q][l] += w[l] * chunk[VALUES + q][l];
+            }
+        }
+    }
+}

@@ -7,6 +7,8 @@
 //! - `mse_gaussian_same_radius`: the same for the naive alternative, a plain
 //!   image-space Gaussian over the same window (|i|, |j| <= radius, sigma = radius / 2,
 //!   separable, skipping pixels without an estimate);
+//! - `mse_unfiltered_by_layer`, `mse_filtered_by_layer`: the same per layer, in the
+//!   order e_r_dir, e_r_ind, e_rv_dir, e_rv_ind;
 //! - `temporal_flicker` and `temporal_flicker_spatial_only`: a still camera over a
 //!   static scene. The frame's sampling is re-run [`FLICKER_FRAMES`] times with fresh
 //!   random numbers (as consecutive frames of a camera that does not move would get),
@@ -45,6 +47,8 @@ pub struct FilterScorer {
     unfiltered: Mse,
     filtered: Mse,
     gaussian: Mse,
+    /// Per layer (e_r_dir, e_r_ind, e_rv_dir, e_rv_ind): unfiltered, filtered.
+    layers: [(Mse, Mse); 4],
     flicker_temporal: Mse,
     flicker_spatial: Mse,
 }
@@ -94,6 +98,7 @@ impl FilterScorer {
             unfiltered: Mse::default(),
             filtered: Mse::default(),
             gaussian: Mse::default(),
+            layers: Default::default(),
             flicker_temporal: Mse::default(),
             flicker_spatial: Mse::default(),
         }
@@ -131,7 +136,7 @@ impl FilterScorer {
             &reference.e_rv_ind,
         ];
         let radius = self.stage.params.int("radius").max(0) as usize;
-        for (role, truth) in LAYERS.into_iter().zip(truth) {
+        for (k, (role, truth)) in LAYERS.into_iter().zip(truth).enumerate() {
             let (Ok(input), Ok(output)) = (
                 frame.radiance(&self.input(role)),
                 frame.radiance(&self.output(&format!("filtered_{role}"))),
@@ -140,6 +145,8 @@ impl FilterScorer {
             };
             self.unfiltered.add_layers(input, truth);
             self.filtered.add_layers(output, truth);
+            self.layers[k].0.add_layers(input, truth);
+            self.layers[k].1.add_layers(output, truth);
             self.gaussian
                 .add_layers(&plain_gaussian(input, radius, radius as f32 / 2.0), truth);
         }
@@ -231,6 +238,8 @@ impl FilterScorer {
             "mse_unfiltered": self.unfiltered.value(),
             "mse_filtered": self.filtered.value(),
             "mse_gaussian_same_radius": self.gaussian.value(),
+            "mse_unfiltered_by_layer": self.layers.iter().map(|l| l.0.value()).collect::<Vec<_>>(),
+            "mse_filtered_by_layer": self.layers.iter().map(|l| l.1.value()).collect::<Vec<_>>(),
             "temporal_flicker": self.flicker_temporal.value(),
             "temporal_flicker_spatial_only": self.flicker_spatial.value(),
         })

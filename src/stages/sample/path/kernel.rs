@@ -85,6 +85,9 @@ pub(super) struct Kernel<'a> {
     /// the objects.
     pub(super) object_pixels: [i64; 4],
     pub(super) strata: Vec<u32>,
+    /// Blocked direct samples dimmer than this (largest channel of the sample's
+    /// radiance) do not count towards `direct_min_distance`.
+    pub(super) occluder_min_radiance: f32,
 }
 
 impl<'a> Kernel<'a> {
@@ -125,6 +128,25 @@ impl<'a> Kernel<'a> {
             camera_cone,
             object_pixels,
             strata: strata_bounds(params.primary * params.direct, inputs.table.samples.len()),
+            occluder_min_radiance: params.occluder_threshold
+                * inputs
+                    .table
+                    .samples
+                    .iter()
+                    .map(|s| s.radiance.max_element())
+                    .fold(0.0, f32::max),
+        }
+    }
+
+    /// Records a blocked direct sample for the filter: its occluder at distance `t`
+    /// along a direction at `cos` to the normal stands at depth z = t cos above the
+    /// receiver (paper 001 Fig. 3c), so the cos^2(theta_occ) / z of eq. 17 is
+    /// 1 / (t / cos); the smallest t / cos is kept. Samples too dim to matter are
+    /// skipped (paper 001 Sec. 7).
+    #[inline]
+    pub(super) fn record_occluder(&self, acc: &mut Acc, radiance: Vec3, t: f32, cos: f32) {
+        if radiance.max_element() >= self.occluder_min_radiance {
+            acc.direct_min = acc.direct_min.min(t / cos);
         }
     }
 
@@ -389,7 +411,7 @@ impl<'a> Kernel<'a> {
                 if cos > 0.0 && ls.pdf > 0.0 {
                     let dir_camera = Vec3::from(self.to_camera * Vec3A::from(ls.direction));
                     match self.trace_real(rp, dir_camera) {
-                        Some(hit) => acc.direct_min = acc.direct_min.min(hit.t),
+                        Some(hit) => self.record_occluder(acc, ls.radiance, hit.t, cos),
                         None => {
                             c = ls.radiance * (cos / ls.pdf);
                             c_rv = c;
@@ -402,7 +424,7 @@ impl<'a> Kernel<'a> {
                             if let Some(hit) = blocker {
                                 c_rv = Vec3::ZERO;
                                 acc.touched = true;
-                                acc.direct_min = acc.direct_min.min(hit.t);
+                                self.record_occluder(acc, ls.radiance, hit.t, cos);
                             }
                         }
                     }

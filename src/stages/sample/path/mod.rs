@@ -56,9 +56,15 @@
 //!   E_RV == E_R still holds exactly where no candidate meets an object. Direct light
 //!   keeps the correlated table samples (they already follow the light, and a blocked
 //!   sample is exactly what a shadow needs).
-//! - `direct_min_distance` / `indirect_min_distance`: the smallest hit distance (metres)
-//!   of blocked direct samples / of indirect rays that hit something, over E_R and E_RV
-//!   paths; INFINITY where none (the filter's bandwidths need them).
+//! - `direct_min_distance` / `indirect_min_distance` (metres, over E_R and E_RV paths,
+//!   INFINITY where none; the filter's bandwidths need them): for indirect rays the
+//!   smallest hit distance; for blocked direct samples the smallest t / cos(theta) of
+//!   the hit distance t and the sample's angle theta to the normal. That is the
+//!   z / cos^2(theta_occ) of paper 001 eq. 17, whose flatland occluder stands at depth
+//!   z = t cos(theta) above the receiver (Fig. 3c): an occluder met at a grazing angle
+//!   narrows the filter less than one overhead at the same distance. As in paper 001
+//!   Sec. 7, occluders of dim direct samples are ignored: those whose radiance (largest
+//!   channel) is below `occluder_threshold` (0.1) times the table's brightest sample.
 //! - Random numbers are counter-based per (seed, frame, pixel, stream, sample), so the
 //!   products are the same for any thread count.
 //!
@@ -149,6 +155,12 @@ const PARAMS: &[ParamSpec] = &[
         "real ray origins are raised off the surface along its normal by this many pixel footprints (depth / focal length), so grazing rays do not hit their own surface between pixel centres",
     )
     .range(0.0, 16.0),
+    ParamSpec::new(
+        "occluder_threshold",
+        ParamDefault::Float(0.1),
+        "direct_min_distance counts only occluders of samples at least this bright, as a fraction of the table's brightest sample (paper 001 Sec. 7 ignores occluders of samples below 0.1): dim light blocked nearby does not narrow the filter",
+    )
+    .range(0.0, 1.0),
     ParamSpec::new(
         "thickness",
         ParamDefault::Float(0.1),
@@ -254,6 +266,9 @@ pub struct PathParams {
     /// Pixel footprints (depth / focal length) by which real ray origins are raised
     /// along the normal.
     pub normal_offset: f32,
+    /// Blocked direct samples whose radiance is below this fraction of the table's
+    /// brightest do not set `direct_min_distance`.
+    pub occluder_threshold: f32,
 }
 
 impl Default for PathParams {
@@ -269,6 +284,7 @@ impl Default for PathParams {
             trace: TraceParams::default(),
             max_distance: 1.0,
             normal_offset: 1.0,
+            occluder_threshold: 0.1,
         }
     }
 }
@@ -291,6 +307,7 @@ impl PathParams {
             },
             max_distance: p.float("max_distance") as f32,
             normal_offset: p.float("normal_offset") as f32,
+            occluder_threshold: p.float("occluder_threshold") as f32,
         }
     }
 

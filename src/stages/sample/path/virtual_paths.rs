@@ -37,7 +37,7 @@ impl Kernel<'_> {
                 let cos = n.dot(ls.direction);
                 if cos > 0.0 && ls.pdf > 0.0 {
                     match self.occluder_distance(origin, ls.direction) {
-                        Some(t) => acc.direct_min = acc.direct_min.min(t),
+                        Some(t) => self.record_occluder(acc, ls.radiance, t, cos),
                         None => {
                             let lobe = if glossy {
                                 phong_weight(mirror.dot(ls.direction), material.exponent)

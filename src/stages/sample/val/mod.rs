@@ -29,7 +29,8 @@
 //! evaluated, a glossy object is shaded as diffuse, so `exponent` is 0 everywhere).
 //! `indirect_min_distance` is INFINITY everywhere (no indirect rays);
 //! `direct_min_distance` is the distance to the nearest shadow-map occluder of a light
-//! that faces the point. Pixels with no surface (no depth, or a zero normal, and no
+//! that faces the point, over the cosine of that light's direction at the point (as
+//! `sample.path` records it: the z / cos^2(theta_occ) of paper 001 eq. 17). Pixels with no surface (no depth, or a zero normal, and no
 //! object) get NaN irradiance.
 
 mod pixel;

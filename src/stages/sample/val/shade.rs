@@ -57,7 +57,9 @@ pub(crate) struct Shaded {
     /// every V^_j is 1.
     pub e_rv: Vec3,
     /// The distance to the nearest occluder (real or virtual) of a light that would
-    /// otherwise reach the point; INFINITY when none.
+    /// otherwise reach the point over the cosine of the light's direction at the point
+    /// (the z / cos^2(theta_occ) of paper 001 eq. 17, as `sample.path` records it);
+    /// INFINITY when none.
     pub min_occluder: f32,
 }
 
@@ -143,9 +145,12 @@ pub(crate) fn shade_point(
                     occluder = occluder.min(z_real);
                 }
                 if occluder.is_finite() {
-                    // Along the ray to the light, distance scales with light-space depth.
-                    let d = r2.sqrt() * (1.0 - occluder / l.z);
-                    out.min_occluder = out.min_occluder.min(d.max(0.0));
+                    // Along the ray to the light, distance scales with light-space depth;
+                    // over the cosine at the receiver, as `sample.path` records it.
+                    let r = r2.sqrt();
+                    let d = r * (1.0 - occluder / l.z);
+                    let cos_receiver = n.dot(v) / r;
+                    out.min_occluder = out.min_occluder.min(d.max(0.0) / cos_receiver);
                 }
             }
         }

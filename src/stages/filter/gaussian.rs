@@ -8,6 +8,8 @@
 //! (see [`super::planes`]), so one pointer and constant offsets reach every plane of a
 //! chunk and the four lanes load as one SSE2 vector.
 
+use super::simd::F4;
+
 /// SIMD width the tap loop is written for (four f32 lanes: SSE2 on baseline x86-64).
 pub const LANES: usize = 4;
 
@@ -48,6 +50,20 @@ pub fn exp_neg(a: f32) -> f32 {
     let scale = f32::from_bits((t.to_bits() << 23).wrapping_add(127 << 23));
     let r = p * scale;
     if a < EXP_CUTOFF { r } else { 0.0 }
+}
+
+/// [`exp_neg`] on four lanes (the same operations, so the same bits per lane).
+#[inline(always)]
+pub fn exp_neg4(a: F4) -> F4 {
+    let y = a.mul(F4::splat(-std::f32::consts::LOG2_E));
+    let t = y.add(F4::splat(ROUNDING_MAGIC));
+    let f = y.sub(t.sub(F4::splat(ROUNDING_MAGIC)));
+    let mut p = F4::splat(C4);
+    for c in [C3, C2, C1, 1.0] {
+        p = p.mul(f).add(F4::splat(c));
+    }
+    p.mul(t.exponent_from_low_bits(127))
+        .zero_unless_below(a, F4::splat(EXP_CUTOFF))
 }
 
 /// Number of value planes per filtered kind: E_R rgb, E_RV rgb, valid_R, valid_RV.
@@ -92,19 +108,17 @@ pub fn accumulate<const B2: usize, const VALUES: usize>(
     mask: &[[f32; LANES]],
     sums: &mut Sums,
 ) {
-    let [tx, ty, tz] = target.position;
-    let acc = &mut sums.0;
+    let [tx, ty, tz] = target.position.map(F4::splat);
+    let tb = F4::splat(target.b2);
+    let mut acc = sums.0.map(F4::from_array);
     for (chunk, mask) in chunks.iter().zip(mask) {
-        let mut w = [0.0f32; LANES];
-        for l in 0..LANES {
-            let (dx, dy, dz) = (chunk[0][l] - tx, chunk[1][l] - ty, chunk[2][l] - tz);
-            let d2 = dx * dx + dy * dy + dz * dz;
-            w[l] = exp_neg((target.b2 + chunk[B2][l]) * d2) * mask[l];
-        }
-        for q in 0..VALUE_PLANES {
-            for l in 0..LANES {
-                acc[q][l] += w[l] * chunk[VALUES + q][l];
-            }
+        let load = |q: usize| F4::from_array(chunk[q]);
+        let (dx, dy, dz) = (load(0).sub(tx), load(1).sub(ty), load(2).sub(tz));
+        let d2 = dx.mul(dx).add(dy.mul(dy)).add(dz.mul(dz));
+        let w = exp_neg4(tb.add(load(B2)).mul(d2)).mul(F4::from_array(*mask));
+        for (q, acc) in acc.iter_mut().enumerate() {
+            *acc = acc.add(w.mul(load(VALUES + q)));
         }
     }
+    sums.0 = acc.map(F4::to_array);
 }

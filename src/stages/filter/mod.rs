@@ -42,6 +42,7 @@
 pub mod bandwidth;
 pub mod gaussian;
 pub mod planes;
+mod simd;
 pub mod spectrum;
 pub mod temporal;
 

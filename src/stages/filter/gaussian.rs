@@ -22,7 +22,7 @@ pub const EXP_CUTOFF: f32 = 40.0;
 // coefficients (iteratively reweighted least squares, constant term pinned to 1 so that
 // exp(0) = 1 exactly); max relative error 2.8e-6 in exact arithmetic.
 const C1: f32 = 0.693_124_2;
-const C2: f32 = 0.240_241_0;
+const C2: f32 = 0.240_241;
 const C3: f32 = 0.055_906_43;
 const C4: f32 = 0.009_582_807;
 

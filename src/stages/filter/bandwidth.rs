@@ -92,10 +92,16 @@ fn clamp_bandwidth(b: f32) -> f32 {
     }
 }
 
-/// The unsigned angle (radians) between two non-zero vectors, accurate for small angles.
+/// The unsigned angle (radians) between two non-zero vectors, from the chord c between
+/// their directions: 2 asin(c / 2) = c + c^3 / 24 + 3 c^5 / 640 + ... (three terms; no
+/// libm call). Relative error: < 2e-4 up to 30 degrees, 0.8 % at 90 degrees; it
+/// underestimates only beyond that, where neighbouring normals are no longer a smooth
+/// surface anyway.
 #[inline]
 fn angle_between(a: Vec3, b: Vec3) -> f32 {
-    a.cross(b).length().atan2(a.dot(b))
+    let c = (a.normalize() - b.normalize()).length();
+    let c2 = c * c;
+    c * (1.0 + c2 * (1.0 / 24.0 + c2 * (3.0 / 640.0)))
 }
 
 #[inline]

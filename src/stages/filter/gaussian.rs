@@ -8,6 +8,8 @@
 //! (see [`super::planes`]), so one pointer and constant offsets reach every plane of a
 //! chunk and the four lanes load as one SSE2 vector.
 
+use super::simd::F4;
+
 /// SIMD width the tap loop is written for (four f32 lanes: SSE2 on baseline x86-64).
 pub const LANES: usize = 4;
 
@@ -20,7 +22,7 @@ pub const EXP_CUTOFF: f32 = 40.0;
 // coefficients (iteratively reweighted least squares, constant term pinned to 1 so that
 // exp(0) = 1 exactly); max relative error 2.8e-6 in exact arithmetic.
 const C1: f32 = 0.693_124_2;
-const C2: f32 = 0.240_241_0;
+const C2: f32 = 0.240_241;
 const C3: f32 = 0.055_906_43;
 const C4: f32 = 0.009_582_807;
 
@@ -48,6 +50,27 @@ pub fn exp_neg(a: f32) -> f32 {
     let scale = f32::from_bits((t.to_bits() << 23).wrapping_add(127 << 23));
     let r = p * scale;
     if a < EXP_CUTOFF { r } else { 0.0 }
+}
+
+/// [`exp_neg`] on four lanes (the same operations, so the same bits per lane).
+#[inline(always)]
+pub fn exp_neg4(a: F4) -> F4 {
+    exp_neg4_below(a, F4::splat(EXP_CUTOFF))
+}
+
+/// [`exp_neg4`] with the cutoff per lane: lanes with `a >= limit` give 0 (a limit below
+/// 0 masks a lane out for any a >= 0).
+#[inline(always)]
+pub fn exp_neg4_below(a: F4, limit: F4) -> F4 {
+    let y = a.mul(F4::splat(-std::f32::consts::LOG2_E));
+    let t = y.add(F4::splat(ROUNDING_MAGIC));
+    let f = y.sub(t.sub(F4::splat(ROUNDING_MAGIC)));
+    let mut p = F4::splat(C4);
+    for c in [C3, C2, C1, 1.0] {
+        p = p.mul(f).add(F4::splat(c));
+    }
+    p.mul(t.exponent_from_low_bits(127))
+        .zero_unless_below(a, limit)
 }
 
 /// Number of value planes per filtered kind: E_R rgb, E_RV rgb, valid_R, valid_RV.
@@ -82,29 +105,28 @@ impl Sums {
 
 /// Adds w * value over the taps in `chunks` to `sums`, with
 /// w = exp(-2 Bbar^2 |p - p_i|^2), Bbar^2 = (B^2(target) + B^2(source)) / 2 (paper 001
-/// eq. 23), times `mask` (1 for the taps inside the radius, 0 for the others that share
-/// their chunks). Squared bandwidths are read from plane `B2`, values from the
+/// eq. 23), for the taps inside the radius; `limits` holds per tap the exp cutoff
+/// ([`EXP_CUTOFF`] inside the radius, -1 for the other taps that share their chunks, so
+/// their weight is 0 at no extra cost). Squared bandwidths are read from plane `B2`, values from the
 /// [`VALUE_PLANES`] planes from `VALUES` on. Positions are plane 0..3.
 #[inline(always)]
 pub fn accumulate<const B2: usize, const VALUES: usize>(
     target: Target,
     chunks: &[Chunk],
-    mask: &[[f32; LANES]],
+    limits: &[[f32; LANES]],
     sums: &mut Sums,
 ) {
-    let [tx, ty, tz] = target.position;
-    let acc = &mut sums.0;
-    for (chunk, mask) in chunks.iter().zip(mask) {
-        let mut w = [0.0f32; LANES];
-        for l in 0..LANES {
-            let (dx, dy, dz) = (chunk[0][l] - tx, chunk[1][l] - ty, chunk[2][l] - tz);
-            let d2 = dx * dx + dy * dy + dz * dz;
-            w[l] = exp_neg((target.b2 + chunk[B2][l]) * d2) * mask[l];
-        }
-        for q in 0..VALUE_PLANES {
-            for l in 0..LANES {
-                acc[q][l] += w[l] * chunk[VALUES + q][l];
-            }
+    let [tx, ty, tz] = target.position.map(F4::splat);
+    let tb = F4::splat(target.b2);
+    let mut acc = sums.0.map(F4::from_array);
+    for (chunk, limit) in chunks.iter().zip(limits) {
+        let load = |q: usize| F4::from_array(chunk[q]);
+        let (dx, dy, dz) = (load(0).sub(tx), load(1).sub(ty), load(2).sub(tz));
+        let d2 = dx.mul(dx).add(dy.mul(dy)).add(dz.mul(dz));
+        let w = exp_neg4_below(tb.add(load(B2)).mul(d2), F4::from_array(*limit));
+        for (q, acc) in acc.iter_mut().enumerate() {
+            *acc = acc.add(w.mul(load(VALUES + q)));
         }
     }
+    sums.0 = acc.map(F4::to_array);
 }

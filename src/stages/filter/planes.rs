@@ -10,7 +10,7 @@
 
 use super::bandwidth::{brdf_bandwidth, curvature_row, direct_bandwidth, indirect_bandwidth};
 pub use super::gaussian::NPLANES;
-use super::gaussian::{Chunk, LANES, Sums, Target, VALUE_PLANES, accumulate};
+use super::gaussian::{Chunk, EXP_CUTOFF, LANES, Sums, Target, VALUE_PLANES, accumulate};
 use super::temporal::{PreviousView, find_previous};
 use crate::raster::{ScalarImage, Vec3Image};
 use glam::Vec3;
@@ -97,8 +97,8 @@ fn put(line: &mut [Chunk], q: usize, t: usize, v: f32) {
 }
 
 /// The tap masks of radius R: for each alignment m = (t - R) mod 4 of a window's first
-/// tap, `chunks` chunks of lanes that are 1 for the taps |i| <= R of the window and 0 for
-/// the others in the same chunks.
+/// tap, `chunks` chunks of per-lane exp cutoffs: [`EXP_CUTOFF`] for the taps |i| <= R of
+/// the window, -1 (weight 0) for the others in the same chunks.
 #[derive(Clone, Debug)]
 pub struct TapMasks {
     pub radius: usize,
@@ -115,9 +115,9 @@ impl TapMasks {
                     std::array::from_fn(|l| {
                         let k = c * LANES + l;
                         if k >= m && k <= m + 2 * radius {
-                            1.0
+                            EXP_CUTOFF
                         } else {
-                            0.0
+                            -1.0
                         }
                     })
                 })

@@ -9,6 +9,8 @@ use super::temporal::find_previous;
 use super::*;
 use crate::rng::{hash, unit_f32};
 
+mod reference;
+
 const W: u32 = 96;
 const H: u32 = 72;
 
@@ -224,6 +226,11 @@ fn fast_exp_accuracy() {
             .map(|k| rel(lo + (hi - lo) * k as f32 / 200_000.0))
             .fold(0.0f64, f64::max)
     };
+    // The four-lane version computes the same bits.
+    for a in [0.0f32, 1e-3, 0.5, 3.7, 20.0, 39.99, 40.0, 1e30, f32::NAN] {
+        let lanes = gaussian::exp_neg4(simd::F4::splat(a)).to_array();
+        assert_eq!(lanes.map(f32::to_bits), [exp_neg(a).to_bits(); 4], "{a}");
+    }
     let (small, large) = (worst(0.0, 1.0), worst(0.0, 39.99));
     eprintln!("exp_neg: max relative error {small:e} on [0, 1], {large:e} on [0, 40)");
     assert!(small < 4e-6, "max relative error {small} on [0, 1]");
@@ -504,85 +511,29 @@ fn outputs_are_the_same_bits_for_any_thread_count() {
 }
 
 #[test]
-fn the_stage_reads_its_products_caches_b_e_and_writes_every_output() {
-    use crate::graph::{BuildContext, Params};
-    use crate::recording::Header;
-    use std::collections::BTreeMap;
-    let params = Params::defaults(PARAMS);
-    let ports = (INFO.ports)(&params);
-    let roles: Vec<&str> = ports.inputs.iter().map(|p| p.role.as_str()).collect();
-    assert!(roles.contains(&"environment") && roles.contains(&"pose"));
-    let mut fixed = params.clone();
-    fixed.set(
-        "environment_bandwidth",
-        crate::graph::ParamValue::Float(4.0),
-    );
-    fixed.set("temporal", crate::graph::ParamValue::Bool(false));
-    let fixed_roles = (INFO.ports)(&fixed).inputs;
-    assert_eq!(fixed_roles.len(), 9, "no environment, no pose");
-    let header = Header::new("t", Intrinsics::PRIMESENSE, 0.001);
-    let objects = Arc::new(crate::objects::VirtualScene::default());
-    let ctx = BuildContext {
-        stage_name: "filter",
-        params: &params,
-        inputs: &BTreeMap::new(),
-        outputs: &BTreeMap::new(),
-        header: &header,
-        out_dir: std::path::Path::new("."),
-        seed: 0,
-        objects: &objects,
-    };
-    let mut stage = (INFO.build)(&ctx).unwrap();
-    let mut scene = Scene::new(sphere(Vec3::new(0.0, 0.0, 2.0), 0.5, 3.0), 0.5, 0.5);
-    scene.set_layers(|i| Vec3::splat(1.0 + noise(12, i)));
-    let map = Arc::new(EnvMap::from_fn(64, 32, |d| {
-        Vec3::splat(1.0 + 0.5 * (3.0 * d.z.atan2(d.x)).cos())
-    }));
-    let mut direct = AxisAlignedFilter::new(FilterParams::default());
-    let mut expected = FilterOutputs::new(W, H);
-    for index in 0..2 {
-        let mut frame = Frame::new(index, 0);
-        let names = ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind"];
-        for (name, layer) in names.iter().zip(&scene.layers) {
-            frame.insert(name, Product::Radiance(layer.clone()));
-        }
-        frame.insert("world_position", Product::Points(scene.position.clone()));
-        frame.insert("world_normal", Product::Normals(scene.normal.clone()));
-        frame.insert("direct_min_distance", Product::Scalar(scene.zd.clone()));
-        frame.insert("indirect_min_distance", Product::Scalar(scene.zi.clone()));
-        frame.insert("exponent", Product::Scalar(scene.exponent.clone()));
-        frame.insert("environment", Product::Environment(Arc::clone(&map)));
-        frame.insert("pose", Product::Pose(Pose::IDENTITY));
-        stage.process(&mut frame).unwrap();
-        let inputs = FilterInputs {
-            environment: Some(&map),
-            ..scene.inputs(Some((Pose::IDENTITY, camera())))
-        };
-        expected = FilterOutputs::new(W, H);
-        direct.filter(&inputs, &mut expected).unwrap();
-        for (role, _) in OUTPUTS {
-            assert!(frame.get(role).is_some(), "{role}");
-        }
-        assert!(same_bits(
-            frame.radiance("filtered_e_rv_ind").unwrap(),
-            &expected.layers[3]
-        ));
-        assert_eq!(
-            frame.scalar("filter_width_ind").unwrap(),
-            &expected.width_ind
+fn curvature_angle_of_two_normals() {
+    // Neighbours 0.1 m apart whose normals differ by `angle`: kappa = angle / 0.1.
+    for angle in [1e-3f32, 0.1, 0.5, 1.0, std::f32::consts::FRAC_PI_2] {
+        let normals = Image::from_vec(
+            2,
+            1,
+            vec![Vec3::Z, Vec3::new(angle.sin(), 0.0, angle.cos()) * 3.0],
+        )
+        .unwrap();
+        let positions = Image::from_vec(2, 1, vec![Vec3::ZERO, Vec3::new(0.1, 0.0, 0.0)]).unwrap();
+        let mut kx = Image::filled(2, 1, 0.0);
+        let mut ky = Image::filled(2, 1, 0.0);
+        screen_curvature(&positions, &normals, &mut kx, &mut ky).unwrap();
+        let relative = (kx.data[0] * 0.1 / angle - 1.0).abs();
+        eprintln!("angle {angle}: relative error {relative}");
+        assert!(
+            relative < if angle < 0.6 { 2e-4 } else { 8e-3 },
+            "{angle}: {relative}"
         );
+        assert_eq!(
+            kx.data[0], kx.data[1],
+            "backward neighbour of the last pixel"
+        );
+        assert_eq!(ky.data, vec![0.0, 0.0], "no vertical neighbour");
     }
-    // B_e = 3 of the map: the plane behind the sphere has kappa 0 and z = 0.5:
-    // B = 2 (1 + 3) = 8, sigma 1 / 8 m.
-    assert_eq!(direct.environment_cache.as_ref().unwrap().1, 3.0);
-    assert_eq!(*expected.width_dir.at(0, 0), 0.125);
-    let missing = Frame::new(0, 0);
-    let mut stage = (INFO.build)(&ctx).unwrap();
-    let err = stage.process(&mut missing.clone()).unwrap_err().to_string();
-    assert!(err.contains("e_r_dir"), "{err}");
-    let bad = FilterParams {
-        radius: 0,
-        ..Default::default()
-    };
-    assert!(bad.check().unwrap_err().to_string().contains("radius is 0"));
 }

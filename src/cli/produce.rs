@@ -31,6 +31,10 @@ pub struct SynthArgs {
     /// Store clean depth instead of Kinect-like noisy depth with holes.
     #[arg(long)]
     no_depth_noise: bool,
+    /// Focal length multiplier: `--size 320x240 --zoom 2` sees the central 320x240
+    /// pixels of the full 640x480 camera (a small image as finely sampled as the full one).
+    #[arg(long, default_value_t = SynthConfig::default().zoom)]
+    zoom: f64,
 }
 
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
@@ -54,6 +58,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
         seed: a.seed,
         fps: a.fps,
         contrast: a.contrast,
+        zoom: a.zoom,
         depth_noise: !a.no_depth_noise,
         ..SynthConfig::default()
     };

@@ -1,0 +1,214 @@
+//! The finished mixed-reality pipeline from the command line: the composite keeps the
+//! camera's image where the objects change nothing, the filter's and composite's eval
+//! scores on the synthetic room, and livingroom1 lit by its own cloud.
+
+mod common;
+
+use common::{ok, run_in, stdout};
+use serde_json::Value;
+use std::path::Path;
+
+fn pipeline(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("pipelines")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+fn rgb8(path: &Path) -> image::RgbImage {
+    image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgb8()
+}
+
+/// The mixed-reality pipeline without its `[[object]]` tables.
+fn without_objects() -> String {
+    let text = std::fs::read_to_string(pipeline("mixed-reality.toml")).unwrap();
+    let mut out = String::new();
+    let mut in_object = false;
+    for line in text.lines() {
+        if line.starts_with("[[") || line.starts_with("[pipeline]") {
+            in_object = line == "[[object]]";
+        }
+        if !in_object {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    assert!(!out.contains("[[object]]") && out.contains("composite.differential"));
+    out
+}
+
+#[test]
+fn without_objects_the_finished_frames_are_the_camera_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    ok(run_in(
+        d,
+        &[
+            "synth", "-o", "s.relume", "--frames", "3", "--size", "96x72",
+        ],
+    ));
+    std::fs::write(d.join("p.toml"), without_objects()).unwrap();
+    ok(run_in(
+        d,
+        &[
+            "replay", "s.relume", "-p", "p.toml", "--out", "o", "--save", "color",
+        ],
+    ));
+    for frame in 0..3 {
+        let name = format!("{frame:06}.png");
+        let finished = rgb8(&d.join("o/final").join(&name));
+        let camera = rgb8(&d.join("o/color").join(&name));
+        // Compensation c_t, ratio 1, c_t^-1 and the same gamma: the camera's levels.
+        assert_eq!(finished, camera, "frame {frame}");
+    }
+}
+
+#[test]
+fn pixels_whose_paths_never_meet_the_objects_keep_the_camera_levels() {
+    // The composite of the unfiltered layers: per pixel, E_RV == E_R exactly where no
+    // path met an object (`touched` 0), so the ratio is 1 and the camera's levels come
+    // back. (After filtering the same holds where the whole 31-pixel footprint is
+    // untouched; the filter's tests check that E_RV == E_R survives it bit for bit.)
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    ok(run_in(
+        d,
+        &[
+            "synth", "-o", "s.relume", "--frames", "3", "--size", "96x72",
+        ],
+    ));
+    let text = std::fs::read_to_string(pipeline("mixed-reality.toml")).unwrap();
+    let unfiltered = text.replace(
+        "kind = \"composite.differential\"\n",
+        "kind = \"composite.differential\"\ninputs = { e_r_dir = \"e_r_dir\", e_r_ind = \"e_r_ind\", \
+         e_rv_dir = \"e_rv_dir\", e_rv_ind = \"e_rv_ind\" }\n",
+    );
+    assert_ne!(unfiltered, text);
+    std::fs::write(d.join("p.toml"), unfiltered).unwrap();
+    ok(run_in(
+        d,
+        &[
+            "replay",
+            "s.relume",
+            "-p",
+            "p.toml",
+            "--out",
+            "o",
+            "--save",
+            "color,touched",
+        ],
+    ));
+    let name = "000002.png";
+    let finished = rgb8(&d.join("o/final").join(name));
+    let camera = rgb8(&d.join("o/color").join(name));
+    let touched = image::open(d.join("o/touched").join(name))
+        .unwrap()
+        .to_luma8();
+    let (mut untouched, mut changed) = (0, 0);
+    for (x, y, t) in touched.enumerate_pixels() {
+        if t.0[0] == 0 {
+            untouched += 1;
+            assert_eq!(
+                finished.get_pixel(x, y),
+                camera.get_pixel(x, y),
+                "({x}, {y})"
+            );
+        } else {
+            changed += (finished.get_pixel(x, y) != camera.get_pixel(x, y)) as usize;
+        }
+    }
+    assert!(untouched > 1000, "{untouched} untouched pixels");
+    assert!(changed > 100, "the objects show: {changed} pixels changed");
+}
+
+/// The filter's and the composite's scores on the synthetic room, 320x240 with the
+/// full 640x480 camera's metres per pixel (`--zoom 2`: the filter's footprint in pixels
+/// is the built-in recording's). Scored on frame 14 against 1024-sample references.
+#[test]
+fn eval_scores_the_filter_and_the_composite() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    ok(run_in(
+        d,
+        &[
+            "synth", "-o", "s.relume", "--frames", "15", "--size", "320x240", "--zoom", "2",
+        ],
+    ));
+    let mixed = pipeline("mixed-reality.toml");
+    let o = ok(run_in(d, &["eval", "s.relume", "-p", &mixed, "--json"]));
+    let doc: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let filter = &doc["stages"]["filter.axis_aligned"];
+    let composite = &doc["stages"]["composite.differential"];
+    let key = |stage: &Value, k: &str| {
+        stage[k]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{k} missing in {stage}"))
+    };
+    assert_eq!(filter["frames_scored"], 1);
+    let (unfiltered, filtered, gaussian) = (
+        key(filter, "mse_unfiltered"),
+        key(filter, "mse_filtered"),
+        key(filter, "mse_gaussian_same_radius"),
+    );
+    // On the whole 640x480 frame the filter removes 92 % of the squared error (see the
+    // issue note); this crop is the harder centre, with the objects and their shadows.
+    assert!(filtered * 5.0 < unfiltered, "{filtered} vs {unfiltered}");
+    assert!(
+        filtered < gaussian,
+        "{filtered} vs the plain Gaussian's {gaussian}"
+    );
+    let (flicker, spatial) = (
+        key(filter, "temporal_flicker"),
+        key(filter, "temporal_flicker_spatial_only"),
+    );
+    assert!(flicker * 2.0 <= spatial, "{flicker} vs {spatial}");
+    let (psnr, psnr_unfiltered) = (
+        key(composite, "psnr_db"),
+        key(composite, "psnr_db_unfiltered"),
+    );
+    assert!(psnr > psnr_unfiltered + 3.0, "{psnr} vs {psnr_unfiltered}");
+}
+
+#[test]
+fn livingroom1_gets_finished_frames_lit_by_its_own_cloud() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    common::import_livingroom1(d);
+    let lr = pipeline("mixed-reality-livingroom1.toml");
+    let o = ok(run_in(
+        d,
+        &[
+            "replay",
+            "lr.relume",
+            "-p",
+            &lr,
+            "--frames",
+            "0..3",
+            "--out",
+            "o",
+            "--save",
+            "color",
+        ],
+    ));
+    assert!(stdout(&o).contains("3 frames in"), "{}", stdout(&o));
+    let name = "000002.png";
+    let finished = rgb8(&d.join("o/final").join(name));
+    let camera = rgb8(&d.join("o/color").join(name));
+    assert_eq!(finished.dimensions(), (640, 480));
+    // The objects block a little of every real point's light, so most pixels move by
+    // a level or so; clearly changed are the objects (in the foreground here, about a
+    // sixth of the view) and their shadows.
+    let clearly_changed = finished
+        .pixels()
+        .zip(camera.pixels())
+        .filter(|(a, b)| (0..3).any(|c| a.0[c].abs_diff(b.0[c]) > 8))
+        .count();
+    assert!(
+        clearly_changed > 20_000 && clearly_changed < 640 * 480 / 2,
+        "{clearly_changed} pixels differ from the camera by more than 8 levels"
+    );
+    assert!(d.join("o/final_hdr/000002.exr").is_file());
+}

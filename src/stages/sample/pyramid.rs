@@ -3,6 +3,12 @@
 //! pixel's depth, every coarser texel the minimum and maximum valid depth of the 2x2
 //! texels below it. A texel with no valid depth below it is empty: min = +inf,
 //! max = -inf, so every "ray in front of the tile" test passes and the tile is skipped.
+//!
+//! Storage (one `f32` array, level after level, each with a border of empty texels):
+//! level 0 keeps one value per pixel, its depth (+inf where invalid), which stands for
+//! both its min and its max (half the bytes of a pair: the tracer's level-0 reads are
+//! its cache misses); coarser levels keep (min, max) pairs side by side, so one cache
+//! line serves both.
 
 use crate::raster::{DepthImage, depth_is_valid};
 use rayon::prelude::*;
@@ -11,23 +17,30 @@ use rayon::prelude::*;
 pub const EMPTY_TEXEL: [f32; 2] = [f32::INFINITY, f32::NEG_INFINITY];
 
 /// One level of the pyramid: `width` x `height` texels, stored with a border of one
-/// empty texel on every side, so texel (x, y) for x in -1..=width and y in
-/// -1..=height is at `origin + y * stride + x` in the pyramid's texel storage.
+/// empty texel on every side: texel (x, y) for x in -1..=width and y in -1..=height
+/// has its min at `index(x, y)` of the pyramid's storage and its max `max_offset`
+/// further.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct PyramidLevel {
     pub width: u32,
     pub height: u32,
     /// Texels per stored row (width + 2).
     pub stride: usize,
-    /// Index of texel (0, 0).
+    /// Storage index of texel (0, 0).
     pub origin: usize,
+    /// Storage values per stored row: stride << shift.
+    pub row: isize,
+    /// Values per texel, as a shift: 0 at level 0 (one value), 1 above (a pair).
+    pub shift: u32,
+    /// Where a texel's max lies after its min: 0 at level 0, 1 above.
+    pub max_offset: usize,
 }
 
 impl PyramidLevel {
-    /// The index of texel (x, y), x in -1..=width, y in -1..=height.
+    /// The storage index of texel (x, y)'s min, x in -1..=width, y in -1..=height.
     #[inline(always)]
     pub fn index(&self, x: i32, y: i32) -> usize {
-        (self.origin as isize + y as isize * self.stride as isize + x as isize) as usize
+        (self.origin as isize + y as isize * self.row + ((x as isize) << self.shift)) as usize
     }
 }
 
@@ -36,9 +49,8 @@ impl PyramidLevel {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DepthPyramid {
     levels: Vec<PyramidLevel>,
-    /// Every level's texels with their borders, row-major, level after level:
-    /// [min, max] in metres.
-    texels: Vec<[f32; 2]>,
+    /// Every level's texels with their borders (see the module docs).
+    values: Vec<f32>,
 }
 
 /// Rows per parallel task when reducing a level (a level is cheap: keep tasks big).
@@ -59,46 +71,51 @@ impl DepthPyramid {
         let mut total = 0usize;
         loop {
             let stride = w as usize + 2;
+            let shift = (!self.levels.is_empty()) as u32;
+            let row = stride << shift;
             self.levels.push(PyramidLevel {
                 width: w,
                 height: h,
                 stride,
-                origin: total + stride + 1,
+                origin: total + row + (1 << shift),
+                row: row as isize,
+                shift,
+                max_offset: shift as usize,
             });
-            total += stride * (h as usize + 2);
+            total += row * (h as usize + 2);
             if w <= 1 && h <= 1 {
                 break;
             }
             (w, h) = (w.div_ceil(2), h.div_ceil(2));
         }
-        self.texels.clear();
-        self.texels.resize(total, EMPTY_TEXEL);
+        self.values.clear();
+        self.values.resize(total, f32::INFINITY);
+        // Coarse levels: empty pairs.
+        if self.levels.len() > 1 {
+            let start = self.levels[1].origin - self.levels[1].row as usize - 2;
+            for pair in self.values[start..].chunks_exact_mut(2) {
+                pair.copy_from_slice(&EMPTY_TEXEL);
+            }
+        }
         let (w, h) = (depth.width as usize, depth.height as usize);
         if w == 0 || h == 0 {
             return;
         }
         let l0 = self.levels[0];
-        let rows = &mut self.texels[l0.origin..l0.origin + (h - 1) * l0.stride + w];
+        let rows = &mut self.values[l0.origin..l0.origin + (h - 1) * l0.stride + w];
         rows.par_chunks_mut(l0.stride)
             .zip(depth.data.par_chunks(w))
             .for_each(|(out, zs)| {
                 for (t, &z) in out.iter_mut().zip(zs) {
-                    *t = if depth_is_valid(z) {
-                        [z, z]
-                    } else {
-                        EMPTY_TEXEL
-                    };
+                    *t = if depth_is_valid(z) { z } else { f32::INFINITY };
                 }
             });
         for l in 1..self.levels.len() {
             let (fine, coarse) = (self.levels[l - 1], self.levels[l]);
-            let (below, above) = self.texels.split_at_mut(coarse.origin);
-            reduce_level(
-                below,
-                fine,
-                &mut above[..(coarse.height as usize - 1) * coarse.stride + coarse.width as usize],
-                coarse,
-            );
+            let (below, above) = self.values.split_at_mut(coarse.origin);
+            let len =
+                (coarse.height as usize - 1) * coarse.row as usize + 2 * coarse.width as usize;
+            reduce_level(below, fine, &mut above[..len], coarse);
         }
     }
 
@@ -119,11 +136,12 @@ impl DepthPyramid {
     pub fn texel(&self, level: u32, x: i32, y: i32) -> [f32; 2] {
         let l = self.levels[level as usize];
         assert!((-1..=l.width as i32).contains(&x) && (-1..=l.height as i32).contains(&y));
-        self.texels[l.index(x, y)]
+        texel_at(&self.values, &l, x, y)
     }
 
     /// The texel (`x`, `y`) of `level` without a bounds check, for the tracer's inner
-    /// loop.
+    /// loop; at level 0 an invalid pixel reads [+inf, +inf] (a tile the tracer skips,
+    /// as it skips an empty one).
     ///
     /// # Safety
     /// `level` is one of [`DepthPyramid::levels`] and x in -1..=width, y in -1..=height
@@ -136,9 +154,15 @@ impl DepthPyramid {
             level.width,
             level.height
         );
+        let i = level.index(x, y);
         // SAFETY: the caller keeps (x, y) within the level's border, whose texels are
         // all stored.
-        unsafe { *self.texels.get_unchecked(level.index(x, y)) }
+        unsafe {
+            [
+                *self.values.get_unchecked(i),
+                *self.values.get_unchecked(i + level.max_offset),
+            ]
+        }
     }
 
     /// The levels, finest first.
@@ -147,35 +171,41 @@ impl DepthPyramid {
     }
 }
 
+/// [min, max] of texel (x, y) of level `l` in `values` (level 0's +inf is empty).
+#[inline(always)]
+fn texel_at(values: &[f32], l: &PyramidLevel, x: i32, y: i32) -> [f32; 2] {
+    let i = l.index(x, y);
+    let (min, max) = (values[i], values[i + l.max_offset]);
+    if min == f32::INFINITY {
+        EMPTY_TEXEL
+    } else {
+        [min, max]
+    }
+}
+
 /// Fills the texels of level `coarse` (`above` starts at its texel (0, 0)) with the 2x2
 /// min and max of level `fine` in `below`; children beyond the fine level's edge are
 /// its empty border.
-fn reduce_level(
-    below: &[[f32; 2]],
-    fine: PyramidLevel,
-    above: &mut [[f32; 2]],
-    coarse: PyramidLevel,
-) {
+fn reduce_level(below: &[f32], fine: PyramidLevel, above: &mut [f32], coarse: PyramidLevel) {
     let cw = coarse.width as usize;
+    let row = coarse.row as usize;
     above
-        .par_chunks_mut(coarse.stride * ROWS_PER_TASK)
+        .par_chunks_mut(row * ROWS_PER_TASK)
         .enumerate()
         .for_each(|(task, rows)| {
-            for (r, row) in rows.chunks_mut(coarse.stride).enumerate() {
+            for (r, out) in rows.chunks_mut(row).enumerate() {
                 let y = ((task * ROWS_PER_TASK + r) * 2) as i32;
-                let n = cw.min(row.len());
-                for (x, t) in row[..n].iter_mut().enumerate() {
+                let n = cw.min(out.len() / 2);
+                for (x, t) in out[..2 * n].chunks_exact_mut(2).enumerate() {
                     let x = 2 * x as i32;
                     let [a, b, c, d] = [
-                        below[fine.index(x, y)],
-                        below[fine.index(x + 1, y)],
-                        below[fine.index(x, y + 1)],
-                        below[fine.index(x + 1, y + 1)],
+                        texel_at(below, &fine, x, y),
+                        texel_at(below, &fine, x + 1, y),
+                        texel_at(below, &fine, x, y + 1),
+                        texel_at(below, &fine, x + 1, y + 1),
                     ];
-                    *t = [
-                        a[0].min(b[0]).min(c[0].min(d[0])),
-                        a[1].max(b[1]).max(c[1].max(d[1])),
-                    ];
+                    t[0] = a[0].min(b[0]).min(c[0].min(d[0]));
+                    t[1] = a[1].max(b[1]).max(c[1].max(d[1]));
                 }
             }
         });

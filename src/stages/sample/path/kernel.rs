@@ -88,6 +88,8 @@ pub(super) struct Kernel<'a> {
     /// Blocked direct samples dimmer than this (largest channel of the sample's
     /// radiance) do not count towards `direct_min_distance`.
     pub(super) occluder_min_radiance: f32,
+    /// The table's directions in camera space (where the screen-space tracer works).
+    pub(super) table_camera: Vec<Vec3>,
 }
 
 impl<'a> Kernel<'a> {
@@ -135,6 +137,12 @@ impl<'a> Kernel<'a> {
                     .iter()
                     .map(|s| s.radiance.max_element())
                     .fold(0.0, f32::max),
+            table_camera: inputs
+                .table
+                .samples
+                .iter()
+                .map(|ls| Vec3::from(to_camera * Vec3A::from(ls.direction)))
+                .collect(),
         }
     }
 
@@ -361,12 +369,17 @@ impl<'a> Kernel<'a> {
             .map(|h| (h, dir))
     }
 
-    /// The table sample of direct sample `s` of the pixel, if the table has any.
+    /// The table sample of direct sample `s` of the pixel with its index, if the table
+    /// has any.
     #[inline]
-    pub(super) fn direct_sample(&self, stream: &Stream, s: u32) -> Option<&'a LightSample> {
+    pub(super) fn direct_sample(
+        &self,
+        stream: &Stream,
+        s: u32,
+    ) -> Option<(usize, &'a LightSample)> {
         let table = &self.inputs.table.samples;
         let i = stratum_index(&self.strata, s as usize, table.len(), stream.bits(s as u64))?;
-        Some(&table[i])
+        Some((i, &table[i]))
     }
 
     /// The first real surface along camera-space direction `dir` from the real point,
@@ -406,10 +419,10 @@ impl<'a> Kernel<'a> {
             let s = j * params.direct + k;
             let mut c = Vec3::ZERO;
             let mut c_rv = Vec3::ZERO;
-            if let Some(ls) = self.direct_sample(direct_stream, s) {
+            if let Some((i, ls)) = self.direct_sample(direct_stream, s) {
                 let cos = rp.normal_world.dot(ls.direction);
                 if cos > 0.0 && ls.pdf > 0.0 {
-                    let dir_camera = Vec3::from(self.to_camera * Vec3A::from(ls.direction));
+                    let dir_camera = self.table_camera[i];
                     match self.trace_real(rp, dir_camera) {
                         Some(hit) => self.record_occluder(acc, ls.radiance, hit.t, cos),
                         None => {

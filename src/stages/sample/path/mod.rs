@@ -76,8 +76,9 @@
 //!
 //! Cost: the screen-space marches dominate. Per valid pixel there are up to
 //! primary x (direct + indirect) = 32 of them (direct samples below the horizon are not
-//! traced); a 1 m ray at 640x480 takes about 9 iterations of the hierarchical march
-//! where the sample-by-sample march would test about 150 pixels. The virtual objects
+//! traced). Measured on the bench frame at 640x480: 23 marched rays per pixel, 13.9
+//! iterations of the hierarchical march per ray (2 of them at level 0) where the
+//! sample-by-sample march would test 132 pixels, about 320 ns per ray. The virtual objects
 //! cost a cone test per ray, then a box test and the BVH only for rays inside the cone
 //! of their bounding sphere.
 

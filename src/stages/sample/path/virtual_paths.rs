@@ -33,7 +33,7 @@ impl Kernel<'_> {
         for k in 0..params.direct {
             let s = j * params.direct + k;
             let mut c = Vec3::ZERO;
-            if let Some(ls) = self.direct_sample(direct_stream, s) {
+            if let Some((_, ls)) = self.direct_sample(direct_stream, s) {
                 let cos = n.dot(ls.direction);
                 if cos > 0.0 && ls.pdf > 0.0 {
                     match self.occluder_distance(origin, ls.direction) {

@@ -98,10 +98,11 @@ const FRACTION_BITS: u32 = 16;
 const FIXED_ONE: f32 = (1u32 << FRACTION_BITS) as f32;
 
 /// One ray's sample sequence on screen, in (major, minor) axes: samples at integer
-/// major coordinates `first, first + step, ..., last`, all inside the image along the
-/// major axis; along the minor axis a sample may lie outside (it then never hits). The
-/// minor coordinate is fixed-point (exactly linear in the major coordinate, so pixel
-/// indices are monotonic along the march), 1/z is linear in the major coordinate.
+/// major coordinates `first, first + step, ..., last`, all inside the image along both
+/// axes (`setup` clips the sequence to the samples whose pixel lies in the image: the
+/// others never hit, and the march then needs no bounds tests). The minor coordinate
+/// is fixed-point (exactly linear in the major coordinate, so pixel indices are
+/// monotonic along the march), 1/z is linear in the major coordinate.
 /// Images up to 8192 pixels on a side.
 #[derive(Clone, Copy, Debug, Default)]
 struct March {
@@ -118,8 +119,6 @@ struct March {
     last: i32,
     /// +1 or -1: the march direction along the major axis.
     step: i32,
-    /// Image extent along the minor axis.
-    minor_extent: i32,
 }
 
 impl March {
@@ -134,14 +133,11 @@ impl March {
         self.minor_fixed(a) as f32 / FIXED_ONE - 1.5
     }
 
-    /// The pixel row (or column) of the sample at `a`: floor(minor + 0.5), clamped to
-    /// -1..=extent (the pyramid's empty border stands for everything outside).
+    /// The pixel row (or column) of the sample at `a`: floor(minor + 0.5), inside the
+    /// image for every sample of the march.
     #[inline(always)]
     fn minor_index(&self, a: i32) -> i32 {
-        (self.minor_fixed(a) >> FRACTION_BITS)
-            .max(0)
-            .min(self.minor_extent + 1)
-            - 1
+        (self.minor_fixed(a) >> FRACTION_BITS) - 1
     }
 
     /// 1/z of the ray at the sample at `a` (monotonic in `a`).
@@ -158,6 +154,19 @@ impl March {
         } else {
             (major, minor)
         }
+    }
+}
+
+/// The range of integers a (inclusive, possibly empty) with
+/// `lo <= c + a * s <= hi`, for the rare marches that leave the image sideways.
+fn fixed_range(c: i64, s: i64, lo: i64, hi: i64) -> (i64, i64) {
+    let floor_div = |n: i64, d: i64| n.div_euclid(d);
+    let ceil_div = |n: i64, d: i64| -(-n).div_euclid(d);
+    match s.signum() {
+        0 if (lo..=hi).contains(&c) => (i64::MIN, i64::MAX),
+        0 => (1, 0),
+        1 => (ceil_div(lo - c, s), floor_div(hi - c, s)),
+        _ => (ceil_div(c - hi, -s), floor_div(c - lo, -s)),
     }
 }
 
@@ -339,19 +348,17 @@ impl<'a> ScreenTracer<'a> {
         Some(self.hit(&m, origin, dir, a, b, inv))
     }
 
-    /// Projects the camera-space segment and clips it to the image along the major
-    /// axis; `None` when no sample is left.
+    /// Projects the camera-space segment and clips its samples to the image; `None`
+    /// when no sample is left.
     #[inline]
     fn setup(&self, origin: &RayOrigin, d: Vec3, t_max: f32) -> Option<March> {
         let o = origin.point;
-        // Selects rather than branches: the signs of directions are unpredictable.
-        let t_near = (NEAR - o.z) / d.z;
-        let t_end = t_max.min(FAR);
-        let t_end = if d.z < 0.0 && t_near < t_end {
-            t_near
-        } else {
-            t_end
-        };
+        let mut t_end = t_max.min(FAR);
+        // Clipped to the near plane (the origin is in front of it): the division only
+        // for the few rays that reach it.
+        if o.z + t_end * d.z < NEAR {
+            t_end = (NEAR - o.z) / d.z;
+        }
         if t_end.is_nan() || t_end <= 0.0 {
             return None;
         }
@@ -382,7 +389,7 @@ impl<'a> ScreenTracer<'a> {
         }
         let (forward_last, backward_last) =
             (floor_i32(ea).min(major_extent - 1), ceil_i32(ea).max(0));
-        let last = if step > 0 {
+        let mut last = if step > 0 {
             forward_last
         } else {
             backward_last
@@ -392,16 +399,40 @@ impl<'a> ScreenTracer<'a> {
         }
         let slope = (eb - sb) * r;
         let dinv = (inv1 - origin.inv_z) * r;
+        let minor_c = ((sb + 1.5 - sa * slope) * FIXED_ONE) as i32;
+        let minor_slope = (slope * FIXED_ONE) as i32;
+        // Samples whose pixel lies outside the image along the minor axis never hit:
+        // keep those inside, which are consecutive (the pixel index is monotonic).
+        let (lo, hi) = (
+            1i64 << FRACTION_BITS,
+            ((minor_extent as i64 + 1) << FRACTION_BITS) - 1,
+        );
+        let fixed = |a: i32| minor_c as i64 + a as i64 * minor_slope as i64;
+        let inside = |a: i32| (lo..=hi).contains(&fixed(a));
+        if !(inside(first) && inside(last)) {
+            let (a0, a1) = fixed_range(minor_c as i64, minor_slope as i64, lo, hi);
+            let (a0, a1) = (
+                a0.max(i32::MIN as i64) as i32,
+                a1.min(i32::MAX as i64) as i32,
+            );
+            (first, last) = if step > 0 {
+                (first.max(a0), last.min(a1))
+            } else {
+                (first.min(a1), last.max(a0))
+            };
+            if (last - first) * step < 0 {
+                return None;
+            }
+        }
         Some(March {
             transposed,
-            minor_c: ((sb + 1.5 - sa * slope) * FIXED_ONE) as i32,
-            minor_slope: (slope * FIXED_ONE) as i32,
+            minor_c,
+            minor_slope,
             inv_c: origin.inv_z - sa * dinv,
             dinv,
             first,
             last,
             step,
-            minor_extent,
         })
     }
 
@@ -411,14 +442,11 @@ impl<'a> ScreenTracer<'a> {
         let th = self.params.thickness;
         let mut a = m.first;
         loop {
-            let pb = m.minor_index(a);
-            if (0..m.minor_extent).contains(&pb) {
-                let (x, y) = m.untranspose(a, pb);
-                let surface = *self.depth.at(x as u32, y as u32);
-                let inv = m.inv_depth(a);
-                if depth_is_valid(surface) && inv * surface <= 1.0 && inv * (surface + th) >= 1.0 {
-                    return Some((a, m.minor(a), inv));
-                }
+            let (x, y) = m.untranspose(a, m.minor_index(a));
+            let surface = *self.depth.at(x as u32, y as u32);
+            let inv = m.inv_depth(a);
+            if depth_is_valid(surface) && inv * surface <= 1.0 && inv * (surface + th) >= 1.0 {
+                return Some((a, m.minor(a), inv));
             }
             if a == m.last {
                 return None;
@@ -483,10 +511,9 @@ impl<'a> ScreenTracer<'a> {
             let tb_end = m.minor_index(ae) >> level;
             let inv_e = m.inv_depth(ae);
             let ((x0, y0), (x1, y1)) = (xy(ta, tb), xy(ta, tb_end));
-            // SAFETY: the samples' major coordinates lie in [0, extent) (`setup` clips
-            // them to the image, whose size is the pyramid's: checked in `build`), so
-            // their tiles lie in [0, level extent); minor indices are clamped to
-            // -1..=extent, whose tiles lie within the level's border.
+            // SAFETY: the samples' pixels lie in the image (`setup` clips them to it,
+            // and its size is the pyramid's: checked in `build`), so their tiles lie in
+            // the level.
             let (t0, t1) = unsafe {
                 (
                     self.pyramid.texel_unchecked(lv, x0, y0),

@@ -214,3 +214,29 @@ fn degenerate_inputs_find_nothing() {
         None
     );
 }
+
+#[test]
+fn clipping_to_the_image_keeps_exactly_the_samples_inside() {
+    // `fixed_range` against testing every a: the samples whose fixed-point minor
+    // coordinate lies in [lo, hi] (the pixel rows or columns of the image).
+    let mut r = Counter::new(&[31]);
+    let (lo, hi) = (1i64 << 16, (481i64 << 16) - 1);
+    for case in 0..2_000 {
+        let s = match case % 4 {
+            0 => 0,
+            1 => 65_536,
+            2 => -65_536,
+            _ => (r.next_u64() % 131_073) as i64 - 65_536,
+        };
+        let c = (r.next_u64() % (2_000 << 16)) as i64 - (700 << 16);
+        let (a0, a1) = fixed_range(c, s, lo, hi);
+        for a in -900i64..900 {
+            let inside = (lo..=hi).contains(&(c + a * s));
+            assert_eq!(
+                inside,
+                (a0..=a1).contains(&a),
+                "c {c} s {s} a {a}: {a0}..={a1}"
+            );
+        }
+    }
+}

@@ -37,10 +37,14 @@ fn the_default_pipeline_is_the_mixed_reality_chain() {
             "sample.path",
             "filter.axis_aligned",
             "composite.differential",
+            "write",
             "write"
         ]
     );
-    assert!(!p.objects.is_empty(), "the default scene has virtual objects");
+    assert!(
+        !p.objects.is_empty(),
+        "the default scene has virtual objects"
+    );
     let file = |name: &str| {
         std::fs::read_to_string(format!("{}/pipelines/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
     };

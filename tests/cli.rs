@@ -411,7 +411,11 @@ fn the_main_job_generates_its_recording_and_writes_finished_frames() {
         "{table}"
     );
     assert!(table.contains("2 frames in"), "{table}");
-    for stage in ["sample.path", "filter.axis_aligned", "composite.differential"] {
+    for stage in [
+        "sample.path",
+        "filter.axis_aligned",
+        "composite.differential",
+    ] {
         assert!(table.contains(stage), "{table}");
     }
     assert!(
@@ -419,7 +423,11 @@ fn the_main_job_generates_its_recording_and_writes_finished_frames() {
         "{}",
         stderr(&o)
     );
-    for (product, ext) in [("final", "png"), ("final_hdr", "exr"), ("differential", "png")] {
+    for (product, ext) in [
+        ("final", "png"),
+        ("final_hdr", "exr"),
+        ("differential", "png"),
+    ] {
         let path = d.join(format!("out/{product}/000001.{ext}"));
         assert!(path.is_file(), "{}", path.display());
     }

@@ -11,7 +11,6 @@
 mod common;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use relume::graph::Frame;
 
 /// Frames replayed before the measured one.
 const WARM_FRAMES: usize = 12;
@@ -26,16 +25,7 @@ fn bench_mixed_reality(c: &mut Criterion) {
     } = common::warm_up("mixed-reality.toml", WARM_FRAMES + 1);
     let mut group = c.benchmark_group("mixed_reality_640x480");
     group.sample_size(10);
-    for (i, stage) in stages.iter_mut().enumerate() {
-        let spec = &pipeline.stages[i];
-        group.bench_function(format!("stage/{}", spec.name), |b| {
-            b.iter(|| {
-                let mut frame: Frame = arriving[i].clone();
-                stage.process(&mut frame).unwrap();
-                frame
-            })
-        });
-    }
+    common::bench_each_stage(&mut group, &pipeline, &mut stages, &arriving);
     group.finish();
 }
 

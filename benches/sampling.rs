@@ -21,7 +21,6 @@ mod common;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Affine3A;
-use relume::graph::Frame;
 use relume::light::{ImpostorBuilder, ImpostorParams, LightTable, ValBuilder, ValParams};
 use relume::pinhole::Pinhole;
 use relume::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
@@ -41,16 +40,7 @@ fn bench_sampling(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("sampling_640x480");
     group.sample_size(10);
-    for (i, stage) in stages.iter_mut().enumerate() {
-        let spec = &pipeline.stages[i];
-        group.bench_function(format!("stage/{}", spec.name), |b| {
-            b.iter(|| {
-                let mut frame: Frame = arriving[i].clone();
-                stage.process(&mut frame).unwrap();
-                frame
-            })
-        });
-    }
+    common::bench_each_stage(&mut group, &pipeline, &mut stages, &arriving);
 
     // The sampling math alone, both schemes.
     if let Some(spec) = pipeline.stages.iter().find(|s| s.kind == "sample.path") {

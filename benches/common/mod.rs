@@ -81,3 +81,22 @@ pub fn warm_up(default_pipeline: &str, frames: usize) -> WarmedUp {
         _dir: dir,
     }
 }
+
+/// `stage/<name>`: every stage's `process` on a copy of the frame as it arrived there.
+pub fn bench_each_stage(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    pipeline: &Pipeline,
+    stages: &mut [Box<dyn Stage>],
+    arriving: &[Frame],
+) {
+    for (i, stage) in stages.iter_mut().enumerate() {
+        let spec = &pipeline.stages[i];
+        group.bench_function(format!("stage/{}", spec.name), |b| {
+            b.iter(|| {
+                let mut frame: Frame = arriving[i].clone();
+                stage.process(&mut frame).unwrap();
+                frame
+            })
+        });
+    }
+}

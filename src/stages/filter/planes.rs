@@ -32,8 +32,8 @@ pub const IND: usize = DIR + VALUE_PLANES;
 pub const MISSING_POSITION: f32 = 1e15;
 
 /// Columns per parallel task of the X pass, rows per task of the Y pass.
-const COLUMN_BAND: usize = 16;
-const ROW_BAND: usize = 8;
+const COLUMN_BAND: usize = 64;
+const ROW_BAND: usize = 24;
 
 /// Lines (image rows or columns) of planes, each a sequence of [`Chunk`]s with `pad`
 /// pixels of zero padding (never written: valid 0, so zero weight) before and after the

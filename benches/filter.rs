@@ -10,7 +10,7 @@
 //!   (the worst case: no pixel can reuse E_R's sums for E_RV).
 //! - `filter.axis_aligned/spatial`: temporal off (E_RV == E_R off the sphere).
 //! - `pass/prepare`, `pass/x`, `pass/y_spatial`, `pass/y_temporal`: the passes alone
-//!   (where the time goes).
+//!   (where the time goes), E_RV == E_R off the sphere.
 //! - `environment_bandwidth/512x256`: B_e of a map (once per map in the stage).
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -93,7 +93,13 @@ fn inputs(frames: usize) -> Inputs {
                     return l[k].clone();
                 }
                 let data = (0..n)
-                    .map(|i| if on_sphere[i] { l[k].data[i] } else { l[k - 2].data[i] })
+                    .map(|i| {
+                        if on_sphere[i] {
+                            l[k].data[i]
+                        } else {
+                            l[k - 2].data[i]
+                        }
+                    })
                     .collect();
                 Image::from_vec(W, H, data).unwrap()
             })

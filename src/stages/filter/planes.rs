@@ -168,9 +168,11 @@ impl TapMasks {
     fn window<'a>(&'a self, line: &'a [Chunk], t: usize) -> (&'a [Chunk], &'a [[f32; LANES]]) {
         let s = t - self.radius;
         let (c0, m) = (s / LANES, s % LANES);
+        // Only the chunks that hold taps of the window (8 or 9 at R = 15).
+        let n = (m + 2 * self.radius + 1).div_ceil(LANES);
         (
-            &line[c0..c0 + self.chunks],
-            &self.masks[m * self.chunks..(m + 1) * self.chunks],
+            &line[c0..c0 + n],
+            &self.masks[m * self.chunks..m * self.chunks + n],
         )
     }
 }
@@ -359,7 +361,10 @@ fn pixel_sums<const B2D: usize>(
         normalize(sums, valid, f32::NAN)
     };
     let [dir, ind] = &mut sums;
-    [kind(dir, [valid[0], valid[1]]), kind(ind, [valid[2], valid[3]])]
+    [
+        kind(dir, [valid[0], valid[1]]),
+        kind(ind, [valid[2], valid[3]]),
+    ]
 }
 
 /// The X pass, eq. 21: filters both kinds of `rows` along image rows and writes the
@@ -375,7 +380,11 @@ pub fn x_pass(rows: &RowPlanes, masks: &TapMasks, columns: &mut ColumnPlanes) {
     columns
         .data
         .par_chunks_mut(COLUMN_BAND * cpl)
-        .zip(columns.differences.par_chunks_mut(COLUMN_BAND * counts_per_line))
+        .zip(
+            columns
+                .differences
+                .par_chunks_mut(COLUMN_BAND * counts_per_line),
+        )
         .enumerate()
         .for_each(|(band, (out, counts))| {
             let x0 = band * COLUMN_BAND;
@@ -455,8 +464,7 @@ pub fn y_pass(
                             }
                             r
                         };
-                        let [dir, ind] =
-                            pixel_sums::<B2Y_DIR>(masks, line, t, matched, rv_same);
+                        let [dir, ind] = pixel_sums::<B2Y_DIR>(masks, line, t, matched, rv_same);
                         (
                             nan_if_missing(dir, [valid[0], valid[1]]),
                             nan_if_missing(ind, [valid[2], valid[3]]),

@@ -442,7 +442,9 @@ fn reusing_e_r_sums_for_e_rv_leaves_e_r_unchanged() {
     for layer in 0..2 {
         let bits = |out: &FilterOutputs| -> Vec<[u32; 3]> {
             let data = &out.layers[layer].data;
-            data.iter().map(|v| v.to_array().map(f32::to_bits)).collect()
+            data.iter()
+                .map(|v| v.to_array().map(f32::to_bits))
+                .collect()
         };
         assert_eq!(bits(&reused), bits(&full), "layer {layer}");
         assert_eq!(

@@ -4,9 +4,13 @@
 //!
 //! - `filter.axis_aligned/temporal`: the whole filter, temporal on, with the previous
 //!   frame's state in place (the issue-5 budget: median <= 25 ms on 2 cores).
-//! - `filter.axis_aligned/spatial`: the same, temporal off.
+//!   E_RV == E_R off the sphere (as `sample.path` makes them: equal bits away from the
+//!   virtual objects), independent noise on it.
+//! - `filter.axis_aligned/temporal_rv_differs`: the same with E_RV != E_R everywhere
+//!   (the worst case: no pixel can reuse E_R's sums for E_RV).
+//! - `filter.axis_aligned/spatial`: temporal off (E_RV == E_R off the sphere).
 //! - `pass/prepare`, `pass/x`, `pass/y_spatial`, `pass/y_temporal`: the passes alone
-//!   (where the time goes).
+//!   (where the time goes), E_RV == E_R off the sphere.
 //! - `environment_bandwidth/512x256`: B_e of a map (once per map in the stage).
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -28,7 +32,10 @@ const H: u32 = 480;
 const RADIUS: usize = 15;
 
 struct Inputs {
+    /// Independent noise in all four layers.
     layers: Vec<[Vec3Image; 4]>,
+    /// E_RV == E_R off the sphere.
+    layers_rv_equal: Vec<[Vec3Image; 4]>,
     position: Vec3Image,
     normal: Vec3Image,
     zd: ScalarImage,
@@ -77,6 +84,26 @@ fn inputs(frames: usize) -> Inputs {
                 Image::from_vec(W, H, data).unwrap()
             })
         })
+        .collect::<Vec<[Vec3Image; 4]>>();
+    let layers_rv_equal = layers
+        .iter()
+        .map(|l| {
+            std::array::from_fn(|k| {
+                if k < 2 {
+                    return l[k].clone();
+                }
+                let data = (0..n)
+                    .map(|i| {
+                        if on_sphere[i] {
+                            l[k].data[i]
+                        } else {
+                            l[k - 2].data[i]
+                        }
+                    })
+                    .collect();
+                Image::from_vec(W, H, data).unwrap()
+            })
+        })
         .collect();
     let distance = |seed: u64| {
         let data = (0..n)
@@ -96,6 +123,7 @@ fn inputs(frames: usize) -> Inputs {
         .collect();
     Inputs {
         layers,
+        layers_rv_equal,
         position: Image::from_vec(W, H, position).unwrap(),
         normal: Image::from_vec(W, H, normal).unwrap(),
         zd: distance(1000),
@@ -105,8 +133,13 @@ fn inputs(frames: usize) -> Inputs {
 }
 
 impl Inputs {
-    fn frame(&self, f: usize) -> FilterInputs<'_> {
-        let l = &self.layers[f % self.layers.len()];
+    fn frame(&self, f: usize, rv_equal: bool) -> FilterInputs<'_> {
+        let layers = if rv_equal {
+            &self.layers_rv_equal
+        } else {
+            &self.layers
+        };
+        let l = &layers[f % layers.len()];
         FilterInputs {
             layers: [&l[0], &l[1], &l[2], &l[3]],
             world_position: &self.position,
@@ -124,7 +157,11 @@ fn bench_filter(c: &mut Criterion) {
     let input = inputs(2);
     let mut group = c.benchmark_group("filter_640x480");
     group.sample_size(30);
-    for temporal in [true, false] {
+    for (name, temporal, rv_equal) in [
+        ("temporal", true, true),
+        ("temporal_rv_differs", true, false),
+        ("spatial", false, true),
+    ] {
         let params = FilterParams {
             radius: RADIUS,
             environment_bandwidth: 4.0,
@@ -133,13 +170,12 @@ fn bench_filter(c: &mut Criterion) {
         };
         let mut filter = AxisAlignedFilter::new(params);
         let mut out = FilterOutputs::new(W, H);
-        filter.filter(&input.frame(0), &mut out).unwrap();
+        filter.filter(&input.frame(0, rv_equal), &mut out).unwrap();
         let mut f = 1;
-        let name = if temporal { "temporal" } else { "spatial" };
         group.bench_function(format!("filter.axis_aligned/{name}"), |b| {
             b.iter(|| {
                 let mut out = FilterOutputs::new(W, H);
-                filter.filter(&input.frame(f), &mut out).unwrap();
+                filter.filter(&input.frame(f, rv_equal), &mut out).unwrap();
                 f += 1;
                 black_box(out)
             })
@@ -148,7 +184,7 @@ fn bench_filter(c: &mut Criterion) {
 
     // The passes alone.
     let (w, h) = (W as usize, H as usize);
-    let l = &input.layers[0];
+    let l = &input.layers_rv_equal[0];
     let prep = PrepareInputs {
         layers: [&l[0], &l[1], &l[2], &l[3]],
         world_position: &input.position,

@@ -36,11 +36,19 @@
 //! Fig. 7; INFINITY where B = 0 (flat over the window), NaN where there is no position.
 //!
 //! Cost: per pixel and kind (direct, indirect) 3 windows of 2R + 1 taps (X, Y, temporal
-//! Y; 9 chunks of 4 taps at R = 15, the window's alignment masked per lane), each tap one
-//! fast `exp` ([`gaussian::exp_neg`]) shared by E_R and E_RV and 8 multiply-adds, in
-//! explicit SSE2 lanes over chunked planes ([`planes`]). No tap cutting: at R = 15 and
-//! 640x480 a weight falls below e^-14 inside the window only where B exceeds ~60 per
-//! metre (occluders nearer than ~8 cm), so a per-pixel radius bound would rarely help.
+//! Y; 8 or 9 chunks of 4 taps at R = 15 by the window's alignment, masked per lane), each
+//! tap one fast `exp` ([`gaussian::exp_neg`]) shared by E_R and E_RV and 8 multiply-adds,
+//! in explicit SSE2 lanes over chunked planes ([`planes`]). Where E_RV == E_R (bit for
+//! bit, both kinds) over every window of a pass (most of the image: `sample.path` makes
+//! them equal away from the virtual objects), the planes' running counts of differing
+//! pixels say so in O(1) and only E_R's planes are summed, both kinds in one loop with
+//! one distance per tap (4 multiply-adds per kind); E_RV's sums are copied from E_R's,
+//! the same bits the full sums give. The parallel tasks take wide bands (64 columns for
+//! the X pass, 24 rows for the Y pass) so that each streams long contiguous runs of its
+//! lines (16 columns / 8 rows made the passes wait on memory 2-3x longer). No tap
+//! cutting: at R = 15 and 640x480 a weight falls below e^-14 inside the window only where
+//! B exceeds ~60 per metre (occluders nearer than ~8 cm), so a per-pixel radius bound
+//! would rarely help.
 //! `benches/filter.rs` measures the whole filter and each pass.
 
 pub mod bandwidth;

@@ -10,7 +10,9 @@
 
 use super::bandwidth::{brdf_bandwidth, curvature_row, direct_bandwidth, indirect_bandwidth};
 pub use super::gaussian::NPLANES;
-use super::gaussian::{Chunk, EXP_CUTOFF, LANES, Sums, Target, VALUE_PLANES, accumulate};
+use super::gaussian::{
+    BothTarget, Chunk, EXP_CUTOFF, LANES, Sums, Target, VALUE_PLANES, accumulate, accumulate_r,
+};
 use super::temporal::{PreviousView, find_previous};
 use crate::raster::{ScalarImage, Vec3Image};
 use glam::Vec3;
@@ -32,8 +34,8 @@ pub const IND: usize = DIR + VALUE_PLANES;
 pub const MISSING_POSITION: f32 = 1e15;
 
 /// Columns per parallel task of the X pass, rows per task of the Y pass.
-const COLUMN_BAND: usize = 16;
-const ROW_BAND: usize = 8;
+const COLUMN_BAND: usize = 64;
+const ROW_BAND: usize = 24;
 
 /// Lines (image rows or columns) of planes, each a sequence of [`Chunk`]s with `pad`
 /// pixels of zero padding (never written: valid 0, so zero weight) before and after the
@@ -47,6 +49,11 @@ pub struct Lines {
     pad: usize,
     chunks_per_line: usize,
     data: Vec<Chunk>,
+    /// Per line, `chunks_per_line * LANES + 1` running counts of the padded positions
+    /// where E_RV differs from E_R (any bit of either kind's rgb or valid): position t's
+    /// window [t - R, t + R] has E_RV == E_R throughout when the counts at t + R + 1 and
+    /// t - R agree (see [`Lines::rv_same`]).
+    differences: Vec<u32>,
 }
 
 /// Planes by image row (pixel (x, y) is position x of line y): the X pass's input.
@@ -68,7 +75,16 @@ impl Lines {
             pad,
             chunks_per_line,
             data: vec![[[0.0; LANES]; NPLANES]; count * chunks_per_line],
+            differences: vec![0; count * (chunks_per_line * LANES + 1)],
         }
+    }
+
+    /// Whether E_RV == E_R (both kinds, bit for bit) over the taps |i| <= `radius`
+    /// around padded position `t` of line `i`, in O(1) from the running counts.
+    #[inline(always)]
+    pub fn rv_same(&self, i: usize, t: usize, radius: usize) -> bool {
+        let counts = &self.differences[i * (self.chunks_per_line * LANES + 1)..];
+        counts[t + radius + 1] == counts[t - radius]
     }
 
     /// The chunks of line `i`.
@@ -82,6 +98,23 @@ impl Lines {
     pub fn at(&self, q: usize, line: usize, pos: usize) -> f32 {
         let t = pos + self.pad;
         self.data[line * self.chunks_per_line + t / LANES][q][t % LANES]
+    }
+}
+
+/// Fills `counts` (length `line.len() * LANES + 1`) with the running counts of the
+/// positions of `line` where E_RV differs from E_R (see [`Lines::rv_same`]).
+fn count_differences(line: &[Chunk], counts: &mut [u32]) {
+    let mut n = 0;
+    counts[0] = 0;
+    for (chunk, out) in line.iter().zip(counts[1..].chunks_exact_mut(LANES)) {
+        for (l, out) in out.iter_mut().enumerate() {
+            let differs = [DIR, IND].iter().any(|&k| {
+                (0..3).any(|c| chunk[k + c][l].to_bits() != chunk[k + 3 + c][l].to_bits())
+                    || chunk[k + 6][l] != chunk[k + 7][l]
+            });
+            n += differs as u32;
+            *out = n;
+        }
     }
 }
 
@@ -135,9 +168,11 @@ impl TapMasks {
     fn window<'a>(&'a self, line: &'a [Chunk], t: usize) -> (&'a [Chunk], &'a [[f32; LANES]]) {
         let s = t - self.radius;
         let (c0, m) = (s / LANES, s % LANES);
+        // Only the chunks that hold taps of the window (8 or 9 at R = 15).
+        let n = (m + 2 * self.radius + 1).div_ceil(LANES);
         (
-            &line[c0..c0 + self.chunks],
-            &self.masks[m * self.chunks..(m + 1) * self.chunks],
+            &line[c0..c0 + n],
+            &self.masks[m * self.chunks..m * self.chunks + n],
         )
     }
 }
@@ -174,14 +209,16 @@ pub fn prepare(
     if w == 0 || rows.count == 0 {
         return;
     }
+    let counts_per_line = rows.chunks_per_line * LANES + 1;
     rows.data
         .par_chunks_mut(rows.chunks_per_line)
+        .zip(rows.differences.par_chunks_mut(counts_per_line))
         .zip(width_dir.data.par_chunks_mut(w))
         .zip(width_ind.data.par_chunks_mut(w))
         .enumerate()
         .for_each_init(
             || (vec![0.0f32; w], vec![0.0f32; w]),
-            |(kx, ky), (y, ((line, wd), wi))| {
+            |(kx, ky), (y, (((line, counts), wd), wi))| {
                 curvature_row(input.world_position, input.world_normal, y, kx, ky);
                 for x in 0..w {
                     let i = y * w + x;
@@ -229,6 +266,7 @@ pub fn prepare(
                     };
                     wi[x] = if has_position { sigma(bi) } else { f32::NAN };
                 }
+                count_differences(line, counts);
             },
         );
 }
@@ -277,6 +315,58 @@ fn kind_sums<const B2: usize, const VALUES: usize>(
     normalize(&sums, valid, f32::NAN)
 }
 
+/// The tap sums of both kinds ([`kind_sums`] of the direct kind with B^2 plane `B2D`,
+/// then of the indirect kind) for the target at padded position `t` of `line`, plus
+/// those of `previous` when given. `rv_same`: E_RV == E_R over every window summed (the
+/// caller checks with [`Lines::rv_same`]); then only E_R's planes are summed and E_RV's
+/// sums are copies of them, which are the bits the full sums would give (same weights,
+/// same values, same order).
+#[inline(always)]
+fn pixel_sums<const B2D: usize>(
+    masks: &TapMasks,
+    line: &[Chunk],
+    t: usize,
+    previous: Option<(&[Chunk], usize)>,
+    rv_same: bool,
+) -> [[f32; VALUE_PLANES]; 2] {
+    if !rv_same {
+        return [
+            kind_sums::<B2D, DIR>(masks, line, t, previous),
+            kind_sums::<B2_IND, IND>(masks, line, t, previous),
+        ];
+    }
+    let valid = [DIR + 6, DIR + 7, IND + 6, IND + 7].map(|q| get(line, q, t));
+    if valid == [0.0; 4] {
+        return [[0.0; VALUE_PLANES]; 2];
+    }
+    let target = BothTarget {
+        position: [get(line, PX, t), get(line, PY, t), get(line, PZ, t)],
+        b2: [get(line, B2D, t), get(line, B2_IND, t)],
+    };
+    let mut sums = [Sums::default(); 2];
+    let (chunks, mask) = masks.window(line, t);
+    accumulate_r::<B2D, B2_IND, DIR, IND>(target, chunks, mask, &mut sums);
+    if let Some((prev_line, tp)) = previous {
+        let (chunks, mask) = masks.window(prev_line, tp);
+        accumulate_r::<B2D, B2_IND, DIR, IND>(target, chunks, mask, &mut sums);
+    }
+    let kind = |sums: &mut Sums, valid: [f32; 2]| {
+        if valid == [0.0, 0.0] {
+            return [0.0; VALUE_PLANES];
+        }
+        for c in 0..3 {
+            sums.0[3 + c] = sums.0[c];
+        }
+        sums.0[7] = sums.0[6];
+        normalize(sums, valid, f32::NAN)
+    };
+    let [dir, ind] = &mut sums;
+    [
+        kind(dir, [valid[0], valid[1]]),
+        kind(ind, [valid[2], valid[3]]),
+    ]
+}
+
 /// The X pass, eq. 21: filters both kinds of `rows` along image rows and writes the
 /// results (0 with valid 0 where a layer has no value), with the positions and the Y
 /// bandwidths, into `columns`.
@@ -286,11 +376,17 @@ pub fn x_pass(rows: &RowPlanes, masks: &TapMasks, columns: &mut ColumnPlanes) {
         return;
     }
     let (rp, cp, cpl) = (rows.pad, columns.pad, columns.chunks_per_line);
+    let (radius, counts_per_line) = (masks.radius, cpl * LANES + 1);
     columns
         .data
         .par_chunks_mut(COLUMN_BAND * cpl)
+        .zip(
+            columns
+                .differences
+                .par_chunks_mut(COLUMN_BAND * counts_per_line),
+        )
         .enumerate()
-        .for_each(|(band, out)| {
+        .for_each(|(band, (out, counts))| {
             let x0 = band * COLUMN_BAND;
             for y in 0..h {
                 let line = rows.line(y);
@@ -300,8 +396,8 @@ pub fn x_pass(rows: &RowPlanes, masks: &TapMasks, columns: &mut ColumnPlanes) {
                     for q in [PX, PY, PZ, B2Y_DIR, B2_IND] {
                         put(col, q, tc, get(line, q, t));
                     }
-                    let dir = kind_sums::<B2X_DIR, DIR>(masks, line, t, None);
-                    let ind = kind_sums::<B2_IND, IND>(masks, line, t, None);
+                    let rv_same = rows.rv_same(y, t, radius);
+                    let [dir, ind] = pixel_sums::<B2X_DIR>(masks, line, t, None, rv_same);
                     for q in 0..VALUE_PLANES {
                         // A missing value (NaN) is stored as 0 with valid 0.
                         let clean = |v: f32| if v.is_nan() { 0.0 } else { v };
@@ -309,6 +405,9 @@ pub fn x_pass(rows: &RowPlanes, masks: &TapMasks, columns: &mut ColumnPlanes) {
                         put(col, IND + q, tc, clean(ind[q]));
                     }
                 }
+            }
+            for (col, counts) in out.chunks_mut(cpl).zip(counts.chunks_mut(counts_per_line)) {
+                count_differences(col, counts);
             }
         });
 }
@@ -326,7 +425,7 @@ pub fn y_pass(
     if w == 0 || h == 0 {
         return;
     }
-    let cp = columns.pad;
+    let (cp, radius) = (columns.pad, masks.radius);
     let [er_dir, er_ind, erv_dir, erv_ind] = out;
     er_dir
         .data
@@ -349,9 +448,13 @@ pub fn y_pass(
                         ([f32::NAN; VALUE_PLANES], [f32::NAN; VALUE_PLANES])
                     } else {
                         let p = Vec3::new(get(line, PX, t), get(line, PY, t), get(line, PZ, t));
+                        let mut rv_same = columns.rv_same(x, t, radius);
                         let matched = previous.and_then(|(planes, view)| {
-                            find_previous(p, view, planes)
-                                .map(|(xp, yp)| (planes.line(xp), yp + planes.pad))
+                            find_previous(p, view, planes).map(|(xp, yp)| {
+                                let tp = yp + planes.pad;
+                                rv_same &= planes.rv_same(xp, tp, radius);
+                                (planes.line(xp), tp)
+                            })
                         });
                         let nan_if_missing = |mut r: [f32; VALUE_PLANES], ok: [f32; 2]| {
                             for (layer, &ok) in ok.iter().enumerate() {
@@ -361,15 +464,10 @@ pub fn y_pass(
                             }
                             r
                         };
+                        let [dir, ind] = pixel_sums::<B2Y_DIR>(masks, line, t, matched, rv_same);
                         (
-                            nan_if_missing(
-                                kind_sums::<B2Y_DIR, DIR>(masks, line, t, matched),
-                                [valid[0], valid[1]],
-                            ),
-                            nan_if_missing(
-                                kind_sums::<B2_IND, IND>(masks, line, t, matched),
-                                [valid[2], valid[3]],
-                            ),
+                            nan_if_missing(dir, [valid[0], valid[1]]),
+                            nan_if_missing(ind, [valid[2], valid[3]]),
                         )
                     };
                     o_r_dir[i] = rgb(&dir, 0);

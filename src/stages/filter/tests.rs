@@ -424,6 +424,40 @@ fn e_rv_equal_to_e_r_filters_to_the_same_bits() {
     );
 }
 
+/// Where E_RV == E_R over a window the filter sums E_R's planes only and copies the sums
+/// to E_RV: E_R's outputs must be the same bits as when every window is summed in full.
+#[test]
+fn reusing_e_r_sums_for_e_rv_leaves_e_r_unchanged() {
+    let mut same = Scene::new(sphere(Vec3::new(0.0, 0.0, 2.0), 0.3, 2.5), 0.5, 0.3);
+    same.set_layers(|i| Vec3::new(1.0 + noise(6, i), 0.5 + noise(7, i), 2.0));
+    let mut differs = same.clone();
+    for layer in &mut differs.layers[2..] {
+        for (i, v) in layer.data.iter_mut().enumerate() {
+            *v *= 0.5 + noise(8, i);
+        }
+    }
+    let view = Some((Pose::IDENTITY, camera()));
+    let reused = filter_frames(&[&same, &same], params(true), view);
+    let full = filter_frames(&[&differs, &differs], params(true), view);
+    for layer in 0..2 {
+        let bits = |out: &FilterOutputs| -> Vec<[u32; 3]> {
+            let data = &out.layers[layer].data;
+            data.iter()
+                .map(|v| v.to_array().map(f32::to_bits))
+                .collect()
+        };
+        assert_eq!(bits(&reused), bits(&full), "layer {layer}");
+        assert_eq!(
+            bits(&reused),
+            reused.layers[layer + 2]
+                .data
+                .iter()
+                .map(|v| v.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        );
+    }
+}
+
 #[test]
 fn missing_values_stay_nan_and_do_not_spread() {
     let mut scene = Scene::new(plane(2.0), 1.0, 1.0);

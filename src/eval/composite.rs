@@ -40,8 +40,7 @@ impl CompositeScorer {
             encoder: GammaEncoder::new(params.gamma),
             params,
             unfiltered: sampler.map(|s| {
-                ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind"]
-                    .map(|r| s.outputs.get(r).cloned().unwrap_or_else(|| r.into()))
+                ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind"].map(|r| super::output(s, r))
             }),
             frames_scored: 0,
             squared: 0.0,
@@ -50,17 +49,13 @@ impl CompositeScorer {
         }
     }
 
-    fn name(map: &std::collections::BTreeMap<String, String>, role: &str) -> String {
-        map.get(role).cloned().unwrap_or_else(|| role.into())
-    }
-
     /// The composite of `layers` with the stage's other inputs on `frame`.
     fn composite_of(
         &self,
         frame: &Frame,
         layers: [&crate::raster::Vec3Image; 4],
     ) -> Result<Rgb8Image, String> {
-        let input = |role: &str| Self::name(&self.stage.inputs, role);
+        let input = |role: &str| super::input(&self.stage, role);
         let e = |e: crate::graph::StageError| e.to_string();
         let radiance = frame.radiance(&input("radiance")).map_err(e)?;
         let inputs = CompositeInputs {
@@ -90,7 +85,7 @@ impl CompositeScorer {
         let Some(reference) = reference.filter(|r| r.frame == frame.index) else {
             return Ok(());
         };
-        let Ok(own) = frame.color(&Self::name(&self.stage.outputs, "final")) else {
+        let Ok(own) = frame.color(&super::output(&self.stage, "final")) else {
             return Ok(());
         };
         let truth = self.composite_of(

@@ -105,19 +105,11 @@ impl FilterScorer {
     }
 
     fn input(&self, role: &str) -> String {
-        self.stage
-            .inputs
-            .get(role)
-            .cloned()
-            .unwrap_or_else(|| role.into())
+        super::input(&self.stage, role)
     }
 
     fn output(&self, role: &str) -> String {
-        self.stage
-            .outputs
-            .get(role)
-            .cloned()
-            .unwrap_or_else(|| role.into())
+        super::output(&self.stage, role)
     }
 
     /// Scores `frame` when `reference` holds its reference layers.
@@ -263,13 +255,7 @@ fn flicker_runs(runner: &PathRunner, frame: &Frame) -> Result<Vec<PathOutputs>, 
 
 /// Puts a sampling run's products into `frame` under the names `sampler` gives them.
 pub fn insert_outputs(frame: &mut Frame, sampler: &ResolvedStage, run: &PathOutputs) {
-    let name = |role: &str| {
-        sampler
-            .outputs
-            .get(role)
-            .cloned()
-            .unwrap_or_else(|| role.into())
-    };
+    let name = |role: &str| super::output(sampler, role);
     let products = [
         ("e_r_dir", Product::Radiance(run.e_r_dir.clone())),
         ("e_r_ind", Product::Radiance(run.e_r_ind.clone())),

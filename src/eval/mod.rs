@@ -52,7 +52,8 @@ pub struct Evaluator {
     frames_with_truth: usize,
 }
 
-fn output(stage: &ResolvedStage, role: &str) -> String {
+/// The product a stage writes for output `role` (the role itself unless renamed).
+pub(crate) fn output(stage: &ResolvedStage, role: &str) -> String {
     stage
         .outputs
         .get(role)
@@ -60,7 +61,8 @@ fn output(stage: &ResolvedStage, role: &str) -> String {
         .unwrap_or_else(|| role.into())
 }
 
-fn input(stage: &ResolvedStage, role: &str) -> String {
+/// The product a stage reads for input `role` (the role itself unless renamed).
+pub(crate) fn input(stage: &ResolvedStage, role: &str) -> String {
     stage
         .inputs
         .get(role)

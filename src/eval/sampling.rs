@@ -80,13 +80,8 @@ impl PathRunner {
         seed: u64,
     ) -> PathRunner {
         PathRunner {
-            inputs: ["depth", "normals", "pose", "radiance", "light_table"].map(|r| {
-                stage
-                    .inputs
-                    .get(r)
-                    .cloned()
-                    .unwrap_or_else(|| r.to_string())
-            }),
+            inputs: ["depth", "normals", "pose", "radiance", "light_table"]
+                .map(|r| super::input(stage, r)),
             params: PathParams::from_params(&stage.params, seed),
             objects,
             intrinsics,
@@ -206,13 +201,8 @@ impl PathScorer {
     ) -> Self {
         PathScorer {
             runner: PathRunner::new(stage, objects, intrinsics, seed),
-            outputs: ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind", "mask"].map(|r| {
-                stage
-                    .outputs
-                    .get(r)
-                    .cloned()
-                    .unwrap_or_else(|| r.to_string())
-            }),
+            outputs: ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind", "mask"]
+                .map(|r| super::output(stage, r)),
             frames_scored: 0,
             pixels: 0,
             squared: 0.0,

@@ -4,17 +4,9 @@
 
 mod common;
 
-use common::{ok, run_in, stdout};
+use common::{ok, pipeline, run_in, stdout};
 use serde_json::Value;
 use std::path::Path;
-
-fn pipeline(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("pipelines")
-        .join(name)
-        .display()
-        .to_string()
-}
 
 fn rgb8(path: &Path) -> image::RgbImage {
     image::open(path)

@@ -4,17 +4,9 @@
 
 mod common;
 
-use common::{ok, run_in, stdout};
+use common::{ok, pipeline, run_in, stdout};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-
-fn pipeline(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("pipelines")
-        .join(name)
-        .display()
-        .to_string()
-}
 
 /// A small synthetic recording in `dir`.
 fn small_recording(dir: &Path, frames: usize) -> PathBuf {

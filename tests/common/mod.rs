@@ -94,3 +94,12 @@ pub fn ok(o: Output) -> Output {
     );
     o
 }
+
+/// The path of a shipped pipeline file, `pipelines/<name>`.
+pub fn pipeline(name: &str) -> String {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("pipelines")
+        .join(name)
+        .display()
+        .to_string()
+}

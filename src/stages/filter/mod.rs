@@ -226,7 +226,9 @@ pub struct FilterInputs<'a> {
     /// World positions (non-finite = none) and normals (zero = invalid).
     pub world_position: &'a Vec3Image,
     pub world_normal: &'a Vec3Image,
-    /// Metres to the nearest occluder / reflector (INFINITY = none).
+    /// `sample.*`'s nearest direct occluder as t / cos(theta) (so eq. 17's
+    /// cos^2(theta_occ) / z is its inverse) and nearest indirect hit, in metres
+    /// (INFINITY = none).
     pub direct_min_distance: &'a ScalarImage,
     pub indirect_min_distance: &'a ScalarImage,
     /// Mean Phong exponent of the virtual primaries (0 = diffuse).

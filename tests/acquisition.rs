@@ -4,7 +4,7 @@
 
 mod common;
 
-use relume::eval::Evaluator;
+use relume::eval::{EvalOptions, Evaluator};
 use relume::graph::{Pipeline, Registry, RunOptions, SourceFile, run};
 use relume::recording::synth::{SynthConfig, generate};
 use relume::recording::{Replay, ReplayOptions};
@@ -51,7 +51,7 @@ fn evaluate(pipeline_toml: &str, path: &Path) -> Value {
     let stages = pipeline
         .build(&registry, &header, out.path(), 1)
         .unwrap_or_else(|(s, e)| panic!("{s}: {e}"));
-    let mut evaluator = Evaluator::new(&pipeline, &header, 1);
+    let mut evaluator = Evaluator::new(&pipeline, &header, 1, &EvalOptions::default()).unwrap();
     let options = RunOptions::default();
     run(&pipeline, stages, &replay, &options, &mut |f| {
         evaluator.observe(&f).unwrap()

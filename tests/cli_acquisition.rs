@@ -69,6 +69,41 @@ fn eval_reports_every_acquisition_score_as_json() {
         "{text}"
     );
     assert!(!text.contains("no ground truth"), "{text}");
+    // --stage scores only the named stages, and names the choices when one is wrong.
+    let o = ok(run_in(
+        tmp.path(),
+        &[
+            "eval",
+            "s.relume",
+            "-p",
+            &p,
+            "--json",
+            "--stage",
+            "depth.fuse",
+        ],
+    ));
+    let only: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let names: Vec<&String> = only["stages"].as_object().unwrap().keys().collect();
+    assert_eq!(names, ["depth.fuse"]);
+    assert_eq!(
+        only["stages"]["depth.fuse"]["rmse_fused_m"],
+        stages["depth.fuse"]["rmse_fused_m"]
+    );
+    for (name, what) in [
+        ("fuse", "is not in the pipeline"),
+        ("decode", "cannot be scored"),
+    ] {
+        let o = run_in(tmp.path(), &["eval", "s.relume", "-p", &p, "--stage", name]);
+        assert!(!o.status.success());
+        assert!(
+            stderr(&o).contains(&format!(
+                "stage `{name}` {what}; the stages eval can score here: gbuffer.splat, \
+                 color.compensate, depth.fuse, normals.plane_fit"
+            )),
+            "{}",
+            stderr(&o)
+        );
+    }
 }
 
 #[test]

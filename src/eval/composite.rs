@@ -3,7 +3,8 @@
 //! (see [`super::sampling`]), on the frames the `sample.path` scorer scores.
 //!
 //! - `psnr_db`: PSNR of the stage's 8-bit `final` image against the reference composite
-//!   (peak 255, over all pixels and channels);
+//!   (peak 255, over all channels of the pixels that have a reference: all of them, or
+//!   the lattice of `relume eval --reference-stride`);
 //! - `psnr_db_unfiltered`: the same for a composite of the sampling's unfiltered layers
 //!   (what the filter buys; absent without a `sample.path`).
 //!
@@ -97,17 +98,18 @@ impl CompositeScorer {
                 &reference.e_rv_ind,
             ],
         )?;
-        self.squared += squared_error(own, &truth);
+        let scored = |i: usize| reference.has_pixel(i);
+        self.squared += squared_error(own, &truth, scored);
         if let Some(names) = &self.unfiltered {
             let layers: Vec<_> = names.iter().map(|n| frame.radiance(n)).collect();
             if let [Ok(a), Ok(b), Ok(c), Ok(d)] = layers.as_slice() {
                 let unfiltered = self.composite_of(frame, [a, b, c, d])?;
-                self.squared_unfiltered += squared_error(&unfiltered, &truth);
+                self.squared_unfiltered += squared_error(&unfiltered, &truth, scored);
             } else {
                 self.unfiltered = None;
             }
         }
-        self.values += own.data.len() as u64 * 3;
+        self.values += (0..own.data.len()).filter(|&i| scored(i)).count() as u64 * 3;
         self.frames_scored += 1;
         Ok(())
     }
@@ -131,12 +133,14 @@ impl CompositeScorer {
     }
 }
 
-/// The sum of squared 8-bit differences over all pixels and channels.
-fn squared_error(a: &Rgb8Image, b: &Rgb8Image) -> f64 {
+/// The sum of squared 8-bit differences over the pixels `scored` keeps, all channels.
+fn squared_error(a: &Rgb8Image, b: &Rgb8Image, scored: impl Fn(usize) -> bool) -> f64 {
     a.data
         .iter()
         .zip(&b.data)
-        .map(|(p, q)| {
+        .enumerate()
+        .filter(|(i, _)| scored(*i))
+        .map(|(_, (p, q))| {
             let d = Vec3::from_array(p.map(f32::from)) - Vec3::from_array(q.map(f32::from));
             d.length_squared() as f64
         })

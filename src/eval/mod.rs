@@ -48,8 +48,31 @@ enum Scorer {
 /// Scores a pipeline's stages over the frames given to [`Evaluator::observe`].
 pub struct Evaluator {
     scorers: Vec<(String, &'static str, Scorer)>,
+    /// The many-sample references, when a scorer needs them.
+    references: Option<sampling::ReferenceSchedule>,
     frames: usize,
     frames_with_truth: usize,
+}
+
+/// What `relume eval` scores, and how.
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    /// Names of the stages to score (empty: every stage that can be scored).
+    pub stages: Vec<String>,
+    /// The references of `sample.path`, `filter.axis_aligned` and
+    /// `composite.differential` are computed on the pixels whose x and y are multiples
+    /// of this (1: every pixel; n: n^2 times less work, the scores then average over
+    /// that lattice).
+    pub reference_stride: u32,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions {
+            stages: Vec::new(),
+            reference_stride: 1,
+        }
+    }
 }
 
 /// The product a stage writes for output `role` (the role itself unless renamed).
@@ -72,8 +95,14 @@ pub(crate) fn input(stage: &ResolvedStage, role: &str) -> String {
 
 impl Evaluator {
     /// An evaluator for the scorable stages of `pipeline` run with `seed` (see the
-    /// module table).
-    pub fn new(pipeline: &Pipeline, header: &Header, seed: u64) -> Evaluator {
+    /// module table), or those `options` names. Fails when a named stage is not in the
+    /// pipeline or cannot be scored.
+    pub fn new(
+        pipeline: &Pipeline,
+        header: &Header,
+        seed: u64,
+        options: &EvalOptions,
+    ) -> Result<Evaluator, String> {
         let compensated = pipeline
             .stages
             .iter()
@@ -83,7 +112,7 @@ impl Evaluator {
         let runner = sampler.map(|s| {
             sampling::PathRunner::new(s, pipeline.objects.clone(), header.depth_intrinsics, seed)
         });
-        let scorers = pipeline
+        let mut scorers: Vec<_> = pipeline
             .stages
             .iter()
             .filter_map(|s| {
@@ -136,11 +165,42 @@ impl Evaluator {
                 Some((s.name.clone(), s.kind, scorer))
             })
             .collect();
-        Evaluator {
+        for name in &options.stages {
+            if !scorers.iter().any(|(n, _, _)| n == name) {
+                let what = if pipeline.stages.iter().any(|s| &s.name == name) {
+                    "cannot be scored"
+                } else {
+                    "is not in the pipeline"
+                };
+                let scorable: Vec<&str> = scorers.iter().map(|(n, _, _)| n.as_str()).collect();
+                let scorable = if scorable.is_empty() {
+                    "none".to_string()
+                } else {
+                    scorable.join(", ")
+                };
+                return Err(format!(
+                    "stage `{name}` {what}; the stages eval can score here: {scorable}"
+                ));
+            }
+        }
+        if !options.stages.is_empty() {
+            scorers.retain(|(n, _, _)| options.stages.contains(n));
+        }
+        let needs_references = scorers.iter().any(|(_, _, s)| {
+            matches!(
+                s,
+                Scorer::Path(_) | Scorer::Filter(_) | Scorer::Composite(_)
+            )
+        });
+        let references = runner
+            .filter(|_| needs_references)
+            .map(|r| sampling::ReferenceSchedule::new(r, options.reference_stride));
+        Ok(Evaluator {
             scorers,
+            references,
             frames: 0,
             frames_with_truth: 0,
-        }
+        })
     }
 
     /// True when no stage of the pipeline can be scored.
@@ -154,9 +214,11 @@ impl Evaluator {
         let truth = FrameTruth::of(frame)?;
         self.frames += 1;
         self.frames_with_truth += truth.is_some() as usize;
-        // The 1024-sample reference layers, when the sampling scorer computed them for
-        // this frame; the filter and composite scorers compare against them.
-        let mut reference = None;
+        // The 1024-sample reference layers on scored frames.
+        let reference = match &mut self.references {
+            Some(schedule) => schedule.reference(frame)?,
+            None => None,
+        };
         for (_, _, scorer) in &mut self.scorers {
             match scorer {
                 Scorer::Depth(s) => s.observe(frame, truth.as_ref()),
@@ -165,7 +227,7 @@ impl Evaluator {
                 Scorer::Reference(s) => s.observe(frame),
                 Scorer::Importance(s) => s.observe(frame),
                 Scorer::Val(s) => s.observe(frame),
-                Scorer::Path(s) => reference = s.observe(frame)?.or(reference),
+                Scorer::Path(s) => s.observe(frame, reference.as_deref())?,
                 Scorer::Filter(s) => s.observe(frame, reference.as_deref())?,
                 Scorer::Composite(s) => s.observe(frame, reference.as_deref())?,
             }

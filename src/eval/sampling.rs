@@ -1,9 +1,11 @@
 //! Scores of `sample.path` against references computed with many more samples.
 //!
 //! On a scored frame (every [`SCORE_EVERY`]-th, at most [`MAX_SCORED_FRAMES`]) the
-//! scorer re-runs the stage's own math on the frame's inputs:
+//! evaluator re-runs the stage's own math on the frame's inputs:
 //! - a reference with 4 x 64 direct and 4 x 64 indirect samples per primary sample, from
-//!   four independent seeds (1024 samples per pixel and layer, 64 times the default);
+//!   four independent seeds (1024 samples per pixel and layer, 64 times the default),
+//!   on every pixel or on a lattice of them ([`ReferenceSchedule`]); the scores below
+//!   and those of the filter and the composite are taken where it has values;
 //! - `ratio_rmse`: RMSE of the stage's E_RV / E_R (channel means of direct + indirect)
 //!   against the reference ratio, over real pixels where a reference path met the
 //!   object (elsewhere the ratio is exactly 1 by construction);
@@ -122,9 +124,12 @@ impl PathRunner {
 
 /// The four irradiance layers of a frame with 1024 samples per pixel and layer: the
 /// mean of [`REFERENCE_RUNS`] independent runs with 64 + 64 samples per primary
-/// sample. `filter.axis_aligned` and `composite.differential` are scored against it too.
+/// sample. `sample.path`, `filter.axis_aligned` and `composite.differential` are scored
+/// against it.
 pub struct ReferenceLayers {
     pub frame: usize,
+    /// Only pixels whose x and y are multiples of this have values (NaN elsewhere).
+    pub stride: u32,
     pub e_r_dir: Vec3Image,
     pub e_r_ind: Vec3Image,
     pub e_rv_dir: Vec3Image,
@@ -134,9 +139,14 @@ pub struct ReferenceLayers {
 }
 
 impl ReferenceLayers {
-    /// The reference of `frame` for the stage's configuration in `runner`; `None` when
-    /// the frame lacks an input.
-    pub fn compute(runner: &PathRunner, frame: &Frame) -> Option<Result<ReferenceLayers, String>> {
+    /// The reference of `frame` for the stage's configuration in `runner`, on the
+    /// pixels whose x and y are multiples of `stride`; `None` when the frame lacks an
+    /// input.
+    pub fn compute(
+        runner: &PathRunner,
+        frame: &Frame,
+        stride: u32,
+    ) -> Option<Result<ReferenceLayers, String>> {
         let mut sums: Option<ReferenceLayers> = None;
         for k in 0..REFERENCE_RUNS {
             let params = PathParams {
@@ -144,6 +154,7 @@ impl ReferenceLayers {
                 indirect: REFERENCE_SAMPLES,
                 object_aware: false,
                 seed: rng::hash(&[runner.params.seed, REFERENCE_SALT, k]),
+                pixel_stride: stride,
                 ..runner.params
             };
             let out = match runner.run(frame, &params)? {
@@ -154,6 +165,7 @@ impl ReferenceLayers {
                 let zero = Image::filled(out.e_r_dir.width, out.e_r_dir.height, Vec3::ZERO);
                 ReferenceLayers {
                     frame: frame.index,
+                    stride,
                     e_r_dir: zero.clone(),
                     e_r_ind: zero.clone(),
                     e_rv_dir: zero.clone(),
@@ -177,6 +189,43 @@ impl ReferenceLayers {
             }
         }
         sums.map(Ok)
+    }
+
+    /// Whether pixel `i` of the image has reference values (lies on the lattice).
+    pub fn has_pixel(&self, i: usize) -> bool {
+        let (w, s) = (self.e_r_dir.width as usize, self.stride as usize);
+        w > 0 && (i % w) % s == 0 && (i / w) % s == 0
+    }
+}
+
+/// Which frames get a reference: every [`SCORE_EVERY`]-th (frames 14, 29, ...), at
+/// most [`MAX_SCORED_FRAMES`], each on the lattice of `stride` pixels.
+pub struct ReferenceSchedule {
+    runner: PathRunner,
+    stride: u32,
+    computed: usize,
+}
+
+impl ReferenceSchedule {
+    pub fn new(runner: PathRunner, stride: u32) -> ReferenceSchedule {
+        ReferenceSchedule {
+            runner,
+            stride: stride.max(1),
+            computed: 0,
+        }
+    }
+
+    /// The reference layers of `frame` when it is a scored frame and holds the
+    /// sampling's inputs, else `None`.
+    pub fn reference(&mut self, frame: &Frame) -> Result<Option<Arc<ReferenceLayers>>, String> {
+        if self.computed >= MAX_SCORED_FRAMES || frame.index % SCORE_EVERY != SCORE_EVERY - 1 {
+            return Ok(None);
+        }
+        let Some(reference) = ReferenceLayers::compute(&self.runner, frame, self.stride) else {
+            return Ok(None);
+        };
+        self.computed += 1;
+        Ok(Some(Arc::new(reference?)))
     }
 }
 
@@ -211,17 +260,16 @@ impl PathScorer {
         }
     }
 
-    /// The stage's math, for scorers of the stages after it.
-    pub fn runner(&self) -> &PathRunner {
-        &self.runner
-    }
-
-    /// Scores a scored frame and returns its reference layers (`None` on other frames
-    /// and where the frame lacks the stage's inputs or outputs).
-    pub fn observe(&mut self, frame: &Frame) -> Result<Option<Arc<ReferenceLayers>>, String> {
-        if self.frames_scored >= MAX_SCORED_FRAMES || frame.index % SCORE_EVERY != SCORE_EVERY - 1 {
-            return Ok(None);
-        }
+    /// Scores `frame` when `reference` holds its reference layers and the frame the
+    /// stage's outputs.
+    pub fn observe(
+        &mut self,
+        frame: &Frame,
+        reference: Option<&ReferenceLayers>,
+    ) -> Result<(), String> {
+        let Some(reference) = reference.filter(|r| r.frame == frame.index) else {
+            return Ok(());
+        };
         let [e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask] = &self.outputs;
         let (Ok(e_r_dir), Ok(e_r_ind), Ok(e_rv_dir), Ok(e_rv_ind), Ok(mask)) = (
             frame.radiance(e_r_dir),
@@ -230,12 +278,8 @@ impl PathScorer {
             frame.radiance(e_rv_ind),
             frame.scalar(mask),
         ) else {
-            return Ok(None);
+            return Ok(());
         };
-        let Some(reference) = ReferenceLayers::compute(&self.runner, frame) else {
-            return Ok(None);
-        };
-        let reference = Arc::new(reference?);
         let n = reference.touched.len();
         let sum_of = |a: &Vec3Image, b: &Vec3Image, i: usize| channel_mean(a.data[i] + b.data[i]);
         let ref_r: Vec<f64> = (0..n)
@@ -309,7 +353,7 @@ impl PathScorer {
             self.z_scores.push((m - reference_mean) / se);
         }
         self.frames_scored += 1;
-        Ok(Some(reference))
+        Ok(())
     }
 
     pub fn report(&self) -> Value {

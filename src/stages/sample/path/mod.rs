@@ -270,6 +270,11 @@ pub struct PathParams {
     /// Blocked direct samples whose radiance is below this fraction of the table's
     /// brightest do not set `direct_min_distance`.
     pub occluder_threshold: f32,
+    /// Shade only the pixels whose x and y are multiples of this (1: every pixel); the
+    /// others keep [`PathOutputs::new`]'s values (NaN irradiance). A shaded pixel gets
+    /// the bits a full run gives it (random numbers are hashed per pixel): `relume eval`
+    /// computes its many-sample references on such a lattice. Not a stage parameter.
+    pub pixel_stride: u32,
 }
 
 impl Default for PathParams {
@@ -286,6 +291,7 @@ impl Default for PathParams {
             max_distance: 1.0,
             normal_offset: 1.0,
             occluder_threshold: 0.1,
+            pixel_stride: 1,
         }
     }
 }
@@ -309,6 +315,7 @@ impl PathParams {
             max_distance: p.float("max_distance") as f32,
             normal_offset: p.float("normal_offset") as f32,
             occluder_threshold: p.float("occluder_threshold") as f32,
+            pixel_stride: 1,
         }
     }
 
@@ -333,6 +340,9 @@ impl PathParams {
                     self.direct, self.indirect
                 ),
             );
+        }
+        if self.pixel_stride == 0 {
+            return bad("pixel_stride", "0, expected 1 or more".into());
         }
         let max = MAX_CANDIDATES as u32;
         if !(1..=max).contains(&self.candidates) || !(1..=max).contains(&self.cache_size) {
@@ -569,11 +579,13 @@ pub fn sample_path_with_pyramid(
         params.trace,
     );
     let kernel = Kernel::new(inputs, params, tracer);
+    let stride = params.pixel_stride as usize;
     rows(out, w as usize)
         .into_par_iter()
         .enumerate()
+        .filter(|(y, _)| y % stride == 0)
         .for_each(|(y, mut row)| {
-            for x in 0..w {
+            for x in (0..w).step_by(stride) {
                 row.set(x as usize, &kernel.shade_pixel(x, y as u32));
             }
         });

@@ -124,3 +124,56 @@ fn the_stage_reads_its_products_and_writes_every_output() {
     }
     assert_eq!(frame.labels("touched").unwrap().data, direct.touched.data);
 }
+
+#[test]
+fn a_pixel_stride_shades_the_lattice_with_the_bits_of_a_full_run() {
+    let scene = floor_scene();
+    let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, Material::DIFFUSE_GRAY);
+    let table = uniform_table(512);
+    let full = run(&scene, &objects, &table, &PathParams::default());
+    let params = PathParams {
+        pixel_stride: 3,
+        ..Default::default()
+    };
+    let lattice = run(&scene, &objects, &table, &params);
+    let fresh = PathOutputs::new(W, H);
+    let layers = |o: &PathOutputs| {
+        [
+            &o.e_r_dir,
+            &o.e_r_ind,
+            &o.e_rv_dir,
+            &o.e_rv_ind,
+            &o.world_position,
+        ]
+        .map(|l| l.data.clone())
+    };
+    let (full, lattice_layers, fresh) = (layers(&full), layers(&lattice), layers(&fresh));
+    let mut shaded = 0;
+    for y in 0..H as usize {
+        for x in 0..W as usize {
+            let i = y * W as usize + x;
+            let expected = if x % 3 == 0 && y % 3 == 0 {
+                shaded += 1;
+                &full
+            } else {
+                &fresh
+            };
+            for (k, layer) in lattice_layers.iter().enumerate() {
+                assert!(
+                    same_bits(layer[i], expected[k][i]),
+                    "layer {k} at ({x}, {y})"
+                );
+            }
+        }
+    }
+    assert_eq!(shaded, W.div_ceil(3) * H.div_ceil(3));
+    assert!(lattice.e_r_dir.data.iter().any(|v| v.is_finite()));
+    let zero = PathParams {
+        pixel_stride: 0,
+        ..Default::default()
+    };
+    assert_eq!(
+        zero.check().unwrap_err().to_string(),
+        "sample.path: pixel_stride is 0, expected 1 or more"
+    );
+}

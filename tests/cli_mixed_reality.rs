@@ -116,22 +116,36 @@ fn pixels_whose_paths_never_meet_the_objects_keep_the_camera_levels() {
     assert!(changed > 100, "the objects show: {changed} pixels changed");
 }
 
-/// The filter's and the composite's scores on the synthetic room, 320x240 with the
-/// full 640x480 camera's metres per pixel (`--zoom 2`: the filter's footprint in pixels
-/// is the built-in recording's). Scored on frame 14 against 1024-sample references.
+/// The filter's and the composite's scores on the built-in synthetic recording
+/// (640x480), scored on frame 14 against 1024-sample references. The references are
+/// computed on every 4th pixel in x and y (`--reference-stride 4`, 16 times less work):
+/// on every pixel the same frame gives mse_filtered 0.000482 vs mse_unfiltered 0.00623
+/// (12.9x), on the lattice 0.000516 vs 0.00645 (12.5x).
 #[test]
 fn eval_scores_the_filter_and_the_composite() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
-    ok(run_in(
+    ok(run_in(d, &["synth", "-o", "s.relume"]));
+    let mixed = pipeline("mixed-reality.toml");
+    let o = ok(run_in(
         d,
         &[
-            "synth", "-o", "s.relume", "--frames", "15", "--size", "320x240", "--zoom", "2",
+            "eval",
+            "s.relume",
+            "-p",
+            &mixed,
+            "--frames",
+            "0..15",
+            "--stage",
+            "filter.axis_aligned,composite.differential",
+            "--reference-stride",
+            "4",
+            "--json",
         ],
     ));
-    let mixed = pipeline("mixed-reality.toml");
-    let o = ok(run_in(d, &["eval", "s.relume", "-p", &mixed, "--json"]));
     let doc: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let stages = doc["stages"].as_object().unwrap();
+    assert_eq!(stages.len(), 2, "only the stages asked for: {doc}");
     let filter = &doc["stages"]["filter.axis_aligned"];
     let composite = &doc["stages"]["composite.differential"];
     let key = |stage: &Value, k: &str| {
@@ -145,9 +159,8 @@ fn eval_scores_the_filter_and_the_composite() {
         key(filter, "mse_filtered"),
         key(filter, "mse_gaussian_same_radius"),
     );
-    // On the whole 640x480 frame the filter removes 92 % of the squared error (see the
-    // issue note); this crop is the harder centre, with the objects and their shadows.
-    assert!(filtered * 5.0 < unfiltered, "{filtered} vs {unfiltered}");
+    // The done-when line of the filtering issue, as written.
+    assert!(filtered <= unfiltered / 10.0, "{filtered} vs {unfiltered}");
     assert!(
         filtered < gaussian,
         "{filtered} vs the plain Gaussian's {gaussian}"

@@ -21,6 +21,8 @@ use std::sync::Arc;
 const WARM_FRAMES: usize = 12;
 
 fn bench_acquisition(c: &mut Criterion) {
+    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    relume::graph::memory::keep_freed_memory();
     let common::WarmedUp {
         pipeline,
         header,

@@ -40,6 +40,8 @@ fn noop_chain(stages: usize, capacity: usize) -> Pipeline {
 }
 
 fn bench_hops(c: &mut Criterion) {
+    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    relume::graph::memory::keep_freed_memory();
     let registry = Registry::builtin();
     let frames = 2000;
     let mut group = c.benchmark_group("runtime/noop_chain");

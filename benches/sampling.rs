@@ -29,6 +29,8 @@ use relume::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_p
 const WARM_FRAMES: usize = 12;
 
 fn bench_sampling(c: &mut Criterion) {
+    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    relume::graph::memory::keep_freed_memory();
     let common::WarmedUp {
         pipeline,
         header,

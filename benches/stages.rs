@@ -25,6 +25,8 @@ fn data_dir() -> PathBuf {
 }
 
 fn bench_stages(c: &mut Criterion) {
+    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    relume::graph::memory::keep_freed_memory();
     let lr = data_dir().join("livingroom1");
     let (color, _) = wrap_image_file(std::fs::read(lr.join("color/00100.jpg")).unwrap()).unwrap();
     let (depth, _) = wrap_image_file(std::fs::read(lr.join("depth/00100.png")).unwrap()).unwrap();

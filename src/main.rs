@@ -3,6 +3,7 @@
 mod cli;
 
 fn main() {
+    relume::graph::memory::keep_freed_memory();
     match cli::main() {
         Ok(code) => std::process::exit(code),
         Err(e) => {

@@ -2,6 +2,7 @@
 
 pub mod config;
 pub mod frame;
+pub mod memory;
 pub mod params;
 pub mod pipeline;
 pub mod product;

@@ -10,6 +10,18 @@ pub struct Image<T> {
     pub data: Vec<T>,
 }
 
+impl<T: bytemuck::Zeroable> Image<T> {
+    /// An image of all-zero values, from a zeroed allocation: no fill pass, and a large
+    /// one gets fresh zero pages from the system (for outputs a stage overwrites).
+    pub fn zeroed(width: u32, height: u32) -> Self {
+        Image {
+            width,
+            height,
+            data: bytemuck::zeroed_vec(width as usize * height as usize),
+        }
+    }
+}
+
 impl<T: Clone> Image<T> {
     /// An image filled with `value`.
     pub fn filled(width: u32, height: u32, value: T) -> Self {

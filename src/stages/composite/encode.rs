@@ -18,6 +18,12 @@ const SHIFT: u32 = 23 - MANTISSA_BITS;
 /// Values below 2^-27 are level 0 whatever the gamma in [1, 3]: the first threshold,
 /// (0.5 / 255)^3 = 7.54e-9, lies above it (2^-27 = 7.45e-9).
 const LOWEST: f32 = 1.0 / (1u32 << 27) as f32;
+/// Table entries: a power of two above the 27 * 2^9 buckets of [LOWEST, 1), so that a
+/// masked index needs no bounds check.
+const TABLE: usize = 1 << 14;
+/// The largest float below 1.
+const BELOW_ONE: f32 = 0.999_999_94;
+const _: () = assert!(27 << MANTISSA_BITS < TABLE);
 
 /// Linear value -> 8-bit level by rounding in the gamma-encoded scale.
 #[derive(Clone, Debug)]
@@ -25,8 +31,8 @@ pub struct GammaEncoder {
     /// `thresholds[k]` = ((k + 0.5) / 255)^gamma: the smallest value of level k + 1
     /// (k < 255), then +inf.
     thresholds: [f32; 256],
-    /// The level of the smallest value of every table bucket.
-    levels: Vec<u8>,
+    /// The level of the smallest value of every table bucket (then unused zeros).
+    levels: Box<[u8; TABLE]>,
     /// The bucket index of [`LOWEST`].
     first_bucket: u32,
 }
@@ -45,9 +51,10 @@ impl GammaEncoder {
         });
         let first_bucket = LOWEST.to_bits() >> SHIFT;
         let last_bucket = 1.0f32.to_bits() >> SHIFT;
-        let levels = (first_bucket..=last_bucket)
-            .map(|bucket| search(&thresholds, f32::from_bits(bucket << SHIFT)))
-            .collect();
+        let mut levels = Box::new([0; TABLE]);
+        for (level, bucket) in levels.iter_mut().zip(first_bucket..=last_bucket) {
+            *level = search(&thresholds, f32::from_bits(bucket << SHIFT));
+        }
         GammaEncoder {
             thresholds,
             levels,
@@ -58,15 +65,15 @@ impl GammaEncoder {
     /// round(255 x^(1 / gamma)) clamped to [0, 255]; 0 for negative values and NaN.
     #[inline]
     pub fn level(&self, x: f32) -> u8 {
-        // Also catches NaN.
-        if x.is_nan() || x < LOWEST {
-            return 0;
-        }
-        if x >= 1.0 {
-            return 255;
-        }
+        // Branch-free clamping into [LOWEST, 1) (one maxss and one minss: a comparison
+        // with NaN is false): NaN, negatives and values below LOWEST become LOWEST
+        // (level 0), values from 1 up the float below 1 (level 255 for every gamma in
+        // [1, 3]: the last threshold is at most 0.998).
+        let x = if x > LOWEST { x } else { LOWEST };
+        let x = if x < BELOW_ONE { x } else { BELOW_ONE };
+        // The bucket lies in the table; the mask only spares the bounds check.
         let bucket = (x.to_bits() >> SHIFT) - self.first_bucket;
-        let level = self.levels[bucket as usize];
+        let level = self.levels[bucket as usize & (TABLE - 1)];
         // At most one threshold lies inside a bucket (see MANTISSA_BITS).
         level + (x >= self.thresholds[level as usize]) as u8
     }
@@ -116,7 +123,30 @@ mod tests {
             let x = f32::from_bits(bits);
             assert_eq!(encoder.level(x), encoder.level_by_search(x), "x = {x:e}");
         }
-        for (x, level) in [(-1.0, 0), (0.0, 0), (f32::NAN, 0), (2.0, 255), (1.0, 255)] {
+        // Each threshold and its neighbouring floats (where a bucket's compare decides).
+        for gamma in [1.0, 2.2, 3.0] {
+            let encoder = GammaEncoder::new(gamma);
+            for &t in &encoder.thresholds[..255] {
+                for x in [t.to_bits() - 1, t.to_bits(), t.to_bits() + 1].map(f32::from_bits) {
+                    assert_eq!(
+                        encoder.level(x),
+                        encoder.level_by_search(x),
+                        "{gamma} {x:e}"
+                    );
+                }
+            }
+        }
+        assert_eq!(BELOW_ONE, f32::from_bits(1.0f32.to_bits() - 1));
+        let clamps = [
+            (-1.0, 0),
+            (0.0, 0),
+            (f32::NAN, 0),
+            (f32::NEG_INFINITY, 0),
+            (2.0, 255),
+            (1.0, 255),
+            (f32::INFINITY, 255),
+        ];
+        for (x, level) in clamps {
             assert_eq!(encoder.level(x), level, "x = {x}");
         }
         // And the search is the rounding it stands for, away from ties.

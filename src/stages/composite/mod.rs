@@ -162,9 +162,9 @@ pub struct CompositeOutputs {
 impl CompositeOutputs {
     pub fn new(width: u32, height: u32) -> CompositeOutputs {
         CompositeOutputs {
-            final_color: Image::filled(width, height, [0; 3]),
-            final_hdr: Image::filled(width, height, Vec3::ZERO),
-            differential: Image::filled(width, height, Vec3::ONE),
+            final_color: Image::zeroed(width, height),
+            final_hdr: Image::zeroed(width, height),
+            differential: Image::zeroed(width, height),
         }
     }
 }
@@ -192,6 +192,10 @@ pub fn composite_pixel(
     camera: Vec3,
     params: &CompositeParams,
 ) -> (Vec3, Vec3) {
+    // Most pixels: real, and no path met an object (the ratio is exactly 1).
+    if mask >= 1.0 && e_rv == e_r {
+        return (camera, Vec3::ONE);
+    }
     let ratio = Vec3::new(
         differential_ratio(e_r.x, e_rv.x, params),
         differential_ratio(e_r.y, e_rv.y, params),
@@ -212,8 +216,8 @@ pub fn composite_pixel(
 
 /// Composites every pixel (see the module docs) into `out`, which must have the camera
 /// image's size.
-pub fn composite(
-    inputs: &CompositeInputs,
+pub fn composite<'a>(
+    inputs: &CompositeInputs<'a>,
     params: &CompositeParams,
     encoder: &GammaEncoder,
     out: &mut CompositeOutputs,
@@ -259,19 +263,23 @@ pub fn composite(
         .into_par_iter()
         .enumerate()
         .for_each(|(y, (color_row, hdr_row, ratio_row))| {
-            let at = y * width;
+            // Rows of exactly `width` pixels: the loop below needs no bounds checks.
+            let rows = y * width..(y + 1) * width;
+            let row = |image: &'a Vec3Image| &image.data[rows.clone()];
+            let (e_r_dir, e_r_ind) = (row(inputs.e_r_dir), row(inputs.e_r_ind));
+            let (e_rv_dir, e_rv_ind) = (row(inputs.e_rv_dir), row(inputs.e_rv_ind));
+            let (k_v, radiance) = (row(inputs.k_v), row(inputs.radiance));
+            let mask = &inputs.mask.data[rows.clone()];
+            let (color_row, hdr_row, ratio_row) = (
+                &mut color_row[..width],
+                &mut hdr_row[..width],
+                &mut ratio_row[..width],
+            );
             for x in 0..width {
-                let i = at + x;
-                let e_r = inputs.e_r_dir.data[i] + inputs.e_r_ind.data[i];
-                let e_rv = inputs.e_rv_dir.data[i] + inputs.e_rv_ind.data[i];
-                let (reference, ratio) = composite_pixel(
-                    e_r,
-                    e_rv,
-                    inputs.mask.data[i],
-                    inputs.k_v.data[i],
-                    inputs.radiance.data[i],
-                    params,
-                );
+                let e_r = e_r_dir[x] + e_r_ind[x];
+                let e_rv = e_rv_dir[x] + e_rv_ind[x];
+                let (reference, ratio) =
+                    composite_pixel(e_r, e_rv, mask[x], k_v[x], radiance[x], params);
                 let camera = inverse * reference;
                 hdr_row[x] = camera;
                 ratio_row[x] = ratio;

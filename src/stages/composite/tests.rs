@@ -143,6 +143,41 @@ fn the_ratio_is_one_where_an_estimate_is_missing_and_bounded_where_e_r_vanishes(
     assert_eq!(differential_ratio(2.0, -1.0, &p), 0.0);
     assert_eq!(differential_ratio(2.0, 1.0, &p), 0.5);
     assert_eq!(differential_ratio(1e-6, 2e-6, &p), 2e-6 / p.min_irradiance);
+    // The three-channel form gives the scalar form's bits, edge cases included.
+    let values = [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        -1.0,
+        -0.0,
+        0.0,
+        1e-6,
+        2e-6,
+        0.5,
+        1.0,
+        2.0,
+        1e30,
+    ];
+    for p in [
+        p,
+        CompositeParams {
+            min_irradiance: 0.0,
+            ..p
+        },
+    ] {
+        for &a in &values {
+            for &b in &values {
+                let (e_r, e_rv) = (Vec3::new(a, b, 0.25), Vec3::new(b, a, 0.5));
+                let three = differential_ratio3(e_r, e_rv, &p).to_array();
+                let one = [0, 1, 2].map(|c| differential_ratio(e_r[c], e_rv[c], &p));
+                assert_eq!(
+                    three.map(f32::to_bits),
+                    one.map(f32::to_bits),
+                    "{e_r} {e_rv}"
+                );
+            }
+        }
+    }
 }
 
 #[test]

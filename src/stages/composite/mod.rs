@@ -214,7 +214,8 @@ pub fn composite_pixel(
     camera: Vec3,
     params: &CompositeParams,
 ) -> (Vec3, Vec3) {
-    // Most pixels: real, and no path met an object (the ratio is exactly 1).
+    // Real, and no path met an object: the ratio is exactly 1 (on real frames only a
+    // few percent of pixels: the objects block some light everywhere).
     if mask >= 1.0 && e_rv == e_r {
         return (camera, Vec3::ONE);
     }

@@ -177,10 +177,10 @@ pub fn differential_ratio(e_r: f32, e_rv: f32, params: &CompositeParams) -> f32 
     if e_rv == e_r || !e_r.is_finite() || !e_rv.is_finite() {
         1.0
     } else {
-        // Comparisons spelled out (f32::max leaves the sign of a zero open), so that
-        // [`differential_ratio3`] can give the same bits.
+        // max(E_R, min) spelled out (f32::max leaves the sign of a zero open), so that
+        // [`differential_ratio3`] gives the same bits; E_R = -0 counts as min.
         let min = params.min_irradiance;
-        (e_rv / if e_r < min { min } else { e_r }).clamp(0.0, params.max_ratio)
+        (e_rv / if e_r > min { e_r } else { min }).clamp(0.0, params.max_ratio)
     }
 }
 
@@ -192,7 +192,7 @@ pub fn differential_ratio3(e_r: Vec3, e_rv: Vec3, params: &CompositeParams) -> V
     let (e_r, e_rv) = (Vec3A::from(e_r), Vec3A::from(e_rv));
     let keep = e_rv.cmpeq(e_r) | !e_r.is_finite_mask() | !e_rv.is_finite_mask();
     let min = Vec3A::splat(params.min_irradiance);
-    let quotient = e_rv / Vec3A::select(e_r.cmplt(min), min, e_r);
+    let quotient = e_rv / Vec3A::select(e_r.cmpgt(min), e_r, min);
     // f32::clamp's comparisons (which keep -0.0, unlike maxps).
     let max_ratio = Vec3A::splat(params.max_ratio);
     let bounded = Vec3A::select(

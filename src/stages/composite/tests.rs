@@ -140,6 +140,12 @@ fn the_ratio_is_one_where_an_estimate_is_missing_and_bounded_where_e_r_vanishes(
     assert_eq!(differential_ratio(2.0, f32::NAN, &p), 1.0);
     assert_eq!(differential_ratio(0.0, 0.0, &p), 1.0);
     assert_eq!(differential_ratio(0.0, 1.0, &p), p.max_ratio);
+    // E_R = -0 is no irradiance, as +0 is, even with min_irradiance 0.
+    let no_floor = CompositeParams {
+        min_irradiance: 0.0,
+        ..p
+    };
+    assert_eq!(differential_ratio(-0.0, 1.0, &no_floor), p.max_ratio);
     assert_eq!(differential_ratio(2.0, -1.0, &p), 0.0);
     assert_eq!(differential_ratio(2.0, 1.0, &p), 0.5);
     assert_eq!(differential_ratio(1e-6, 2e-6, &p), 2e-6 / p.min_irradiance);

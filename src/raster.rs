@@ -11,8 +11,9 @@ pub struct Image<T> {
 }
 
 impl<T: bytemuck::Zeroable> Image<T> {
-    /// An image of all-zero values, from a zeroed allocation: no fill pass, and a large
-    /// one gets fresh zero pages from the system (for outputs a stage overwrites).
+    /// An image of all-zero values, from a zeroed allocation (`calloc`: fresh pages
+    /// need no fill pass, reused heap memory gets a memset), for outputs a stage
+    /// overwrites.
     pub fn zeroed(width: u32, height: u32) -> Self {
         Image {
             width,

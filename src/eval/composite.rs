@@ -1,6 +1,6 @@
 //! Scores of `composite.differential` against a reference composite: the same camera
 //! image, mask, k_V and compensation composited from the 1024-sample reference layers
-//! (see [`super::sampling`]), on the frames the `sample.path` scorer scores.
+//! (see [`super::sampling::ReferenceSchedule`]), on the frames that get references.
 //!
 //! - `psnr_db`: PSNR of the stage's 8-bit `final` image against the reference composite
 //!   (peak 255, over all channels of the pixels that have a reference: all of them, or

@@ -31,7 +31,8 @@ use std::sync::Arc;
 /// Every how many frames `sample.path` is scored (frames 14, 29, ...: late enough that
 /// the cloud-lit environment exists).
 pub const SCORE_EVERY: usize = 15;
-/// The most frames scored (each costs about 70 runs of the stage).
+/// The most frames that get references and scores (each costs about 70 runs of the
+/// stage with the sample.path scorer, 32 without it).
 pub const MAX_SCORED_FRAMES: usize = 2;
 /// Independent reference runs, each with 64 + 64 samples per primary sample.
 const REFERENCE_RUNS: u64 = 4;

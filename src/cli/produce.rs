@@ -80,17 +80,24 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
 /// (re)generates it otherwise.
 pub fn ensure_default_recording(path: &Path) -> anyhow::Result<()> {
     let config = SynthConfig::default();
-    if let Ok(rec) = Recording::open(path)
+    let existing = Recording::open(path);
+    if let Ok(rec) = &existing
         && rec.damage().is_none()
         && rec.header().provenance == synth::provenance(&config)
     {
         return Ok(());
     }
+    let why = match existing {
+        Ok(rec) if rec.damage().is_some() => "the old one is damaged",
+        Ok(_) => "the old one does not match the current generator",
+        Err(_) if path.exists() => "the old one cannot be read",
+        Err(_) => "first use",
+    };
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
     eprintln!(
-        "generating the built-in synthetic recording into {} (first use; {} frames at {}x{}) ...",
+        "generating the built-in synthetic recording into {} ({why}; {} frames at {}x{}) ...",
         path.display(),
         config.frames,
         config.width,

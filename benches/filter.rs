@@ -7,10 +7,14 @@
 //!   E_RV == E_R off the sphere (as `sample.path` makes them: equal bits away from the
 //!   virtual objects), independent noise on it.
 //! - `filter.axis_aligned/temporal_rv_differs`: the same with E_RV != E_R everywhere
-//!   (the worst case: no pixel can reuse E_R's sums for E_RV).
+//!   (as on real frames, where the objects change E_RV a little almost everywhere; the
+//!   filter's cost does not depend on it).
 //! - `filter.axis_aligned/spatial`: temporal off (E_RV == E_R off the sphere).
 //! - `pass/prepare`, `pass/x`, `pass/y_spatial`, `pass/y_temporal`: the passes alone
-//!   (where the time goes), E_RV == E_R off the sphere.
+//!   (where the time goes), with the kernel the CPU runs (AVX2 + FMA where it has them);
+//!   `pass/x_portable`: the X pass with the portable kernel (CPUs without them). The
+//!   temporal pass's previous frame is the same frame, so every pixel finds itself and
+//!   the temporal taps are read contiguously.
 //! - `environment_bandwidth/512x256`: B_e of a map (once per map in the stage).
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -20,7 +24,11 @@ use relume::pinhole::Pinhole;
 use relume::raster::{Image, ScalarImage, Vec3Image};
 use relume::recording::{Intrinsics, Pose};
 use relume::rng::{hash, unit_f32};
-use relume::stages::filter::planes::{self, BandwidthSettings, Lines, PrepareInputs, TapMasks};
+use relume::stages::filter::lanes::Kernel;
+use relume::stages::filter::passes::{self, Previous};
+use relume::stages::filter::planes::{
+    self, BandwidthSettings, COLUMN_PLANES, INPUT_PLANES, Planes, PrepareInputs,
+};
 use relume::stages::filter::temporal::PreviousView;
 use relume::stages::filter::{
     AxisAlignedFilter, FilterInputs, FilterOutputs, FilterParams, environment_bandwidth,
@@ -196,28 +204,39 @@ fn bench_filter(c: &mut Criterion) {
         exponent: &input.exponent,
     };
     let settings = BandwidthSettings { b_f: 1.0, b_e: 4.0 };
-    let mut rows = Lines::new(h, w, RADIUS);
+    let mut rows = Planes::new(INPUT_PLANES, w, h, RADIUS);
     let mut width_dir = Image::filled(W, H, 0.0);
     let mut width_ind = Image::filled(W, H, 0.0);
+    // Filled once here too, so that the passes below have their inputs when the prepare
+    // bench is filtered out.
+    planes::prepare(&prep, settings, &mut rows, &mut width_dir, &mut width_ind);
     group.bench_function("pass/prepare", |b| {
         b.iter(|| planes::prepare(&prep, settings, &mut rows, &mut width_dir, &mut width_ind))
     });
-    let masks = TapMasks::new(RADIUS);
-    let mut columns = Lines::new(w, h, RADIUS);
+    let kernel = Kernel::detect();
+    let mut columns = Planes::new(COLUMN_PLANES, h, w, RADIUS);
     group.bench_function("pass/x", |b| {
-        b.iter(|| planes::x_pass(&rows, &masks, &mut columns))
+        b.iter(|| passes::x_pass(kernel, &rows, RADIUS, &mut columns))
     });
+    group.bench_function("pass/x_portable", |b| {
+        b.iter(|| passes::x_pass(Kernel::Portable, &rows, RADIUS, &mut columns))
+    });
+    passes::x_pass(kernel, &rows, RADIUS, &mut columns);
     let mut out: [Vec3Image; 4] = std::array::from_fn(|_| Image::filled(W, H, Vec3::ZERO));
     group.bench_function("pass/y_spatial", |b| {
-        b.iter(|| planes::y_pass(&columns, None, &masks, &mut out))
+        b.iter(|| passes::y_pass(kernel, &columns, None, RADIUS, &mut out))
     });
     let view = PreviousView {
         world_to_camera: Affine3A::IDENTITY,
         camera: Pinhole::new(&Intrinsics::PRIMESENSE, W, H),
     };
-    let previous = columns.clone();
+    let previous_columns = columns.clone();
+    let previous = Previous {
+        columns: &previous_columns,
+        view: &view,
+    };
     group.bench_function("pass/y_temporal", |b| {
-        b.iter(|| planes::y_pass(&columns, Some((&previous, &view)), &masks, &mut out))
+        b.iter(|| passes::y_pass(kernel, &columns, Some(previous), RADIUS, &mut out))
     });
     let map = EnvMap::from_fn(512, 256, |d| {
         Vec3::splat(1.0 + (4.0 * d.x).sin().abs() + 10.0 * d.y.max(0.0).powi(8))

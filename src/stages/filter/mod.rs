@@ -36,25 +36,27 @@
 //! Fig. 7; INFINITY where B = 0 (flat over the window), NaN where there is no position.
 //!
 //! Cost: per pixel and kind (direct, indirect) 3 windows of 2R + 1 taps (X, Y, temporal
-//! Y; 8 or 9 chunks of 4 taps at R = 15 by the window's alignment, masked per lane), each
-//! tap one fast `exp` ([`gaussian::exp_neg`]) shared by E_R and E_RV and 8 multiply-adds,
-//! in explicit SSE2 lanes over chunked planes ([`planes`]). Where E_RV == E_R (bit for
-//! bit, both kinds) over every window of a pass (most of the image: `sample.path` makes
-//! them equal away from the virtual objects), the planes' running counts of differing
-//! pixels say so in O(1) and only E_R's planes are summed, both kinds in one loop with
-//! one distance per tap (4 multiply-adds per kind); E_RV's sums are copied from E_R's,
-//! the same bits the full sums give. The parallel tasks take wide bands (64 columns for
-//! the X pass, 24 rows for the Y pass) so that each streams long contiguous runs of its
-//! lines (16 columns / 8 rows made the passes wait on memory 2-3x longer). No tap
-//! cutting: at R = 15 and 640x480 a weight falls below e^-14 inside the window only where
-//! B exceeds ~60 per metre (occluders nearer than ~8 cm), so a per-pixel radius bound
-//! would rarely help.
+//! Y), each tap one fast `exp` ([`gaussian::exp_neg`]) shared by E_R and E_RV and 8
+//! multiply-adds. The passes ([`passes`]) take eight target pixels at a time, one per
+//! lane of an AVX2 + FMA vector where the CPU has them (a portable kernel with the same
+//! bits elsewhere, [`lanes`]): the X pass eight neighbours in a row of the row-major
+//! input planes, the Y pass eight neighbours in a column of the column set (the X pass
+//! writes its output transposed, [`planes`]), so that every tap of the eight targets is
+//! one contiguous load per plane in either pass. The temporal taps are contiguous too
+//! where the eight targets found their previous pixels at one offset (a still or slowly
+//! moving camera), and gathered per lane elsewhere. No tap cutting: at R = 15 and
+//! 640x480 a weight falls below e^-14 inside the window only where B exceeds ~60 per
+//! metre (occluders nearer than ~8 cm), so a per-pixel radius bound would rarely help.
+//! E_RV is always summed in full: on real frames the objects change E_RV a little almost
+//! everywhere (2-6 % of the pixels of the built-in recording's frames 10-13 have
+//! E_RV == E_R), so a shortcut for E_RV == E_R rarely applies.
 //! `benches/filter.rs` measures the whole filter and each pass.
 
 pub mod bandwidth;
 pub mod gaussian;
+pub mod lanes;
+pub mod passes;
 pub mod planes;
-mod simd;
 pub mod spectrum;
 pub mod temporal;
 
@@ -73,7 +75,9 @@ use crate::pinhole::Pinhole;
 use crate::raster::{Image, ScalarImage, Vec3Image};
 use crate::recording::{Intrinsics, Pose};
 use glam::{Affine3A, Vec3};
-use planes::{BandwidthSettings, ColumnPlanes, Lines, PrepareInputs, RowPlanes, TapMasks};
+use lanes::Kernel;
+use passes::Previous;
+use planes::{BandwidthSettings, COLUMN_PLANES, INPUT_PLANES, Planes, PrepareInputs};
 use std::sync::Arc;
 use temporal::PreviousView;
 
@@ -261,24 +265,32 @@ impl FilterOutputs {
 /// The filter with its buffers and the previous frame's state (kept across frames).
 pub struct AxisAlignedFilter {
     params: FilterParams,
-    rows: RowPlanes,
-    current: ColumnPlanes,
-    previous: ColumnPlanes,
+    kernel: Kernel,
+    /// This frame's input planes (row-major) and column set (the X pass's output).
+    input: Planes,
+    columns: Planes,
+    /// The previous frame's column set (swapped with `columns` after each frame).
+    previous_columns: Planes,
     previous_view: Option<PreviousView>,
-    masks: TapMasks,
     /// B_e of the last environment map, keyed by its `Arc`.
     environment_cache: Option<(Arc<EnvMap>, f32)>,
 }
 
 impl AxisAlignedFilter {
+    /// The filter with the fastest kernel this CPU runs.
     pub fn new(params: FilterParams) -> AxisAlignedFilter {
+        AxisAlignedFilter::with_kernel(params, Kernel::detect())
+    }
+
+    /// The filter with the given kernel (all kernels give the same bits).
+    pub fn with_kernel(params: FilterParams, kernel: Kernel) -> AxisAlignedFilter {
         AxisAlignedFilter {
             params,
-            rows: RowPlanes::default(),
-            current: ColumnPlanes::default(),
-            previous: ColumnPlanes::default(),
+            kernel,
+            input: Planes::default(),
+            columns: Planes::default(),
+            previous_columns: Planes::default(),
             previous_view: None,
-            masks: TapMasks::new(params.radius),
             environment_cache: None,
         }
     }
@@ -347,10 +359,11 @@ impl AxisAlignedFilter {
         }
         let b_e = self.environment_bandwidth(input.environment)?;
         let (wu, hu) = (w as usize, h as usize);
-        if self.rows.length != wu || self.rows.count != hu {
-            self.rows = Lines::new(hu, wu, self.params.radius);
-            self.current = Lines::new(wu, hu, self.params.radius);
-            self.previous = Lines::new(wu, hu, self.params.radius);
+        if (self.input.width, self.input.height) != (wu, hu) {
+            let radius = self.params.radius;
+            self.input = Planes::new(INPUT_PLANES, wu, hu, radius);
+            self.columns = Planes::new(COLUMN_PLANES, hu, wu, radius);
+            self.previous_columns = self.columns.clone();
             self.previous_view = None;
         }
         let settings = BandwidthSettings {
@@ -368,20 +381,27 @@ impl AxisAlignedFilter {
         planes::prepare(
             &prepare_inputs,
             settings,
-            &mut self.rows,
+            &mut self.input,
             &mut out.width_dir,
             &mut out.width_ind,
         );
-        planes::x_pass(&self.rows, &self.masks, &mut self.current);
-        let previous = if self.params.temporal {
-            self.previous_view
-                .as_ref()
-                .map(|view| (&self.previous, view))
-        } else {
-            None
+        let radius = self.params.radius;
+        passes::x_pass(self.kernel, &self.input, radius, &mut self.columns);
+        let previous = match (&self.previous_view, self.params.temporal) {
+            (Some(view), true) => Some(Previous {
+                columns: &self.previous_columns,
+                view,
+            }),
+            _ => None,
         };
-        planes::y_pass(&self.current, previous, &self.masks, &mut out.layers);
-        std::mem::swap(&mut self.current, &mut self.previous);
+        passes::y_pass(
+            self.kernel,
+            &self.columns,
+            previous,
+            radius,
+            &mut out.layers,
+        );
+        std::mem::swap(&mut self.columns, &mut self.previous_columns);
         self.previous_view = match (self.params.temporal, input.view) {
             (true, Some((pose, camera))) => Some(PreviousView {
                 world_to_camera: Affine3A::from_mat4(pose.matrix().inverse().as_mat4()),

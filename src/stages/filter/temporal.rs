@@ -2,7 +2,7 @@
 //! the pixel (x', y') of the previous frame whose world position is nearest the current
 //! pixel's.
 
-use super::planes::{ColumnPlanes, PX, PY, PZ};
+use super::planes::{C_PX, C_PY, C_PZ, Planes};
 use crate::pinhole::Pinhole;
 use glam::{Affine3A, Vec3};
 
@@ -21,14 +21,12 @@ pub struct PreviousView {
 /// The previous pixel (x', y') matching world position `p`: `p` is projected into the
 /// previous camera and rounded to a pixel, then the [`SEARCH_RADIUS`] window around it is
 /// searched for the previous pixel with the nearest world position (ties: the first in
-/// row order). `None` when `p` is behind the previous camera or projects off-screen, or
+/// row order). `previous` is the previous frame's column set (position y of line x
+/// is pixel (x, y)).
+/// `None` when `p` is behind the previous camera or projects off-screen, or
 /// when no pixel of the window has a position.
 #[inline]
-pub fn find_previous(
-    p: Vec3,
-    view: &PreviousView,
-    previous: &ColumnPlanes,
-) -> Option<(usize, usize)> {
+pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<(usize, usize)> {
     let c = view.world_to_camera.transform_point3(p);
     if c.z.is_nan() || c.z <= 0.0 {
         return None;
@@ -43,7 +41,7 @@ pub fn find_previous(
     // u, v >= 0: truncation is the floor.
     let (u, v) = (u as i32, v as i32);
     let mut best: Option<(usize, usize)> = None;
-    let mut best_d2 = ColumnPlanes::MISSING_DISTANCE2;
+    let mut best_d2 = Planes::MISSING_DISTANCE2;
     for dy in -SEARCH_RADIUS..=SEARCH_RADIUS {
         for dx in -SEARCH_RADIUS..=SEARCH_RADIUS {
             let (x, y) = (u + dx, v + dy);
@@ -52,9 +50,9 @@ pub fn find_previous(
             }
             let (x, y) = (x as usize, y as usize);
             let q = Vec3::new(
-                previous.at(PX, x, y),
-                previous.at(PY, x, y),
-                previous.at(PZ, x, y),
+                previous.at(C_PX, y, x),
+                previous.at(C_PY, y, x),
+                previous.at(C_PZ, y, x),
             );
             let d2 = (q - p).length_squared();
             if d2 < best_d2 {

@@ -4,7 +4,8 @@
 //! E_RV == E_R bits, determinism).
 
 use super::gaussian::exp_neg;
-use super::planes::ColumnPlanes;
+use super::lanes::{Lanes, Portable};
+use super::planes::Planes;
 use super::temporal::find_previous;
 use super::*;
 use crate::rng::{hash, unit_f32};
@@ -213,6 +214,13 @@ fn curvature_falls_back_to_the_backward_neighbour() {
     assert_eq!(*kx.at(x + 1, y), 0.0, "no normal: no curvature");
 }
 
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn exp_avx2(a: f32) -> [f32; lanes::LANES] {
+    use lanes::Avx2;
+    gaussian::exp_neg_lanes(Avx2::splat(a), Avx2::splat(gaussian::EXP_CUTOFF)).to_array()
+}
+
 #[test]
 fn fast_exp_accuracy() {
     assert_eq!(exp_neg(0.0), 1.0);
@@ -226,10 +234,18 @@ fn fast_exp_accuracy() {
             .map(|k| rel(lo + (hi - lo) * k as f32 / 200_000.0))
             .fold(0.0f64, f64::max)
     };
-    // The four-lane version computes the same bits.
+    // The lane versions compute the same bits.
+    let cutoff = gaussian::EXP_CUTOFF;
     for a in [0.0f32, 1e-3, 0.5, 3.7, 20.0, 39.99, 40.0, 1e30, f32::NAN] {
-        let lanes = gaussian::exp_neg4(simd::F4::splat(a)).to_array();
-        assert_eq!(lanes.map(f32::to_bits), [exp_neg(a).to_bits(); 4], "{a}");
+        let expected = [exp_neg(a).to_bits(); lanes::LANES];
+        let portable = gaussian::exp_neg_lanes(Portable::splat(a), Portable::splat(cutoff));
+        assert_eq!(portable.to_array().map(f32::to_bits), expected, "{a}");
+        #[cfg(target_arch = "x86_64")]
+        if lanes::Kernel::detect() == lanes::Kernel::Avx2Fma {
+            // SAFETY: the CPU has AVX2 and FMA.
+            let avx2 = unsafe { exp_avx2(a) };
+            assert_eq!(avx2.map(f32::to_bits), expected, "{a}");
+        }
     }
     let (small, large) = (worst(0.0, 1.0), worst(0.0, 39.99));
     eprintln!("exp_neg: max relative error {small:e} on [0, 1], {large:e} on [0, 40)");
@@ -338,7 +354,7 @@ fn temporal_reuse_finds_the_same_pixel_and_lowers_the_variance() {
         for x in 0..W as usize {
             let p = first.position.data[y * W as usize + x];
             assert_eq!(
-                find_previous(p, &previous_view, &filter.previous),
+                find_previous(p, &previous_view, &filter.previous_columns),
                 Some((x, y))
             );
         }
@@ -354,7 +370,7 @@ fn temporal_reuse_finds_the_same_pixel_and_lowers_the_variance() {
         assert!(a < 0.75 * b, "layer {k}: temporal {a}, spatial {b}");
     }
     // A different size drops the previous frame instead of failing.
-    assert!(ColumnPlanes::new(3, 2, 15).at(0, 2, 1) == 0.0);
+    assert!(Planes::new(3, 2, 1, 15).at(0, 1, 0) == 0.0);
 }
 
 #[test]
@@ -367,11 +383,11 @@ fn a_point_behind_or_beside_the_previous_camera_has_no_match() {
         .unwrap();
     let view = filter.previous_view.unwrap();
     assert_eq!(
-        find_previous(Vec3::new(0.0, 0.0, -1.0), &view, &filter.previous),
+        find_previous(Vec3::new(0.0, 0.0, -1.0), &view, &filter.previous_columns),
         None
     );
     assert_eq!(
-        find_previous(Vec3::new(50.0, 0.0, 2.0), &view, &filter.previous),
+        find_previous(Vec3::new(50.0, 0.0, 2.0), &view, &filter.previous_columns),
         None
     );
 }
@@ -424,8 +440,8 @@ fn e_rv_equal_to_e_r_filters_to_the_same_bits() {
     );
 }
 
-/// Where E_RV == E_R over a window the filter sums E_R's planes only and copies the sums
-/// to E_RV: E_R's outputs must be the same bits as when every window is summed in full.
+/// E_R's outputs do not depend on E_RV's inputs (the two share weights, not sums), and
+/// where E_RV == E_R everywhere the outputs are equal bit for bit.
 #[test]
 fn reusing_e_r_sums_for_e_rv_leaves_e_r_unchanged() {
     let mut same = Scene::new(sphere(Vec3::new(0.0, 0.0, 2.0), 0.3, 2.5), 0.5, 0.3);
@@ -542,6 +558,41 @@ fn outputs_are_the_same_bits_for_any_thread_count() {
             .map(|v| v.to_bits())
             .collect::<Vec<_>>()
     );
+}
+
+/// Two frames with a moving camera (so the temporal taps are read both contiguously and
+/// gathered per lane) give the same bits with the portable kernel as with AVX2 + FMA.
+#[test]
+fn kernels_give_the_same_bits() {
+    let mut first = Scene::new(sphere(Vec3::new(0.1, -0.05, 2.0), 0.4, 3.0), 0.7, 0.4);
+    first.set_layers(|i| Vec3::new(1.0 + noise(12, i), noise(13, i), 3.0 * noise(14, i)));
+    first.layers[3].data[200] = Vec3::NAN;
+    let mut second = first.clone();
+    second.set_layers(|i| Vec3::new(1.0 + noise(15, i), noise(16, i), noise(17, i)));
+    let moved = Pose::from_parts(
+        glam::DVec3::new(0.03, 0.01, 0.02),
+        glam::DQuat::from_rotation_y(0.02),
+    );
+    let run = |kernel| {
+        let mut filter = AxisAlignedFilter::with_kernel(params(true), kernel);
+        let mut out = FilterOutputs::new(W, H);
+        filter
+            .filter(&first.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
+            .unwrap();
+        filter
+            .filter(&second.inputs(Some((moved, camera()))), &mut out)
+            .unwrap();
+        out
+    };
+    let detected = lanes::Kernel::detect();
+    if detected == lanes::Kernel::Portable {
+        eprintln!("this CPU runs the portable kernel only: nothing to compare");
+        return;
+    }
+    let (portable, fast) = (run(lanes::Kernel::Portable), run(detected));
+    for k in 0..4 {
+        assert!(same_bits(&portable.layers[k], &fast.layers[k]), "layer {k}");
+    }
 }
 
 #[test]

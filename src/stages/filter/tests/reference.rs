@@ -2,6 +2,75 @@
 
 use super::*;
 
+/// Values of a layer per pixel (`None`: no value), f64.
+type Values = Vec<Option<[f64; 3]>>;
+
+/// A tap outside the pass's own line (the temporal taps of eq. 26): source position,
+/// source B^2 and value.
+type ExtraTap = (glam::DVec3, f64, [f64; 3]);
+
+/// One pass of eqs. 21-23 (or 22 with the extra taps of eq. 26) evaluated directly in
+/// f64 with exact exp, along X or Y, over the taps |i| <= `radius`.
+fn pass(
+    position: &Vec3Image,
+    values: &Values,
+    b2: &[f64],
+    along_x: bool,
+    radius: i64,
+    extra: &dyn Fn(i64, i64) -> Vec<ExtraTap>,
+) -> Values {
+    let (w, h) = (W as i64, H as i64);
+    let p = |x: i64, y: i64| position.data[(y * w + x) as usize].as_dvec3();
+    let mut out = vec![None; (w * h) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            if values[(y * w + x) as usize].is_none() {
+                continue;
+            }
+            let b2_target = b2[(y * w + x) as usize];
+            let (mut sum, mut weight) = ([0.0; 3], 0.0);
+            let mut add = |q: glam::DVec3, b2_source: f64, v: [f64; 3]| {
+                let bbar2 = 0.5 * (b2_target + b2_source);
+                let wt = (-2.0 * bbar2 * (p(x, y) - q).length_squared()).exp();
+                for c in 0..3 {
+                    sum[c] += wt * v[c];
+                }
+                weight += wt;
+            };
+            for i in -radius..=radius {
+                let (sx, sy) = if along_x { (x + i, y) } else { (x, y + i) };
+                if sx < 0 || sy < 0 || sx >= w || sy >= h {
+                    continue;
+                }
+                let Some(v) = values[(sy * w + sx) as usize] else {
+                    continue;
+                };
+                add(p(sx, sy), b2[(sy * w + sx) as usize], v);
+            }
+            for (q, b2_source, v) in extra(x, y) {
+                add(q, b2_source, v);
+            }
+            out[(y * w + x) as usize] = Some(sum.map(|s| s / weight));
+        }
+    }
+    out
+}
+
+/// Layer `layer` of `scene` as [`Values`] (no value where it or the position is not
+/// finite).
+fn layer_values(scene: &Scene, layer: usize) -> Values {
+    scene.layers[layer]
+        .data
+        .iter()
+        .zip(&scene.position.data)
+        .map(|(v, p)| (v.is_finite() && p.is_finite()).then(|| v.as_dvec3().to_array()))
+        .collect()
+}
+
+fn no_taps(_: i64, _: i64) -> Vec<ExtraTap> {
+    Vec::new()
+}
+
 /// Eqs. 21-23 evaluated directly in f64 with exact exp: the X pass, then the Y pass.
 fn brute_force(
     scene: &Scene,
@@ -10,45 +79,47 @@ fn brute_force(
     layer: usize,
     radius: i64,
 ) -> Vec<[f64; 3]> {
-    let (w, h) = (W as i64, H as i64);
-    let p = |x: i64, y: i64| scene.position.data[(y * w + x) as usize].as_dvec3();
-    let value = |x: i64, y: i64| {
-        let v = scene.layers[layer].data[(y * w + x) as usize];
-        (v.is_finite() && scene.position.data[(y * w + x) as usize].is_finite())
-            .then(|| v.as_dvec3().to_array())
-    };
-    let pass = |values: &dyn Fn(i64, i64) -> Option<[f64; 3]>, b2: &[f64], along_x: bool| {
-        let mut out = vec![None; (w * h) as usize];
-        for y in 0..h {
-            for x in 0..w {
-                if values(x, y).is_none() {
-                    continue;
-                }
-                let (mut sum, mut weight) = ([0.0; 3], 0.0);
-                for i in -radius..=radius {
-                    let (sx, sy) = if along_x { (x + i, y) } else { (x, y + i) };
-                    if sx < 0 || sy < 0 || sx >= w || sy >= h {
-                        continue;
-                    }
-                    let Some(v) = values(sx, sy) else { continue };
-                    let bbar2 = 0.5 * (b2[(y * w + x) as usize] + b2[(sy * w + sx) as usize]);
-                    let wt = (-2.0 * bbar2 * (p(x, y) - p(sx, sy)).length_squared()).exp();
-                    for c in 0..3 {
-                        sum[c] += wt * v[c];
-                    }
-                    weight += wt;
-                }
-                out[(y * w + x) as usize] = Some(sum.map(|s| s / weight));
-            }
-        }
-        out
-    };
-    let ex = pass(&value, b2x, true);
-    let ex_at = |x: i64, y: i64| ex[(y * w + x) as usize];
-    pass(&ex_at, b2y, false)
+    let values = layer_values(scene, layer);
+    let ex = pass(&scene.position, &values, b2x, true, radius, &no_taps);
+    pass(&scene.position, &ex, b2y, false, radius, &no_taps)
         .into_iter()
         .map(|v| v.unwrap_or([f64::NAN; 3]))
         .collect()
+}
+
+/// The squared bandwidths of `scene` (B_e = 3, B_f = 1) from the filter's own
+/// (separately tested) formulas: X and Y direct, indirect.
+fn squared_bandwidths(scene: &Scene) -> [Vec<f64>; 3] {
+    let mut kx = Image::filled(W, H, 0.0);
+    let mut ky = Image::filled(W, H, 0.0);
+    screen_curvature(&scene.position, &scene.normal, &mut kx, &mut ky).unwrap();
+    let b2 = |f: &dyn Fn(usize) -> f32| {
+        (0..(W * H) as usize)
+            .map(|i| (f(i) as f64).powi(2))
+            .collect::<Vec<f64>>()
+    };
+    let b_rho = |i: usize| bandwidth::brdf_bandwidth(scene.exponent.data[i]);
+    [
+        b2(&|i| direct_bandwidth(kx.data[i], scene.zd.data[i], 1.0, b_rho(i), 3.0)),
+        b2(&|i| direct_bandwidth(ky.data[i], scene.zd.data[i], 1.0, b_rho(i), 3.0)),
+        b2(&|i| indirect_bandwidth(scene.zi.data[i], scene.exponent.data[i])),
+    ]
+}
+
+/// The worst relative difference of `out` from `expected` (floored at 0.1); NaN must
+/// match NaN.
+fn worst_difference(expected: &[[f64; 3]], out: &Vec3Image) -> f64 {
+    let mut worst = 0.0f64;
+    for (e, v) in expected.iter().zip(&out.data) {
+        for c in 0..3 {
+            if e[c].is_nan() {
+                assert!(v[c].is_nan());
+            } else {
+                worst = worst.max((v[c] as f64 - e[c]).abs() / e[c].abs().max(0.1));
+            }
+        }
+    }
+    worst
 }
 
 #[test]
@@ -59,33 +130,98 @@ fn the_filter_matches_eqs_21_to_23_evaluated_directly() {
     scene.exponent.data[(30 * W + 48) as usize..(30 * W + 60) as usize].fill(20.0);
     let p = params(false);
     let out = filter_frames(&[&scene], p, None);
-    // The bandwidths the filter uses, from its own (separately tested) formulas.
-    let mut kx = Image::filled(W, H, 0.0);
-    let mut ky = Image::filled(W, H, 0.0);
-    screen_curvature(&scene.position, &scene.normal, &mut kx, &mut ky).unwrap();
-    let b2 = |f: &dyn Fn(usize) -> f32| {
-        (0..(W * H) as usize)
-            .map(|i| (f(i) as f64).powi(2))
-            .collect::<Vec<f64>>()
-    };
-    let b_rho = |i: usize| bandwidth::brdf_bandwidth(scene.exponent.data[i]);
-    let bx = b2(&|i| direct_bandwidth(kx.data[i], scene.zd.data[i], 1.0, b_rho(i), 3.0));
-    let by = b2(&|i| direct_bandwidth(ky.data[i], scene.zd.data[i], 1.0, b_rho(i), 3.0));
-    let bi = b2(&|i| indirect_bandwidth(scene.zi.data[i], scene.exponent.data[i]));
+    let [bx, by, bi] = squared_bandwidths(&scene);
     let mut worst = 0.0f64;
     for (layer, (b2x, b2y)) in [(0, (&bx, &by)), (1, (&bi, &bi))] {
         let expected = brute_force(&scene, b2x, b2y, layer, 15);
-        for (e, v) in expected.iter().zip(&out.layers[layer].data) {
-            for c in 0..3 {
-                if e[c].is_nan() {
-                    assert!(v[c].is_nan());
-                } else {
-                    worst = worst.max((v[c] as f64 - e[c]).abs() / e[c].abs().max(0.1));
-                }
-            }
-        }
+        worst = worst.max(worst_difference(&expected, &out.layers[layer]));
     }
     eprintln!("filter vs direct eqs. 21-23: worst relative difference {worst:e}");
+    assert!(worst < 1e-4, "{worst}");
+}
+
+/// The temporal extension (eq. 26) with a moving camera against a direct evaluation:
+/// the Y pass of frame 2 adds, at the previous pixel (x', y') that [`find_previous`]
+/// picks (tested separately), the taps (x', y' + j) of frame 1's X-filtered layer, with
+/// frame 1's positions and bandwidths. The camera turns, so neighbouring pixels find
+/// their previous pixels at different offsets (the filter then gathers per lane).
+#[test]
+fn the_temporal_taps_match_eq_26_evaluated_directly() {
+    let mut first = Scene::new(sphere(Vec3::new(0.05, 0.0, 1.5), 0.3, 2.0), 0.3, 0.2);
+    first.set_layers(|i| Vec3::new(1.0 + noise(30, i), 0.5 + noise(31, i), noise(32, i)));
+    let mut second = Scene::new(sphere(Vec3::new(0.08, 0.01, 1.52), 0.3, 2.1), 0.3, 0.2);
+    second.set_layers(|i| Vec3::new(1.0 + noise(33, i), 0.5 + noise(34, i), noise(35, i)));
+    second.layers[1].data[900] = Vec3::NAN;
+    let turned = Pose::from_parts(
+        glam::DVec3::new(0.02, 0.0, 0.0),
+        glam::DQuat::from_rotation_y(0.03),
+    );
+    let mut filter = AxisAlignedFilter::new(params(true));
+    let mut out = FilterOutputs::new(W, H);
+    filter
+        .filter(&first.inputs(Some((turned, camera()))), &mut out)
+        .unwrap();
+    let view = filter.previous_view.unwrap();
+    let found: Vec<Option<(usize, usize)>> = second
+        .position
+        .data
+        .iter()
+        .map(|&p| find_previous(p, &view, &filter.previous_columns))
+        .collect();
+    filter
+        .filter(&second.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
+        .unwrap();
+    // How many lane groups of the Y pass find their previous pixels at mixed offsets.
+    let offset = |i: usize| found[i].map(|(x, y)| (x as i64 - (i % W as usize) as i64, y));
+    let mixed = (0..(W * H) as usize)
+        .step_by(lanes::LANES)
+        .filter(|&i| (i..i + lanes::LANES).any(|j| offset(j) != offset(i)))
+        .count();
+    eprintln!("temporal: {mixed} lane groups with mixed offsets");
+    assert!(mixed > 100, "{mixed}");
+    let ([b1x, b1y, b1i], [b2x, b2y, b2i]) =
+        (squared_bandwidths(&first), squared_bandwidths(&second));
+    let (radius, w) = (15i64, W as i64);
+    let mut worst = 0.0f64;
+    for (layer, (prev_b2x, prev_b2y, b2x, b2y)) in
+        [(0, (&b1x, &b1y, &b2x, &b2y)), (1, (&b1i, &b1i, &b2i, &b2i))]
+    {
+        let prev_x = pass(
+            &first.position,
+            &layer_values(&first, layer),
+            prev_b2x,
+            true,
+            radius,
+            &no_taps,
+        );
+        let ex = pass(
+            &second.position,
+            &layer_values(&second, layer),
+            b2x,
+            true,
+            radius,
+            &no_taps,
+        );
+        let temporal_taps = |x: i64, y: i64| -> Vec<ExtraTap> {
+            let Some((xp, yp)) = found[(y * w + x) as usize] else {
+                return Vec::new();
+            };
+            (yp as i64 - radius..=yp as i64 + radius)
+                .filter(|&sy| sy >= 0 && sy < H as i64)
+                .filter_map(|sy| {
+                    let i = (sy * w + xp as i64) as usize;
+                    prev_x[i].map(|v| (first.position.data[i].as_dvec3(), prev_b2y[i], v))
+                })
+                .collect()
+        };
+        let expected: Vec<[f64; 3]> =
+            pass(&second.position, &ex, b2y, false, radius, &temporal_taps)
+                .into_iter()
+                .map(|v| v.unwrap_or([f64::NAN; 3]))
+                .collect();
+        worst = worst.max(worst_difference(&expected, &out.layers[layer]));
+    }
+    eprintln!("temporal filter vs direct eq. 26: worst relative difference {worst:e}");
     assert!(worst < 1e-4, "{worst}");
 }
 

@@ -1,0 +1,241 @@
+//! Eight f32 lanes for the filter's tap loops, one target pixel per lane: AVX2 with FMA
+//! where the CPU has them (detected at run time, [`Kernel::detect`]), plain arrays with
+//! `f32::mul_add` elsewhere. Both compute the same operations with the same roundings
+//! (a fused multiply-add rounds once in either), so the filter's output bits do not
+//! depend on the kernel.
+
+/// Number of lanes (target pixels per vector).
+pub const LANES: usize = 8;
+
+/// Which implementation of [`Lanes`] the filter's passes run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernel {
+    /// AVX2 + FMA (x86-64 only, checked at run time).
+    Avx2Fma,
+    /// Arrays of eight floats: any CPU, the same bits, several times slower.
+    Portable,
+}
+
+impl Kernel {
+    /// The fastest kernel this CPU runs.
+    pub fn detect() -> Kernel {
+        #[cfg(target_arch = "x86_64")]
+        if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+            return Kernel::Avx2Fma;
+        }
+        Kernel::Portable
+    }
+}
+
+/// Eight f32 lanes. Loads and gathers take raw pointers: the passes check once per
+/// group of targets that every tap they read lies inside the planes.
+pub trait Lanes: Copy {
+    fn splat(v: f32) -> Self;
+    fn from_array(a: [f32; LANES]) -> Self;
+    fn to_array(self) -> [f32; LANES];
+    /// # Safety
+    /// `p..p + LANES` must be readable.
+    unsafe fn load(p: *const f32) -> Self;
+    /// Lane l reads `p + index[l]`.
+    /// # Safety
+    /// Every `p + index[l]` must be readable.
+    unsafe fn gather(p: *const f32, index: &[i32; LANES]) -> Self;
+    /// # Safety
+    /// `p..p + LANES` must be writable.
+    unsafe fn store(self, p: *mut f32);
+    fn add(self, o: Self) -> Self;
+    fn sub(self, o: Self) -> Self;
+    fn mul(self, o: Self) -> Self;
+    fn div(self, o: Self) -> Self;
+    /// self * b + c, rounded once.
+    fn mul_add(self, b: Self, c: Self) -> Self;
+    /// `self` where `a < limit` (false for NaN), else 0.
+    fn zero_unless_below(self, a: Self, limit: Self) -> Self;
+    /// `self` where `cond > 0`, else 0.
+    fn zero_unless_positive(self, cond: Self) -> Self;
+    /// `self` with NaN lanes replaced by 0.
+    fn zero_if_nan(self) -> Self;
+    /// The float with bits ((bits(self) << 23) + (bias << 23)) per lane.
+    fn exponent_from_low_bits(self, bias: i32) -> Self;
+    /// Whether every lane is +0 or -0.
+    fn all_zero(self) -> bool;
+}
+
+/// The portable lanes.
+#[derive(Clone, Copy, Debug)]
+pub struct Portable([f32; LANES]);
+
+impl Lanes for Portable {
+    #[inline(always)]
+    fn splat(v: f32) -> Self {
+        Portable([v; LANES])
+    }
+    #[inline(always)]
+    fn from_array(a: [f32; LANES]) -> Self {
+        Portable(a)
+    }
+    #[inline(always)]
+    fn to_array(self) -> [f32; LANES] {
+        self.0
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> Self {
+        // SAFETY: the caller guarantees p..p + LANES is readable.
+        Portable(unsafe { p.cast::<[f32; LANES]>().read_unaligned() })
+    }
+    #[inline(always)]
+    unsafe fn gather(p: *const f32, index: &[i32; LANES]) -> Self {
+        // SAFETY: the caller guarantees every p + index[l] is readable.
+        Portable(index.map(|i| unsafe { *p.offset(i as isize) }))
+    }
+    #[inline(always)]
+    unsafe fn store(self, p: *mut f32) {
+        // SAFETY: the caller guarantees p..p + LANES is writable.
+        unsafe { p.cast::<[f32; LANES]>().write_unaligned(self.0) }
+    }
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| self.0[l] + o.0[l]))
+    }
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| self.0[l] - o.0[l]))
+    }
+    #[inline(always)]
+    fn mul(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| self.0[l] * o.0[l]))
+    }
+    #[inline(always)]
+    fn div(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| self.0[l] / o.0[l]))
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        Portable(std::array::from_fn(|l| self.0[l].mul_add(b.0[l], c.0[l])))
+    }
+    #[inline(always)]
+    fn zero_unless_below(self, a: Self, limit: Self) -> Self {
+        Portable(std::array::from_fn(|l| {
+            if a.0[l] < limit.0[l] { self.0[l] } else { 0.0 }
+        }))
+    }
+    #[inline(always)]
+    fn zero_unless_positive(self, cond: Self) -> Self {
+        Portable(std::array::from_fn(|l| {
+            if cond.0[l] > 0.0 { self.0[l] } else { 0.0 }
+        }))
+    }
+    #[inline(always)]
+    fn zero_if_nan(self) -> Self {
+        Portable(self.0.map(|v| if v.is_nan() { 0.0 } else { v }))
+    }
+    #[inline(always)]
+    fn exponent_from_low_bits(self, bias: i32) -> Self {
+        Portable(
+            self.0
+                .map(|v| f32::from_bits((v.to_bits() << 23).wrapping_add((bias as u32) << 23))),
+        )
+    }
+    #[inline(always)]
+    fn all_zero(self) -> bool {
+        self.0.iter().all(|&v| v == 0.0)
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+pub use avx2::Avx2;
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    // SAFETY (every intrinsic below): `Avx2` values are only made inside functions
+    // compiled with `#[target_feature(enable = "avx2,fma")]`, which the passes call only
+    // after `Kernel::detect` found both features; these methods are inlined into them.
+    use super::{LANES, Lanes};
+    use std::arch::x86_64::*;
+
+    /// Eight lanes in an AVX register.
+    #[derive(Clone, Copy, Debug)]
+    #[repr(transparent)]
+    pub struct Avx2(__m256);
+
+    impl Lanes for Avx2 {
+        #[inline(always)]
+        fn splat(v: f32) -> Self {
+            Avx2(unsafe { _mm256_set1_ps(v) })
+        }
+        #[inline(always)]
+        fn from_array(a: [f32; LANES]) -> Self {
+            Avx2(unsafe { _mm256_loadu_ps(a.as_ptr()) })
+        }
+        #[inline(always)]
+        fn to_array(self) -> [f32; LANES] {
+            let mut a = [0.0; LANES];
+            unsafe { _mm256_storeu_ps(a.as_mut_ptr(), self.0) };
+            a
+        }
+        #[inline(always)]
+        unsafe fn load(p: *const f32) -> Self {
+            Avx2(unsafe { _mm256_loadu_ps(p) })
+        }
+        #[inline(always)]
+        unsafe fn gather(p: *const f32, index: &[i32; LANES]) -> Self {
+            Avx2(unsafe {
+                let index = _mm256_loadu_si256(index.as_ptr().cast());
+                _mm256_i32gather_ps::<4>(p, index)
+            })
+        }
+        #[inline(always)]
+        unsafe fn store(self, p: *mut f32) {
+            unsafe { _mm256_storeu_ps(p, self.0) }
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_add_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_sub_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_mul_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_div_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn mul_add(self, b: Self, c: Self) -> Self {
+            Avx2(unsafe { _mm256_fmadd_ps(self.0, b.0, c.0) })
+        }
+        #[inline(always)]
+        fn zero_unless_below(self, a: Self, limit: Self) -> Self {
+            Avx2(unsafe { _mm256_and_ps(_mm256_cmp_ps::<_CMP_LT_OQ>(a.0, limit.0), self.0) })
+        }
+        #[inline(always)]
+        fn zero_unless_positive(self, cond: Self) -> Self {
+            Avx2(unsafe {
+                let positive = _mm256_cmp_ps::<_CMP_GT_OQ>(cond.0, _mm256_setzero_ps());
+                _mm256_and_ps(positive, self.0)
+            })
+        }
+        #[inline(always)]
+        fn zero_if_nan(self) -> Self {
+            Avx2(unsafe { _mm256_and_ps(_mm256_cmp_ps::<_CMP_ORD_Q>(self.0, self.0), self.0) })
+        }
+        #[inline(always)]
+        fn exponent_from_low_bits(self, bias: i32) -> Self {
+            Avx2(unsafe {
+                let i = _mm256_slli_epi32::<23>(_mm256_castps_si256(self.0));
+                _mm256_castsi256_ps(_mm256_add_epi32(i, _mm256_set1_epi32(bias << 23)))
+            })
+        }
+        #[inline(always)]
+        fn all_zero(self) -> bool {
+            unsafe {
+                let zero = _mm256_cmp_ps::<_CMP_EQ_OQ>(self.0, _mm256_setzero_ps());
+                _mm256_movemask_ps(zero) == 0xff
+            }
+        }
+    }
+}

@@ -24,7 +24,7 @@ use relume::pinhole::Pinhole;
 use relume::raster::{Image, ScalarImage, Vec3Image};
 use relume::recording::{Intrinsics, Pose};
 use relume::rng::{hash, unit_f32};
-use relume::stages::filter::lanes::Kernel;
+use relume::simd::Kernel;
 use relume::stages::filter::passes::{self, Previous};
 use relume::stages::filter::planes::{
     self, BandwidthSettings, COLUMN_PLANES, INPUT_PLANES, Planes, PrepareInputs,

@@ -18,4 +18,5 @@ pub mod pinhole;
 pub mod raster;
 pub mod recording;
 pub mod rng;
+pub mod simd;
 pub mod stages;

@@ -8,7 +8,7 @@
 //! neighbours in memory: the X and Y passes, and the temporal taps when the eight
 //! targets found their previous pixels at one offset) or gathered per lane.
 
-use super::lanes::{LANES, Lanes};
+use crate::simd::{LANES, Lanes};
 
 /// Arguments at or above this give a weight of exactly 0: e^-40 ~ 4e-18, far below the
 /// f32 resolution of a sum that holds the target's own weight 1 (and the products stay

@@ -39,7 +39,7 @@
 //! Y), each tap one fast `exp` ([`gaussian::exp_neg`]) shared by E_R and E_RV and 8
 //! multiply-adds. The passes ([`passes`]) take eight target pixels at a time, one per
 //! lane of an AVX2 + FMA vector where the CPU has them (a portable kernel with the same
-//! bits elsewhere, [`lanes`]): the X pass eight neighbours in a row of the row-major
+//! bits elsewhere, [`crate::simd`]): the X pass eight neighbours in a row of the row-major
 //! input planes, the Y pass eight neighbours in a column of the column set (the X pass
 //! writes its output transposed, [`planes`]), so that every tap of the eight targets is
 //! one contiguous load per plane in either pass. The temporal taps are contiguous too
@@ -54,7 +54,6 @@
 
 pub mod bandwidth;
 pub mod gaussian;
-pub mod lanes;
 pub mod passes;
 pub mod planes;
 pub mod spectrum;
@@ -74,8 +73,8 @@ use crate::light::EnvMap;
 use crate::pinhole::Pinhole;
 use crate::raster::{Image, ScalarImage, Vec3Image};
 use crate::recording::{Intrinsics, Pose};
+use crate::simd::Kernel;
 use glam::{Affine3A, Vec3};
-use lanes::Kernel;
 use passes::Previous;
 use planes::{BandwidthSettings, COLUMN_PLANES, INPUT_PLANES, Planes, PrepareInputs};
 use std::sync::Arc;

@@ -16,13 +16,13 @@
 use super::gaussian::{
     Contiguous, EXP_CUTOFF, Gathered, TapPlanes, Targets, VALUE_PLANES, Window, accumulate,
 };
-use super::lanes::{Kernel, LANES, Lanes, Portable};
 use super::planes::{
     B2_IND, B2X_DIR, B2Y_DIR, C_B2_IND, C_B2Y_DIR, C_DIR, C_IND, C_PX, C_PY, C_PZ, DIR, IND,
     Layout, PX, PY, PZ, Planes,
 };
 use super::temporal::{PreviousView, find_previous};
 use crate::raster::Vec3Image;
+use crate::simd::{Kernel, LANES, Lanes, Portable};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -83,7 +83,7 @@ pub fn x_pass(kernel: Kernel, input: &Planes, radius: usize, columns: &mut Plane
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn x_band_avx2(input: &Planes, radius: usize, x_start: usize, layout: &Layout, lines: &mut [f32]) {
-    x_band::<super::lanes::Avx2>(input, radius, x_start, layout, lines)
+    x_band::<crate::simd::Avx2>(input, radius, x_start, layout, lines)
 }
 
 /// The X pass for image columns `x_start..` into `lines`, their lines of the column set
@@ -235,7 +235,7 @@ struct BandOut<'a> {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn y_band_avx2(source: &YSource, out: &mut BandOut) {
-    y_band::<super::lanes::Avx2>(source, out)
+    y_band::<crate::simd::Avx2>(source, out)
 }
 
 /// The Y pass over one band of rows, [`LANES`] rows of an image column at a time.

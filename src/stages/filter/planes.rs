@@ -11,8 +11,8 @@
 
 use super::bandwidth::{brdf_bandwidth, curvature_row, direct_bandwidth, indirect_bandwidth};
 use super::gaussian::VALUE_PLANES;
-use super::lanes::LANES;
 use crate::raster::{ScalarImage, Vec3Image};
+use crate::simd::LANES;
 use glam::Vec3;
 use rayon::prelude::*;
 

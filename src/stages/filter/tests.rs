@@ -4,11 +4,11 @@
 //! E_RV == E_R bits, determinism).
 
 use super::gaussian::exp_neg;
-use super::lanes::{Lanes, Portable};
 use super::planes::Planes;
 use super::temporal::find_previous;
 use super::*;
 use crate::rng::{hash, unit_f32};
+use crate::simd::{self as lanes, Lanes, Portable};
 
 mod reference;
 

@@ -174,8 +174,8 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
     // How many lane groups of the Y pass find their previous pixels at mixed offsets.
     let offset = |i: usize| found[i].map(|(x, y)| (x as i64 - (i % W as usize) as i64, y));
     let mixed = (0..(W * H) as usize)
-        .step_by(lanes::LANES)
-        .filter(|&i| (i..i + lanes::LANES).any(|j| offset(j) != offset(i)))
+        .step_by(crate::simd::LANES)
+        .filter(|&i| (i..i + crate::simd::LANES).any(|j| offset(j) != offset(i)))
         .count();
     eprintln!("temporal: {mixed} lane groups with mixed offsets");
     assert!(mixed > 100, "{mixed}");

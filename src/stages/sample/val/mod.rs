@@ -30,12 +30,19 @@
 //! `indirect_min_distance` is INFINITY everywhere (no indirect rays);
 //! `direct_min_distance` is the distance to the nearest shadow-map occluder of a light
 //! that faces the point, over the cosine of that light's direction at the point (as
-//! `sample.path` records it: the z / cos^2(theta_occ) of paper 001 eq. 17). Pixels with no surface (no depth, or a zero normal, and no
-//! object) get NaN irradiance.
+//! `sample.path` records it: the z / cos^2(theta_occ) of paper 001 eq. 17). Pixels with
+//! no surface (no depth, or a zero normal, and no object) get NaN irradiance.
+//!
+//! Cost: the real surfaces are shaded eight pixels at a time (`shade_lanes.rs`, AVX2 +
+//! FMA where the CPU has them, [`crate::simd`]), with the bits of the per-point
+//! `shade_point` (tested); the rest of the time goes to the per-light real shadow maps
+//! (a splat of the real points of the tiles that may reach each frustum), the camera
+//! raster and the per-pixel outputs.
 
 mod pixel;
 mod raster;
 mod shade;
+mod shade_lanes;
 mod shadow;
 #[cfg(test)]
 mod tests;
@@ -48,8 +55,9 @@ use crate::objects::VirtualScene;
 use crate::pinhole::Pinhole;
 use crate::raster::{DepthImage, Image, ScalarImage, Vec3Image, depth_is_valid};
 use crate::recording::Intrinsics;
+use crate::simd::{Kernel, Portable};
 use glam::{Affine3A, Vec2, Vec3, Vec3A};
-use pixel::{PixelContext, sampling_of};
+use pixel::{PixelContext, RowOut, sampling_of};
 use raster::{DepthTarget, NO_ID, ScreenTriangle, raster_screen_triangle, screen_triangles};
 use rayon::prelude::*;
 use shade::{Biases, Maps, PreparedLight, Sh9Irradiance};
@@ -223,6 +231,9 @@ impl ValOutputs {
 pub struct ValRenderer {
     real_points: Vec<Vec3A>,
     real_normals: Vec<Vec3A>,
+    /// Per real point, the world size of the patch it stands for
+    /// ([`shadow::PointSampling::footprint`]; computed once, used per light).
+    real_patches: Vec<f32>,
     camera_depth: Vec<f32>,
     camera_ids: Vec<u32>,
     /// The virtual triangles clipped and projected into the camera.
@@ -232,6 +243,11 @@ pub struct ValRenderer {
     /// Per tile, bit j set when the tile's real points may be inside light j's frustum.
     lookup: Vec<u64>,
     maps: Vec<f32>,
+    /// The shading kernel; `None`: the fastest the CPU runs (all give the same bits).
+    kernel: Option<Kernel>,
+    /// Shade every pixel with the scalar `shade_point` instead (the kernels' reference).
+    #[cfg(test)]
+    scalar_reference: bool,
 }
 
 /// The near plane of the camera raster, metres.
@@ -241,6 +257,14 @@ const CAMERA_NEAR: f32 = 1e-3;
 const RASTER_BAND_ROWS: usize = 16;
 
 impl ValRenderer {
+    /// A renderer that shades with `kernel` (all kernels give the same bits).
+    pub fn with_kernel(kernel: Kernel) -> ValRenderer {
+        ValRenderer {
+            kernel: Some(kernel),
+            ..ValRenderer::default()
+        }
+    }
+
     /// Computes every output for one frame (see the module docs for the model).
     pub fn render(
         &mut self,
@@ -286,10 +310,14 @@ impl ValRenderer {
             slope: params.slope_bias,
         };
         let sh = Sh9Irradiance::new(&inputs.lights.sh9);
+        let kernel = self.kernel.unwrap_or_else(Kernel::detect);
+        #[cfg(test)]
+        let scalar_reference = self.scalar_reference;
         let context = PixelContext {
             inputs,
             real_points: &self.real_points,
             real_normals: &self.real_normals,
+            real_patches: &self.real_patches,
             lookup: &self.lookup,
             tiles_per_row: wu.div_ceil(TILE),
             ids: &self.camera_ids,
@@ -315,36 +343,56 @@ impl ValRenderer {
             .enumerate()
             .for_each(|(y, row)| {
                 let (e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask, k_v, pos, nrm, dmin, imin) = row;
-                for x in 0..wu {
-                    let p = context.pixel(x, y);
-                    e_r_dir[x] = p.e_r_dir;
-                    e_r_ind[x] = p.e_r_ind;
-                    e_rv_dir[x] = p.e_rv_dir;
-                    e_rv_ind[x] = p.e_rv_ind;
-                    mask[x] = p.mask;
-                    k_v[x] = p.k_v;
-                    pos[x] = p.position;
-                    nrm[x] = p.normal;
-                    dmin[x] = p.direct_min_distance;
-                    imin[x] = f32::INFINITY;
+                let mut row = RowOut {
+                    e_r_dir,
+                    e_r_ind,
+                    e_rv_dir,
+                    e_rv_ind,
+                    mask,
+                    k_v,
+                    position: pos,
+                    normal: nrm,
+                    direct_min_distance: dmin,
+                    indirect_min_distance: imin,
+                };
+                #[cfg(test)]
+                if scalar_reference {
+                    for x in 0..wu {
+                        row.put(x, context.pixel(x, y));
+                    }
+                    return;
+                }
+                match kernel {
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: `Avx2Fma` is only detected where the CPU has AVX2 and FMA.
+                    Kernel::Avx2Fma => unsafe { pixel::row_avx2(&context, y, &mut row) },
+                    _ => context.row::<Portable>(y, &mut row),
                 }
             });
         Ok(())
     }
 
-    /// World points and normals of the real surface (NaN / zero where missing).
+    /// World points, normals and patch sizes of the real surface (NaN / zero / NaN
+    /// where missing).
     fn real_surface(&mut self, inputs: &ValInputs) {
         let (w, n) = (inputs.depth.width as usize, inputs.depth.len());
         self.real_points.resize(n, Vec3A::NAN);
         self.real_normals.resize(n, Vec3A::ZERO);
+        self.real_patches.resize(n, f32::NAN);
         let m = inputs.camera_to_world;
         let camera = inputs.camera;
+        let sampling = sampling_of(inputs);
         self.real_points
             .par_chunks_mut(w.max(1))
             .zip(self.real_normals.par_chunks_mut(w.max(1)))
+            .zip(self.real_patches.par_chunks_mut(w.max(1)))
             .enumerate()
-            .for_each(|(y, (points, normals))| {
-                for (x, (p, nrm)) in points.iter_mut().zip(normals.iter_mut()).enumerate() {
+            .for_each(|(y, ((points, normals), patches))| {
+                let row = points
+                    .iter_mut()
+                    .zip(normals.iter_mut())
+                    .zip(patches.iter_mut());
+                for (x, ((p, nrm), patch)) in row.enumerate() {
                     let i = y * w + x;
                     let z = inputs.depth.data[i];
                     *p = if depth_is_valid(z) {
@@ -352,6 +400,7 @@ impl ValRenderer {
                     } else {
                         Vec3A::NAN
                     };
+                    *patch = sampling.footprint(*p);
                     let n_cam = inputs.normals.data[i];
                     *nrm = if n_cam != Vec3::ZERO && n_cam.is_finite() {
                         m.transform_vector3a(n_cam.into()).normalize_or_zero()
@@ -444,7 +493,7 @@ impl ValRenderer {
         let stride = 3 * size * size;
         self.maps.resize(stride * frusta.len(), f32::INFINITY);
         let (points, tiles, width) = (&self.real_points, &self.tiles, inputs.depth.width as usize);
-        let sampling = sampling_of(inputs);
+        let patches = &self.real_patches;
         self.maps
             .par_chunks_mut(stride)
             .zip(frusta.par_iter())
@@ -453,7 +502,7 @@ impl ValRenderer {
                 let (virtual_map, rest) = maps.split_at_mut(size * size);
                 let (real_map, scratch) = rest.split_at_mut(size * size);
                 virtual_shadow_map(f, inputs.objects, virtual_map);
-                real_shadow_map(f, points, width, tiles, sampling, real_map, scratch);
+                real_shadow_map(f, points, patches, width, tiles, real_map, scratch);
             });
         // Which tiles need shadow-map lookups for which lights.
         self.lookup = self

@@ -3,10 +3,12 @@
 
 use super::ValInputs;
 use super::raster::NO_ID;
-use super::shade::{Biases, Maps, PreparedLight, Sh9Irradiance, shade_point};
+use super::shade::{Biases, Maps, PreparedLight, Sh9Irradiance, Shaded, shade_point};
+use super::shade_lanes::{Points, shade_points};
 use super::shadow::{PointSampling, TILE};
 use crate::objects::ray_triangle;
 use crate::raster::depth_is_valid;
+use crate::simd::{LANES, Lanes};
 use glam::{Vec3, Vec3A};
 
 /// How the camera sampled the real points.
@@ -22,6 +24,7 @@ pub(super) struct PixelContext<'a> {
     pub(super) inputs: &'a ValInputs<'a>,
     pub(super) real_points: &'a [Vec3A],
     pub(super) real_normals: &'a [Vec3A],
+    pub(super) real_patches: &'a [f32],
     pub(super) lookup: &'a [u64],
     pub(super) tiles_per_row: usize,
     pub(super) ids: &'a [u32],
@@ -45,16 +48,122 @@ pub(super) struct PixelOut {
     pub(super) direct_min_distance: f32,
 }
 
+/// One row of every output, as [`PixelContext::row`] fills it.
+pub(super) struct RowOut<'a> {
+    pub(super) e_r_dir: &'a mut [Vec3],
+    pub(super) e_r_ind: &'a mut [Vec3],
+    pub(super) e_rv_dir: &'a mut [Vec3],
+    pub(super) e_rv_ind: &'a mut [Vec3],
+    pub(super) mask: &'a mut [f32],
+    pub(super) k_v: &'a mut [Vec3],
+    pub(super) position: &'a mut [Vec3],
+    pub(super) normal: &'a mut [Vec3],
+    pub(super) direct_min_distance: &'a mut [f32],
+    pub(super) indirect_min_distance: &'a mut [f32],
+}
+
+impl RowOut<'_> {
+    pub(super) fn put(&mut self, x: usize, p: PixelOut) {
+        self.e_r_dir[x] = p.e_r_dir;
+        self.e_r_ind[x] = p.e_r_ind;
+        self.e_rv_dir[x] = p.e_rv_dir;
+        self.e_rv_ind[x] = p.e_rv_ind;
+        self.mask[x] = p.mask;
+        self.k_v[x] = p.k_v;
+        self.position[x] = p.position;
+        self.normal[x] = p.normal;
+        self.direct_min_distance[x] = p.direct_min_distance;
+        self.indirect_min_distance[x] = f32::INFINITY;
+    }
+}
+
+/// [`PixelContext::row`] with AVX2 + FMA.
+///
+/// # Safety
+/// The CPU must have AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+pub(super) unsafe fn row_avx2(context: &PixelContext, y: usize, out: &mut RowOut) {
+    context.row::<crate::simd::Avx2>(y, out)
+}
+
 impl PixelContext<'_> {
-    #[inline]
-    pub(super) fn pixel(&self, x: usize, y: usize) -> PixelOut {
+    /// Row `y` into `out`: the real surfaces shaded [`LANES`] pixels at a time
+    /// ([`shade_points`], the same bits as [`shade_point`]), the rest per pixel.
+    #[inline(always)]
+    pub(super) fn row<V: Lanes>(&self, y: usize, out: &mut RowOut) {
         let w = self.inputs.depth.width as usize;
-        let i = y * w + x;
+        for x0 in (0..w).step_by(LANES) {
+            let lanes = LANES.min(w - x0);
+            let mut position = [[0.0f32; LANES]; 3];
+            let mut normal = [[0.0f32; LANES]; 3];
+            let mut patch = [0.0f32; LANES];
+            let mut active = [0.0f32; LANES];
+            for l in 0..lanes {
+                let (real, real_normal, real_ok) = self.real_at(y * w + x0 + l);
+                if real_ok {
+                    for c in 0..3 {
+                        position[c][l] = real[c];
+                        normal[c][l] = real_normal[c];
+                    }
+                    patch[l] = self.real_patches[y * w + x0 + l];
+                    active[l] = f32::from_bits(u32::MAX);
+                }
+            }
+            let shaded = if active.iter().any(|a| a.to_bits() != 0) {
+                let points = Points {
+                    position: [
+                        V::from_array(position[0]),
+                        V::from_array(position[1]),
+                        V::from_array(position[2]),
+                    ],
+                    normal: [
+                        V::from_array(normal[0]),
+                        V::from_array(normal[1]),
+                        V::from_array(normal[2]),
+                    ],
+                    patch: V::from_array(patch),
+                    active: V::from_array(active),
+                };
+                // x0 is a multiple of LANES, which divides TILE: one tile.
+                let lookup = self.lookup[(y / TILE) * self.tiles_per_row + x0 / TILE];
+                Some(shade_points(
+                    &points,
+                    lookup,
+                    self.lights,
+                    self.maps,
+                    self.biases,
+                ))
+            } else {
+                None
+            };
+            for l in 0..lanes {
+                let real_shaded = shaded.filter(|_| active[l].to_bits() != 0).map(|s| s[l]);
+                out.put(x0 + l, self.pixel_with(x0 + l, y, real_shaded));
+            }
+        }
+    }
+
+    /// The real surface at pixel `i`: world point, normal, and whether both exist.
+    #[inline]
+    fn real_at(&self, i: usize) -> (Vec3A, Vec3A, bool) {
         let real = self.real_points[i];
         let real_normal = self.real_normals[i];
-        let real_ok = real.is_finite() && real_normal != Vec3A::ZERO;
+        (
+            real,
+            real_normal,
+            real.is_finite() && real_normal != Vec3A::ZERO,
+        )
+    }
+
+    /// Every output of pixel (x, y), the real surface shaded by [`shade_point`] (the
+    /// reference of [`PixelContext::row`]).
+    #[cfg(test)]
+    pub(super) fn pixel(&self, x: usize, y: usize) -> PixelOut {
+        let w = self.inputs.depth.width as usize;
+        let (real, real_normal, real_ok) = self.real_at(y * w + x);
         let real_shaded = real_ok.then(|| {
-            let patch = self.sampling.footprint(real);
+            let patch = self.real_patches[y * w + x];
             let lookup = self.lookup[(y / TILE) * self.tiles_per_row + x / TILE];
             shade_point(
                 real,
@@ -66,6 +175,16 @@ impl PixelContext<'_> {
                 self.biases,
             )
         });
+        self.pixel_with(x, y, real_shaded)
+    }
+
+    /// Every output of pixel (x, y), given the shading of its real surface (`None`
+    /// where it has none).
+    #[inline]
+    fn pixel_with(&self, x: usize, y: usize, real_shaded: Option<Shaded>) -> PixelOut {
+        let w = self.inputs.depth.width as usize;
+        let i = y * w + x;
+        let (real, real_normal, _) = self.real_at(i);
         let mut out = PixelOut {
             e_r_dir: Vec3::NAN,
             e_r_ind: Vec3::NAN,

@@ -83,7 +83,13 @@ impl ShadowFrustum {
         }
         let k = self.scale / l.z;
         let half = self.size as f32 * 0.5;
-        let (fx, fy) = (l.x * k + half, l.y * k + half);
+        self.texel_at(l.x * k + half, l.y * k + half)
+    }
+
+    /// The texel at map coordinates (`fx`, `fy`) (texel edges at integers), or `None`
+    /// off the map.
+    #[inline]
+    pub fn texel_at(&self, fx: f32, fy: f32) -> Option<usize> {
         let s = self.size as f32;
         (fx >= 0.0 && fx < s && fy >= 0.0 && fy < s).then(|| {
             (fy as usize).min(self.size - 1) * self.size + (fx as usize).min(self.size - 1)
@@ -205,15 +211,16 @@ const MAX_SPLAT_RADIUS: f32 = 16.0;
 
 /// Splats the real world points (`width` per row, non-finite = none) of the tiles that
 /// may reach the frustum into `map` (nearest depth per texel), each over a square of
-/// texels as wide as the patch it stands for (so a surface the camera sampled more
-/// coarsely than the map's texels still covers the map), then closes single-texel holes
-/// into `map` using `scratch` (both size^2).
+/// texels as wide as the patch it stands for (`patches`, per point: see
+/// [`PointSampling::footprint`]; so a surface the camera sampled more coarsely than the
+/// map's texels still covers the map), then closes single-texel holes into `map` using
+/// `scratch` (both size^2).
 pub(crate) fn real_shadow_map(
     frustum: &ShadowFrustum,
     points: &[Vec3A],
+    patches: &[f32],
     width: usize,
     tiles: &[Option<Tile>],
-    sampling: PointSampling,
     map: &mut [f32],
     scratch: &mut [f32],
 ) {
@@ -225,7 +232,8 @@ pub(crate) fn real_shadow_map(
             continue;
         }
         for y in tile.y0..tile.y1 {
-            for p in &points[y * width + tile.x0..y * width + tile.x1] {
+            let row = y * width + tile.x0..y * width + tile.x1;
+            for (p, &patch) in points[row.clone()].iter().zip(&patches[row]) {
                 let l = frustum.light_space(*p);
                 // NaN points fail this test too.
                 if !(l.z >= frustum.real_from && l.z > 0.0) {
@@ -234,9 +242,9 @@ pub(crate) fn real_shadow_map(
                 let k = frustum.scale / l.z;
                 let (fx, fy) = (l.x * k + half, l.y * k + half);
                 // Half the patch's diagonal, in texels.
-                let radius = (0.71 * sampling.footprint(*p) * k).min(MAX_SPLAT_RADIUS);
+                let radius = (0.71 * patch * k).min(MAX_SPLAT_RADIUS);
                 if radius < 0.5 {
-                    if let Some(t) = frustum.texel(l) {
+                    if let Some(t) = frustum.texel_at(fx, fy) {
                         if l.z < map[t] {
                             map[t] = l.z;
                         }
@@ -393,7 +401,11 @@ mod tests {
             origin: Vec3A::new(0.0, 5.0, 0.0),
             pixel_angle: 1e-4,
         };
-        real_shadow_map(&f, &points, width, &tiles, sampling, &mut map, &mut scratch);
+        let patches = |points: &[Vec3A], sampling: PointSampling| -> Vec<f32> {
+            points.iter().map(|p| sampling.footprint(*p)).collect()
+        };
+        let fine = patches(&points, sampling);
+        real_shadow_map(&f, &points, &fine, width, &tiles, &mut map, &mut scratch);
         let at = |p: Vec3A| map[f.texel(f.light_space(p)).unwrap()];
         assert!(
             (at(Vec3A::new(0.01, 0.0, 0.01)) - 4.5).abs() < 1e-5,
@@ -420,9 +432,9 @@ mod tests {
         real_shadow_map(
             &f,
             &sparse,
+            &patches(&sparse, coarse),
             sparse.len(),
             &tiles,
-            coarse,
             &mut map,
             &mut scratch,
         );

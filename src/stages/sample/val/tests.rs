@@ -435,3 +435,69 @@ fn objects_shadow_each_other_through_the_virtual_map() {
     eprintln!("sphere pixels in the ball's shadow {shadowed}, lit {lit}");
     assert!(shadowed > 10 && lit > 50, "{shadowed} {lit}");
 }
+
+/// The real pixels are shaded eight at a time (`shade_lanes`); with either kernel every
+/// output has the bits of the scalar `shade_point` per pixel, in a scene with real and
+/// virtual shadows (masked lanes, the slope-bias test, occluder distances).
+#[test]
+fn every_kernel_gives_the_scalar_bits() {
+    let (depth, normals) = real_scene(true);
+    let set = lights(vec![
+        light(LAMP, 10.0),
+        light(Vec3::new(3.0, 3.0, 2.0), 4.0),
+        light(Vec3::new(-2.0, 2.5, -1.0), 2.0),
+    ]);
+    let scene = sphere();
+    let (camera, camera_to_world) = camera();
+    let inputs = ValInputs {
+        depth: &depth,
+        normals: &normals,
+        camera,
+        camera_to_world,
+        lights: &set,
+        objects: &scene,
+    };
+    let run = |mut renderer: ValRenderer| {
+        let mut out = ValOutputs::new(W, H);
+        renderer
+            .render(&inputs, &ValShadingParams::default(), &mut out)
+            .unwrap();
+        out
+    };
+    let reference = run(ValRenderer {
+        scalar_reference: true,
+        ..ValRenderer::default()
+    });
+    let shadowed = (0..reference.mask.len())
+        .filter(|&i| reference.mask.data[i] == 1.0)
+        .filter(|&i| reference.e_rv_dir.data[i] != reference.e_r_dir.data[i])
+        .count();
+    let occluded = reference
+        .direct_min_distance
+        .data
+        .iter()
+        .filter(|d| d.is_finite())
+        .count();
+    eprintln!("{shadowed} real pixels in the objects' shadow, {occluded} with an occluder");
+    assert!(shadowed > 100 && occluded > 100, "{shadowed} {occluded}");
+    let scalar_bits = |s: &ScalarImage| s.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for kernel in [Kernel::Portable, Kernel::detect()] {
+        let out = run(ValRenderer::with_kernel(kernel));
+        for (a, b) in [
+            (&reference.e_r_dir, &out.e_r_dir),
+            (&reference.e_rv_dir, &out.e_rv_dir),
+            (&reference.e_r_ind, &out.e_r_ind),
+            (&reference.e_rv_ind, &out.e_rv_ind),
+            (&reference.world_position, &out.world_position),
+            (&reference.k_v, &out.k_v),
+        ] {
+            assert_eq!(bits(a), bits(b), "{kernel:?}");
+        }
+        assert_eq!(
+            scalar_bits(&reference.direct_min_distance),
+            scalar_bits(&out.direct_min_distance),
+            "{kernel:?}"
+        );
+        assert_eq!(reference.mask, out.mask);
+    }
+}

@@ -1,8 +1,15 @@
-//! Eight f32 lanes for the filter's tap loops, one target pixel per lane: AVX2 with FMA
-//! where the CPU has them (detected at run time, [`Kernel::detect`]), plain arrays with
-//! `f32::mul_add` elsewhere. Both compute the same operations with the same roundings
-//! (a fused multiply-add rounds once in either), so the filter's output bits do not
-//! depend on the kernel.
+//! Eight f32 lanes, one pixel per lane, for the per-pixel loops that the compiler does
+//! not vectorize well by itself (the filter's tap loops, `sample.val`'s shading): AVX2
+//! with FMA where the CPU has them (detected at run time, [`Kernel::detect`]), plain
+//! arrays with `f32::mul_add` elsewhere. Both compute the same operations with the same
+//! roundings (a fused multiply-add rounds once in either), so outputs do not depend on
+//! the kernel.
+//!
+//! Use: a generic `#[inline(always)]` function over [`Lanes`], called through a
+//! `#[target_feature(enable = "avx2,fma")]` wrapper with [`Avx2`] when [`Kernel::detect`]
+//! says so, else with [`Portable`]. Never call lane operations from closures inside
+//! such functions: closures do not inherit `#[target_feature]`, and the intrinsics in
+//! them would stay function calls (10-30x slower).
 
 /// Number of lanes (target pixels per vector).
 pub const LANES: usize = 8;
@@ -59,6 +66,29 @@ pub trait Lanes: Copy {
     fn exponent_from_low_bits(self, bias: i32) -> Self;
     /// Whether every lane is +0 or -0.
     fn all_zero(self) -> bool;
+
+    /// The square root per lane (correctly rounded, as `f32::sqrt`).
+    fn sqrt(self) -> Self;
+    /// `self` where `self > o`, else `o` (so `o` where either is NaN; `f32::max` for
+    /// finite values of different magnitude or sign).
+    fn max(self, o: Self) -> Self;
+    /// `self` where `self < o`, else `o`.
+    fn min(self, o: Self) -> Self;
+    /// Masks (all bits set where true): `self < o`, `self > o`, `self >= o`, false
+    /// for NaN as in Rust.
+    fn lt(self, o: Self) -> Self;
+    fn gt(self, o: Self) -> Self;
+    fn ge(self, o: Self) -> Self;
+    /// Bitwise and, or, and `self & !o` (of masks, or of a value and a mask).
+    fn and(self, o: Self) -> Self;
+    fn or(self, o: Self) -> Self;
+    fn and_not(self, o: Self) -> Self;
+    /// `a` where `mask`, else `b`.
+    fn select(mask: Self, a: Self, b: Self) -> Self;
+    /// Whether any lane of a mask is set.
+    fn any(self) -> bool;
+    /// Truncation toward zero to i32 per lane (for values that fit).
+    fn trunc_to_i32(self) -> [i32; LANES];
 }
 
 /// The portable lanes.
@@ -140,6 +170,84 @@ impl Lanes for Portable {
     fn all_zero(self) -> bool {
         self.0.iter().all(|&v| v == 0.0)
     }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        Portable(self.0.map(f32::sqrt))
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| {
+            if self.0[l] > o.0[l] {
+                self.0[l]
+            } else {
+                o.0[l]
+            }
+        }))
+    }
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| {
+            if self.0[l] < o.0[l] {
+                self.0[l]
+            } else {
+                o.0[l]
+            }
+        }))
+    }
+    #[inline(always)]
+    fn lt(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| mask(self.0[l] < o.0[l])))
+    }
+    #[inline(always)]
+    fn gt(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| mask(self.0[l] > o.0[l])))
+    }
+    #[inline(always)]
+    fn ge(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| mask(self.0[l] >= o.0[l])))
+    }
+    #[inline(always)]
+    fn and(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| {
+            f32::from_bits(self.0[l].to_bits() & o.0[l].to_bits())
+        }))
+    }
+    #[inline(always)]
+    fn or(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| {
+            f32::from_bits(self.0[l].to_bits() | o.0[l].to_bits())
+        }))
+    }
+    #[inline(always)]
+    fn and_not(self, o: Self) -> Self {
+        Portable(std::array::from_fn(|l| {
+            f32::from_bits(self.0[l].to_bits() & !o.0[l].to_bits())
+        }))
+    }
+    #[inline(always)]
+    fn select(mask: Self, a: Self, b: Self) -> Self {
+        Portable(std::array::from_fn(|l| {
+            if mask.0[l].to_bits() >> 31 == 1 {
+                a.0[l]
+            } else {
+                b.0[l]
+            }
+        }))
+    }
+    #[inline(always)]
+    fn any(self) -> bool {
+        self.0.iter().any(|v| v.to_bits() >> 31 == 1)
+    }
+    #[inline(always)]
+    fn trunc_to_i32(self) -> [i32; LANES] {
+        self.0.map(|v| v as i32)
+    }
+}
+
+/// A mask lane: all bits set for true.
+#[inline(always)]
+fn mask(b: bool) -> f32 {
+    f32::from_bits(if b { u32::MAX } else { 0 })
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -236,6 +344,57 @@ mod avx2 {
                 let zero = _mm256_cmp_ps::<_CMP_EQ_OQ>(self.0, _mm256_setzero_ps());
                 _mm256_movemask_ps(zero) == 0xff
             }
+        }
+        #[inline(always)]
+        fn sqrt(self) -> Self {
+            Avx2(unsafe { _mm256_sqrt_ps(self.0) })
+        }
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            // maxps returns its second operand unless the first is greater.
+            Avx2(unsafe { _mm256_max_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn min(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_min_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_cmp_ps::<_CMP_LT_OQ>(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_cmp_ps::<_CMP_GT_OQ>(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn ge(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_cmp_ps::<_CMP_GE_OQ>(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn and(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_and_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn or(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_or_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn and_not(self, o: Self) -> Self {
+            Avx2(unsafe { _mm256_andnot_ps(o.0, self.0) })
+        }
+        #[inline(always)]
+        fn select(mask: Self, a: Self, b: Self) -> Self {
+            Avx2(unsafe { _mm256_blendv_ps(b.0, a.0, mask.0) })
+        }
+        #[inline(always)]
+        fn any(self) -> bool {
+            unsafe { _mm256_movemask_ps(self.0) != 0 }
+        }
+        #[inline(always)]
+        fn trunc_to_i32(self) -> [i32; LANES] {
+            let mut a = [0; LANES];
+            unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), _mm256_cvttps_epi32(self.0)) };
+            a
         }
     }
 }

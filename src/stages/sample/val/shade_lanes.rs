@@ -1,0 +1,199 @@
+//! [`shade_point`](super::shade::shade_point) for eight points at once, one per lane
+//! ([`Lanes`]): the same operations in the same order per lane, so each lane's result
+//! has the bits the scalar function gives (tested). The real pixels of a row are shaded
+//! eight at a time; the rare virtual hits stay scalar.
+//!
+//! Per light the branches of the scalar code become masks: a lane whose light is behind
+//! it or that lies outside the light's shadow frustum adds nothing or skips the map
+//! lookups; the two shadow-map texels are gathered; the slope-scaled bias test runs
+//! only when some lane's texels may occlude it.
+
+use super::shade::{Biases, Maps, PreparedLight, Shaded};
+use crate::simd::{LANES, Lanes};
+use glam::Vec3;
+
+/// Eight shading points: world positions and unit normals (x, y, z lanes), the world
+/// size of each point's real-map splat (see [`Biases::slope`]), and a mask of the lanes
+/// to shade.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Points<V> {
+    pub position: [V; 3],
+    pub normal: [V; 3],
+    pub patch: V,
+    pub active: V,
+}
+
+/// (a.x b.x + a.y b.y) + a.z b.z: the order of glam's `Vec3A::dot`.
+#[inline(always)]
+fn dot<V: Lanes>(a: [V; 3], b: [V; 3]) -> V {
+    a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]))
+}
+
+/// `b` broadcast minus `a` per component.
+#[inline(always)]
+fn sub_from<V: Lanes>(b: Vec3, a: [V; 3]) -> [V; 3] {
+    [
+        V::splat(b.x).sub(a[0]),
+        V::splat(b.y).sub(a[1]),
+        V::splat(b.z).sub(a[2]),
+    ]
+}
+
+/// `a` minus `b` broadcast per component.
+#[inline(always)]
+fn sub_splat<V: Lanes>(a: [V; 3], b: Vec3) -> [V; 3] {
+    [
+        a[0].sub(V::splat(b.x)),
+        a[1].sub(V::splat(b.y)),
+        a[2].sub(V::splat(b.z)),
+    ]
+}
+
+#[inline(always)]
+fn splat3<V: Lanes>(v: Vec3) -> [V; 3] {
+    [V::splat(v.x), V::splat(v.y), V::splat(v.z)]
+}
+
+/// The eight points' [`Shaded`] values; lanes outside `points.active` are meaningless.
+/// `lookup` is the lights' frustum mask of [`shade_point`](super::shade::shade_point),
+/// the same for the eight points (they share a tile).
+#[inline(always)]
+pub(crate) fn shade_points<V: Lanes>(
+    points: &Points<V>,
+    lookup: u64,
+    lights: &[PreparedLight],
+    maps: Maps,
+    biases: Biases,
+) -> [Shaded; LANES] {
+    let (x, n) = (points.position, points.normal);
+    let zero = V::splat(0.0);
+    let infinity = V::splat(f32::INFINITY);
+    let mut e_r = [zero; 3];
+    let mut e_rv = [zero; 3];
+    let mut min_occluder = infinity;
+    for (j, light) in lights.iter().enumerate() {
+        // Eq. 6 as in `light_irradiance`.
+        let v = sub_from(light.position.into(), x);
+        let cos_receiver = dot(n, v);
+        // -(n_j . v): negating the normal first gives the same bits.
+        let cos_light = dot(splat3(-Vec3::from(light.normal)), v);
+        let lit = cos_receiver
+            .gt(zero)
+            .and(cos_light.gt(zero))
+            .and(points.active);
+        if !lit.any() {
+            continue;
+        }
+        let r2 = dot(v, v);
+        let scale = cos_receiver
+            .mul(cos_light)
+            .div(r2.mul(r2.max(V::splat(light.min_r2))));
+        let intensity = Vec3::from(light.intensity);
+        let e = [
+            V::splat(intensity.x).mul(scale),
+            V::splat(intensity.y).mul(scale),
+            V::splat(intensity.z).mul(scale),
+        ];
+        let (mut real_visible, mut virtual_visible) = (lit, lit);
+        let frustum = light
+            .frustum
+            .as_ref()
+            .filter(|_| j >= 64 || (lookup >> j) & 1 == 1);
+        if let Some(f) = frustum {
+            let d = sub_splat(x, f.origin.into());
+            let lx = dot(d, splat3(f.right.into()));
+            let ly = dot(d, splat3(f.up.into()));
+            let lz = dot(d, splat3(f.axis.into()));
+            // `ShadowFrustum::texel`.
+            let k = V::splat(f.scale).div(lz);
+            let half = V::splat(f.size as f32 * 0.5);
+            let (fx, fy) = (lx.mul(k).add(half), ly.mul(k).add(half));
+            let s = V::splat(f.size as f32);
+            let inside = lit
+                .and(lz.gt(zero))
+                .and(fx.ge(zero))
+                .and(fx.lt(s))
+                .and(fy.ge(zero))
+                .and(fy.lt(s));
+            if inside.any() {
+                let (tx, ty) = (fx.trunc_to_i32(), fy.trunc_to_i32());
+                let last = f.size as i32 - 1;
+                let inside_lanes = inside.to_array();
+                let base = j * maps.stride;
+                let texel: [i32; LANES] = std::array::from_fn(|l| {
+                    if inside_lanes[l].to_bits() >> 31 == 1 {
+                        (base + ty[l].min(last) as usize * f.size + tx[l].min(last) as usize) as i32
+                    } else {
+                        base as i32
+                    }
+                });
+                let mut real_texel = texel;
+                for t in &mut real_texel {
+                    *t += maps.texels as i32;
+                }
+                assert!(
+                    f.size * f.size <= maps.texels && base + 2 * maps.texels <= maps.data.len()
+                );
+                // SAFETY: every index is a texel of light j's two maps (checked above).
+                let (z_virtual, z_real) = unsafe {
+                    (
+                        V::gather(maps.data.as_ptr(), &texel),
+                        V::gather(maps.data.as_ptr(), &real_texel),
+                    )
+                };
+                let vb = V::splat(biases.virtual_bias);
+                let rb = V::splat(biases.real_bias);
+                let may_occlude = z_virtual
+                    .lt(lz.sub(vb))
+                    .or(z_real.lt(lz.sub(rb)))
+                    .and(inside);
+                // The slope test gives the fast path's answer where the fast path
+                // applies (see `shade_point`), so it runs for all lanes or none.
+                if biases.slope < 0.0 || may_occlude.any() {
+                    let r = r2.sqrt();
+                    let one = V::splat(1.0);
+                    // f32::clamp(0.1, 1.0), NaN kept.
+                    let cos = cos_receiver.div(r);
+                    let (low, high) = (V::splat(0.1), one);
+                    let cos = V::select(cos.lt(low), low, V::select(cos.gt(high), high, cos));
+                    let tan = one.sub(cos.mul(cos)).sqrt().div(cos);
+                    let footprint = lz.div(V::splat(f.scale));
+                    let slope = V::splat(biases.slope).mul(tan);
+                    let virtual_occludes = z_virtual
+                        .lt(lz.sub(vb.add(slope.mul(footprint))))
+                        .and(inside);
+                    let real_occludes = z_real
+                        .lt(lz.sub(rb.add(slope.mul(footprint.max(points.patch)))))
+                        .and(inside);
+                    virtual_visible = virtual_visible.and_not(virtual_occludes);
+                    real_visible = real_visible.and_not(real_occludes);
+                    let occluder = V::select(virtual_occludes, z_virtual, infinity);
+                    // `a.min(b)` as f32::min(b, a) for a NaN a.
+                    let occluder = V::select(real_occludes, z_real.min(occluder), occluder);
+                    let blocked = occluder.lt(infinity);
+                    if blocked.any() {
+                        let d = r.mul(one.sub(occluder.div(lz)));
+                        let cos_at_receiver = cos_receiver.div(r);
+                        let candidate = d.max(zero).div(cos_at_receiver);
+                        let nearer = candidate.min(min_occluder);
+                        min_occluder = V::select(blocked, nearer, min_occluder);
+                    }
+                }
+            }
+        }
+        let both = real_visible.and(virtual_visible);
+        for c in 0..3 {
+            e_r[c] = e_r[c].add(e[c].and(real_visible));
+            e_rv[c] = e_rv[c].add(e[c].and(both));
+        }
+    }
+    // No closures on lanes here (see `crate::simd`).
+    let e_r = [e_r[0].to_array(), e_r[1].to_array(), e_r[2].to_array()];
+    let e_rv = [e_rv[0].to_array(), e_rv[1].to_array(), e_rv[2].to_array()];
+    let min_occluder = min_occluder.to_array();
+    std::array::from_fn(|l| Shaded {
+        e_r: Vec3::new(e_r[0][l], e_r[1][l], e_r[2][l]),
+        e_rv: Vec3::new(e_rv[0][l], e_rv[1][l], e_rv[2][l]),
+        min_occluder: min_occluder[l],
+    })
+}

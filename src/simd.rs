@@ -3,7 +3,8 @@
 //! with FMA where the CPU has them (detected at run time, [`Kernel::detect`]), plain
 //! arrays with `f32::mul_add` elsewhere. Both compute the same operations with the same
 //! roundings (a fused multiply-add rounds once in either), so outputs do not depend on
-//! the kernel.
+//! the kernel. (Exception: [`Lanes::trunc_to_i32`] of NaN or out-of-range values, which
+//! callers do not use.)
 //!
 //! Use: a generic `#[inline(always)]` function over [`Lanes`], called through a
 //! `#[target_feature(enable = "avx2,fma")]` wrapper with [`Avx2`] when [`Kernel::detect`]
@@ -24,6 +25,15 @@ pub enum Kernel {
 }
 
 impl Kernel {
+    /// `self`, or [`Kernel::Portable`] where the CPU lacks what `self` needs: a caller
+    /// may ask for any kernel, the code only runs what the CPU has.
+    pub fn available(self) -> Kernel {
+        match self {
+            Kernel::Avx2Fma if Kernel::detect() != Kernel::Avx2Fma => Kernel::Portable,
+            kernel => kernel,
+        }
+    }
+
     /// The fastest kernel this CPU runs.
     pub fn detect() -> Kernel {
         #[cfg(target_arch = "x86_64")]
@@ -34,8 +44,8 @@ impl Kernel {
     }
 }
 
-/// Eight f32 lanes. Loads and gathers take raw pointers: the passes check once per
-/// group of targets that every tap they read lies inside the planes.
+/// Eight f32 lanes. Loads and gathers take raw pointers: callers check that every lane
+/// they read lies inside their buffers.
 pub trait Lanes: Copy {
     fn splat(v: f32) -> Self;
     fn from_array(a: [f32; LANES]) -> Self;
@@ -250,14 +260,17 @@ fn mask(b: bool) -> f32 {
     f32::from_bits(if b { u32::MAX } else { 0 })
 }
 
+// Crate-private: its safe methods run AVX2 instructions, so only code that checked the
+// CPU (through `Kernel`) may make one.
 #[cfg(target_arch = "x86_64")]
-pub use avx2::Avx2;
+pub(crate) use avx2::Avx2;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    // SAFETY (every intrinsic below): `Avx2` values are only made inside functions
-    // compiled with `#[target_feature(enable = "avx2,fma")]`, which the passes call only
-    // after `Kernel::detect` found both features; these methods are inlined into them.
+    // SAFETY (every intrinsic below): `Avx2` is crate-private and only used inside
+    // functions compiled with `#[target_feature(enable = "avx2,fma")]`, which are called
+    // only with `Kernel::Avx2Fma` from `Kernel::available` (the CPU has both features);
+    // these methods are inlined into them.
     use super::{LANES, Lanes};
     use std::arch::x86_64::*;
 

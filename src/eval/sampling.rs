@@ -195,7 +195,7 @@ impl ReferenceLayers {
     /// Whether pixel `i` of the image has reference values (lies on the lattice).
     pub fn has_pixel(&self, i: usize) -> bool {
         let (w, s) = (self.e_r_dir.width as usize, self.stride as usize);
-        w > 0 && (i % w) % s == 0 && (i / w) % s == 0
+        w > 0 && (i % w).is_multiple_of(s) && (i / w).is_multiple_of(s)
     }
 }
 

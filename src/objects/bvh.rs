@@ -247,10 +247,11 @@ impl Bvh {
             let first = node.offset as usize;
             for slot in first..first + node.count as usize {
                 let [v0, e1, e2] = self.edges[slot];
-                if let Some((t, _, _)) = ray_triangle_edges(origin, dir, v0, e1, e2) {
-                    if t > t_min && t < t_max {
-                        return true;
-                    }
+                if let Some((t, _, _)) = ray_triangle_edges(origin, dir, v0, e1, e2)
+                    && t > t_min
+                    && t < t_max
+                {
+                    return true;
                 }
             }
         }

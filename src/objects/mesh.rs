@@ -59,7 +59,7 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<Triangle>, ObjectError
 
 /// Appends the triangles of one `tobj` mesh; the error says what is wrong.
 fn append_model(mesh: &tobj::Mesh, out: &mut Vec<Triangle>) -> Result<(), String> {
-    if mesh.positions.len() % 3 != 0 || mesh.indices.len() % 3 != 0 {
+    if !mesh.positions.len().is_multiple_of(3) || !mesh.indices.len().is_multiple_of(3) {
         return Err("the faces do not triangulate".into());
     }
     let positions: Vec<Vec3> = mesh

@@ -80,7 +80,7 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<Pose>, ImportError> {
         .map(|(i, l)| (i + 1, l.trim()))
         .filter(|(_, l)| !l.is_empty())
         .collect();
-    if lines.len() % 5 != 0 {
+    if !lines.len().is_multiple_of(5) {
         let (line, _) = lines[lines.len() - lines.len() % 5];
         return Err(line_error(
             path,

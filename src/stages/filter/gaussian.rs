@@ -123,11 +123,10 @@ pub struct Targets<V> {
 }
 
 /// Adds w * value over the taps of `window` to `sums`, for each of the
-/// [`VALUE_PLANES`] value planes from `first_value` on (so for the valid planes, the
+/// [`VALUE_PLANES`] value planes (so for the valid planes, the
 /// sums of weights), with w = exp(-2 Bbar^2 |p - p_i|^2),
-/// Bbar^2 = (B^2(target) + B^2(source)) / 2 (paper 001 eq. 23). Positions are planes
-/// `position_plane..+3`, squared bandwidths plane `b2_plane`. Lanes whose `limit` is
-/// below 0 add nothing. Taps in order, so each lane's sums are the same bits whatever
+/// Bbar^2 = (B^2(target) + B^2(source)) / 2 (paper 001 eq. 23), the planes named by
+/// `planes` ([`TapPlanes`]). Lanes whose `limit` is below 0 add nothing. Taps in order, so each lane's sums are the same bits whatever
 /// its neighbours are.
 ///
 /// # Safety

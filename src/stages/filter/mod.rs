@@ -36,7 +36,7 @@
 //! Fig. 7; INFINITY where B = 0 (flat over the window), NaN where there is no position.
 //!
 //! Cost: per pixel and kind (direct, indirect) 3 windows of 2R + 1 taps (X, Y, temporal
-//! Y), each tap one fast `exp` ([`gaussian::exp_neg`]) shared by E_R and E_RV and 8
+//! Y), each tap one fast `exp` ([`gaussian::exp_neg_lanes`]) shared by E_R and E_RV and 8
 //! multiply-adds. The passes ([`passes`]) take eight target pixels at a time, one per
 //! lane of an AVX2 + FMA vector where the CPU has them (a portable kernel with the same
 //! bits elsewhere, [`crate::simd`]): the X pass eight neighbours in a row of the row-major
@@ -355,6 +355,9 @@ impl AxisAlignedFilter {
                 sizes[bad].0,
                 sizes[bad].1
             )));
+        }
+        if w == 0 || h == 0 {
+            return Ok(());
         }
         let b_e = self.environment_bandwidth(input.environment)?;
         let (wu, hu) = (w as usize, h as usize);

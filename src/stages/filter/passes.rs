@@ -3,10 +3,10 @@
 //! previous frame (eq. 26) from the column set into the output images.
 //!
 //! Both passes work on groups of [`LANES`] target pixels that are consecutive along the
-//! pass's direction's normal: the X pass on pixels (x0 + l, y) of the row-major input
-//! planes, the Y pass on pixels (x, y0 + l) of the column set (the transposed image).
-//! Either way a tap of all eight targets is eight consecutive floats of each plane, one
-//! vector load, and a task's taps stay in cache. The X pass writes the column set
+//! pass's direction: the X pass on pixels (x0 + l, y) of the row-major input planes,
+//! the Y pass on pixels (x, y0 + l) of the column set (the transposed image). Either
+//! way a tap of all eight targets is eight consecutive floats of each plane, one vector
+//! load, and a task's taps stay in cache. The X pass writes the column set
 //! transposed, lane by lane. The kernel (AVX2 + FMA or portable, [`Kernel`]) is chosen
 //! per band; both give the same bits.
 //!
@@ -17,8 +17,8 @@ use super::gaussian::{
     Contiguous, EXP_CUTOFF, Gathered, TapPlanes, Targets, VALUE_PLANES, Window, accumulate,
 };
 use super::planes::{
-    B2_IND, B2X_DIR, B2Y_DIR, C_B2_IND, C_B2Y_DIR, C_DIR, C_IND, C_PX, C_PY, C_PZ, DIR, IND,
-    Layout, PX, PY, PZ, Planes,
+    B2_IND, B2X_DIR, B2Y_DIR, C_B2_IND, C_B2Y_DIR, C_DIR, C_IND, C_PX, C_PY, C_PZ, COLUMN_PLANES,
+    DIR, IND, INPUT_PLANES, Layout, PX, PY, PZ, Planes,
 };
 use super::temporal::{PreviousView, find_previous};
 use crate::raster::Vec3Image;
@@ -26,10 +26,13 @@ use crate::simd::{Kernel, LANES, Lanes, Portable};
 use glam::Vec3;
 use rayon::prelude::*;
 
-/// Image columns per parallel task of the X pass (its lines of the column set).
+/// Image columns per parallel task of the X pass (its lines of the column set; a
+/// multiple of [`LANES`], so that no group of lanes spans two tasks). 16: the lane
+/// stores into the task's lines stay in L1 (64 took 25 % longer).
 const COLUMN_BAND: usize = 16;
 /// Image rows per parallel task of the Y pass (a multiple of [`LANES`]).
 const ROW_BAND: usize = 24;
+const _: () = assert!(COLUMN_BAND.is_multiple_of(LANES) && ROW_BAND.is_multiple_of(LANES));
 
 /// The previous frame as the temporal taps read it: its column set (positions,
 /// bandwidths, and its X-filtered layers, E'_X of eq. 26) and its camera.
@@ -63,9 +66,11 @@ fn line_window(data: &[f32], i: usize, plane_stride: usize, radius: usize) -> Wi
 /// set `columns` (0 with valid 0 where a layer has no value), with the positions and
 /// the bandwidths the Y pass needs.
 pub fn x_pass(kernel: Kernel, input: &Planes, radius: usize, columns: &mut Planes) {
+    assert!(input.planes() == INPUT_PLANES && columns.planes() == COLUMN_PLANES);
     assert!(input.fits_radius(radius) && columns.fits_radius(radius));
     assert_eq!((columns.width, columns.height), (input.height, input.width));
-    let layout = columns.layout;
+    let kernel = kernel.available();
+    let layout = columns.layout();
     columns
         .bands_mut(COLUMN_BAND)
         .enumerate()
@@ -73,7 +78,7 @@ pub fn x_pass(kernel: Kernel, input: &Planes, radius: usize, columns: &mut Plane
             let x_start = band * COLUMN_BAND;
             match kernel {
                 #[cfg(target_arch = "x86_64")]
-                // SAFETY: `Avx2Fma` is only detected where the CPU has AVX2 and FMA.
+                // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and FMA.
                 Kernel::Avx2Fma => unsafe { x_band_avx2(input, radius, x_start, &layout, lines) },
                 _ => x_band::<Portable>(input, radius, x_start, &layout, lines),
             }
@@ -111,7 +116,7 @@ fn x_band<V: Lanes>(
             };
             // Pixel (x0 + l, y) of any plane is inside the planes: the padding covers a
             // group's lanes past the width.
-            let c = input.index(x0 as isize, y as isize);
+            let c = input.index(x0 as isize, y);
             let position = [
                 load::<V>(data, c + PX * s),
                 load::<V>(data, c + PY * s),
@@ -179,11 +184,13 @@ pub fn y_pass(
 ) {
     // The column set is the transposed image.
     let (w, h) = (columns.height, columns.width);
-    assert!(columns.fits_radius(radius));
+    assert!(columns.planes() == COLUMN_PLANES && columns.fits_radius(radius));
+    // Gather offsets are i32.
+    assert!(columns.floats() <= i32::MAX as usize);
     if let Some(p) = previous {
-        assert!(p.columns.fits_radius(radius));
-        assert_eq!(p.columns.layout, columns.layout);
+        assert_eq!(p.columns.layout(), columns.layout());
     }
+    let kernel = kernel.available();
     for layer in out.iter() {
         assert_eq!((layer.width as usize, layer.height as usize), (w, h));
     }
@@ -211,7 +218,7 @@ pub fn y_pass(
             };
             match kernel {
                 #[cfg(target_arch = "x86_64")]
-                // SAFETY: `Avx2Fma` is only detected where the CPU has AVX2 and FMA.
+                // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and FMA.
                 Kernel::Avx2Fma => unsafe { y_band_avx2(&source, &mut band_out) },
                 _ => y_band::<Portable>(&source, &mut band_out),
             }
@@ -267,7 +274,7 @@ fn y_group<V: Lanes>(source: &YSource, x: usize, y0: usize) -> [[[f32; LANES]; 6
     let (data, s) = (columns.data(), columns.plane_stride());
     // Position y0 + l of line x: inside the planes (the padding covers lanes past the
     // height).
-    let c = columns.index(y0 as isize, x as isize);
+    let c = columns.index(y0 as isize, x);
     let mut valid = [[V::splat(0.0); 2]; 2];
     let mut any = false;
     for (k, first) in [C_DIR, C_IND].into_iter().enumerate() {
@@ -381,8 +388,8 @@ fn temporal_taps<V: Lanes>(
         .enumerate()
         .find_map(|(l, f)| f.map(|p| (l, p)))?;
     // Lane m's offset along the column; lanes without a previous pixel read at the same
-    // offset (inside the padding, at most LANES - 1 positions from lane m's), with no
-    // weight.
+    // offset, at most LANES - 1 positions from lane m's pixel (inside the planes by
+    // `fits_radius`), with no weight.
     let dy = ym as isize - (y0 + m) as isize;
     let same_offset = found.iter().enumerate().all(|(l, f)| match *f {
         Some((xp, yp)) => xp == xm && yp as isize == (y0 + l) as isize + dy,
@@ -392,7 +399,7 @@ fn temporal_taps<V: Lanes>(
     let limit = V::from_array(limit);
     let (data, s) = (columns.data(), columns.plane_stride());
     if same_offset {
-        let i = columns.index(y0 as isize + dy, xm as isize);
+        let i = columns.index(y0 as isize + dy, xm);
         return Some((
             line_window(data, i, s, radius),
             TemporalFetch::Contiguous,
@@ -403,7 +410,7 @@ fn temporal_taps<V: Lanes>(
     // without one from its own pixel's, with no weight).
     let first_tap: [i32; LANES] = std::array::from_fn(|l| {
         let (x, y) = found[l].unwrap_or((x, y0 + l));
-        columns.index(y as isize - radius as isize, x as isize) as i32
+        columns.index(y as isize - radius as isize, x) as i32
     });
     let window = Window {
         planes: data.as_ptr(),

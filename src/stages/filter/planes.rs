@@ -5,9 +5,11 @@
 //! Layout: image row by image row, each row holding its planes one after the other, each
 //! plane row `stride` floats: [`LANES`] consecutive pixels of a plane are consecutive
 //! floats (one vector, one target per lane), a pixel's tap to the right is the next
-//! float, the tap below is one row (`planes * stride` floats) further. The padding (at
-//! least the filter radius and [`LANES`] columns on each side, the radius in rows above
-//! and below) is never written: valid 0, so zero weight.
+//! float, the next row is `planes * stride` floats further. The padding (at least
+//! R + [`LANES`] - 1 columns on each side, so that the taps |i| <= R of a group of lanes
+//! that starts up to [`LANES`] - 1 pixels off the image stay inside) is never written:
+//! valid 0, so zero weight. The passes only read along rows, so there are no padding
+//! rows.
 
 use super::bandwidth::{brdf_bandwidth, curvature_row, direct_bandwidth, indirect_bandwidth};
 use super::gaussian::VALUE_PLANES;
@@ -54,9 +56,8 @@ pub struct Layout {
     pub width: usize,
     pub height: usize,
     planes: usize,
-    /// Padding columns on each side and padding rows above and below.
+    /// Padding columns on each side.
     pad_x: usize,
-    pad_y: usize,
     /// Floats per plane row.
     stride: usize,
 }
@@ -64,32 +65,41 @@ pub struct Layout {
 impl Layout {
     /// `planes` planes of `width` x `height`, padded for tap windows of `radius`.
     pub fn new(planes: usize, width: usize, height: usize, radius: usize) -> Layout {
-        let pad_x = radius.max(LANES).next_multiple_of(LANES);
+        let pad_x = (radius + LANES - 1).next_multiple_of(LANES);
         // An odd number of cache lines (16 floats) per plane row, so that the same pixel
         // of consecutive planes falls in different cache sets: with a power-of-two
         // stride (480 + 2 * 16 = 512 floats for the 640x480 column set) the 21 planes of
         // a tap would share two L1 sets and evict each other, which cost 3x.
         let lines = (pad_x + width.next_multiple_of(LANES) + pad_x).div_ceil(16);
-        let lines = if lines % 2 == 0 { lines + 1 } else { lines };
+        let lines = if lines.is_multiple_of(2) {
+            lines + 1
+        } else {
+            lines
+        };
         Layout {
             width,
             height,
             planes,
             pad_x,
-            pad_y: radius,
             stride: 16 * lines,
         }
     }
 
     /// Floats in the planes.
     pub fn floats(&self) -> usize {
-        (self.height + 2 * self.pad_y) * self.row_step()
+        self.height * self.row_step()
     }
 
-    /// Whether windows of taps |i| <= `radius` around any pixel (and [`LANES`] pixels
-    /// from any pixel along a row) stay inside the planes.
+    /// Planes in the set.
+    pub fn planes(&self) -> usize {
+        self.planes
+    }
+
+    /// Whether the taps |i| <= `radius` of [`LANES`] consecutive pixels of a row stay
+    /// inside the row's planes when the first pixel is anywhere from -([`LANES`] - 1)
+    /// to the width.
     pub fn fits_radius(&self, radius: usize) -> bool {
-        self.pad_x >= radius.max(LANES) && self.pad_y >= radius
+        self.pad_x >= radius + LANES - 1
     }
 
     /// Floats per plane row: from one plane to the next in an image row.
@@ -104,11 +114,10 @@ impl Layout {
         self.planes * self.stride
     }
 
-    /// Index of plane 0 at pixel (x, y); x may go down to -pad_x and y to -pad_y.
+    /// Index of plane 0 at pixel (x, y), 0 <= y < height; x may go down to -pad_x.
     #[inline(always)]
-    pub fn index(&self, x: isize, y: isize) -> usize {
-        let row = (y + self.pad_y as isize) as usize;
-        row * self.row_step() + (x + self.pad_x as isize) as usize
+    pub fn index(&self, x: isize, y: usize) -> usize {
+        y * self.row_step() + (x + self.pad_x as isize) as usize
     }
 
     /// The index of pixel `x` of plane `q` within one image row of the planes (as
@@ -122,7 +131,7 @@ impl Layout {
 /// A set of zero-padded planes of one image size.
 #[derive(Clone, Debug, Default)]
 pub struct Planes {
-    pub layout: Layout,
+    layout: Layout,
     data: Vec<f32>,
 }
 
@@ -146,24 +155,30 @@ impl Planes {
         }
     }
 
+    /// The planes' shape (the data's length always matches it).
+    pub fn layout(&self) -> Layout {
+        self.layout
+    }
+
     /// The planes' floats.
     #[inline(always)]
     pub fn data(&self) -> &[f32] {
         &self.data
     }
 
-    /// Plane `q` at pixel (x, y).
+    /// Plane `q` at pixel (x, y) of the planes' image (for a column set, x is the
+    /// image row and y the image column).
     #[inline]
     pub fn at(&self, q: usize, x: usize, y: usize) -> f32 {
-        self.data[self.index(x as isize, y as isize) + q * self.stride]
+        assert!(q < self.planes && x < self.width && y < self.height);
+        self.data[self.index(x as isize, y) + q * self.stride]
     }
 
     /// The image rows (all planes, padding columns included), top to bottom, in bands
     /// of `rows` rows (the last may be shorter), for writing in parallel.
     pub fn bands_mut(&mut self, rows: usize) -> rayon::slice::ChunksMut<'_, f32> {
         let step = self.row_step();
-        let interior = self.pad_y * step..(self.pad_y + self.height) * step;
-        self.data[interior].par_chunks_mut((rows * step).max(1))
+        self.data.par_chunks_mut((rows * step).max(1))
     }
 }
 
@@ -201,7 +216,7 @@ pub fn prepare(
     if w == 0 || input.height == 0 {
         return;
     }
-    let layout = input.layout;
+    let layout = input.layout();
     input
         .bands_mut(1)
         .zip(width_dir.data.par_chunks_mut(w))

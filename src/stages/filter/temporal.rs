@@ -34,7 +34,11 @@ pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<
     let cam = &view.camera;
     let u = cam.fx * c.x / c.z + cam.cx + 0.5;
     let v = cam.fy * c.y / c.z + cam.cy + 0.5;
-    let (w, h) = (cam.width as f32, cam.height as f32);
+    // The search stays inside both the camera and the previous planes (the column set
+    // is the transposed image: its lines are image columns).
+    let width = previous.height.min(cam.width as usize) as i32;
+    let height = previous.width.min(cam.height as usize) as i32;
+    let (w, h) = (width as f32, height as f32);
     if !(u >= 0.0 && v >= 0.0 && u < w && v < h) {
         return None;
     }
@@ -45,7 +49,7 @@ pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<
     for dy in -SEARCH_RADIUS..=SEARCH_RADIUS {
         for dx in -SEARCH_RADIUS..=SEARCH_RADIUS {
             let (x, y) = (u + dx, v + dy);
-            if x < 0 || y < 0 || x >= cam.width as i32 || y >= cam.height as i32 {
+            if x < 0 || y < 0 || x >= width || y >= height {
                 continue;
             }
             let (x, y) = (x as usize, y as usize);

@@ -189,7 +189,7 @@ fn rough_scene(w: u32, h: u32) -> (DepthImage, ScalarImage) {
             *z = 1.2;
         }
         *z += 0.01 * (crate::rng::unit_f32(r) - 0.5);
-        if r % 11 == 0 {
+        if r.is_multiple_of(11) {
             *z = 0.0;
         }
         *wt = 1.0 + (r >> 20) as f32 % 20.0;

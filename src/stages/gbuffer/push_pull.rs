@@ -91,7 +91,7 @@ impl Sum {
 #[inline]
 pub(crate) fn taps(x: usize, n: usize) -> [(usize, f32); 2] {
     let parent = x / 2;
-    let side = if x % 2 == 0 {
+    let side = if x.is_multiple_of(2) {
         parent.checked_sub(1)
     } else {
         Some(parent + 1).filter(|&s| s < n)

@@ -97,7 +97,7 @@ struct Write {
 
 impl Stage for Write {
     fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
-        if frame.index % self.every != 0 {
+        if !frame.index.is_multiple_of(self.every) {
             return Ok(());
         }
         let mut jobs = Vec::new();

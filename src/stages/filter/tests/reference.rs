@@ -1,4 +1,5 @@
-//! The filter against eqs. 21-23 evaluated directly, and the stage wrapper.
+//! The filter against eqs. 21-23 evaluated directly, the kernels against each other,
+//! and the stage wrapper.
 
 use super::*;
 
@@ -19,7 +20,7 @@ fn pass(
     radius: i64,
     extra: &dyn Fn(i64, i64) -> Vec<ExtraTap>,
 ) -> Values {
-    let (w, h) = (W as i64, H as i64);
+    let (w, h) = (position.width as i64, position.height as i64);
     let p = |x: i64, y: i64| position.data[(y * w + x) as usize].as_dvec3();
     let mut out = vec![None; (w * h) as usize];
     for y in 0..h {
@@ -90,11 +91,12 @@ fn brute_force(
 /// The squared bandwidths of `scene` (B_e = 3, B_f = 1) from the filter's own
 /// (separately tested) formulas: X and Y direct, indirect.
 fn squared_bandwidths(scene: &Scene) -> [Vec<f64>; 3] {
-    let mut kx = Image::filled(W, H, 0.0);
-    let mut ky = Image::filled(W, H, 0.0);
+    let (w, h) = (scene.position.width, scene.position.height);
+    let mut kx = Image::filled(w, h, 0.0);
+    let mut ky = Image::filled(w, h, 0.0);
     screen_curvature(&scene.position, &scene.normal, &mut kx, &mut ky).unwrap();
     let b2 = |f: &dyn Fn(usize) -> f32| {
-        (0..(W * H) as usize)
+        (0..(w * h) as usize)
             .map(|i| (f(i) as f64).powi(2))
             .collect::<Vec<f64>>()
     };
@@ -128,13 +130,19 @@ fn the_filter_matches_eqs_21_to_23_evaluated_directly() {
     scene.set_layers(|i| Vec3::new(1.0 + noise(20, i), 0.5 + noise(21, i), 2.0 * noise(22, i)));
     scene.layers[0].data[700] = Vec3::NAN;
     scene.exponent.data[(30 * W + 48) as usize..(30 * W + 60) as usize].fill(20.0);
-    let p = params(false);
-    let out = filter_frames(&[&scene], p, None);
-    let [bx, by, bi] = squared_bandwidths(&scene);
+    // The full image, and a crop whose size is no multiple of the lanes (groups of
+    // lanes past the right and bottom edges, partial bands).
     let mut worst = 0.0f64;
-    for (layer, (b2x, b2y)) in [(0, (&bx, &by)), (1, (&bi, &bi))] {
-        let expected = brute_force(&scene, b2x, b2y, layer, 15);
-        worst = worst.max(worst_difference(&expected, &out.layers[layer]));
+    for scene in [scene.clone(), scene.crop(93, 70)] {
+        let (w, h) = (scene.position.width, scene.position.height);
+        let mut filter = AxisAlignedFilter::new(params(false));
+        let mut out = FilterOutputs::new(w, h);
+        filter.filter(&scene.inputs(None), &mut out).unwrap();
+        let [bx, by, bi] = squared_bandwidths(&scene);
+        for (layer, (b2x, b2y)) in [(0, (&bx, &by)), (1, (&bi, &bi))] {
+            let expected = brute_force(&scene, b2x, b2y, layer, 15);
+            worst = worst.max(worst_difference(&expected, &out.layers[layer]));
+        }
     }
     eprintln!("filter vs direct eqs. 21-23: worst relative difference {worst:e}");
     assert!(worst < 1e-4, "{worst}");
@@ -171,11 +179,17 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
     filter
         .filter(&second.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
         .unwrap();
-    // How many lane groups of the Y pass find their previous pixels at mixed offsets.
-    let offset = |i: usize| found[i].map(|(x, y)| (x as i64 - (i % W as usize) as i64, y));
-    let mixed = (0..(W * H) as usize)
-        .step_by(crate::simd::LANES)
-        .filter(|&i| (i..i + crate::simd::LANES).any(|j| offset(j) != offset(i)))
+    // How many lane groups of the Y pass (eight pixels down a column, all with a
+    // previous pixel) find them at mixed offsets: those are gathered.
+    let lanes = crate::simd::LANES as u32;
+    let offset =
+        |x: u32, y: u32| found[(y * W + x) as usize].map(|(xp, yp)| (xp, yp as i64 - y as i64));
+    let mixed = (0..W)
+        .flat_map(|x| (0..H).step_by(lanes as usize).map(move |y0| (x, y0)))
+        .filter(|&(x, y0)| {
+            let first = offset(x, y0);
+            first.is_some() && (y0..y0 + lanes).any(|y| offset(x, y) != first)
+        })
         .count();
     eprintln!("temporal: {mixed} lane groups with mixed offsets");
     assert!(mixed > 100, "{mixed}");
@@ -307,4 +321,39 @@ fn the_stage_reads_its_products_caches_b_e_and_writes_every_output() {
         ..Default::default()
     };
     assert!(bad.check().unwrap_err().to_string().contains("radius is 0"));
+}
+
+/// Two frames with a moving camera (so the temporal taps are read both contiguously and
+/// gathered per lane) give the same bits with the portable kernel as with AVX2 + FMA.
+#[test]
+fn kernels_give_the_same_bits() {
+    let mut first = Scene::new(sphere(Vec3::new(0.1, -0.05, 2.0), 0.4, 3.0), 0.7, 0.4);
+    first.set_layers(|i| Vec3::new(1.0 + noise(12, i), noise(13, i), 3.0 * noise(14, i)));
+    first.layers[3].data[200] = Vec3::NAN;
+    let mut second = first.clone();
+    second.set_layers(|i| Vec3::new(1.0 + noise(15, i), noise(16, i), noise(17, i)));
+    let moved = Pose::from_parts(
+        glam::DVec3::new(0.03, 0.01, 0.02),
+        glam::DQuat::from_rotation_y(0.02),
+    );
+    let run = |kernel| {
+        let mut filter = AxisAlignedFilter::with_kernel(params(true), kernel);
+        let mut out = FilterOutputs::new(W, H);
+        filter
+            .filter(&first.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
+            .unwrap();
+        filter
+            .filter(&second.inputs(Some((moved, camera()))), &mut out)
+            .unwrap();
+        out
+    };
+    let detected = lanes::Kernel::detect();
+    if detected == lanes::Kernel::Portable {
+        eprintln!("this CPU runs the portable kernel only: nothing to compare");
+        return;
+    }
+    let (portable, fast) = (run(lanes::Kernel::Portable), run(detected));
+    for k in 0..4 {
+        assert!(same_bits(&portable.layers[k], &fast.layers[k]), "layer {k}");
+    }
 }

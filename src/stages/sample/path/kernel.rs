@@ -244,13 +244,13 @@ impl<'a> Kernel<'a> {
             }
         }
         let mut differential = Vec3::ZERO;
-        if params.object_aware && acc.rv_ind_real_n > 0 {
-            if let (Some(rp), Some(objects)) = (&real, &self.objects) {
-                if let Some(d) = self.object_aware(rp, objects, &rng, &bounce_stream, &mut acc) {
-                    differential = d;
-                    acc.touched = true;
-                }
-            }
+        if params.object_aware
+            && acc.rv_ind_real_n > 0
+            && let (Some(rp), Some(objects)) = (&real, &self.objects)
+            && let Some(d) = self.object_aware(rp, objects, &rng, &bounce_stream, &mut acc)
+        {
+            differential = d;
+            acc.touched = true;
         }
         let nan = Vec3::NAN;
         let (dir_n, ind_n) = (

@@ -310,7 +310,7 @@ impl ValRenderer {
             slope: params.slope_bias,
         };
         let sh = Sh9Irradiance::new(&inputs.lights.sh9);
-        let kernel = self.kernel.unwrap_or_else(Kernel::detect);
+        let kernel = self.kernel.unwrap_or_else(Kernel::detect).available();
         #[cfg(test)]
         let scalar_reference = self.scalar_reference;
         let context = PixelContext {
@@ -364,7 +364,7 @@ impl ValRenderer {
                 }
                 match kernel {
                     #[cfg(target_arch = "x86_64")]
-                    // SAFETY: `Avx2Fma` is only detected where the CPU has AVX2 and FMA.
+                    // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and FMA.
                     Kernel::Avx2Fma => unsafe { pixel::row_avx2(&context, y, &mut row) },
                     _ => context.row::<Portable>(y, &mut row),
                 }

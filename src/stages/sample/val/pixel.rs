@@ -126,6 +126,7 @@ impl PixelContext<'_> {
                     active: V::from_array(active),
                 };
                 // x0 is a multiple of LANES, which divides TILE: one tile.
+                const _: () = assert!(TILE.is_multiple_of(LANES));
                 let lookup = self.lookup[(y / TILE) * self.tiles_per_row + x0 / TILE];
                 Some(shade_points(
                     &points,

@@ -131,9 +131,11 @@ pub(crate) fn shade_points<V: Lanes>(
                 for t in &mut real_texel {
                     *t += maps.texels as i32;
                 }
+                // Inside light j's two maps, and the offsets fit an i32.
                 assert!(
                     f.size * f.size <= maps.texels && base + 2 * maps.texels <= maps.data.len()
                 );
+                assert!(maps.data.len() <= i32::MAX as usize);
                 // SAFETY: every index is a texel of light j's two maps (checked above).
                 let (z_virtual, z_real) = unsafe {
                     (
@@ -163,14 +165,18 @@ pub(crate) fn shade_points<V: Lanes>(
                         .lt(lz.sub(vb.add(slope.mul(footprint))))
                         .and(inside);
                     let real_occludes = z_real
-                        .lt(lz.sub(rb.add(slope.mul(footprint.max(points.patch)))))
+                        // As f32::max(footprint, patch) for a NaN patch.
+                        .lt(lz.sub(rb.add(slope.mul(points.patch.max(footprint)))))
                         .and(inside);
                     virtual_visible = virtual_visible.and_not(virtual_occludes);
                     real_visible = real_visible.and_not(real_occludes);
                     let occluder = V::select(virtual_occludes, z_virtual, infinity);
                     // `a.min(b)` as f32::min(b, a) for a NaN a.
                     let occluder = V::select(real_occludes, z_real.min(occluder), occluder);
-                    let blocked = occluder.lt(infinity);
+                    // f32::is_finite.
+                    let blocked = occluder
+                        .lt(infinity)
+                        .and(occluder.gt(V::splat(f32::NEG_INFINITY)));
                     if blocked.any() {
                         let d = r.mul(one.sub(occluder.div(lz)));
                         let cos_at_receiver = cos_receiver.div(r);

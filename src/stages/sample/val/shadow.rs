@@ -244,10 +244,10 @@ pub(crate) fn real_shadow_map(
                 // Half the patch's diagonal, in texels.
                 let radius = (0.71 * patch * k).min(MAX_SPLAT_RADIUS);
                 if radius < 0.5 {
-                    if let Some(t) = frustum.texel_at(fx, fy) {
-                        if l.z < map[t] {
-                            map[t] = l.z;
-                        }
+                    if let Some(t) = frustum.texel_at(fx, fy)
+                        && l.z < map[t]
+                    {
+                        map[t] = l.z;
                     }
                     continue;
                 }

@@ -448,17 +448,37 @@ fn every_kernel_gives_the_scalar_bits() {
         light(Vec3::new(-2.0, 2.5, -1.0), 2.0),
     ]);
     let scene = sphere();
-    let (camera, camera_to_world) = camera();
+    // Also a crop whose width is no multiple of the lanes (a partial last group).
+    for (w, h) in [(W, H), (157, 117)] {
+        kernels_match_the_scalar_path(&crop(&depth, w, h), &crop(&normals, w, h), &set, &scene);
+    }
+}
+
+fn crop<T: Copy>(image: &Image<T>, w: u32, h: u32) -> Image<T> {
+    let data = (0..h)
+        .flat_map(|y| (0..w).map(move |x| *image.at(x, y)))
+        .collect();
+    Image::from_vec(w, h, data).unwrap()
+}
+
+fn kernels_match_the_scalar_path(
+    depth: &DepthImage,
+    normals: &Vec3Image,
+    set: &AreaLights,
+    scene: &VirtualScene,
+) {
+    let (mut camera, camera_to_world) = camera();
+    (camera.width, camera.height) = (depth.width, depth.height);
     let inputs = ValInputs {
-        depth: &depth,
-        normals: &normals,
+        depth,
+        normals,
         camera,
         camera_to_world,
-        lights: &set,
-        objects: &scene,
+        lights: set,
+        objects: scene,
     };
     let run = |mut renderer: ValRenderer| {
-        let mut out = ValOutputs::new(W, H);
+        let mut out = ValOutputs::new(depth.width, depth.height);
         renderer
             .render(&inputs, &ValShadingParams::default(), &mut out)
             .unwrap();

@@ -149,6 +149,24 @@ fn noise(seed: u64, i: usize) -> f32 {
     unit_f32(hash(&[seed, i as u64])) - 0.5
 }
 
+/// `first` seen from the identity pose, then `second` from `moved`: the outputs of the
+/// second frame.
+fn filter_still_then_moved(
+    filter: &mut AxisAlignedFilter,
+    first: &Scene,
+    second: &Scene,
+    moved: Pose,
+) -> FilterOutputs {
+    let mut out = FilterOutputs::new(W, H);
+    filter
+        .filter(&first.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
+        .unwrap();
+    filter
+        .filter(&second.inputs(Some((moved, camera()))), &mut out)
+        .unwrap();
+    out
+}
+
 /// Variance of channel x of `image` over pixels at least `margin` from the border.
 fn interior_variance(image: &Vec3Image, margin: u32) -> f64 {
     let values: Vec<f64> = (margin..H - margin)
@@ -574,14 +592,7 @@ fn outputs_are_the_same_bits_for_any_thread_count() {
     let run = |threads| {
         crate::stages::with_threads(threads, || {
             let mut filter = AxisAlignedFilter::new(params(true));
-            let mut out = FilterOutputs::new(W, H);
-            filter
-                .filter(&first.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
-                .unwrap();
-            filter
-                .filter(&second.inputs(Some((moved, camera()))), &mut out)
-                .unwrap();
-            out
+            filter_still_then_moved(&mut filter, &first, &second, moved)
         })
     };
     let (one, three) = (run(1), run(3));

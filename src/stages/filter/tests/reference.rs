@@ -338,14 +338,7 @@ fn kernels_give_the_same_bits() {
     );
     let run = |kernel| {
         let mut filter = AxisAlignedFilter::with_kernel(params(true), kernel);
-        let mut out = FilterOutputs::new(W, H);
-        filter
-            .filter(&first.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
-            .unwrap();
-        filter
-            .filter(&second.inputs(Some((moved, camera()))), &mut out)
-            .unwrap();
-        out
+        filter_still_then_moved(&mut filter, &first, &second, moved)
     };
     let detected = lanes::Kernel::detect();
     if detected == lanes::Kernel::Portable {

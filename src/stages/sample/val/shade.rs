@@ -17,6 +17,15 @@ pub(crate) struct PreparedLight {
 }
 
 impl PreparedLight {
+    /// This light's (the `j`-th's) frustum, if it has one and bit j of `lookup` does not
+    /// say the point lies outside it (lights from 64 on are always looked up).
+    #[inline]
+    pub fn frustum_to_look_up(&self, j: usize, lookup: u64) -> Option<&ShadowFrustum> {
+        self.frustum
+            .as_ref()
+            .filter(|_| j >= 64 || (lookup >> j) & 1 == 1)
+    }
+
     pub fn new(light: &AreaLight, frustum: Option<ShadowFrustum>) -> PreparedLight {
         PreparedLight {
             position: light.position.into(),
@@ -108,10 +117,7 @@ pub(crate) fn shade_point(
             continue;
         };
         let (mut real_visible, mut virtual_visible) = (true, true);
-        let frustum = light
-            .frustum
-            .as_ref()
-            .filter(|_| j >= 64 || (lookup >> j) & 1 == 1);
+        let frustum = light.frustum_to_look_up(j, lookup);
         if let Some(f) = frustum {
             let l = f.light_space(x);
             if let Some(t) = f.texel(l) {

@@ -95,10 +95,7 @@ pub(crate) fn shade_points<V: Lanes>(
             V::splat(intensity.z).mul(scale),
         ];
         let (mut real_visible, mut virtual_visible) = (lit, lit);
-        let frustum = light
-            .frustum
-            .as_ref()
-            .filter(|_| j >= 64 || (lookup >> j) & 1 == 1);
+        let frustum = light.frustum_to_look_up(j, lookup);
         if let Some(f) = frustum {
             let d = sub_splat(x, f.origin.into());
             let lx = dot(d, splat3(f.right.into()));

@@ -9,6 +9,9 @@
 //! - `sample.path/plain` and `sample.path/object_aware`: the sampling math alone, with
 //!   the stage's defaults (16 direct + 16 indirect samples per pixel), the object-aware
 //!   scheme off and on.
+//! - `ssrt/one_by_one`, `ssrt/batch_Portable`, `ssrt/batch_Avx2Fma`: the screen-space
+//!   tracer alone on one thread, 16 cosine rays from every 16th pixel, traced ray by ray
+//!   and as one batch with each kernel.
 //! - `light.val/update_warm` and `light.val/update_cold`: one update at 16 lights,
 //!   warm-started on an unchanged map and from a cold start (the stage's work whenever
 //!   the environment changes lies between the two).
@@ -66,6 +69,11 @@ fn bench_sampling(c: &mut Criterion) {
             objects: &pipeline.objects,
             frame: WARM_FRAMES as u64,
         };
+        bench_tracer(
+            &mut group,
+            &inputs,
+            &PathParams::from_params(&spec.params, 1),
+        );
         for object_aware in [false, true] {
             let params = PathParams {
                 object_aware,
@@ -129,6 +137,64 @@ fn bench_sampling(c: &mut Criterion) {
         });
     }
     group.finish();
+}
+
+/// The screen-space tracer alone, on one thread: from every 4th pixel of every 4th row
+/// of the frame, 16 cosine-distributed rays about its normal, up to `max_distance` (as
+/// sample.path's indirect rays), traced one by one and as one batch with each kernel.
+fn bench_tracer(
+    group: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>,
+    inputs: &PathInputs,
+    params: &PathParams,
+) {
+    use relume::simd::Kernel;
+    use relume::stages::sample::path::sampling::{Basis, cosine_hemisphere};
+    use relume::stages::sample::ssrt::{ScreenTracer, TraceBatch};
+    let tracer = ScreenTracer::new(
+        inputs.depth,
+        inputs.camera,
+        inputs.camera_to_world,
+        params.trace,
+    );
+    let mut rays = Vec::new();
+    let mut u = relume::rng::Counter::new(&[3]);
+    for y in (0..inputs.depth.height).step_by(4) {
+        for x in (0..inputs.depth.width).step_by(4) {
+            let (z, n) = (*inputs.depth.at(x, y), *inputs.normals.at(x, y));
+            if !(z > 0.0 && z.is_finite() && n.is_finite() && n != glam::Vec3::ZERO) {
+                continue;
+            }
+            let n = n.normalize();
+            let p = inputs.camera.back_project(x as f32, y as f32, z) + n * (z / 500.0);
+            let basis = Basis::new(n);
+            for _ in 0..16 {
+                let d = basis.to_world(cosine_hemisphere(u.next_f32(), u.next_f32()));
+                rays.push((p, d));
+            }
+        }
+    }
+    eprintln!("ssrt: {} rays", rays.len());
+    let t_max = params.max_distance;
+    group.bench_function("ssrt/one_by_one", |b| {
+        b.iter(|| {
+            rays.iter()
+                .filter(|&&(o, d)| tracer.trace_camera(o, d, t_max).is_some())
+                .count()
+        })
+    });
+    let mut batch = TraceBatch::new();
+    for kernel in [Kernel::Portable, Kernel::detect()] {
+        group.bench_function(format!("ssrt/batch_{kernel:?}"), |b| {
+            b.iter(|| {
+                batch.clear();
+                for &(o, d) in &rays {
+                    batch.push(&tracer, tracer.origin(o).as_ref(), d, t_max);
+                }
+                batch.trace(&tracer, kernel);
+                batch.hits().iter().filter(|h| h.is_some()).count()
+            })
+        });
+    }
 }
 
 criterion_group!(benches, bench_sampling);

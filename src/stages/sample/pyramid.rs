@@ -165,6 +165,11 @@ impl DepthPyramid {
         }
     }
 
+    /// Every level's texels, at the levels' [`PyramidLevel::index`].
+    pub(crate) fn values(&self) -> &[f32] {
+        &self.values
+    }
+
     /// The levels, finest first.
     pub(crate) fn levels(&self) -> &[PyramidLevel] {
         &self.levels

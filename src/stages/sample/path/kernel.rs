@@ -3,13 +3,13 @@
 //! [`super`] for what each estimate means.
 
 use super::bounds::{Cone, Objects, object_pixel_bounds};
-use super::sampling::{
-    Basis, PixelRng, Stream, StreamId, cosine_hemisphere, strata_bounds, stratum_index,
-};
+use super::sampling::{Basis, PixelRng, Stream, StreamId, strata_bounds, stratum_index};
+use super::span::{DirectRay, IndirectRay, RealSamples};
 use super::{PathInputs, PathParams};
 use crate::light::LightSample;
 use crate::objects::VirtualHit;
 use crate::raster::depth_is_valid;
+use crate::simd;
 use crate::stages::sample::ssrt::{RayOrigin, RealHit, ScreenTracer};
 use glam::{Mat3A, Vec3, Vec3A};
 use std::f32::consts::PI;
@@ -90,6 +90,8 @@ pub(super) struct Kernel<'a> {
     pub(super) occluder_min_radiance: f32,
     /// The table's directions in camera space (where the screen-space tracer works).
     pub(super) table_camera: Vec<Vec3>,
+    /// How the screen-space rays are marched (the same hits with any).
+    pub(super) lanes: simd::Kernel,
 }
 
 impl<'a> Kernel<'a> {
@@ -97,6 +99,7 @@ impl<'a> Kernel<'a> {
         inputs: &'a PathInputs<'a>,
         params: &'a PathParams,
         tracer: ScreenTracer<'a>,
+        lanes: simd::Kernel,
     ) -> Self {
         let c2w = inputs.camera_to_world;
         let to_world = c2w.matrix3;
@@ -143,6 +146,7 @@ impl<'a> Kernel<'a> {
                 .iter()
                 .map(|ls| Vec3::from(to_camera * Vec3A::from(ls.direction)))
                 .collect(),
+            lanes,
         }
     }
 
@@ -158,14 +162,22 @@ impl<'a> Kernel<'a> {
         }
     }
 
-    /// All estimates of pixel (x, y).
-    pub(super) fn shade_pixel(&self, x: u32, y: u32) -> PixelResult {
+    /// All estimates of pixel (x, y), whose real point `real` (see
+    /// [`Kernel::real_point`]) had its samples drawn into `samples`, with their
+    /// screen-space rays traced into `hits` (see [`super::span`]).
+    pub(super) fn shade_pixel(
+        &self,
+        x: u32,
+        y: u32,
+        real: Option<&RealPoint>,
+        samples: &RealSamples,
+        hits: &[Option<RealHit>],
+    ) -> PixelResult {
         let inputs = self.inputs;
         let params = self.params;
         let p = y as usize * inputs.depth.width as usize + x as usize;
         let rng = PixelRng::new(params.seed, inputs.frame, p as u64);
         let z = inputs.depth.data[p];
-        let real = self.real_point(x, y, z, inputs.normals.data[p]);
         let may_see_objects = {
             let [x0, y0, x1, y1] = self.object_pixels;
             (x0..=x1).contains(&(x as i64)) && (y0..=y1).contains(&(y as i64))
@@ -189,6 +201,11 @@ impl<'a> Kernel<'a> {
         let direct_stream = rng.stream(StreamId::Direct);
         let indirect_stream = rng.stream(StreamId::Indirect);
         let bounce_stream = rng.stream(StreamId::Bounce);
+        let real_samples = |j: u32, with_rv: bool, acc: &mut Acc| {
+            if let Some(rp) = real {
+                self.real_samples(rp, samples, hits, j, &bounce_stream, with_rv, acc);
+            }
+        };
         for j in 0..params.primary {
             let virtual_hit = if may_see_objects {
                 self.primary_hit(&primary_stream, j, x, y, z)
@@ -197,20 +214,12 @@ impl<'a> Kernel<'a> {
             };
             match virtual_hit {
                 None => {
-                    if let Some(rp) = &real {
+                    if let Some(rp) = real {
                         surfaces += 1;
                         position += rp.surface;
                         normal += rp.normal_world;
-                        self.real_samples(
-                            rp,
-                            j,
-                            &direct_stream,
-                            &indirect_stream,
-                            &bounce_stream,
-                            true,
-                            &mut acc,
-                        );
                     }
+                    real_samples(j, true, &mut acc);
                 }
                 Some((hit, view)) => {
                     virtual_count += 1;
@@ -220,17 +229,7 @@ impl<'a> Kernel<'a> {
                     position += hit.position;
                     normal += hit.normal;
                     acc.touched = true;
-                    if let Some(rp) = &real {
-                        self.real_samples(
-                            rp,
-                            j,
-                            &direct_stream,
-                            &indirect_stream,
-                            &bounce_stream,
-                            false,
-                            &mut acc,
-                        );
-                    }
+                    real_samples(j, false, &mut acc);
                     self.virtual_samples(
                         &hit,
                         -view,
@@ -246,7 +245,7 @@ impl<'a> Kernel<'a> {
         let mut differential = Vec3::ZERO;
         if params.object_aware
             && acc.rv_ind_real_n > 0
-            && let (Some(rp), Some(objects)) = (&real, &self.objects)
+            && let (Some(rp), Some(objects)) = (real, &self.objects)
             && let Some(d) = self.object_aware(rp, objects, &rng, &bounce_stream, &mut acc)
         {
             differential = d;
@@ -305,7 +304,13 @@ impl<'a> Kernel<'a> {
     }
 
     /// The pixel's depth-map point and normal, when both are valid.
-    fn real_point(&self, x: u32, y: u32, z: f32, normal_camera: Vec3) -> Option<RealPoint> {
+    pub(super) fn real_point(
+        &self,
+        x: u32,
+        y: u32,
+        z: f32,
+        normal_camera: Vec3,
+    ) -> Option<RealPoint> {
         if !depth_is_valid(z) || !normal_camera.is_finite() || normal_camera == Vec3::ZERO {
             return None;
         }
@@ -398,16 +403,17 @@ impl<'a> Kernel<'a> {
         if l.is_finite() { l } else { Vec3::ZERO }
     }
 
-    /// Direct and indirect samples of primary j at the real point: always for E_R, and
-    /// for E_RV too when `with_rv` (a real primary), with the same random numbers and
-    /// paths, adding the virtual objects' blocking and reflection.
+    /// Direct and indirect samples of primary j at the real point, drawn in `samples`
+    /// with their rays' `hits`: always for E_R, and for E_RV too when `with_rv` (a real
+    /// primary), with the same random numbers and paths, adding the virtual objects'
+    /// blocking and reflection.
     #[allow(clippy::too_many_arguments)]
     fn real_samples(
         &self,
         rp: &RealPoint,
+        samples: &RealSamples,
+        hits: &[Option<RealHit>],
         j: u32,
-        direct_stream: &Stream,
-        indirect_stream: &Stream,
         bounce_stream: &Stream,
         with_rv: bool,
         acc: &mut Acc,
@@ -416,29 +422,26 @@ impl<'a> Kernel<'a> {
         // The objects E_RV sees from here with the correlated samples.
         let rv_objects = if with_rv { self.objects.as_ref() } else { None };
         for k in 0..params.direct {
-            let s = j * params.direct + k;
+            let s = (j * params.direct + k) as usize;
             let mut c = Vec3::ZERO;
             let mut c_rv = Vec3::ZERO;
-            if let Some((i, ls)) = self.direct_sample(direct_stream, s) {
-                let cos = rp.normal_world.dot(ls.direction);
-                if cos > 0.0 && ls.pdf > 0.0 {
-                    let dir_camera = self.table_camera[i];
-                    match self.trace_real(rp, dir_camera) {
-                        Some(hit) => self.record_occluder(acc, ls.radiance, hit.t, cos),
-                        None => {
-                            c = ls.radiance * (cos / ls.pdf);
-                            c_rv = c;
-                            let blocker = match rv_objects {
-                                Some(o) if rp.cone_world.admits(ls.direction) => {
-                                    o.hit(rp.world, ls.direction, f32::INFINITY)
-                                }
-                                _ => None,
-                            };
-                            if let Some(hit) = blocker {
-                                c_rv = Vec3::ZERO;
-                                acc.touched = true;
-                                self.record_occluder(acc, ls.radiance, hit.t, cos);
+            if let Some(DirectRay { sample, cos, ray }) = samples.direct[s] {
+                let ls = &self.inputs.table.samples[sample];
+                match hits[ray] {
+                    Some(hit) => self.record_occluder(acc, ls.radiance, hit.t, cos),
+                    None => {
+                        c = ls.radiance * (cos / ls.pdf);
+                        c_rv = c;
+                        let blocker = match rv_objects {
+                            Some(o) if rp.cone_world.admits(ls.direction) => {
+                                o.hit(rp.world, ls.direction, f32::INFINITY)
                             }
+                            _ => None,
+                        };
+                        if let Some(hit) = blocker {
+                            c_rv = Vec3::ZERO;
+                            acc.touched = true;
+                            self.record_occluder(acc, ls.radiance, hit.t, cos);
                         }
                     }
                 }
@@ -454,11 +457,9 @@ impl<'a> Kernel<'a> {
             acc.rv_ind_real_n += params.indirect;
         }
         for k in 0..params.indirect {
-            let s = j * params.indirect + k;
-            let (u1, u2) = indirect_stream.pair(s as u64);
-            let dir_camera = rp.basis_camera.to_world(cosine_hemisphere(u1, u2));
-            let real_hit = self.trace_real(rp, dir_camera);
-            let (l, t_real) = match real_hit {
+            let s = (j * params.indirect + k) as usize;
+            let IndirectRay { dir_camera, ray } = samples.indirect[s];
+            let (l, t_real) = match hits[ray] {
                 Some(hit) => {
                     acc.indirect_min = acc.indirect_min.min(hit.t);
                     (self.radiance_at(hit.pixel), hit.t)

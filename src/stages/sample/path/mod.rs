@@ -78,13 +78,17 @@
 //! primary x (direct + indirect) = 32 of them (direct samples below the horizon are not
 //! traced). Measured on the bench frame at 640x480: 23 marched rays per pixel, 13.9
 //! iterations of the hierarchical march per ray (2 of them at level 0) where the
-//! sample-by-sample march would test 132 pixels, about 320 ns per ray. The virtual objects
-//! cost a cone test per ray, then a box test and the BVH only for rays inside the cone
-//! of their bounding sphere.
+//! sample-by-sample march would test 132 pixels. Pixels are therefore estimated a span
+//! of a row at a time: their samples are drawn first, then all their rays are marched
+//! together, eight per AVX2 vector where the CPU has it (see `span` and
+//! [`crate::stages::sample::ssrt::TraceBatch`]; the same hits as ray by ray). The
+//! virtual objects cost a cone test per ray, then a box test and the BVH only for rays
+//! inside the cone of their bounding sphere.
 
 mod bounds;
 mod kernel;
 pub mod sampling;
+mod span;
 mod virtual_paths;
 
 pub use kernel::{MAX_CANDIDATES, PixelResult};
@@ -100,9 +104,11 @@ use crate::objects::VirtualScene;
 use crate::pinhole::Pinhole;
 use crate::raster::{DepthImage, Image, LabelImage, ScalarImage, Vec3Image};
 use crate::recording::Intrinsics;
+use crate::simd;
 use glam::{Affine3A, Vec3};
 use kernel::Kernel;
 use rayon::prelude::*;
+use span::{SPAN_PIXELS, Span, rows};
 use std::sync::Arc;
 
 /// Most primary, direct or indirect samples per pixel the stage accepts.
@@ -437,91 +443,6 @@ impl PathOutputs {
     }
 }
 
-/// One row of every output buffer.
-struct RowOut<'a> {
-    e_r_dir: &'a mut [Vec3],
-    e_r_ind: &'a mut [Vec3],
-    e_rv_dir: &'a mut [Vec3],
-    e_rv_ind: &'a mut [Vec3],
-    mask: &'a mut [f32],
-    k_v: &'a mut [Vec3],
-    exponent: &'a mut [f32],
-    world_position: &'a mut [Vec3],
-    world_normal: &'a mut [Vec3],
-    direct_min_distance: &'a mut [f32],
-    indirect_min_distance: &'a mut [f32],
-    touched: &'a mut [u8],
-}
-
-impl RowOut<'_> {
-    #[inline]
-    fn set(&mut self, x: usize, r: &PixelResult) {
-        self.e_r_dir[x] = r.e_r_dir;
-        self.e_r_ind[x] = r.e_r_ind;
-        self.e_rv_dir[x] = r.e_rv_dir;
-        self.e_rv_ind[x] = r.e_rv_ind;
-        self.mask[x] = r.mask;
-        self.k_v[x] = r.k_v;
-        self.exponent[x] = r.exponent;
-        self.world_position[x] = r.world_position;
-        self.world_normal[x] = r.world_normal;
-        self.direct_min_distance[x] = r.direct_min_distance;
-        self.indirect_min_distance[x] = r.indirect_min_distance;
-        self.touched[x] = r.touched as u8;
-    }
-}
-
-/// The rows of every output buffer, top to bottom.
-fn rows(out: &mut PathOutputs, width: usize) -> Vec<RowOut<'_>> {
-    let mut e_r_dir = out.e_r_dir.data.chunks_mut(width);
-    let mut e_r_ind = out.e_r_ind.data.chunks_mut(width);
-    let mut e_rv_dir = out.e_rv_dir.data.chunks_mut(width);
-    let mut e_rv_ind = out.e_rv_ind.data.chunks_mut(width);
-    let mut mask = out.mask.data.chunks_mut(width);
-    let mut k_v = out.k_v.data.chunks_mut(width);
-    let mut exponent = out.exponent.data.chunks_mut(width);
-    let mut world_position = out.world_position.data.chunks_mut(width);
-    let mut world_normal = out.world_normal.data.chunks_mut(width);
-    let mut direct_min = out.direct_min_distance.data.chunks_mut(width);
-    let mut indirect_min = out.indirect_min_distance.data.chunks_mut(width);
-    let mut touched = out.touched.data.chunks_mut(width);
-    let mut rows = Vec::new();
-    while let (Some(a), Some(b), Some(c), Some(d), Some(e), Some(f)) = (
-        e_r_dir.next(),
-        e_r_ind.next(),
-        e_rv_dir.next(),
-        e_rv_ind.next(),
-        mask.next(),
-        k_v.next(),
-    ) {
-        let (Some(exponent), Some(g), Some(h), Some(i), Some(j), Some(k)) = (
-            exponent.next(),
-            world_position.next(),
-            world_normal.next(),
-            direct_min.next(),
-            indirect_min.next(),
-            touched.next(),
-        ) else {
-            break;
-        };
-        rows.push(RowOut {
-            e_r_dir: a,
-            e_r_ind: b,
-            e_rv_dir: c,
-            e_rv_ind: d,
-            mask: e,
-            k_v: f,
-            exponent,
-            world_position: g,
-            world_normal: h,
-            direct_min_distance: i,
-            indirect_min_distance: j,
-            touched: k,
-        });
-    }
-    rows
-}
-
 /// Estimates E_R and E_RV (direct and indirect), the mask, k_V, the mean visible
 /// surface and the minimum hit distances of every pixel (paper 001 Sec. 5; see the
 /// module docs). Builds the depth pyramid of the frame (O(pixels)) and fills `out`,
@@ -542,6 +463,18 @@ pub fn sample_path_with_pyramid(
     inputs: &PathInputs,
     params: &PathParams,
     pyramid: &DepthPyramid,
+    out: &mut PathOutputs,
+) -> Result<(), StageError> {
+    sample_path_with_kernel(inputs, params, pyramid, simd::Kernel::detect(), out)
+}
+
+/// [`sample_path_with_pyramid`] marching the screen-space rays with `lanes` where the
+/// CPU has it (the outputs are the same with any).
+pub(crate) fn sample_path_with_kernel(
+    inputs: &PathInputs,
+    params: &PathParams,
+    pyramid: &DepthPyramid,
+    lanes: simd::Kernel,
     out: &mut PathOutputs,
 ) -> Result<(), StageError> {
     params.check()?;
@@ -578,15 +511,16 @@ pub fn sample_path_with_pyramid(
         inputs.camera_to_world,
         params.trace,
     );
-    let kernel = Kernel::new(inputs, params, tracer);
+    let kernel = Kernel::new(inputs, params, tracer, lanes);
     let stride = params.pixel_stride as usize;
+    let xs: Vec<u32> = (0..w).step_by(stride).collect();
     rows(out, w as usize)
         .into_par_iter()
         .enumerate()
         .filter(|(y, _)| y % stride == 0)
-        .for_each(|(y, mut row)| {
-            for x in (0..w).step_by(stride) {
-                row.set(x as usize, &kernel.shade_pixel(x, y as u32));
+        .for_each_init(Span::default, |span, (y, mut row)| {
+            for xs in xs.chunks(SPAN_PIXELS) {
+                kernel.shade_span(y as u32, xs, span, |x, r| row.set(x as usize, r));
             }
         });
     Ok(())

@@ -122,6 +122,16 @@ pub(super) fn run(
     table: &LightTable,
     params: &PathParams,
 ) -> PathOutputs {
+    run_with_kernel(scene, objects, table, params, simd::Kernel::detect())
+}
+
+fn run_with_kernel(
+    scene: &Scene,
+    objects: &VirtualScene,
+    table: &LightTable,
+    params: &PathParams,
+    lanes: simd::Kernel,
+) -> PathOutputs {
     let inputs = PathInputs {
         depth: &scene.depth,
         normals: &scene.normals,
@@ -133,7 +143,8 @@ pub(super) fn run(
         frame: 7,
     };
     let mut out = PathOutputs::new(W, H);
-    sample_path(&inputs, params, &mut out).unwrap();
+    let pyramid = DepthPyramid::new(&scene.depth);
+    sample_path_with_kernel(&inputs, params, &pyramid, lanes, &mut out).unwrap();
     out
 }
 
@@ -465,6 +476,71 @@ fn mean(xs: &[f64]) -> f64 {
 fn variance(xs: &[f64]) -> f64 {
     let m = mean(xs);
     xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (xs.len() - 1) as f64
+}
+
+/// The floor with a wall across it at world z = `wall_z` (facing the camera).
+fn floor_and_wall_scene(wall_z: f32) -> Scene {
+    let (cam, pose) = (camera(), pose());
+    let to_camera = pose.inverse();
+    let mut scene = floor_scene();
+    for v in 0..H {
+        for u in 0..W {
+            let ray = cam.ray(u as f32, v as f32);
+            let (origin, dir) = (pose.translation, pose.transform_vector3(ray));
+            let t_wall = (wall_z - origin.z) / dir.z;
+            let i = (v * W + u) as usize;
+            let z = scene.depth.data[i];
+            if t_wall > 0.0 && (z == 0.0 || t_wall < z) {
+                // t is along `ray`, whose camera z is 1: the depth is t.
+                scene.depth.data[i] = t_wall;
+                scene.normals.data[i] = to_camera.transform_vector3(-Vec3::Z);
+            }
+        }
+    }
+    scene
+}
+
+#[test]
+fn every_kernel_gives_the_bits_of_tracing_ray_by_ray() {
+    // The portable kernel traces each ray in turn (`ScreenTracer`'s scalar march);
+    // AVX2 marches eight at a time.
+    let scene = floor_and_wall_scene(1.6);
+    let table = uniform_table(1024);
+    let objects = sphere(
+        SPHERE_CENTER,
+        SPHERE_RADIUS,
+        Material {
+            albedo: Vec3::splat(0.6),
+            exponent: 0.0,
+        },
+    );
+    for object_aware in [false, true] {
+        let params = PathParams {
+            object_aware,
+            seed: 5,
+            ..Default::default()
+        };
+        let one_by_one = run_with_kernel(&scene, &objects, &table, &params, simd::Kernel::Portable);
+        let lit = |e: &Vec3Image| e.data.iter().filter(|e| e.max_element() > 0.0).count();
+        // Real hits: indirect light reflected by the wall and the floor, and direct
+        // light blocked by the wall (the room is not lit everywhere).
+        let reflected = lit(&one_by_one.e_r_ind);
+        let occluded = one_by_one
+            .direct_min_distance
+            .data
+            .iter()
+            .filter(|d| d.is_finite())
+            .count();
+        assert!(
+            reflected > 1500 && occluded > 1500,
+            "{reflected} pixels with reflected light, {occluded} with an occluder"
+        );
+        let lanes = run_with_kernel(&scene, &objects, &table, &params, simd::Kernel::detect());
+        assert!(
+            bits(&one_by_one) == bits(&lanes),
+            "object_aware {object_aware}"
+        );
+    }
 }
 
 #[test]

@@ -30,6 +30,10 @@
 //! Rays leaving one point share its projection: [`ScreenTracer::origin`] once, then
 //! [`ScreenTracer::trace_from`] per ray.
 
+mod batch;
+
+pub use batch::TraceBatch;
+
 use super::pyramid::DepthPyramid;
 use crate::pinhole::Pinhole;
 use crate::raster::{DepthImage, depth_is_valid};

@@ -64,12 +64,14 @@ fn render(camera: &Pinhole, pose: Affine3A, noise: f32) -> DepthImage {
 
 /// Random rays from surface points of the map (and a few from mid-air), in camera
 /// space, with unit directions.
-fn random_rays(depth: &DepthImage, n: usize, seed: u64) -> Vec<(Vec3, Vec3, f32)> {
-    let cam = camera();
+fn random_rays(cam: &Pinhole, depth: &DepthImage, n: usize, seed: u64) -> Vec<(Vec3, Vec3, f32)> {
     let mut r = Counter::new(&[seed]);
     let mut rays = Vec::new();
     while rays.len() < n {
-        let (u, v) = (r.next_f32() * W as f32, r.next_f32() * H as f32);
+        let (u, v) = (
+            r.next_f32() * cam.width as f32,
+            r.next_f32() * cam.height as f32,
+        );
         let z = *depth.at(u as u32, v as u32);
         let z = if depth_is_valid(z) && r.next_f32() < 0.9 {
             z
@@ -101,7 +103,7 @@ fn hierarchical_march_equals_the_linear_march_bit_for_bit() {
         };
         let tracer = ScreenTracer::new(&depth, cam, pose, params);
         let (mut hits, mut iterations, mut traced) = (0, 0u64, 0);
-        for (o, d, t_max) in random_rays(&depth, 20_000, noise.to_bits() as u64) {
+        for (o, d, t_max) in random_rays(&cam, &depth, 20_000, noise.to_bits() as u64) {
             let (ow, dw) = (pose.transform_point3(o), pose.transform_vector3(d));
             let linear = tracer.trace_linear(ow, dw, t_max);
             let to_camera = tracer.world_to_camera();
@@ -139,7 +141,7 @@ fn rays_from_a_shared_origin_give_the_results_of_single_rays() {
     let depth = render(&cam, pose, 0.02);
     let tracer = ScreenTracer::new(&depth, cam, pose, TraceParams::default());
     let mut hits = 0;
-    for (o, d, t_max) in random_rays(&depth, 4_000, 77) {
+    for (o, d, t_max) in random_rays(&cam, &depth, 4_000, 77) {
         let Some(origin) = tracer.origin(o) else {
             assert_eq!(tracer.trace_camera(o, d, t_max), None);
             continue;
@@ -149,6 +151,62 @@ fn rays_from_a_shared_origin_give_the_results_of_single_rays() {
         hits += hit.is_some() as u32;
     }
     assert!(hits > 500, "{hits} hits");
+}
+
+#[test]
+fn a_batch_gives_the_hits_of_single_rays_with_every_kernel() {
+    use crate::simd::Kernel;
+    let pose = floor_camera_pose();
+    // 160x120 has 9 pyramid levels, 640x480 has 11: the lanes' level lookup crosses
+    // from the first eight entries of its tables to the rest in both.
+    for (scale, noise, thickness) in [
+        (1, 0.0, 0.1),
+        (1, 0.02, 0.05),
+        (1, 0.05, 0.3),
+        (4, 0.02, 0.1),
+    ] {
+        let cam = Pinhole::new(&Intrinsics::PRIMESENSE, W * scale, H * scale);
+        let depth = render(&cam, pose, noise);
+        let params = TraceParams {
+            thickness,
+            ..Default::default()
+        };
+        let tracer = ScreenTracer::new(&depth, cam, pose, params);
+        let rays = random_rays(&cam, &depth, 6_000, 31 + noise.to_bits() as u64);
+        let expected: Vec<_> = rays
+            .iter()
+            .map(|&(o, d, t_max)| tracer.trace_camera(o, d, t_max))
+            .collect();
+        let hits = expected.iter().filter(|h| h.is_some()).count();
+        assert!(
+            hits > 1_000,
+            "the scene is hit often enough to test: {hits}"
+        );
+        for kernel in [Kernel::Portable, Kernel::detect()] {
+            let mut batch = TraceBatch::new();
+            // Two batches through the same buffers: the second starts clean.
+            for half in rays.chunks(rays.len() / 2 + 1) {
+                batch.clear();
+                let first = half.as_ptr() as usize - rays.as_ptr() as usize;
+                let first = first / std::mem::size_of::<(Vec3, Vec3, f32)>();
+                for (i, &(o, d, t_max)) in half.iter().enumerate() {
+                    let origin = tracer.origin(o);
+                    assert_eq!(batch.push(&tracer, origin.as_ref(), d, t_max), i);
+                }
+                assert_eq!(batch.len(), half.len());
+                batch.trace(&tracer, kernel);
+                for (i, hit) in batch.hits().iter().enumerate() {
+                    let want = expected[first + i];
+                    assert_eq!(
+                        hit.map(|h| (h.t.to_bits(), h.pixel)),
+                        want.map(|h| (h.t.to_bits(), h.pixel)),
+                        "{kernel:?}, {scale}x, ray {:?}",
+                        rays[first + i]
+                    );
+                }
+            }
+        }
+    }
 }
 
 #[test]

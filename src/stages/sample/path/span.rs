@@ -1,0 +1,221 @@
+//! Pixels are estimated a span of a row at a time: first every real point's samples are
+//! drawn and their screen-space rays queued, then the rays are traced in one
+//! [`TraceBatch`] (eight at a time with AVX2), then each pixel is estimated from its
+//! samples and their hits. The rays, the hits and therefore the estimates are those of
+//! tracing each ray in turn. Results go to [`RowOut`], one row of every output.
+
+use super::kernel::{Kernel, RealPoint};
+use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
+use super::{PathOutputs, PixelResult};
+use crate::stages::sample::ssrt::TraceBatch;
+use glam::Vec3;
+
+/// Pixels per span: enough rays (about 23 per pixel) that the batch's lanes rarely wait
+/// at its end, few enough that its buffers stay in the cache.
+pub(super) const SPAN_PIXELS: usize = 32;
+
+/// A direct sample whose ray is traced: its table sample, the cosine of its direction
+/// to the normal, and its ray in the batch.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct DirectRay {
+    pub(super) sample: usize,
+    pub(super) cos: f32,
+    pub(super) ray: usize,
+}
+
+/// An indirect sample: its camera-space direction and its ray in the batch.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct IndirectRay {
+    pub(super) dir_camera: Vec3,
+    pub(super) ray: usize,
+}
+
+/// One real point's samples: per direct sample s (primary j has
+/// `j * direct .. (j + 1) * direct`) its ray, `None` where it is not traced (the table
+/// is empty, or the direction is below the surface or has no density); per indirect
+/// sample likewise, always traced.
+pub(super) struct RealSamples<'a> {
+    pub(super) direct: &'a [Option<DirectRay>],
+    pub(super) indirect: &'a [IndirectRay],
+}
+
+/// A span's samples and rays; reused from span to span.
+#[derive(Default)]
+pub(super) struct Span {
+    batch: TraceBatch,
+    real: Vec<Option<RealPoint>>,
+    direct: Vec<Option<DirectRay>>,
+    indirect: Vec<IndirectRay>,
+}
+
+impl Kernel<'_> {
+    /// Estimates pixels `xs` of row `y`, handing each result to `emit`.
+    pub(super) fn shade_span(
+        &self,
+        y: u32,
+        xs: &[u32],
+        span: &mut Span,
+        mut emit: impl FnMut(u32, &PixelResult),
+    ) {
+        let inputs = self.inputs;
+        span.batch.clear();
+        span.real.clear();
+        span.direct.clear();
+        span.indirect.clear();
+        for &x in xs {
+            let p = y as usize * inputs.depth.width as usize + x as usize;
+            let real = self.real_point(x, y, inputs.depth.data[p], inputs.normals.data[p]);
+            if let Some(rp) = &real {
+                self.draw_real_samples(rp, p, span);
+            }
+            span.real.push(real);
+        }
+        span.batch.trace(&self.tracer, self.lanes);
+        let params = self.params;
+        let (direct_n, indirect_n) = (
+            (params.primary * params.direct) as usize,
+            (params.primary * params.indirect) as usize,
+        );
+        let (mut direct, mut indirect) = (&span.direct[..], &span.indirect[..]);
+        for (&x, real) in xs.iter().zip(&span.real) {
+            let samples = match real {
+                Some(_) => {
+                    let samples = RealSamples {
+                        direct: &direct[..direct_n],
+                        indirect: &indirect[..indirect_n],
+                    };
+                    (direct, indirect) = (&direct[direct_n..], &indirect[indirect_n..]);
+                    samples
+                }
+                None => RealSamples {
+                    direct: &[],
+                    indirect: &[],
+                },
+            };
+            let result = self.shade_pixel(x, y, real.as_ref(), &samples, span.batch.hits());
+            emit(x, &result);
+        }
+    }
+
+    /// Draws the direct and indirect samples of real point `rp` (pixel index `p`) for
+    /// every primary, queueing their screen-space rays.
+    fn draw_real_samples(&self, rp: &RealPoint, p: usize, span: &mut Span) {
+        let params = self.params;
+        let rng = PixelRng::new(params.seed, self.inputs.frame, p as u64);
+        let (direct_stream, indirect_stream) =
+            (rng.stream(StreamId::Direct), rng.stream(StreamId::Indirect));
+        let t_max = params.max_distance;
+        let origin = rp.origin.as_ref();
+        for s in 0..params.primary * params.direct {
+            let drawn = self
+                .direct_sample(&direct_stream, s)
+                .and_then(|(sample, ls)| {
+                    let cos = rp.normal_world.dot(ls.direction);
+                    (cos > 0.0 && ls.pdf > 0.0).then(|| DirectRay {
+                        sample,
+                        cos,
+                        ray: span.batch.push(
+                            &self.tracer,
+                            origin,
+                            self.table_camera[sample],
+                            t_max,
+                        ),
+                    })
+                });
+            span.direct.push(drawn);
+        }
+        for s in 0..params.primary * params.indirect {
+            let (u1, u2) = indirect_stream.pair(s as u64);
+            let dir_camera = rp.basis_camera.to_world(cosine_hemisphere(u1, u2));
+            span.indirect.push(IndirectRay {
+                dir_camera,
+                ray: span.batch.push(&self.tracer, origin, dir_camera, t_max),
+            });
+        }
+    }
+}
+
+/// One row of every output buffer.
+pub(super) struct RowOut<'a> {
+    e_r_dir: &'a mut [Vec3],
+    e_r_ind: &'a mut [Vec3],
+    e_rv_dir: &'a mut [Vec3],
+    e_rv_ind: &'a mut [Vec3],
+    mask: &'a mut [f32],
+    k_v: &'a mut [Vec3],
+    exponent: &'a mut [f32],
+    world_position: &'a mut [Vec3],
+    world_normal: &'a mut [Vec3],
+    direct_min_distance: &'a mut [f32],
+    indirect_min_distance: &'a mut [f32],
+    touched: &'a mut [u8],
+}
+
+impl RowOut<'_> {
+    #[inline]
+    pub(super) fn set(&mut self, x: usize, r: &PixelResult) {
+        self.e_r_dir[x] = r.e_r_dir;
+        self.e_r_ind[x] = r.e_r_ind;
+        self.e_rv_dir[x] = r.e_rv_dir;
+        self.e_rv_ind[x] = r.e_rv_ind;
+        self.mask[x] = r.mask;
+        self.k_v[x] = r.k_v;
+        self.exponent[x] = r.exponent;
+        self.world_position[x] = r.world_position;
+        self.world_normal[x] = r.world_normal;
+        self.direct_min_distance[x] = r.direct_min_distance;
+        self.indirect_min_distance[x] = r.indirect_min_distance;
+        self.touched[x] = r.touched as u8;
+    }
+}
+
+/// The rows of every output buffer, top to bottom.
+pub(super) fn rows(out: &mut PathOutputs, width: usize) -> Vec<RowOut<'_>> {
+    let mut e_r_dir = out.e_r_dir.data.chunks_mut(width);
+    let mut e_r_ind = out.e_r_ind.data.chunks_mut(width);
+    let mut e_rv_dir = out.e_rv_dir.data.chunks_mut(width);
+    let mut e_rv_ind = out.e_rv_ind.data.chunks_mut(width);
+    let mut mask = out.mask.data.chunks_mut(width);
+    let mut k_v = out.k_v.data.chunks_mut(width);
+    let mut exponent = out.exponent.data.chunks_mut(width);
+    let mut world_position = out.world_position.data.chunks_mut(width);
+    let mut world_normal = out.world_normal.data.chunks_mut(width);
+    let mut direct_min = out.direct_min_distance.data.chunks_mut(width);
+    let mut indirect_min = out.indirect_min_distance.data.chunks_mut(width);
+    let mut touched = out.touched.data.chunks_mut(width);
+    let mut rows = Vec::new();
+    while let (Some(a), Some(b), Some(c), Some(d), Some(e), Some(f)) = (
+        e_r_dir.next(),
+        e_r_ind.next(),
+        e_rv_dir.next(),
+        e_rv_ind.next(),
+        mask.next(),
+        k_v.next(),
+    ) {
+        let (Some(exponent), Some(g), Some(h), Some(i), Some(j), Some(k)) = (
+            exponent.next(),
+            world_position.next(),
+            world_normal.next(),
+            direct_min.next(),
+            indirect_min.next(),
+            touched.next(),
+        ) else {
+            break;
+        };
+        rows.push(RowOut {
+            e_r_dir: a,
+            e_r_ind: b,
+            e_rv_dir: c,
+            e_rv_ind: d,
+            mask: e,
+            k_v: f,
+            exponent,
+            world_position: g,
+            world_normal: h,
+            direct_min_distance: i,
+            indirect_min_distance: j,
+            touched: k,
+        });
+    }
+    rows
+}

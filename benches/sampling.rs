@@ -11,7 +11,7 @@
 //!   scheme off and on.
 //! - `ssrt/one_by_one`, `ssrt/batch_Portable`, `ssrt/batch_Avx2Fma`: the screen-space
 //!   tracer alone on one thread, 16 cosine rays from every 16th pixel, traced ray by ray
-//!   and as one batch with each kernel.
+//!   and as one batch with each kernel the CPU has.
 //! - `light.val/update_warm` and `light.val/update_cold`: one update at 16 lights,
 //!   warm-started on an unchanged map and from a cold start (the stage's work whenever
 //!   the environment changes lies between the two).
@@ -182,15 +182,18 @@ fn bench_tracer(
                 .count()
         })
     });
-    let mut batch = TraceBatch::new();
-    for kernel in [Kernel::Portable, Kernel::detect()] {
+    let mut batch = TraceBatch::new(&tracer, rays.len());
+    for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+        if kernel.available() != kernel {
+            continue; // the CPU lacks it
+        }
         group.bench_function(format!("ssrt/batch_{kernel:?}"), |b| {
             b.iter(|| {
                 batch.clear();
                 for &(o, d) in &rays {
-                    batch.push(&tracer, tracer.origin(o).as_ref(), d, t_max);
+                    batch.push(tracer.origin(o).as_ref(), d, t_max);
                 }
-                batch.trace(&tracer, kernel);
+                batch.trace(kernel);
                 batch.hits().iter().filter(|h| h.is_some()).count()
             })
         });

@@ -79,11 +79,12 @@
 //! traced). Measured on the bench frame at 640x480: 23 marched rays per pixel, 13.9
 //! iterations of the hierarchical march per ray (2 of them at level 0) where the
 //! sample-by-sample march would test 132 pixels. Pixels are therefore estimated a span
-//! of a row at a time: their samples are drawn first, then all their rays are marched
-//! together, eight per AVX2 vector where the CPU has it (see `span` and
-//! [`crate::stages::sample::ssrt::TraceBatch`]; the same hits as ray by ray). The
-//! virtual objects cost a cone test per ray, then a box test and the BVH only for rays
-//! inside the cone of their bounding sphere.
+//! of a row at a time: the real points' direct and indirect samples are drawn first,
+//! then all their rays are marched together, eight per AVX2 vector where the CPU has it
+//! (see `span` and [`crate::stages::sample::ssrt::TraceBatch`]; the same hits as ray by
+//! ray). The few rays that start on virtual surfaces or are object-aware candidates are
+//! traced one at a time. The virtual objects cost a cone test per ray, then a box test
+//! and the BVH only for rays inside the cone of their bounding sphere.
 
 mod bounds;
 mod kernel;
@@ -518,11 +519,14 @@ pub(crate) fn sample_path_with_kernel(
         .into_par_iter()
         .enumerate()
         .filter(|(y, _)| y % stride == 0)
-        .for_each_init(Span::default, |span, (y, mut row)| {
-            for xs in xs.chunks(SPAN_PIXELS) {
-                kernel.shade_span(y as u32, xs, span, |x, r| row.set(x as usize, r));
-            }
-        });
+        .for_each_init(
+            || Span::new(&kernel.tracer, params),
+            |span, (y, mut row)| {
+                for xs in xs.chunks(SPAN_PIXELS) {
+                    kernel.shade_span(y as u32, xs, span, |x, r| row.set(x as usize, r));
+                }
+            },
+        );
     Ok(())
 }
 

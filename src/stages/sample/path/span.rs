@@ -6,12 +6,12 @@
 
 use super::kernel::{Kernel, RealPoint};
 use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
-use super::{PathOutputs, PixelResult};
-use crate::stages::sample::ssrt::TraceBatch;
+use super::{PathOutputs, PathParams, PixelResult};
+use crate::stages::sample::ssrt::{ScreenTracer, TraceBatch};
 use glam::Vec3;
 
 /// Pixels per span: enough rays (about 23 per pixel) that the batch's lanes rarely wait
-/// at its end, few enough that its buffers stay in the cache.
+/// at its end, few enough that its buffers stay in the cache (about 50 KB).
 pub(super) const SPAN_PIXELS: usize = 32;
 
 /// A direct sample whose ray is traced: its table sample, the cosine of its direction
@@ -40,12 +40,25 @@ pub(super) struct RealSamples<'a> {
 }
 
 /// A span's samples and rays; reused from span to span.
-#[derive(Default)]
-pub(super) struct Span {
-    batch: TraceBatch,
+pub(super) struct Span<'t> {
+    batch: TraceBatch<'t>,
     real: Vec<Option<RealPoint>>,
     direct: Vec<Option<DirectRay>>,
     indirect: Vec<IndirectRay>,
+}
+
+impl<'t> Span<'t> {
+    /// Buffers for spans of up to [`SPAN_PIXELS`] pixels whose rays `tracer` traces.
+    pub(super) fn new(tracer: &'t ScreenTracer<'t>, params: &PathParams) -> Span<'t> {
+        let direct = SPAN_PIXELS * (params.primary * params.direct) as usize;
+        let indirect = SPAN_PIXELS * (params.primary * params.indirect) as usize;
+        Span {
+            batch: TraceBatch::new(tracer, direct + indirect),
+            real: Vec::with_capacity(SPAN_PIXELS),
+            direct: Vec::with_capacity(direct),
+            indirect: Vec::with_capacity(indirect),
+        }
+    }
 }
 
 impl Kernel<'_> {
@@ -54,7 +67,7 @@ impl Kernel<'_> {
         &self,
         y: u32,
         xs: &[u32],
-        span: &mut Span,
+        span: &mut Span<'_>,
         mut emit: impl FnMut(u32, &PixelResult),
     ) {
         let inputs = self.inputs;
@@ -70,7 +83,7 @@ impl Kernel<'_> {
             }
             span.real.push(real);
         }
-        span.batch.trace(&self.tracer, self.lanes);
+        span.batch.trace(self.lanes);
         let params = self.params;
         let (direct_n, indirect_n) = (
             (params.primary * params.direct) as usize,
@@ -99,7 +112,7 @@ impl Kernel<'_> {
 
     /// Draws the direct and indirect samples of real point `rp` (pixel index `p`) for
     /// every primary, queueing their screen-space rays.
-    fn draw_real_samples(&self, rp: &RealPoint, p: usize, span: &mut Span) {
+    fn draw_real_samples(&self, rp: &RealPoint, p: usize, span: &mut Span<'_>) {
         let params = self.params;
         let rng = PixelRng::new(params.seed, self.inputs.frame, p as u64);
         let (direct_stream, indirect_stream) =
@@ -114,12 +127,7 @@ impl Kernel<'_> {
                     (cos > 0.0 && ls.pdf > 0.0).then(|| DirectRay {
                         sample,
                         cos,
-                        ray: span.batch.push(
-                            &self.tracer,
-                            origin,
-                            self.table_camera[sample],
-                            t_max,
-                        ),
+                        ray: span.batch.push(origin, self.table_camera[sample], t_max),
                     })
                 });
             span.direct.push(drawn);
@@ -129,7 +137,7 @@ impl Kernel<'_> {
             let dir_camera = rp.basis_camera.to_world(cosine_hemisphere(u1, u2));
             span.indirect.push(IndirectRay {
                 dir_camera,
-                ray: span.batch.push(&self.tracer, origin, dir_camera, t_max),
+                ray: span.batch.push(origin, dir_camera, t_max),
             });
         }
     }

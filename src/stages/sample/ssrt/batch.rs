@@ -1,13 +1,14 @@
-//! Many rays marched together: [`TraceBatch`] takes rays one by one (each set up at
-//! once, as [`ScreenTracer::trace_from`] does), then marches them all and holds one
-//! [`RealHit`] per ray, bit for bit what `trace_from` returns for it.
+//! Many rays marched together: a [`TraceBatch`] of one tracer takes rays one by one
+//! (each set up at once, as [`ScreenTracer::trace_from`] does), then marches them all
+//! and holds one [`RealHit`] per ray, bit for bit what `trace_from` returns for it.
 //!
 //! With AVX2 the hierarchical march runs eight rays at a time, one per lane, each lane
 //! at its own sample and pyramid level; a lane whose ray ends takes the next queued ray,
 //! so lanes do not wait for the longest ray of a group (rays of one pixel march 14 tile
 //! visits on average, the longest of eight about 35). Every lane computes the scalar
 //! march's operations in the same order with the same roundings (no fused multiply-add),
-//! so the samples found are the same. Without AVX2 the scalar march runs ray by ray.
+//! so the samples found are the same. Without AVX2, or for a pyramid of more than 16
+//! levels, the scalar march runs ray by ray.
 
 use super::{March, RayOrigin, RealHit, ScreenTracer};
 use crate::simd::Kernel;
@@ -24,19 +25,33 @@ struct Queued {
     ray: u32,
 }
 
-/// Rays traced together; reusable (its buffers keep their capacity across batches).
-#[derive(Debug, Default)]
-pub struct TraceBatch {
+/// Rays traced together against one tracer's depth map; reusable (its buffers keep
+/// their capacity from batch to batch).
+pub struct TraceBatch<'t> {
+    /// Every queued march was set up by this tracer, so its samples lie in this
+    /// tracer's image: the march reads its pyramid unchecked.
+    tracer: &'t ScreenTracer<'t>,
+    /// The pyramid's levels for the lanes (`None`: march ray by ray).
+    #[cfg(target_arch = "x86_64")]
+    tables: Option<LevelTables>,
     queued: Vec<Queued>,
     /// Per queued ray: the sample found, as (major coordinate, ray 1/z).
     found: Vec<Option<(i32, f32)>>,
     hits: Vec<Option<RealHit>>,
 }
 
-impl TraceBatch {
-    /// An empty batch.
-    pub fn new() -> TraceBatch {
-        TraceBatch::default()
+impl<'t> TraceBatch<'t> {
+    /// An empty batch of rays against `tracer`'s depth map, with room for `capacity`
+    /// rays.
+    pub fn new(tracer: &'t ScreenTracer<'t>, capacity: usize) -> TraceBatch<'t> {
+        TraceBatch {
+            tracer,
+            #[cfg(target_arch = "x86_64")]
+            tables: LevelTables::new(tracer),
+            queued: Vec::with_capacity(capacity),
+            found: Vec::with_capacity(capacity),
+            hits: Vec::with_capacity(capacity),
+        }
     }
 
     /// Removes every ray.
@@ -58,17 +73,11 @@ impl TraceBatch {
     /// Adds the ray `origin + t dir` (camera space, `dir` unit, t <= `t_max`) and
     /// returns its index. A `None` origin (one that [`ScreenTracer::origin`] rejected)
     /// finds nothing.
-    pub fn push(
-        &mut self,
-        tracer: &ScreenTracer,
-        origin: Option<&RayOrigin>,
-        dir: Vec3,
-        t_max: f32,
-    ) -> usize {
+    pub fn push(&mut self, origin: Option<&RayOrigin>, dir: Vec3, t_max: f32) -> usize {
         let ray = self.hits.len();
         self.hits.push(None);
         if let Some(o) = origin
-            && let Some(march) = tracer.setup(o, dir, t_max)
+            && let Some(march) = self.tracer.setup(o, dir, t_max)
         {
             self.queued.push(Queued {
                 march,
@@ -82,36 +91,40 @@ impl TraceBatch {
 
     /// Marches every ray pushed since the last clear, with `kernel` where the CPU has
     /// it: afterwards [`TraceBatch::hits`] holds what [`ScreenTracer::trace_from`]
-    /// returns for each. Rays pushed after this call need another.
-    pub fn trace(&mut self, tracer: &ScreenTracer, kernel: Kernel) {
+    /// returns for each. Returns the kernel that ran. Rays pushed after this call need
+    /// another.
+    pub fn trace(&mut self, kernel: Kernel) -> Kernel {
+        let tracer = self.tracer;
         self.found.clear();
         self.found.resize(self.queued.len(), None);
         #[cfg(target_arch = "x86_64")]
         if kernel.available() == Kernel::Avx2Fma
-            && let Some(tables) = LevelTables::new(tracer)
+            && let Some(tables) = &self.tables
         {
-            // SAFETY: `available` returned Avx2Fma, so the CPU has AVX2.
-            unsafe { avx2::march(tracer, &tables, &self.queued, &mut self.found) };
-            self.record_hits(tracer);
-            return;
+            // SAFETY: `available` returned Avx2Fma, so the CPU has AVX2; the tables are
+            // this tracer's, whose `setup` made every queued march.
+            unsafe { avx2::march(tracer, tables, &self.queued, &mut self.found) };
+            self.record_hits();
+            return Kernel::Avx2Fma;
         }
         #[cfg(not(target_arch = "x86_64"))]
-        let _ = kernel; // no other kernel here: the scalar march
+        let _ = kernel; // no other kernel here
         for (q, found) in self.queued.iter().zip(&mut self.found) {
             *found = tracer
                 .march_hierarchical(&q.march, &mut 0)
                 .map(|(a, _, inv)| (a, inv));
         }
-        self.record_hits(tracer);
+        self.record_hits();
+        Kernel::Portable
     }
 
     /// The hit records of the samples found.
-    fn record_hits(&mut self, tracer: &ScreenTracer) {
+    fn record_hits(&mut self) {
         for (q, found) in self.queued.iter().zip(&self.found) {
             if let Some((a, inv)) = *found {
                 let m = &q.march;
                 self.hits[q.ray as usize] =
-                    Some(tracer.hit(m, q.origin, q.dir, a, m.minor(a), inv));
+                    Some(self.tracer.hit(m, q.origin, q.dir, a, m.minor(a), inv));
             }
         }
     }
@@ -122,16 +135,18 @@ impl TraceBatch {
     }
 }
 
-/// The pyramid's level geometry as i32 tables of 16 entries, for per-lane lookups
-/// (`None` when the pyramid has more levels, or offsets beyond i32: images over 32768
-/// pixels on a side, which march ray by ray).
-#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+/// The pyramid's level geometry as i32 tables of 16 entries, for per-lane lookups:
+/// `None` when the pyramid has more levels (the march supports images up to 8192
+/// pixels on a side, 14 levels), offsets beyond i32, or a level layout other than the
+/// lanes assume (one value per texel at level 0, a (min, max) pair above).
+#[cfg(target_arch = "x86_64")]
 struct LevelTables {
     origin: [i32; 16],
     row: [i32; 16],
     top: i32,
 }
 
+#[cfg(target_arch = "x86_64")]
 impl LevelTables {
     fn new(tracer: &ScreenTracer) -> Option<LevelTables> {
         let levels = tracer.pyramid.levels();
@@ -147,10 +162,13 @@ impl LevelTables {
             top: levels.len() as i32 - 1,
         };
         for (l, level) in levels.iter().enumerate() {
-            tables.origin[l] = level.origin as i32;
-            tables.row[l] = level.row as i32;
-            debug_assert_eq!(level.max_offset, (l > 0) as usize);
-            debug_assert_eq!(level.shift, (l > 0) as u32);
+            // The lanes shift x and offset the max by min(level, 1).
+            let pair = (l > 0) as u32;
+            if level.shift != pair || level.max_offset != pair as usize {
+                return None;
+            }
+            tables.origin[l] = i32::try_from(level.origin).ok()?;
+            tables.row[l] = i32::try_from(level.row).ok()?;
         }
         Some(tables)
     }
@@ -435,7 +453,8 @@ mod avx2 {
     /// found for `queued[i]`.
     ///
     /// # Safety
-    /// The CPU must have AVX2.
+    /// The CPU must have AVX2; `tables` must be `tracer`'s, and every queued march set
+    /// up by `tracer` (so that its samples lie in the tracer's image).
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn march(
         tracer: &ScreenTracer,

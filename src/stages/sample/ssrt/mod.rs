@@ -28,7 +28,8 @@
 //! to [`FAR`] metres.
 //!
 //! Rays leaving one point share its projection: [`ScreenTracer::origin`] once, then
-//! [`ScreenTracer::trace_from`] per ray.
+//! [`ScreenTracer::trace_from`] per ray. A [`TraceBatch`] marches many rays together
+//! (eight per vector with AVX2), with the same hits.
 
 mod batch;
 
@@ -308,14 +309,19 @@ impl<'a> ScreenTracer<'a> {
             cam.fx * origin.x * inv_z + cam.cx,
             cam.fy * origin.y * inv_z + cam.cy,
         );
-        let inside =
-            x >= -0.5 && x < cam.width as f32 - 0.5 && y >= -0.5 && y < cam.height as f32 - 0.5;
-        inside.then_some(RayOrigin {
+        self.projects_inside(x, y).then_some(RayOrigin {
             point: origin,
             inv_z,
             x,
             y,
         })
+    }
+
+    /// Whether pixel coordinates (x, y) round to a pixel of the image.
+    #[inline(always)]
+    fn projects_inside(&self, x: f32, y: f32) -> bool {
+        let cam = &self.camera;
+        x >= -0.5 && x < cam.width as f32 - 0.5 && y >= -0.5 && y < cam.height as f32 - 0.5
     }
 
     /// [`ScreenTracer::trace_camera`] from a projected origin.
@@ -356,6 +362,11 @@ impl<'a> ScreenTracer<'a> {
     /// when no sample is left.
     #[inline]
     fn setup(&self, origin: &RayOrigin, d: Vec3, t_max: f32) -> Option<March> {
+        // An origin another tracer projected may lie outside this image: the march
+        // relies on starting inside it.
+        if !self.projects_inside(origin.x, origin.y) {
+            return None;
+        }
         let o = origin.point;
         let mut t_end = t_max.min(FAR);
         // Clipped to the near plane (the origin is in front of it): the division only

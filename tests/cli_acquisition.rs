@@ -121,6 +121,27 @@ fn eval_needs_a_scorable_stage() {
 }
 
 #[test]
+fn eval_refuses_a_reference_stride_that_leaves_one_row() {
+    let tmp = tempfile::tempdir().unwrap();
+    small_recording(tmp.path(), 2);
+    let p = acquisition();
+    let o = run_in(
+        tmp.path(),
+        &["eval", "s.relume", "-p", &p, "--reference-stride", "120"],
+    );
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains(
+            "--reference-stride 120 leaves 2x1 pixels of the recording's 160x120 images \
+             for the references: the scores would stand on a single row or column; use a \
+             stride below 120"
+        ),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
 fn replay_saves_products_and_exports_the_cloud_as_ply() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();

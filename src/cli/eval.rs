@@ -66,7 +66,8 @@ pub struct EvalArgs {
     stages: Vec<String>,
     /// Compute the 1024-sample references (sample.path, filter, composite scores) only
     /// at pixels whose x and y are multiples of N: N^2 times less work for the
-    /// slowest part of an eval; those scores then average over that pixel lattice.
+    /// slowest part of an eval; those scores then average over that pixel lattice
+    /// (N must be smaller than the images' width and height).
     #[arg(long, value_name = "N", default_value_t = 1,
           value_parser = clap::value_parser!(u32).range(1..))]
     reference_stride: u32,
@@ -75,6 +76,21 @@ pub struct EvalArgs {
 pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     let loaded = load(&a.run)?;
     let header = loaded.replay.recording.header();
+    let (w, h) = (
+        header.depth_intrinsics.width,
+        header.depth_intrinsics.height,
+    );
+    let stride = a.reference_stride;
+    if stride > 1 && (stride >= w || stride >= h) {
+        bail!(
+            "--reference-stride {stride} leaves {}x{} pixels of the recording's {w}x{h} \
+             images for the references: the scores would stand on a single row or \
+             column; use a stride below {}",
+            w.div_ceil(stride),
+            h.div_ceil(stride),
+            w.min(h)
+        );
+    }
     let options = EvalOptions {
         stages: a.stages.clone(),
         reference_stride: a.reference_stride,

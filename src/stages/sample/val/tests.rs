@@ -450,7 +450,40 @@ fn every_kernel_gives_the_scalar_bits() {
     let scene = sphere();
     // Also a crop whose width is no multiple of the lanes (a partial last group).
     for (w, h) in [(W, H), (157, 117)] {
-        kernels_match_the_scalar_path(&crop(&depth, w, h), &crop(&normals, w, h), &set, &scene);
+        let (depth, normals) = (crop(&depth, w, h), crop(&normals, w, h));
+        let params = ValShadingParams::default();
+        let (shadowed, occluded) =
+            kernels_match_the_scalar_path(&depth, &normals, &set, &scene, &params);
+        eprintln!("{shadowed} real pixels in the objects' shadow, {occluded} with an occluder");
+        assert!(shadowed > 100 && occluded > 100, "{shadowed} {occluded}");
+    }
+}
+
+/// More lights than the tiles' lookup masks have bits (64): a light past them is always
+/// looked up. And slope biases of 0 and below (no bias, or a stricter test).
+#[test]
+fn every_kernel_gives_the_scalar_bits_with_many_lights_and_any_slope_bias() {
+    let (depth, normals) = real_scene(true);
+    let ring: Vec<AreaLight> = (0..70)
+        .map(|i| {
+            let a = i as f32 * std::f32::consts::TAU / 70.0;
+            light(Vec3::new(4.0 * a.cos(), 3.0, 4.0 * a.sin()), 0.05)
+        })
+        .collect();
+    let with_lamp = [ring.clone(), vec![light(LAMP, 10.0)]].concat();
+    let scene = sphere();
+    for slope_bias in [0.0, -0.5] {
+        let params = ValShadingParams {
+            slope_bias,
+            ..ValShadingParams::default()
+        };
+        let run = |set: Vec<AreaLight>| {
+            kernels_match_the_scalar_path(&depth, &normals, &lights(set), &scene, &params)
+        };
+        let (ring_only, _) = run(ring.clone());
+        // The lamp, light 70, casts the sphere's shadow below it.
+        let (shadowed, _) = run(with_lamp.clone());
+        assert!(shadowed > ring_only + 100, "{shadowed} vs {ring_only}");
     }
 }
 
@@ -466,7 +499,8 @@ fn kernels_match_the_scalar_path(
     normals: &Vec3Image,
     set: &AreaLights,
     scene: &VirtualScene,
-) {
+    params: &ValShadingParams,
+) -> (usize, usize) {
     let (mut camera, camera_to_world) = camera();
     (camera.width, camera.height) = (depth.width, depth.height);
     let inputs = ValInputs {
@@ -479,9 +513,7 @@ fn kernels_match_the_scalar_path(
     };
     let run = |mut renderer: ValRenderer| {
         let mut out = ValOutputs::new(depth.width, depth.height);
-        renderer
-            .render(&inputs, &ValShadingParams::default(), &mut out)
-            .unwrap();
+        renderer.render(&inputs, params, &mut out).unwrap();
         out
     };
     let reference = run(ValRenderer {
@@ -498,8 +530,6 @@ fn kernels_match_the_scalar_path(
         .iter()
         .filter(|d| d.is_finite())
         .count();
-    eprintln!("{shadowed} real pixels in the objects' shadow, {occluded} with an occluder");
-    assert!(shadowed > 100 && occluded > 100, "{shadowed} {occluded}");
     let scalar_bits = |s: &ScalarImage| s.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
     for kernel in [Kernel::Portable, Kernel::detect()] {
         let out = run(ValRenderer::with_kernel(kernel));
@@ -520,4 +550,5 @@ fn kernels_match_the_scalar_path(
         );
         assert_eq!(reference.mask, out.mask);
     }
+    (shadowed, occluded)
 }

@@ -541,7 +541,7 @@ fn the_lane_march_gives_the_bits_of_the_scalar_march() {
         let lanes = run_with_kernel(&scene, &objects, &table, &params, simd::Kernel::detect());
         assert!(
             bits(&one_by_one) == bits(&lanes),
-            "object_aware {object_aware}"
+            "object_aware {object_aware}, pixel_stride {pixel_stride}"
         );
     }
 }

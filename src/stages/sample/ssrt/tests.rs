@@ -158,18 +158,22 @@ fn a_batch_gives_the_hits_of_single_rays_with_every_kernel() {
     use crate::simd::Kernel;
     let pose = floor_camera_pose();
     // Levels 8 and up (the second half of the lanes' level tables) are only reached by
-    // marches crossing a multiple of 256 pixels: at 640x480, not at 160x120.
-    for (scale, noise, thickness) in [
-        (1, 0.0, 0.1),
-        (1, 0.02, 0.05),
-        (1, 0.05, 0.3),
-        (4, 0.02, 0.1),
+    // marches crossing a multiple of 256 pixels: at 640x480, not at 160x120. With no
+    // skipped pixels, a march may start one pixel further (behind the origin's centre);
+    // with more than 64 the setup runs ray by ray.
+    for (scale, noise, thickness, skip_pixels) in [
+        (1, 0.0, 0.1, 1.5),
+        (1, 0.02, 0.05, 1.5),
+        (1, 0.05, 0.3, 0.0),
+        (4, 0.02, 0.1, 1.5),
+        (4, 0.0, 0.1, 0.0),
+        (4, 0.0, 0.1, 70.0),
     ] {
         let cam = Pinhole::new(&Intrinsics::PRIMESENSE, W * scale, H * scale);
         let depth = render(&cam, pose, noise);
         let params = TraceParams {
             thickness,
-            ..Default::default()
+            skip_pixels,
         };
         let tracer = ScreenTracer::new(&depth, cam, pose, params);
         let rays = random_rays(&cam, &depth, 6_000, 31 + noise.to_bits() as u64);
@@ -178,10 +182,7 @@ fn a_batch_gives_the_hits_of_single_rays_with_every_kernel() {
             .map(|&(o, d, t_max)| tracer.trace_camera(o, d, t_max))
             .collect();
         let hits = expected.iter().filter(|h| h.is_some()).count();
-        assert!(
-            hits > 1_000,
-            "the scene is hit often enough to test: {hits}"
-        );
+        assert!(hits > 300, "the scene is hit often enough to test: {hits}");
         for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
             let mut batch = TraceBatch::new(&tracer, 0);
             // Two batches through the same buffers: the second starts clean.

@@ -161,13 +161,14 @@ fn a_batch_gives_the_hits_of_single_rays_with_every_kernel() {
     // marches crossing a multiple of 256 pixels: at 640x480, not at 160x120. With no
     // skipped pixels, a march may start one pixel further (behind the origin's centre);
     // with more than 64 the setup runs ray by ray.
-    for (scale, noise, thickness, skip_pixels) in [
-        (1, 0.0, 0.1, 1.5),
-        (1, 0.02, 0.05, 1.5),
-        (1, 0.05, 0.3, 0.0),
-        (4, 0.02, 0.1, 1.5),
-        (4, 0.0, 0.1, 0.0),
-        (4, 0.0, 0.1, 70.0),
+    // The last field is the fewest hits for the comparison to mean something.
+    for (scale, noise, thickness, skip_pixels, min_hits) in [
+        (1, 0.0, 0.1, 1.5, 1_000),
+        (1, 0.02, 0.05, 1.5, 1_000),
+        (1, 0.05, 0.3, 0.0, 1_000),
+        (4, 0.02, 0.1, 1.5, 1_000),
+        (4, 0.0, 0.1, 0.0, 1_000),
+        (4, 0.0, 0.1, 70.0, 300),
     ] {
         let cam = Pinhole::new(&Intrinsics::PRIMESENSE, W * scale, H * scale);
         let depth = render(&cam, pose, noise);
@@ -182,7 +183,10 @@ fn a_batch_gives_the_hits_of_single_rays_with_every_kernel() {
             .map(|&(o, d, t_max)| tracer.trace_camera(o, d, t_max))
             .collect();
         let hits = expected.iter().filter(|h| h.is_some()).count();
-        assert!(hits > 300, "the scene is hit often enough to test: {hits}");
+        assert!(
+            hits > min_hits,
+            "the scene is hit often enough to test: {hits}"
+        );
         for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
             let mut batch = TraceBatch::new(&tracer, 0);
             // Two batches through the same buffers: the second starts clean.

@@ -54,26 +54,9 @@ struct Pending {
 }
 
 impl Pending {
-    fn push(&mut self, o: &RayOrigin, dir: Vec3, t_max: f32, ray: u32) {
-        for (field, v) in [
-            (&mut self.ox, o.point.x),
-            (&mut self.oy, o.point.y),
-            (&mut self.oz, o.point.z),
-            (&mut self.inv_z, o.inv_z),
-            (&mut self.px, o.x),
-            (&mut self.py, o.y),
-            (&mut self.dx, dir.x),
-            (&mut self.dy, dir.y),
-            (&mut self.dz, dir.z),
-            (&mut self.t_max, t_max),
-        ] {
-            field.push(v);
-        }
-        self.ray.push(ray);
-    }
-
-    fn clear(&mut self) {
-        for field in [
+    /// The float arrays, in the order [`Pending::push`] fills them.
+    fn floats_mut(&mut self) -> [&mut Vec<f32>; 10] {
+        [
             &mut self.ox,
             &mut self.oy,
             &mut self.oz,
@@ -84,9 +67,21 @@ impl Pending {
             &mut self.dy,
             &mut self.dz,
             &mut self.t_max,
-        ] {
-            field.clear();
+        ]
+    }
+
+    fn push(&mut self, o: &RayOrigin, dir: Vec3, t_max: f32, ray: u32) {
+        let values = [
+            o.point.x, o.point.y, o.point.z, o.inv_z, o.x, o.y, dir.x, dir.y, dir.z, t_max,
+        ];
+        for (field, v) in self.floats_mut().into_iter().zip(values) {
+            field.push(v);
         }
+        self.ray.push(ray);
+    }
+
+    fn clear(&mut self) {
+        self.floats_mut().into_iter().for_each(Vec::clear);
         self.ray.clear();
     }
 

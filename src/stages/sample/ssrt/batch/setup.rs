@@ -8,7 +8,6 @@
 use super::{Pending, Queued};
 use crate::simd::LANES;
 use crate::stages::sample::ssrt::{FAR, FIXED_ONE, FRACTION_BITS, March, NEAR, ScreenTracer};
-use glam::Vec3;
 use std::arch::x86_64::*;
 
 /// The largest `skip_steps` the lanes handle: with it (and sides up to [`MAX_SIDE`]), a
@@ -240,6 +239,7 @@ unsafe fn set_up_lanes(
             if rare >> lane & 1 == 1 {
                 pending.set_up(i, tracer, queued);
             } else if empty >> lane & 1 == 0 {
+                let (origin, dir, _) = pending.get(i);
                 queued.push(Queued {
                     march: March {
                         transposed: transposed[lane] != 0,
@@ -251,8 +251,8 @@ unsafe fn set_up_lanes(
                         last: last_a[lane],
                         step: step[lane],
                     },
-                    origin: Vec3::new(pending.ox[i], pending.oy[i], pending.oz[i]),
-                    dir: Vec3::new(pending.dx[i], pending.dy[i], pending.dz[i]),
+                    origin: origin.point,
+                    dir,
                     ray: pending.ray[i],
                 });
             }

@@ -15,7 +15,8 @@
 /// Number of lanes (target pixels per vector).
 pub const LANES: usize = 8;
 
-/// Which implementation of [`Lanes`] the filter's passes run.
+/// Which eight-lane code runs: the filter's passes and sample.val's shading (through
+/// [`Lanes`]), and the screen-space tracer's batches (`ssrt::TraceBatch`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kernel {
     /// AVX2 + FMA (x86-64 only, checked at run time).

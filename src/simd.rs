@@ -100,6 +100,8 @@ pub trait Lanes: Copy {
     fn any(self) -> bool;
     /// Truncation toward zero to i32 per lane (for values that fit).
     fn trunc_to_i32(self) -> [i32; LANES];
+    /// The 8 x 8 transpose: lane r of result l is lane l of `rows[r]`.
+    fn transpose(rows: [Self; LANES]) -> [Self; LANES];
 }
 
 /// The portable lanes.
@@ -252,6 +254,10 @@ impl Lanes for Portable {
     #[inline(always)]
     fn trunc_to_i32(self) -> [i32; LANES] {
         self.0.map(|v| v as i32)
+    }
+    #[inline(always)]
+    fn transpose(rows: [Self; LANES]) -> [Self; LANES] {
+        std::array::from_fn(|l| Portable(std::array::from_fn(|r| rows[r].0[l])))
     }
 }
 
@@ -409,6 +415,72 @@ mod avx2 {
             let mut a = [0; LANES];
             unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), _mm256_cvttps_epi32(self.0)) };
             a
+        }
+        #[inline(always)]
+        fn transpose(rows: [Self; LANES]) -> [Self; LANES] {
+            let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
+            unsafe {
+                // Pairs of rows interleaved, then quads, then the 128-bit halves swapped.
+                let t0 = _mm256_unpacklo_ps(r0.0, r1.0);
+                let t1 = _mm256_unpackhi_ps(r0.0, r1.0);
+                let t2 = _mm256_unpacklo_ps(r2.0, r3.0);
+                let t3 = _mm256_unpackhi_ps(r2.0, r3.0);
+                let t4 = _mm256_unpacklo_ps(r4.0, r5.0);
+                let t5 = _mm256_unpackhi_ps(r4.0, r5.0);
+                let t6 = _mm256_unpacklo_ps(r6.0, r7.0);
+                let t7 = _mm256_unpackhi_ps(r6.0, r7.0);
+                let q0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+                let q1 = _mm256_shuffle_ps::<0xEE>(t0, t2);
+                let q2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+                let q3 = _mm256_shuffle_ps::<0xEE>(t1, t3);
+                let q4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+                let q5 = _mm256_shuffle_ps::<0xEE>(t4, t6);
+                let q6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+                let q7 = _mm256_shuffle_ps::<0xEE>(t5, t7);
+                [
+                    Avx2(_mm256_permute2f128_ps::<0x20>(q0, q4)),
+                    Avx2(_mm256_permute2f128_ps::<0x20>(q1, q5)),
+                    Avx2(_mm256_permute2f128_ps::<0x20>(q2, q6)),
+                    Avx2(_mm256_permute2f128_ps::<0x20>(q3, q7)),
+                    Avx2(_mm256_permute2f128_ps::<0x31>(q0, q4)),
+                    Avx2(_mm256_permute2f128_ps::<0x31>(q1, q5)),
+                    Avx2(_mm256_permute2f128_ps::<0x31>(q2, q6)),
+                    Avx2(_mm256_permute2f128_ps::<0x31>(q3, q7)),
+                ]
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rows<V: Lanes>() -> [V; LANES] {
+        std::array::from_fn(|r| V::from_array(std::array::from_fn(|l| (10 * r + l) as f32)))
+    }
+
+    fn check_transpose<V: Lanes>(name: &str) {
+        let columns = V::transpose(rows::<V>());
+        for (l, column) in columns.iter().enumerate() {
+            let expected: [f32; LANES] = std::array::from_fn(|r| (10 * r + l) as f32);
+            assert_eq!(column.to_array(), expected, "{name}, column {l}");
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn check_transpose_avx2() {
+        check_transpose::<Avx2>("Avx2");
+    }
+
+    #[test]
+    fn transpose_moves_lane_l_of_row_r_to_lane_r_of_row_l() {
+        check_transpose::<Portable>("Portable");
+        #[cfg(target_arch = "x86_64")]
+        if Kernel::detect() == Kernel::Avx2Fma {
+            // SAFETY: the CPU has AVX2 and FMA.
+            unsafe { check_transpose_avx2() };
         }
     }
 }

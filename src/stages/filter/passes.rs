@@ -6,8 +6,10 @@
 //! pass's direction: the X pass on pixels (x0 + l, y) of the row-major input planes,
 //! the Y pass on pixels (x, y0 + l) of the column set (the transposed image). Either
 //! way a tap of all eight targets is eight consecutive floats of each plane, one vector
-//! load, and a task's taps stay in cache. The X pass writes the column set
-//! transposed, lane by lane. The kernel (AVX2 + FMA or portable, [`Kernel`]) is chosen
+//! load, and a task's taps stay in cache. Both passes store through 8 x 8 blocks
+//! transposed in registers ([`Lanes::transpose`]): the X pass writes the column set's
+//! lines eight positions at a time, the Y pass the output rows eight pixels at a time.
+//! The kernel (AVX2 + FMA or portable, [`Kernel`]) is chosen
 //! per band; both give the same bits.
 //!
 //! The lane operations are never called from closures: closures do not inherit
@@ -27,9 +29,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 /// Image columns per parallel task of the X pass (its lines of the column set; a
-/// multiple of [`LANES`], so that no group of lanes spans two tasks). 16: the lane
-/// stores into the task's lines stay in L1 (64 took 25 % longer).
-const COLUMN_BAND: usize = 16;
+/// multiple of [`LANES`], so that no group of lanes spans two tasks). 32 was about 8 %
+/// faster than 16 once the X pass stored whole blocks; 64 was within the noise.
+const COLUMN_BAND: usize = 32;
 /// Image rows per parallel task of the Y pass (a multiple of [`LANES`]).
 const ROW_BAND: usize = 24;
 const _: () = assert!(COLUMN_BAND.is_multiple_of(LANES) && ROW_BAND.is_multiple_of(LANES));
@@ -92,7 +94,10 @@ fn x_band_avx2(input: &Planes, radius: usize, x_start: usize, layout: &Layout, l
 }
 
 /// The X pass for image columns `x_start..` into `lines`, their lines of the column set
-/// (`layout`).
+/// (`layout`). Blocks of [`LANES`] x [`LANES`] pixels: eight groups down the rows, then
+/// each plane's block transposed, so that a line takes its eight positions in one vector
+/// store (one float per lane into eight lines cost a quarter of the pass). Rows past the
+/// last whole block are stored lane by lane.
 #[inline(always)]
 fn x_band<V: Lanes>(
     input: &Planes,
@@ -102,74 +107,101 @@ fn x_band<V: Lanes>(
     lines: &mut [f32],
 ) {
     let x_end = x_start + lines.len() / layout.row_step();
-    let (data, s) = (input.data(), input.plane_stride());
-    let kinds = [(DIR, B2X_DIR, C_DIR), (IND, B2_IND, C_IND)];
-    for y in 0..input.height {
+    let block_rows = input.height / LANES * LANES;
+    for y0 in (0..block_rows).step_by(LANES) {
         for x0 in (x_start..x_end).step_by(LANES) {
             let lanes = LANES.min(x_end - x0);
-            // Stores lane l's value of plane q at position y of line x0 + l.
-            let mut put = |q: usize, v: [f32; LANES]| {
-                let first = (x0 - x_start) * layout.row_step() + layout.in_row(q, y);
-                for (l, v) in v.iter().enumerate().take(lanes) {
-                    lines[first + l * layout.row_step()] = *v;
+            let mut block = [[V::splat(0.0); LANES]; COLUMN_PLANES];
+            for r in 0..LANES {
+                let group = x_group::<V>(input, radius, x0, y0 + r);
+                for (rows, v) in block.iter_mut().zip(group) {
+                    rows[r] = v;
                 }
-            };
-            // Pixel (x0 + l, y) of any plane is inside the planes: the padding covers a
-            // group's lanes past the width.
-            let c = input.index(x0 as isize, y);
-            let position = [
-                load::<V>(data, c + PX * s),
-                load::<V>(data, c + PY * s),
-                load::<V>(data, c + PZ * s),
-            ];
-            for (q, v) in [C_PX, C_PY, C_PZ].into_iter().zip(position) {
-                put(q, v.to_array());
             }
-            put(C_B2Y_DIR, load::<V>(data, c + B2Y_DIR * s).to_array());
-            put(C_B2_IND, load::<V>(data, c + B2_IND * s).to_array());
-            for (values, b2, first) in kinds {
-                let valid: [V; 2] = [
-                    load(data, c + (values + 6) * s),
-                    load(data, c + (values + 7) * s),
-                ];
-                let mut sums = [V::splat(0.0); VALUE_PLANES];
-                let any = !(valid[0].all_zero() && valid[1].all_zero());
-                if any {
-                    let targets = Targets {
-                        position,
-                        b2: load(data, c + b2 * s),
-                    };
-                    let window = line_window(data, c, s, radius);
-                    let planes = TapPlanes {
-                        position: PX,
-                        b2,
-                        values,
-                    };
-                    // SAFETY: the taps |i| <= radius of the group lie inside the row's
-                    // planes (`fits_radius`).
-                    unsafe {
-                        let limit = V::splat(EXP_CUTOFF);
-                        accumulate(&Contiguous, &window, planes, &targets, limit, &mut sums)
-                    };
-                }
-                for (layer, &ok) in valid.iter().enumerate() {
-                    for c in 0..3 {
-                        // A missing value (NaN) is stored as 0 with valid 0.
-                        let v = if any {
-                            sums[3 * layer + c]
-                                .div(sums[6 + layer])
-                                .zero_if_nan()
-                                .zero_unless_positive(ok)
-                        } else {
-                            V::splat(0.0)
-                        };
-                        put(first + 3 * layer + c, v.to_array());
-                    }
-                    put(first + 6 + layer, ok.to_array());
+            for (q, rows) in block.into_iter().enumerate() {
+                let first = (x0 - x_start) * layout.row_step() + layout.in_row(q, y0);
+                for (l, column) in V::transpose(rows).into_iter().enumerate().take(lanes) {
+                    let at = first + l * layout.row_step();
+                    let positions = &mut lines[at..at + LANES];
+                    // SAFETY: `positions` holds LANES floats.
+                    unsafe { column.store(positions.as_mut_ptr()) };
                 }
             }
         }
     }
+    for y in block_rows..input.height {
+        for x0 in (x_start..x_end).step_by(LANES) {
+            let lanes = LANES.min(x_end - x0);
+            let group = x_group::<V>(input, radius, x0, y);
+            for (q, v) in group.into_iter().enumerate() {
+                let first = (x0 - x_start) * layout.row_step() + layout.in_row(q, y);
+                for (l, v) in v.to_array().into_iter().enumerate().take(lanes) {
+                    lines[first + l * layout.row_step()] = v;
+                }
+            }
+        }
+    }
+}
+
+/// The X pass for pixels (x0 + l, y): the column set's planes, each a vector over the
+/// lanes (0 with valid 0 where a layer has no value).
+#[inline(always)]
+fn x_group<V: Lanes>(input: &Planes, radius: usize, x0: usize, y: usize) -> [V; COLUMN_PLANES] {
+    let (data, s) = (input.data(), input.plane_stride());
+    let mut out = [V::splat(0.0); COLUMN_PLANES];
+    // Pixel (x0 + l, y) of any plane is inside the planes: the padding covers a group's
+    // lanes past the width.
+    let c = input.index(x0 as isize, y);
+    let position = [
+        load::<V>(data, c + PX * s),
+        load::<V>(data, c + PY * s),
+        load::<V>(data, c + PZ * s),
+    ];
+    out[C_PX] = position[0];
+    out[C_PY] = position[1];
+    out[C_PZ] = position[2];
+    out[C_B2Y_DIR] = load(data, c + B2Y_DIR * s);
+    out[C_B2_IND] = load(data, c + B2_IND * s);
+    for (values, b2, first) in [(DIR, B2X_DIR, C_DIR), (IND, B2_IND, C_IND)] {
+        let valid: [V; 2] = [
+            load(data, c + (values + 6) * s),
+            load(data, c + (values + 7) * s),
+        ];
+        // Kinds without a value anywhere in the group: zeros, and the valid planes.
+        if valid[0].all_zero() && valid[1].all_zero() {
+            out[first + 6] = valid[0];
+            out[first + 7] = valid[1];
+            continue;
+        }
+        let targets = Targets {
+            position,
+            b2: load(data, c + b2 * s),
+        };
+        let window = line_window(data, c, s, radius);
+        let planes = TapPlanes {
+            position: PX,
+            b2,
+            values,
+        };
+        let mut sums = [V::splat(0.0); VALUE_PLANES];
+        // SAFETY: the taps |i| <= radius of the group lie inside the row's planes
+        // (`fits_radius`).
+        unsafe {
+            let limit = V::splat(EXP_CUTOFF);
+            accumulate(&Contiguous, &window, planes, &targets, limit, &mut sums)
+        };
+        for (layer, &ok) in valid.iter().enumerate() {
+            for c in 0..3 {
+                // A missing value (NaN) is stored as 0 with valid 0.
+                out[first + 3 * layer + c] = sums[3 * layer + c]
+                    .div(sums[6 + layer])
+                    .zero_if_nan()
+                    .zero_unless_positive(ok);
+            }
+            out[first + 6 + layer] = ok;
+        }
+    }
+    out
 }
 
 /// The Y pass, eq. 22, with the temporal taps of eq. 26 when `previous` is given:
@@ -246,10 +278,51 @@ fn y_band_avx2(source: &YSource, out: &mut BandOut) {
 }
 
 /// The Y pass over one band of rows, [`LANES`] rows of an image column at a time.
+/// Blocks of [`LANES`] x [`LANES`] pixels: eight groups along the row, then each output
+/// plane's block transposed, so that an output row takes its eight pixels at once (a
+/// pixel per lane into eight rows cost a quarter of the pass). Columns past the last
+/// whole block are stored lane by lane.
 #[inline(always)]
 fn y_band<V: Lanes>(source: &YSource, out: &mut BandOut) {
     let rows = out.layers[0].len() / out.width;
-    for x in 0..out.width {
+    let block_columns = out.width / LANES * LANES;
+    for x0 in (0..block_columns).step_by(LANES) {
+        for dy0 in (0..rows).step_by(LANES) {
+            let mut groups = [[[[0.0; LANES]; 6]; 2]; LANES];
+            for (dx, group) in groups.iter_mut().enumerate() {
+                *group = y_group::<V>(source, x0 + dx, out.y0 + dy0);
+            }
+            // by_row[k][p][l][dx]: kind k, plane p (E_R rgb, E_RV rgb) of pixel
+            // (x0 + dx, dy0 + l).
+            let mut by_row = [[[[0.0; LANES]; LANES]; 6]; 2];
+            for (k, kind) in by_row.iter_mut().enumerate() {
+                for (p, plane) in kind.iter_mut().enumerate() {
+                    let mut columns = [V::splat(0.0); LANES];
+                    for (column, group) in columns.iter_mut().zip(&groups) {
+                        *column = V::from_array(group[k][p]);
+                    }
+                    for (row, v) in plane.iter_mut().zip(V::transpose(columns)) {
+                        *row = v.to_array();
+                    }
+                }
+            }
+            for l in 0..LANES.min(rows - dy0) {
+                let i = (dy0 + l) * out.width + x0;
+                for dx in 0..LANES {
+                    let rgb = |k: usize, layer: usize| {
+                        let p = &by_row[k];
+                        let c = 3 * layer;
+                        Vec3::new(p[c][l][dx], p[c + 1][l][dx], p[c + 2][l][dx])
+                    };
+                    out.layers[0][i + dx] = rgb(0, 0);
+                    out.layers[2][i + dx] = rgb(0, 1);
+                    out.layers[1][i + dx] = rgb(1, 0);
+                    out.layers[3][i + dx] = rgb(1, 1);
+                }
+            }
+        }
+    }
+    for x in block_columns..out.width {
         for dy0 in (0..rows).step_by(LANES) {
             let [dir, ind] = y_group::<V>(source, x, out.y0 + dy0);
             for l in 0..LANES.min(rows - dy0) {

@@ -271,6 +271,19 @@ struct BandOut<'a> {
     layers: [&'a mut [Vec3]; 4],
 }
 
+impl BandOut<'_> {
+    /// Sets pixel `i` of the band from its values per kind (direct, indirect) and layer
+    /// (E_R, E_RV): into E_R^dir, E_RV^dir, E_R^ind, E_RV^ind.
+    #[inline(always)]
+    fn set(&mut self, i: usize, kinds: [[Vec3; 2]; 2]) {
+        let [[r_dir, rv_dir], [r_ind, rv_ind]] = kinds;
+        self.layers[0][i] = r_dir;
+        self.layers[2][i] = rv_dir;
+        self.layers[1][i] = r_ind;
+        self.layers[3][i] = rv_ind;
+    }
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn y_band_avx2(source: &YSource, out: &mut BandOut) {
@@ -314,10 +327,7 @@ fn y_band<V: Lanes>(source: &YSource, out: &mut BandOut) {
                         let c = 3 * layer;
                         Vec3::new(p[c][l][dx], p[c + 1][l][dx], p[c + 2][l][dx])
                     };
-                    out.layers[0][i + dx] = rgb(0, 0);
-                    out.layers[2][i + dx] = rgb(0, 1);
-                    out.layers[1][i + dx] = rgb(1, 0);
-                    out.layers[3][i + dx] = rgb(1, 1);
+                    out.set(i + dx, [[rgb(0, 0), rgb(0, 1)], [rgb(1, 0), rgb(1, 1)]]);
                 }
             }
         }
@@ -330,10 +340,10 @@ fn y_band<V: Lanes>(source: &YSource, out: &mut BandOut) {
                 let rgb = |r: &[[f32; LANES]; 6], layer: usize| {
                     Vec3::new(r[3 * layer][l], r[3 * layer + 1][l], r[3 * layer + 2][l])
                 };
-                out.layers[0][i] = rgb(&dir, 0);
-                out.layers[2][i] = rgb(&dir, 1);
-                out.layers[1][i] = rgb(&ind, 0);
-                out.layers[3][i] = rgb(&ind, 1);
+                out.set(
+                    i,
+                    [[rgb(&dir, 0), rgb(&dir, 1)], [rgb(&ind, 0), rgb(&ind, 1)]],
+                );
             }
         }
     }

@@ -48,6 +48,16 @@ pub(super) struct PixelOut {
     pub(super) direct_min_distance: f32,
 }
 
+/// The outputs a visible virtual surface sets in [`PixelOut`] (its mask is 0).
+struct VirtualSurface {
+    e_rv_dir: Vec3,
+    e_rv_ind: Vec3,
+    k_v: Vec3,
+    position: Vec3,
+    normal: Vec3,
+    direct_min_distance: f32,
+}
+
 /// One row of every output, as [`PixelContext::row`] fills it.
 pub(super) struct RowOut<'a> {
     pub(super) e_r_dir: &'a mut [Vec3],
@@ -63,6 +73,7 @@ pub(super) struct RowOut<'a> {
 }
 
 impl RowOut<'_> {
+    #[inline(always)]
     pub(super) fn put(&mut self, x: usize, p: PixelOut) {
         self.e_r_dir[x] = p.e_r_dir;
         self.e_r_ind[x] = p.e_r_ind;
@@ -138,8 +149,11 @@ impl PixelContext<'_> {
             } else {
                 None
             };
-            for l in 0..lanes {
-                let real_shaded = shaded.filter(|_| active[l].to_bits() != 0).map(|s| s[l]);
+            for (l, active) in active.iter().enumerate().take(lanes) {
+                let real_shaded = shaded
+                    .as_ref()
+                    .filter(|_| active.to_bits() != 0)
+                    .map(|s| s.lane(l));
                 out.put(x0 + l, self.pixel_with(x0 + l, y, real_shaded));
             }
         }
@@ -180,8 +194,9 @@ impl PixelContext<'_> {
     }
 
     /// Every output of pixel (x, y), given the shading of its real surface (`None`
-    /// where it has none).
-    #[inline]
+    /// where it has none). Inlined into the row loops, so that the shading stays in
+    /// registers; the rare pixels of a virtual surface go on in [`Self::virtual_pixel`].
+    #[inline(always)]
     fn pixel_with(&self, x: usize, y: usize, real_shaded: Option<Shaded>) -> PixelOut {
         let w = self.inputs.depth.width as usize;
         let i = y * w + x;
@@ -206,10 +221,26 @@ impl PixelContext<'_> {
             out.direct_min_distance = s.min_occluder;
         }
         let id = self.ids[i];
-        if id == NO_ID {
-            return out;
+        if id != NO_ID
+            && let Some(v) = self.virtual_surface(x, y, id)
+        {
+            out.e_rv_dir = v.e_rv_dir;
+            out.e_rv_ind = v.e_rv_ind;
+            out.mask = 0.0;
+            out.k_v = v.k_v;
+            out.position = v.position;
+            out.normal = v.normal;
+            out.direct_min_distance = v.direct_min_distance;
         }
-        // The virtual surface at the pixel centre, if nearer than the real one.
+        out
+    }
+
+    /// The outputs of the virtual surface of triangle `id` at the centre of pixel (x,
+    /// y), which the camera raster found there; `None` where the real surface is the
+    /// nearer after all (or the ray misses at the very edge).
+    #[inline(never)]
+    fn virtual_surface(&self, x: usize, y: usize, id: u32) -> Option<VirtualSurface> {
+        let i = y * self.inputs.depth.width as usize + x;
         let c = self.inputs.camera;
         let ray = c.ray(x as f32, y as f32);
         let dir = self
@@ -225,23 +256,23 @@ impl PixelContext<'_> {
             // The raster and the ray test disagree at the very edge: ask the scene.
             None => scene.intersect(origin, dir, 0.0, f32::INFINITY),
         };
-        let Some(hit) = hit else { return out };
+        let hit = hit?;
         let z = self.inputs.depth.data[i];
         if depth_is_valid(z) && hit.t >= z * ray.length() {
-            return out;
+            return None;
         }
         let n = Vec3A::from(hit.normal);
         let x = Vec3A::from(hit.position);
         let patch = self.sampling.footprint(x);
         // The objects lie inside every frustum: always look up.
         let s = shade_point(x, n, patch, u64::MAX, self.lights, self.maps, self.biases);
-        out.e_rv_dir = s.e_rv;
-        out.e_rv_ind = self.sh.at(n);
-        out.mask = 0.0;
-        out.k_v = hit.material.albedo;
-        out.position = hit.position;
-        out.normal = hit.normal;
-        out.direct_min_distance = s.min_occluder;
-        out
+        Some(VirtualSurface {
+            e_rv_dir: s.e_rv,
+            e_rv_ind: self.sh.at(n),
+            k_v: hit.material.albedo,
+            position: hit.position,
+            normal: hit.normal,
+            direct_min_distance: s.min_occluder,
+        })
     }
 }

@@ -54,6 +54,29 @@ fn splat3<V: Lanes>(v: Vec3) -> [V; 3] {
     [V::splat(v.x), V::splat(v.y), V::splat(v.z)]
 }
 
+/// The [`Shaded`] values of eight points, one per lane, as arrays: a pixel reads its
+/// lane with [`ShadedLanes::lane`]. (Building eight `Shaded` here and copying one out
+/// later reads whole vectors of fields just written one by one, which stalls the CPU's
+/// store forwarding.)
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ShadedLanes {
+    e_r: [[f32; LANES]; 3],
+    e_rv: [[f32; LANES]; 3],
+    min_occluder: [f32; LANES],
+}
+
+impl ShadedLanes {
+    /// Lane `l`'s values.
+    #[inline(always)]
+    pub fn lane(&self, l: usize) -> Shaded {
+        Shaded {
+            e_r: Vec3::new(self.e_r[0][l], self.e_r[1][l], self.e_r[2][l]),
+            e_rv: Vec3::new(self.e_rv[0][l], self.e_rv[1][l], self.e_rv[2][l]),
+            min_occluder: self.min_occluder[l],
+        }
+    }
+}
+
 /// The eight points' [`Shaded`] values; lanes outside `points.active` are meaningless.
 /// `lookup` is the lights' frustum mask of [`shade_point`](super::shade::shade_point),
 /// the same for the eight points (they share a tile).
@@ -64,7 +87,7 @@ pub(crate) fn shade_points<V: Lanes>(
     lights: &[PreparedLight],
     maps: Maps,
     biases: Biases,
-) -> [Shaded; LANES] {
+) -> ShadedLanes {
     let (x, n) = (points.position, points.normal);
     let zero = V::splat(0.0);
     let infinity = V::splat(f32::INFINITY);
@@ -191,12 +214,9 @@ pub(crate) fn shade_points<V: Lanes>(
         }
     }
     // No closures on lanes here (see `crate::simd`).
-    let e_r = [e_r[0].to_array(), e_r[1].to_array(), e_r[2].to_array()];
-    let e_rv = [e_rv[0].to_array(), e_rv[1].to_array(), e_rv[2].to_array()];
-    let min_occluder = min_occluder.to_array();
-    std::array::from_fn(|l| Shaded {
-        e_r: Vec3::new(e_r[0][l], e_r[1][l], e_r[2][l]),
-        e_rv: Vec3::new(e_rv[0][l], e_rv[1][l], e_rv[2][l]),
-        min_occluder: min_occluder[l],
-    })
+    ShadedLanes {
+        e_r: [e_r[0].to_array(), e_r[1].to_array(), e_r[2].to_array()],
+        e_rv: [e_rv[0].to_array(), e_rv[1].to_array(), e_rv[2].to_array()],
+        min_occluder: min_occluder.to_array(),
+    }
 }

@@ -35,17 +35,21 @@
 //!
 //! Cost: the real surfaces are shaded eight pixels at a time (`shade_lanes.rs`, AVX2 +
 //! FMA where the CPU has them, [`crate::simd`]), with the bits of the per-point
-//! `shade_point` (tested); the rest of the time goes to the per-light real shadow maps
-//! (a splat of the real points of the tiles that may reach each frustum), the camera
-//! raster and the per-pixel outputs.
+//! `shade_point` (tested). The shadow maps are built for up to eight lights per pass,
+//! one light per lane: the triangles (`virtual_maps.rs`) and the real points of the
+//! tiles that may reach a frustum (`real_splat.rs`) are moved into all the group's light
+//! spaces at once, with the bits of the one-light code (tested). The rest of the time
+//! goes to the camera raster and the per-pixel outputs.
 
 mod pixel;
 mod raster;
+mod real_splat;
 mod shade;
 mod shade_lanes;
 mod shadow;
 #[cfg(test)]
 mod tests;
+mod virtual_maps;
 
 use crate::graph::{
     Frame, ParamDefault, ParamSpec, Product, ProductKind, Stage, StageError, StageInfo,
@@ -60,8 +64,8 @@ use glam::{Affine3A, Vec2, Vec3, Vec3A};
 use pixel::{PixelContext, RowOut, sampling_of};
 use raster::{DepthTarget, NO_ID, ScreenTriangle, raster_screen_triangle, screen_triangles};
 use rayon::prelude::*;
-use shade::{Biases, Maps, PreparedLight, Sh9Irradiance};
-use shadow::{ShadowFrustum, TILE, Tile, real_shadow_map, tile_of, virtual_shadow_map};
+use shade::{Biases, Maps, Sh9Irradiance};
+use shadow::{TILE, Tile, tile_of};
 use std::sync::Arc;
 
 const PARAMS: &[ParamSpec] = &[
@@ -243,9 +247,11 @@ pub struct ValRenderer {
     /// Per tile, bit j set when the tile's real points may be inside light j's frustum.
     lookup: Vec<u64>,
     maps: Vec<f32>,
-    /// The shading kernel; `None`: the fastest the CPU runs (all give the same bits).
+    /// The shading and splatting kernel; `None`: the fastest the CPU runs (all give the
+    /// same bits).
     kernel: Option<Kernel>,
-    /// Shade every pixel with the scalar `shade_point` instead (the kernels' reference).
+    /// Shade every pixel with the scalar `shade_point`, and splat the real shadow maps
+    /// one light and one point at a time, instead (the kernels' reference).
     #[cfg(test)]
     scalar_reference: bool,
 }
@@ -466,66 +472,6 @@ impl ValRenderer {
                 tile_of(points, w, x0, (x0 + TILE).min(w), y0, (y0 + TILE).min(h))
             })
             .collect();
-    }
-
-    /// Fits each light's frustum and builds its two shadow maps (in parallel over
-    /// lights); returns the lights prepared for shading.
-    fn shadow_maps(&mut self, inputs: &ValInputs, params: &ValShadingParams) -> Vec<PreparedLight> {
-        let size = params.shadow_map_size;
-        let bounds = inputs.objects.bounds();
-        let frusta: Vec<Option<ShadowFrustum>> = inputs
-            .lights
-            .lights
-            .iter()
-            .map(|l| {
-                if inputs.objects.is_empty() {
-                    return None;
-                }
-                ShadowFrustum::fit(
-                    l.position,
-                    l.normal,
-                    &bounds,
-                    size,
-                    params.real_occluder_reach,
-                )
-            })
-            .collect();
-        let stride = 3 * size * size;
-        self.maps.resize(stride * frusta.len(), f32::INFINITY);
-        let (points, tiles, width) = (&self.real_points, &self.tiles, inputs.depth.width as usize);
-        let patches = &self.real_patches;
-        self.maps
-            .par_chunks_mut(stride)
-            .zip(frusta.par_iter())
-            .for_each(|(maps, frustum)| {
-                let Some(f) = frustum else { return };
-                let (virtual_map, rest) = maps.split_at_mut(size * size);
-                let (real_map, scratch) = rest.split_at_mut(size * size);
-                virtual_shadow_map(f, inputs.objects, virtual_map);
-                real_shadow_map(f, points, patches, width, tiles, real_map, scratch);
-            });
-        // Which tiles need shadow-map lookups for which lights.
-        self.lookup = self
-            .tiles
-            .par_iter()
-            .map(|tile| {
-                let Some(tile) = tile else { return 0 };
-                let mut mask = 0u64;
-                for (j, f) in frusta.iter().enumerate().take(64) {
-                    if f.is_some_and(|f| f.may_hold(tile.centre, tile.radius, 0.0)) {
-                        mask |= 1 << j;
-                    }
-                }
-                mask
-            })
-            .collect();
-        inputs
-            .lights
-            .lights
-            .iter()
-            .zip(frusta)
-            .map(|(l, f)| PreparedLight::new(l, f))
-            .collect()
     }
 }
 

@@ -87,6 +87,9 @@ fn edge(a: Vec2, b: Vec2, p: Vec2) -> f32 {
 }
 
 /// Rasterizes one screen-space triangle given as (pixel position, 1/z) per vertex.
+/// (Inlined: most triangles of a shadow map cover a texel or none, and a call would
+/// pass the vertices through memory just written.)
+#[inline(always)]
 pub(crate) fn raster_screen_triangle(target: &mut DepthTarget, v: [(Vec2, f32); 3], id: u32) {
     let [(s0, iz0), (s1, iz1), (s2, iz2)] = v;
     let area = edge(s0, s1, s2);

@@ -5,18 +5,27 @@
 //! virtual and reconstructed shadow maps").
 //!
 //! Depth is light-space z along the frustum axis. The virtual map rasterizes the
-//! triangles; the real map splats the depth map's world points (nearest texel, nearest
-//! depth), then closes single-texel holes with the farther of two opposite neighbours
-//! (so a surface sampled more sparsely than the map does not leak light, and no
-//! occluder grows at silhouettes). Real points between the light and the near plane
+//! triangles ([`super::virtual_maps`]); the real map splats the depth map's world points
+//! (nearest texel, nearest depth), then closes single-texel holes with the farther of
+//! two opposite neighbours, so that a surface sampled more sparsely than the map does
+//! not leak light and no occluder grows at silhouettes ([`super::real_splat`]). Real points between the light and the near plane
 //! count as occluders (the paper projects them onto the near plane), but only from
 //! `real_occluder_reach` metres in front of the objects' near side: the emitter's own
 //! surface (a VAL sits on the wall or lamp it came from, or 100 m out for a distant
 //! map, behind the room's walls) must not shadow the scene it lights.
 
-use super::raster::{DepthTarget, raster_view_triangle};
-use crate::objects::{Aabb, VirtualScene};
+#[cfg(test)]
+use super::real_splat;
+use super::real_splat::{RealSurface, RealTarget, real_shadow_maps};
+use super::shade::PreparedLight;
+#[cfg(test)]
+use super::virtual_maps;
+use super::virtual_maps::{VirtualTarget, virtual_shadow_maps};
+use super::{ValInputs, ValRenderer, ValShadingParams};
+use crate::objects::Aabb;
+use crate::simd::{Kernel, LANES, Lanes};
 use glam::{Vec2, Vec3, Vec3A};
+use rayon::prelude::*;
 
 /// The light-space frame and projection of one light's shadow maps.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -98,7 +107,7 @@ impl ShadowFrustum {
 
     /// Raster coordinates (texel centres at integers) of light-space point `l`.
     #[inline]
-    fn project(&self, l: Vec3) -> Vec2 {
+    pub fn project(&self, l: Vec3) -> Vec2 {
         let half = self.size as f32 * 0.5 - 0.5;
         Vec2::new(l.x / l.z * self.scale + half, l.y / l.z * self.scale + half)
     }
@@ -127,22 +136,92 @@ impl ShadowFrustum {
     }
 }
 
-/// Rasterizes the virtual triangles into `map` (size^2 texels, reset here).
-pub(crate) fn virtual_shadow_map(frustum: &ShadowFrustum, scene: &VirtualScene, map: &mut [f32]) {
-    map.fill(f32::INFINITY);
-    let mut target = DepthTarget {
-        width: frustum.size,
-        height: frustum.size,
-        first_row: 0,
-        depth: map,
-        ids: None,
-    };
-    for (i, tri) in scene.triangles.iter().enumerate() {
-        let view = tri
-            .vertices
-            .map(|v| Vec3::from(frustum.light_space(v.into())));
-        raster_view_triangle(&mut target, &view, 1e-6, |l| frustum.project(l), i as u32);
+/// The frames of up to [`LANES`] lights' frusta, one light per lane. Lanes without a
+/// light hold a frame that no point passes (`real_from` infinite, `size` 0).
+pub(crate) struct FrustumLanes<V> {
+    origin: [V; 3],
+    right: [V; 3],
+    up: [V; 3],
+    axis: [V; 3],
+    pub real_from: V,
+    pub scale: V,
+    /// Half the texels per side: map coordinates of the axis.
+    pub half: V,
+    /// Texels per side.
+    pub size: V,
+}
+
+impl<V: Lanes> FrustumLanes<V> {
+    #[inline(always)]
+    pub fn new<'f>(frusta: impl Iterator<Item = &'f ShadowFrustum> + Clone) -> Self {
+        // No lane operations in closures (see `crate::simd`): they only build arrays.
+        let lanes = |none: f32, f: &dyn Fn(&ShadowFrustum) -> f32| {
+            let mut a = [none; LANES];
+            for (l, frustum) in frusta.clone().take(LANES).enumerate() {
+                a[l] = f(frustum);
+            }
+            a
+        };
+        let vector = |f: &dyn Fn(&ShadowFrustum) -> Vec3A| {
+            [
+                lanes(0.0, &|t| f(t).x),
+                lanes(0.0, &|t| f(t).y),
+                lanes(0.0, &|t| f(t).z),
+            ]
+        };
+        FrustumLanes {
+            origin: lanes3(vector(&|f| f.origin)),
+            right: lanes3(vector(&|f| f.right)),
+            up: lanes3(vector(&|f| f.up)),
+            axis: lanes3(vector(&|f| f.axis)),
+            real_from: V::from_array(lanes(f32::INFINITY, &|f| f.real_from)),
+            scale: V::from_array(lanes(1.0, &|f| f.scale)),
+            half: V::from_array(lanes(0.0, &|f| f.size as f32 * 0.5)),
+            size: V::from_array(lanes(0.0, &|f| f.size as f32)),
+        }
     }
+
+    /// `p - origin` per lane: [`ShadowFrustum::light_space`] is this offset's dot
+    /// products with `right`, `up` and `axis` ([`Self::x`], [`Self::y`], [`Self::z`]).
+    #[inline(always)]
+    pub fn offset(&self, p: Vec3A) -> [V; 3] {
+        [
+            V::splat(p.x).sub(self.origin[0]),
+            V::splat(p.y).sub(self.origin[1]),
+            V::splat(p.z).sub(self.origin[2]),
+        ]
+    }
+
+    #[inline(always)]
+    pub fn x(&self, d: [V; 3]) -> V {
+        dot(d, self.right)
+    }
+
+    #[inline(always)]
+    pub fn y(&self, d: [V; 3]) -> V {
+        dot(d, self.up)
+    }
+
+    #[inline(always)]
+    pub fn z(&self, d: [V; 3]) -> V {
+        dot(d, self.axis)
+    }
+}
+
+#[inline(always)]
+fn lanes3<V: Lanes>(a: [[f32; LANES]; 3]) -> [V; 3] {
+    [
+        V::from_array(a[0]),
+        V::from_array(a[1]),
+        V::from_array(a[2]),
+    ]
+}
+
+/// (x rx + y ry) + z rz per lane, the order of glam's `Vec3A::dot` on x86-64 (no fused
+/// multiply-add), so each lane has the bits of [`ShadowFrustum::light_space`].
+#[inline(always)]
+fn dot<V: Lanes>(d: [V; 3], e: [V; 3]) -> V {
+    d[0].mul(e[0]).add(d[1].mul(e[1])).add(d[2].mul(e[2]))
 }
 
 /// Bounding spheres of tiles of the real points, to skip whole tiles per light.
@@ -206,103 +285,134 @@ impl PointSampling {
     }
 }
 
-/// Largest splat half-width in texels (bounds the cost of very close, coarse points).
-const MAX_SPLAT_RADIUS: f32 = 16.0;
-
-/// Splats the real world points (`width` per row, non-finite = none) of the tiles that
-/// may reach the frustum into `map` (nearest depth per texel), each over a square of
-/// texels as wide as the patch it stands for (`patches`, per point: see
-/// [`PointSampling::footprint`]; so a surface the camera sampled more coarsely than the
-/// map's texels still covers the map), then closes single-texel holes into `map` using
-/// `scratch` (both size^2).
-pub(crate) fn real_shadow_map(
-    frustum: &ShadowFrustum,
-    points: &[Vec3A],
-    patches: &[f32],
-    width: usize,
-    tiles: &[Option<Tile>],
-    map: &mut [f32],
-    scratch: &mut [f32],
-) {
-    map.fill(f32::INFINITY);
-    let size = frustum.size;
-    let half = size as f32 * 0.5;
-    for tile in tiles.iter().flatten() {
-        if !frustum.may_hold(tile.centre, tile.radius, frustum.real_from) {
-            continue;
-        }
-        for y in tile.y0..tile.y1 {
-            let row = y * width + tile.x0..y * width + tile.x1;
-            for (p, &patch) in points[row.clone()].iter().zip(&patches[row]) {
-                let l = frustum.light_space(*p);
-                // NaN points fail this test too.
-                if !(l.z >= frustum.real_from && l.z > 0.0) {
-                    continue;
+impl ValRenderer {
+    /// Fits each light's frustum and builds its two shadow maps (in parallel over
+    /// lights); returns the lights prepared for shading.
+    pub(super) fn shadow_maps(
+        &mut self,
+        inputs: &ValInputs,
+        params: &ValShadingParams,
+    ) -> Vec<PreparedLight> {
+        let size = params.shadow_map_size;
+        let bounds = inputs.objects.bounds();
+        let frusta: Vec<Option<ShadowFrustum>> = inputs
+            .lights
+            .lights
+            .iter()
+            .map(|l| {
+                if inputs.objects.is_empty() {
+                    return None;
                 }
-                let k = frustum.scale / l.z;
-                let (fx, fy) = (l.x * k + half, l.y * k + half);
-                // Half the patch's diagonal, in texels.
-                let radius = (0.71 * patch * k).min(MAX_SPLAT_RADIUS);
-                if radius < 0.5 {
-                    if let Some(t) = frustum.texel_at(fx, fy)
-                        && l.z < map[t]
-                    {
-                        map[t] = l.z;
+                ShadowFrustum::fit(
+                    l.position,
+                    l.normal,
+                    &bounds,
+                    size,
+                    params.real_occluder_reach,
+                )
+            })
+            .collect();
+        let stride = 3 * size * size;
+        self.maps.resize(stride * frusta.len(), f32::INFINITY);
+        let surface = RealSurface {
+            points: &self.real_points,
+            patches: &self.real_patches,
+            width: inputs.depth.width as usize,
+            tiles: &self.tiles,
+        };
+        let kernel = self.kernel.unwrap_or_else(Kernel::detect);
+        #[cfg(test)]
+        if self.scalar_reference {
+            self.maps
+                .par_chunks_mut(stride)
+                .zip(frusta.par_iter())
+                .for_each(|(maps, frustum)| {
+                    if let Some(frustum) = frustum {
+                        let (virtual_map, rest) = maps.split_at_mut(size * size);
+                        virtual_maps::virtual_shadow_map(frustum, inputs.objects, virtual_map);
+                        let (map, scratch) = rest.split_at_mut(size * size);
+                        let mut target = RealTarget {
+                            frustum,
+                            map,
+                            scratch,
+                        };
+                        real_splat::real_shadow_map(&mut target, &surface);
                     }
-                    continue;
-                }
-                let s = size as f32;
-                let (x0, x1) = ((fx - radius).max(0.0), (fx + radius).min(s - 1e-3));
-                let (y0, y1) = ((fy - radius).max(0.0), (fy + radius).min(s - 1e-3));
-                if !(x0 <= x1 && y0 <= y1) {
-                    continue;
-                }
-                for ty in y0 as usize..=y1 as usize {
-                    for t in &mut map[ty * size + x0 as usize..=ty * size + x1 as usize] {
-                        if l.z < *t {
-                            *t = l.z;
-                        }
-                    }
-                }
-            }
+                });
+            return self.prepare_lights(inputs, &frusta);
         }
+        // Up to eight lights per pass over the triangles and the points, in as many
+        // passes as there are threads where the lights allow (the maps do not depend on
+        // the grouping).
+        let group = frusta
+            .len()
+            .div_ceil(rayon::current_num_threads())
+            .clamp(1, LANES);
+        self.maps
+            .par_chunks_mut(group * stride)
+            .zip(frusta.par_chunks(group))
+            .for_each(|(maps, frusta)| {
+                let (mut virtual_targets, mut real_targets): (Vec<_>, Vec<_>) = maps
+                    .chunks_mut(stride)
+                    .zip(frusta)
+                    .filter_map(|(maps, frustum)| {
+                        let frustum = frustum.as_ref()?;
+                        let (virtual_map, rest) = maps.split_at_mut(size * size);
+                        let (map, scratch) = rest.split_at_mut(size * size);
+                        Some((
+                            VirtualTarget {
+                                frustum,
+                                map: virtual_map,
+                            },
+                            RealTarget {
+                                frustum,
+                                map,
+                                scratch,
+                            },
+                        ))
+                    })
+                    .unzip();
+                virtual_shadow_maps(kernel, &mut virtual_targets, inputs.objects);
+                real_shadow_maps(kernel, &mut real_targets, &surface);
+            });
+        self.prepare_lights(inputs, &frusta)
     }
-    close_holes(map, scratch, size);
-}
 
-/// Fills each empty texel whose left and right, or upper and lower, neighbours are both
-/// filled, with the farthest of those filled pairs' depths (reads a copy: the result does
-/// not depend on the scan order).
-fn close_holes(map: &mut [f32], scratch: &mut [f32], size: usize) {
-    scratch.copy_from_slice(map);
-    for y in 0..size {
-        for x in 0..size {
-            let i = y * size + x;
-            if scratch[i].is_finite() {
-                continue;
-            }
-            let mut fill = f32::NEG_INFINITY;
-            if x > 0 && x + 1 < size && scratch[i - 1].is_finite() && scratch[i + 1].is_finite() {
-                fill = fill.max(scratch[i - 1]).max(scratch[i + 1]);
-            }
-            if y > 0
-                && y + 1 < size
-                && scratch[i - size].is_finite()
-                && scratch[i + size].is_finite()
-            {
-                fill = fill.max(scratch[i - size]).max(scratch[i + size]);
-            }
-            if fill.is_finite() {
-                map[i] = fill;
-            }
-        }
+    /// Which tiles need which lights' shadow maps ([`ValRenderer::lookup`]), and the
+    /// lights prepared for shading.
+    fn prepare_lights(
+        &mut self,
+        inputs: &ValInputs,
+        frusta: &[Option<ShadowFrustum>],
+    ) -> Vec<PreparedLight> {
+        // Which tiles need shadow-map lookups for which lights.
+        self.lookup = self
+            .tiles
+            .par_iter()
+            .map(|tile| {
+                let Some(tile) = tile else { return 0 };
+                let mut mask = 0u64;
+                for (j, f) in frusta.iter().enumerate().take(64) {
+                    if f.is_some_and(|f| f.may_hold(tile.centre, tile.radius, 0.0)) {
+                        mask |= 1 << j;
+                    }
+                }
+                mask
+            })
+            .collect();
+        inputs
+            .lights
+            .lights
+            .iter()
+            .zip(frusta)
+            .map(|(l, f)| PreparedLight::new(l, *f))
+            .collect()
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::objects::{Material, Triangle};
 
     fn unit_box() -> Aabb {
         Aabb {
@@ -334,114 +444,6 @@ mod tests {
         assert!(ShadowFrustum::fit(Vec3::new(0.0, 5.0, 0.0), Vec3::Y, &b, 64, 1.0).is_none());
         assert!(
             ShadowFrustum::fit(Vec3::new(0.0, 5.0, 0.0), -Vec3::Y, &Aabb::EMPTY, 64, 1.0).is_none()
-        );
-    }
-
-    #[test]
-    fn virtual_map_holds_the_depth_of_a_square_seen_from_above() {
-        let b = unit_box();
-        let f = ShadowFrustum::fit(Vec3::new(0.0, 5.0, 0.0), -Vec3::Y, &b, 64, 1.0).unwrap();
-        let (y, h) = (1.0, 0.25);
-        let v = [
-            Vec3::new(-h, y, -h),
-            Vec3::new(h, y, -h),
-            Vec3::new(h, y, h),
-            Vec3::new(-h, y, h),
-        ];
-        let tri = |a, b, c| Triangle {
-            vertices: [a, b, c],
-            normals: [Vec3::Y; 3],
-            material: 0,
-        };
-        let scene = VirtualScene::new(
-            vec![tri(v[0], v[1], v[2]), tri(v[0], v[2], v[3])],
-            vec![Material::DIFFUSE_GRAY],
-        );
-        let mut map = vec![0.0; 64 * 64];
-        virtual_shadow_map(&f, &scene, &mut map);
-        let centre = f.texel(f.light_space(Vec3A::new(0.0, 0.0, 0.0))).unwrap();
-        assert!((map[centre] - 4.0).abs() < 1e-4, "{}", map[centre]);
-        let outside = f.texel(f.light_space(Vec3A::new(0.45, 0.0, 0.0))).unwrap();
-        assert_eq!(map[outside], f32::INFINITY);
-        // Covered texels: the square's share of the map, (0.5 / 4) / (2 tan) squared.
-        let covered = map.iter().filter(|z| z.is_finite()).count() as f32;
-        let expected = (0.5 / 4.0 / (2.0 * f.tan_half) * 64.0).powi(2);
-        assert!(
-            (covered - expected).abs() < 0.1 * expected,
-            "{covered} vs {expected}"
-        );
-    }
-
-    #[test]
-    fn real_map_keeps_the_nearest_point_and_closes_single_holes() {
-        let b = unit_box();
-        let f = ShadowFrustum::fit(Vec3::new(0.0, 5.0, 0.0), -Vec3::Y, &b, 32, 1.0).unwrap();
-        // A floor sampled at every texel except one column, a nearer point above it, a
-        // point of the light's own ceiling (nearer than real_from) and a NaN.
-        let mut points = Vec::new();
-        let texel_width = f.footprint(5.0);
-        for k in 0..32 {
-            for i in 0..32 {
-                if i == 10 {
-                    points.push(Vec3A::NAN);
-                    continue;
-                }
-                let x = (i as f32 - 15.5) * texel_width;
-                let z = (k as f32 - 15.5) * texel_width;
-                points.push(Vec3A::new(x, 0.0, z));
-            }
-        }
-        points.push(Vec3A::new(0.01, 0.5, 0.01));
-        points.push(Vec3A::new(0.0, 4.9, 0.0));
-        let width = points.len();
-        let tiles = [tile_of(&points, width, 0, width, 0, 1)];
-        let (mut map, mut scratch) = (vec![0.0; 32 * 32], vec![0.0; 32 * 32]);
-        // Points of negligible footprint: one texel each.
-        let sampling = PointSampling {
-            origin: Vec3A::new(0.0, 5.0, 0.0),
-            pixel_angle: 1e-4,
-        };
-        let patches = |points: &[Vec3A], sampling: PointSampling| -> Vec<f32> {
-            points.iter().map(|p| sampling.footprint(*p)).collect()
-        };
-        let fine = patches(&points, sampling);
-        real_shadow_map(&f, &points, &fine, width, &tiles, &mut map, &mut scratch);
-        let at = |p: Vec3A| map[f.texel(f.light_space(p)).unwrap()];
-        assert!(
-            (at(Vec3A::new(0.01, 0.0, 0.01)) - 4.5).abs() < 1e-5,
-            "the point above wins"
-        );
-        assert!((at(Vec3A::new(0.3, 0.0, 0.3)) - 5.0).abs() < 1e-5);
-        let hole = Vec3A::new((10.0 - 15.5) * texel_width, 0.0, 0.0);
-        assert!(
-            (at(hole) - 5.0).abs() < 1e-5,
-            "the missing column is closed"
-        );
-        assert!(
-            map.iter().all(|&z| z >= 4.5),
-            "the ceiling point is not an occluder"
-        );
-        // Coarse points cover the texels around them: every fourth point of each row
-        // still closes the map.
-        let sparse: Vec<Vec3A> = points[..32 * 32].iter().step_by(4).copied().collect();
-        let tiles = [tile_of(&sparse, sparse.len(), 0, sparse.len(), 0, 1)];
-        let coarse = PointSampling {
-            pixel_angle: 4.0 * texel_width / 5.0,
-            ..sampling
-        };
-        real_shadow_map(
-            &f,
-            &sparse,
-            &patches(&sparse, coarse),
-            sparse.len(),
-            &tiles,
-            &mut map,
-            &mut scratch,
-        );
-        let inner = (4..28).flat_map(|y| (4..28).map(move |x| y * 32 + x));
-        assert!(
-            inner.clone().all(|t| (map[t] - 5.0).abs() < 1e-5),
-            "no holes"
         );
     }
 }

@@ -58,6 +58,11 @@ pub trait Lanes: Copy {
     /// # Safety
     /// Every `p + index[l]` must be readable.
     unsafe fn gather(p: *const f32, index: &[i32; LANES]) -> Self;
+    /// Lane l reads `p + index[l]`, `index` holding whole numbers in [0, 2^24) (exact
+    /// in f32), so that an index computed in lanes needs no trip through memory.
+    /// # Safety
+    /// Every `p + index[l]` must be readable.
+    unsafe fn gather_at(p: *const f32, index: Self) -> Self;
     /// # Safety
     /// `p..p + LANES` must be writable.
     unsafe fn store(self, p: *mut f32);
@@ -100,6 +105,8 @@ pub trait Lanes: Copy {
     fn any(self) -> bool;
     /// Truncation toward zero to i32 per lane (for values that fit).
     fn trunc_to_i32(self) -> [i32; LANES];
+    /// Rounding toward zero per lane, as `f32::trunc`.
+    fn trunc(self) -> Self;
     /// The 8 x 8 transpose: lane r of result l is lane l of `rows[r]`.
     fn transpose(rows: [Self; LANES]) -> [Self; LANES];
 }
@@ -130,6 +137,11 @@ impl Lanes for Portable {
     unsafe fn gather(p: *const f32, index: &[i32; LANES]) -> Self {
         // SAFETY: the caller guarantees every p + index[l] is readable.
         Portable(index.map(|i| unsafe { *p.offset(i as isize) }))
+    }
+    #[inline(always)]
+    unsafe fn gather_at(p: *const f32, index: Self) -> Self {
+        // SAFETY: the caller's contract.
+        Portable(index.0.map(|i| unsafe { *p.add(i as usize) }))
     }
     #[inline(always)]
     unsafe fn store(self, p: *mut f32) {
@@ -256,6 +268,10 @@ impl Lanes for Portable {
         self.0.map(|v| v as i32)
     }
     #[inline(always)]
+    fn trunc(self) -> Self {
+        Portable(self.0.map(f32::trunc))
+    }
+    #[inline(always)]
     fn transpose(rows: [Self; LANES]) -> [Self; LANES] {
         std::array::from_fn(|l| Portable(std::array::from_fn(|r| rows[r].0[l])))
     }
@@ -311,6 +327,10 @@ mod avx2 {
                 let index = _mm256_loadu_si256(index.as_ptr().cast());
                 _mm256_i32gather_ps::<4>(p, index)
             })
+        }
+        #[inline(always)]
+        unsafe fn gather_at(p: *const f32, index: Self) -> Self {
+            Avx2(unsafe { _mm256_i32gather_ps::<4>(p, _mm256_cvttps_epi32(index.0)) })
         }
         #[inline(always)]
         unsafe fn store(self, p: *mut f32) {
@@ -417,6 +437,10 @@ mod avx2 {
             a
         }
         #[inline(always)]
+        fn trunc(self) -> Self {
+            Avx2(unsafe { _mm256_round_ps::<{ _MM_FROUND_TO_ZERO | _MM_FROUND_NO_EXC }>(self.0) })
+        }
+        #[inline(always)]
         fn transpose(rows: [Self; LANES]) -> [Self; LANES] {
             let [r0, r1, r2, r3, r4, r5, r6, r7] = rows;
             unsafe {
@@ -481,6 +505,60 @@ mod tests {
         if Kernel::detect() == Kernel::Avx2Fma {
             // SAFETY: the CPU has AVX2 and FMA.
             unsafe { check_transpose_avx2() };
+        }
+    }
+
+    /// `trunc` as `f32::trunc` (negative, halves, just below whole numbers, large,
+    /// infinite, NaN), and `gather_at` reading at whole-number float indices up to
+    /// just below 2^24.
+    fn check_trunc_and_gather_at<V: Lanes>(name: &str) {
+        let values = [
+            [-2.5, -0.7, -0.0, 0.0, 0.49, 0.99999994, 1.0, 127.99999],
+            [
+                4095.5,
+                8_388_607.5,
+                16_777_215.0,
+                1e10,
+                -1e10,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                3.5,
+            ],
+        ];
+        for v in values {
+            let got = V::from_array(v).trunc().to_array();
+            for (g, x) in got.iter().zip(v) {
+                assert_eq!(g.to_bits(), x.trunc().to_bits(), "{name}: trunc({x})");
+            }
+        }
+        assert!(V::splat(f32::NAN).trunc().to_array()[0].is_nan(), "{name}");
+        let data: Vec<f32> = (0..1 << 16).map(|i| i as f32 * 0.5).collect();
+        let index = [0.0, 1.0, 65535.0, 17.0, 17.0, 4096.0, 3.0, 60000.0];
+        // SAFETY: every index is inside `data`.
+        let got = unsafe { V::gather_at(data.as_ptr(), V::from_array(index)) }.to_array();
+        assert_eq!(got, index.map(|i| data[i as usize]), "{name}");
+        // The largest index the contract allows.
+        let mut far = vec![1.0f32; 1 << 24];
+        far[(1 << 24) - 1] = 7.0;
+        let at = [16_777_215.0, 0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        // SAFETY: every index is inside `far`.
+        let got = unsafe { V::gather_at(far.as_ptr(), V::from_array(at)) }.to_array();
+        assert_eq!(got[0], 7.0, "{name}");
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn check_trunc_and_gather_at_avx2() {
+        check_trunc_and_gather_at::<Avx2>("Avx2");
+    }
+
+    #[test]
+    fn trunc_rounds_toward_zero_and_gather_at_reads_at_float_indices() {
+        check_trunc_and_gather_at::<Portable>("Portable");
+        #[cfg(target_arch = "x86_64")]
+        if Kernel::detect() == Kernel::Avx2Fma {
+            // SAFETY: the CPU has AVX2 and FMA.
+            unsafe { check_trunc_and_gather_at_avx2() };
         }
     }
 }

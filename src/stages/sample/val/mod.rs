@@ -65,7 +65,7 @@ use pixel::{PixelContext, RowOut, sampling_of};
 use raster::{DepthTarget, NO_ID, ScreenTriangle, raster_screen_triangle, screen_triangles};
 use rayon::prelude::*;
 use shade::{Biases, Maps, Sh9Irradiance};
-use shadow::{TILE, Tile, tile_of};
+use shadow::{MAX_SHADOW_MAP_SIZE, TILE, Tile, tile_of};
 use std::sync::Arc;
 
 const PARAMS: &[ParamSpec] = &[
@@ -74,7 +74,7 @@ const PARAMS: &[ParamSpec] = &[
         ParamDefault::Int(128),
         "texels per side of each light's two shadow maps (virtual and real), over a frustum fitted to the objects",
     )
-    .range(8.0, 4096.0),
+    .range(8.0, MAX_SHADOW_MAP_SIZE as f64),
     ParamSpec::new(
         "virtual_bias",
         ParamDefault::Float(0.005),
@@ -294,10 +294,11 @@ impl ValRenderer {
                 inputs.camera.width, inputs.camera.height
             )));
         }
-        if params.shadow_map_size == 0 {
-            return Err(StageError::Failed(
-                "sample.val: shadow_map_size must be at least 1".into(),
-            ));
+        if !(1..=MAX_SHADOW_MAP_SIZE).contains(&params.shadow_map_size) {
+            return Err(StageError::Failed(format!(
+                "sample.val: shadow_map_size must be 1 to {MAX_SHADOW_MAP_SIZE}, not {}",
+                params.shadow_map_size
+            )));
         }
         let (wu, hu) = (w as usize, h as usize);
         self.real_surface(inputs);

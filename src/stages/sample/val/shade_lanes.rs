@@ -9,6 +9,7 @@
 //! only when some lane's texels may occlude it.
 
 use super::shade::{Biases, Maps, PreparedLight, Shaded};
+use super::shadow::MAX_SHADOW_MAP_SIZE;
 use crate::simd::{LANES, Lanes};
 use glam::Vec3;
 
@@ -136,31 +137,22 @@ pub(crate) fn shade_points<V: Lanes>(
                 .and(fy.ge(zero))
                 .and(fy.lt(s));
             if inside.any() {
-                let (tx, ty) = (fx.trunc_to_i32(), fy.trunc_to_i32());
-                let last = f.size as i32 - 1;
-                let inside_lanes = inside.to_array();
-                let base = j * maps.stride;
-                let texel: [i32; LANES] = std::array::from_fn(|l| {
-                    if inside_lanes[l].to_bits() >> 31 == 1 {
-                        (base + ty[l].min(last) as usize * f.size + tx[l].min(last) as usize) as i32
-                    } else {
-                        base as i32
-                    }
-                });
-                let mut real_texel = texel;
-                for t in &mut real_texel {
-                    *t += maps.texels as i32;
-                }
-                // Inside light j's two maps, and the offsets fit an i32.
+                // `ShadowFrustum::texel_at`: inside the map the coordinates truncate to
+                // texels below `size`, and the index is a whole number below
+                // MAX_SHADOW_MAP_SIZE^2 = 2^24, exact in f32. Lanes outside read texel 0
+                // and are masked out below.
+                let texel = V::select(inside, fy.trunc().mul(s).add(fx.trunc()), zero);
+                let (virtual_map, real_map) = (j * maps.stride, j * maps.stride + maps.texels);
                 assert!(
-                    f.size * f.size <= maps.texels && base + 2 * maps.texels <= maps.data.len()
+                    f.size <= MAX_SHADOW_MAP_SIZE
+                        && f.size * f.size <= maps.texels
+                        && real_map + maps.texels <= maps.data.len()
                 );
-                assert!(maps.data.len() <= i32::MAX as usize);
                 // SAFETY: every index is a texel of light j's two maps (checked above).
                 let (z_virtual, z_real) = unsafe {
                     (
-                        V::gather(maps.data.as_ptr(), &texel),
-                        V::gather(maps.data.as_ptr(), &real_texel),
+                        V::gather_at(maps.data.as_ptr().add(virtual_map), texel),
+                        V::gather_at(maps.data.as_ptr().add(real_map), texel),
                     )
                 };
                 let vb = V::splat(biases.virtual_bias);

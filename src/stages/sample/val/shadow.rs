@@ -27,6 +27,10 @@ use crate::simd::{Kernel, LANES, Lanes};
 use glam::{Vec2, Vec3, Vec3A};
 use rayon::prelude::*;
 
+/// The largest shadow map, in texels per side: texel indices stay below 2^24, whole
+/// numbers that f32 holds exactly (the shading computes them in float lanes).
+pub(crate) const MAX_SHADOW_MAP_SIZE: usize = 4096;
+
 /// The light-space frame and projection of one light's shadow maps.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct ShadowFrustum {

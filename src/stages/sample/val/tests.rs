@@ -320,6 +320,22 @@ fn missing_depth_and_normals_give_nan_irradiance_not_a_failure() {
     };
     let err = sample_val(&inputs, &ValShadingParams::default()).unwrap_err();
     assert!(err.to_string().contains("normals 4x4"), "{err}");
+    // So are shadow maps of no texels or past the size the shading indexes exactly.
+    let inputs = ValInputs {
+        normals: &normals,
+        ..inputs
+    };
+    for size in [0, 4097] {
+        let params = ValShadingParams {
+            shadow_map_size: size,
+            ..ValShadingParams::default()
+        };
+        let err = sample_val(&inputs, &params).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!("sample.val: shadow_map_size must be 1 to 4096, not {size}")
+        );
+    }
     // An empty frame renders to empty outputs (shadow maps are still built).
     let one_light = lights(vec![light(LAMP, 10.0)]);
     let (empty_depth, empty_normals) = (Image::filled(0, 0, 0.0), Image::filled(0, 0, Vec3::ZERO));

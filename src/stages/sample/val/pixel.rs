@@ -3,7 +3,9 @@
 
 use super::ValInputs;
 use super::raster::NO_ID;
-use super::shade::{Biases, Maps, PreparedLight, Sh9Irradiance, Shaded, shade_point};
+#[cfg(test)]
+use super::shade::shade_point;
+use super::shade::{Biases, Maps, PreparedLight, Sh9Irradiance, Shaded};
 use super::shade_lanes::{Points, shade_points};
 use super::shadow::{PointSampling, TILE};
 use crate::objects::ray_triangle;
@@ -48,7 +50,33 @@ pub(super) struct PixelOut {
     pub(super) direct_min_distance: f32,
 }
 
-/// The outputs a visible virtual surface sets in [`PixelOut`] (its mask is 0).
+#[cfg(test)]
+impl PixelOut {
+    /// The pixel shows the virtual surface `v` (its mask is 0; E_R stays the real
+    /// surface's behind it).
+    #[inline(always)]
+    fn show_virtual(&mut self, v: &VirtualSurface) {
+        self.e_rv_dir = v.e_rv_dir;
+        self.e_rv_ind = v.e_rv_ind;
+        self.mask = 0.0;
+        self.k_v = v.k_v;
+        self.position = v.position;
+        self.normal = v.normal;
+        self.direct_min_distance = v.direct_min_distance;
+    }
+}
+
+/// A virtual surface seen at a pixel centre, before shading.
+struct VirtualHit {
+    x: usize,
+    position: Vec3A,
+    normal: Vec3A,
+    /// The world size of its splat in the maps ([`PointSampling::footprint`]).
+    patch: f32,
+    albedo: Vec3,
+}
+
+/// The outputs a visible virtual surface sets in [`PixelOut`].
 struct VirtualSurface {
     e_rv_dir: Vec3,
     e_rv_ind: Vec3,
@@ -86,6 +114,18 @@ impl RowOut<'_> {
         self.direct_min_distance[x] = p.direct_min_distance;
         self.indirect_min_distance[x] = f32::INFINITY;
     }
+
+    /// Pixel `x` shows the virtual surface `v` ([`PixelOut::show_virtual`]).
+    #[inline(always)]
+    fn put_virtual(&mut self, x: usize, v: &VirtualSurface) {
+        self.e_rv_dir[x] = v.e_rv_dir;
+        self.e_rv_ind[x] = v.e_rv_ind;
+        self.mask[x] = 0.0;
+        self.k_v[x] = v.k_v;
+        self.position[x] = v.position;
+        self.normal[x] = v.normal;
+        self.direct_min_distance[x] = v.direct_min_distance;
+    }
 }
 
 /// [`PixelContext::row`] with AVX2 + FMA.
@@ -99,11 +139,13 @@ pub(super) unsafe fn row_avx2(context: &PixelContext, y: usize, out: &mut RowOut
 }
 
 impl PixelContext<'_> {
-    /// Row `y` into `out`: the real surfaces shaded [`LANES`] pixels at a time
-    /// ([`shade_points`], the same bits as [`shade_point`]), the rest per pixel.
+    /// Row `y` into `out`: the real surfaces shaded [`LANES`] pixels at a time, then
+    /// the row's virtual surfaces [`LANES`] at a time ([`shade_points`], the same bits
+    /// as the scalar `shade_point`).
     #[inline(always)]
     pub(super) fn row<V: Lanes>(&self, y: usize, out: &mut RowOut) {
         let w = self.inputs.depth.width as usize;
+        let mut virtual_hits = Vec::new();
         for x0 in (0..w).step_by(LANES) {
             let lanes = LANES.min(w - x0);
             let mut position = [[0.0f32; LANES]; 3];
@@ -122,23 +164,10 @@ impl PixelContext<'_> {
                 }
             }
             let shaded = if active.iter().any(|a| a.to_bits() != 0) {
-                let points = Points {
-                    position: [
-                        V::from_array(position[0]),
-                        V::from_array(position[1]),
-                        V::from_array(position[2]),
-                    ],
-                    normal: [
-                        V::from_array(normal[0]),
-                        V::from_array(normal[1]),
-                        V::from_array(normal[2]),
-                    ],
-                    patch: V::from_array(patch),
-                    active: V::from_array(active),
-                };
                 // x0 is a multiple of LANES, which divides TILE: one tile.
                 const _: () = assert!(TILE.is_multiple_of(LANES));
                 let lookup = self.lookup[(y / TILE) * self.tiles_per_row + x0 / TILE];
+                let points = points::<V>(position, normal, patch, active);
                 Some(shade_points(
                     &points,
                     lookup,
@@ -150,11 +179,38 @@ impl PixelContext<'_> {
                 None
             };
             for (l, active) in active.iter().enumerate().take(lanes) {
+                let x = x0 + l;
                 let real_shaded = shaded
                     .as_ref()
                     .filter(|_| active.to_bits() != 0)
                     .map(|s| s.lane(l));
-                out.put(x0 + l, self.pixel_with(x0 + l, y, real_shaded));
+                out.put(x, self.real_pixel(y * w + x, real_shaded));
+                let id = self.ids[y * w + x];
+                if id != NO_ID
+                    && let Some(hit) = self.virtual_hit(x, y, id)
+                {
+                    virtual_hits.push(hit);
+                }
+            }
+        }
+        for hits in virtual_hits.chunks(LANES) {
+            let mut position = [[0.0f32; LANES]; 3];
+            let mut normal = [[0.0f32; LANES]; 3];
+            let mut patch = [0.0f32; LANES];
+            let mut active = [0.0f32; LANES];
+            for (l, hit) in hits.iter().enumerate() {
+                for c in 0..3 {
+                    position[c][l] = hit.position[c];
+                    normal[c][l] = hit.normal[c];
+                }
+                patch[l] = hit.patch;
+                active[l] = f32::from_bits(u32::MAX);
+            }
+            let points = points::<V>(position, normal, patch, active);
+            // The objects lie inside every frustum: always look up.
+            let shaded = shade_points(&points, u64::MAX, self.lights, self.maps, self.biases);
+            for (l, hit) in hits.iter().enumerate() {
+                out.put_virtual(hit.x, &self.virtual_surface(hit, shaded.lane(l)));
             }
         }
     }
@@ -171,35 +227,43 @@ impl PixelContext<'_> {
         )
     }
 
-    /// Every output of pixel (x, y), the real surface shaded by [`shade_point`] (the
+    /// Every output of pixel (x, y), each surface shaded by [`shade_point`] (the
     /// reference of [`PixelContext::row`]).
     #[cfg(test)]
     pub(super) fn pixel(&self, x: usize, y: usize) -> PixelOut {
-        let w = self.inputs.depth.width as usize;
-        let (real, real_normal, real_ok) = self.real_at(y * w + x);
+        let i = y * self.inputs.depth.width as usize + x;
+        let (real, real_normal, real_ok) = self.real_at(i);
         let real_shaded = real_ok.then(|| {
-            let patch = self.real_patches[y * w + x];
             let lookup = self.lookup[(y / TILE) * self.tiles_per_row + x / TILE];
-            shade_point(
-                real,
-                real_normal,
-                patch,
-                lookup,
-                self.lights,
-                self.maps,
-                self.biases,
-            )
+            let patch = self.real_patches[i];
+            let (lights, maps, biases) = (self.lights, self.maps, self.biases);
+            shade_point(real, real_normal, patch, lookup, lights, maps, biases)
         });
-        self.pixel_with(x, y, real_shaded)
+        let mut out = self.real_pixel(i, real_shaded);
+        let id = self.ids[i];
+        if id != NO_ID
+            && let Some(hit) = self.virtual_hit(x, y, id)
+        {
+            let (lights, maps, biases) = (self.lights, self.maps, self.biases);
+            let s = shade_point(
+                hit.position,
+                hit.normal,
+                hit.patch,
+                u64::MAX,
+                lights,
+                maps,
+                biases,
+            );
+            out.show_virtual(&self.virtual_surface(&hit, s));
+        }
+        out
     }
 
-    /// Every output of pixel (x, y), given the shading of its real surface (`None`
-    /// where it has none). Inlined into the row loops, so that the shading stays in
-    /// registers; the rare pixels of a virtual surface go on in [`Self::virtual_pixel`].
+    /// Every output of pixel `i` for its real surface, given that surface's shading
+    /// (`None` where it has none). Inlined into the row loops, so that the shading
+    /// stays in registers.
     #[inline(always)]
-    fn pixel_with(&self, x: usize, y: usize, real_shaded: Option<Shaded>) -> PixelOut {
-        let w = self.inputs.depth.width as usize;
-        let i = y * w + x;
+    fn real_pixel(&self, i: usize, real_shaded: Option<Shaded>) -> PixelOut {
         let (real, real_normal, _) = self.real_at(i);
         let mut out = PixelOut {
             e_r_dir: Vec3::NAN,
@@ -220,26 +284,14 @@ impl PixelContext<'_> {
             out.e_rv_ind = e_ind;
             out.direct_min_distance = s.min_occluder;
         }
-        let id = self.ids[i];
-        if id != NO_ID
-            && let Some(v) = self.virtual_surface(x, y, id)
-        {
-            out.e_rv_dir = v.e_rv_dir;
-            out.e_rv_ind = v.e_rv_ind;
-            out.mask = 0.0;
-            out.k_v = v.k_v;
-            out.position = v.position;
-            out.normal = v.normal;
-            out.direct_min_distance = v.direct_min_distance;
-        }
         out
     }
 
-    /// The outputs of the virtual surface of triangle `id` at the centre of pixel (x,
-    /// y), which the camera raster found there; `None` where the real surface is the
-    /// nearer after all (or the ray misses at the very edge).
+    /// The virtual surface of triangle `id` at the centre of pixel (x, y), where the
+    /// camera raster found it; `None` where the real surface is the nearer after all
+    /// (or the ray misses at the very edge). Out of line: few pixels show the objects.
     #[inline(never)]
-    fn virtual_surface(&self, x: usize, y: usize, id: u32) -> Option<VirtualSurface> {
+    fn virtual_hit(&self, x: usize, y: usize, id: u32) -> Option<VirtualHit> {
         let i = y * self.inputs.depth.width as usize + x;
         let c = self.inputs.camera;
         let ray = c.ray(x as f32, y as f32);
@@ -261,18 +313,50 @@ impl PixelContext<'_> {
         if depth_is_valid(z) && hit.t >= z * ray.length() {
             return None;
         }
-        let n = Vec3A::from(hit.normal);
-        let x = Vec3A::from(hit.position);
-        let patch = self.sampling.footprint(x);
-        // The objects lie inside every frustum: always look up.
-        let s = shade_point(x, n, patch, u64::MAX, self.lights, self.maps, self.biases);
-        Some(VirtualSurface {
-            e_rv_dir: s.e_rv,
-            e_rv_ind: self.sh.at(n),
-            k_v: hit.material.albedo,
-            position: hit.position,
-            normal: hit.normal,
-            direct_min_distance: s.min_occluder,
+        let position = Vec3A::from(hit.position);
+        Some(VirtualHit {
+            x,
+            position,
+            normal: hit.normal.into(),
+            patch: self.sampling.footprint(position),
+            albedo: hit.material.albedo,
         })
+    }
+
+    /// The outputs of virtual surface `hit` given its shading `s`.
+    #[inline(always)]
+    fn virtual_surface(&self, hit: &VirtualHit, s: Shaded) -> VirtualSurface {
+        VirtualSurface {
+            e_rv_dir: s.e_rv,
+            e_rv_ind: self.sh.at(hit.normal),
+            k_v: hit.albedo,
+            position: hit.position.into(),
+            normal: hit.normal.into(),
+            direct_min_distance: s.min_occluder,
+        }
+    }
+}
+
+/// Eight shading points from arrays (lanes outside `active` hold zeros).
+#[inline(always)]
+fn points<V: Lanes>(
+    position: [[f32; LANES]; 3],
+    normal: [[f32; LANES]; 3],
+    patch: [f32; LANES],
+    active: [f32; LANES],
+) -> Points<V> {
+    Points {
+        position: [
+            V::from_array(position[0]),
+            V::from_array(position[1]),
+            V::from_array(position[2]),
+        ],
+        normal: [
+            V::from_array(normal[0]),
+            V::from_array(normal[1]),
+            V::from_array(normal[2]),
+        ],
+        patch: V::from_array(patch),
+        active: V::from_array(active),
     }
 }

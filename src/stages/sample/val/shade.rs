@@ -11,7 +11,7 @@ pub(crate) struct PreparedLight {
     pub position: Vec3A,
     pub normal: Vec3A,
     pub intensity: Vec3A,
-    /// A / pi: the least r^2 of eq. 6 (see [`light_irradiance`]).
+    /// A / pi: the least r^2 of eq. 6 (see `light_irradiance`).
     pub min_r2: f32,
     pub frustum: Option<ShadowFrustum>,
 }
@@ -77,7 +77,8 @@ pub(crate) struct Shaded {
 /// A_j / pi: a Lambertian disk of area A and radiance L gives at most pi L = I / (A / pi)
 /// (the irradiance of a whole hemisphere of that radiance), so a receiver next to an
 /// area light does not see 1/r^2 blow up. Returns 0 when either cosine is not positive.
-#[inline]
+/// (The scalar reference: the stage shades through `shade_lanes::shade_points`.)
+#[cfg(test)]
 pub(crate) fn light_irradiance(light: &PreparedLight, n: Vec3A, v: Vec3A) -> Option<(Vec3A, f32)> {
     let cos_receiver = n.dot(v);
     let cos_light = -light.normal.dot(v);
@@ -94,8 +95,10 @@ pub(crate) fn light_irradiance(light: &PreparedLight, n: Vec3A, v: Vec3A) -> Opt
 /// inside its frustum and are 1 outside it (and for lights without maps). `patch` is
 /// the world size of the real-map splat at the receiver (see [`Biases::slope`]). Bit j
 /// of `lookup` clear says the point is known to lie outside light j's frustum (lights
-/// from 64 on are always looked up).
-#[inline]
+/// from 64 on are always looked up). The scalar reference of
+/// [`super::shade_lanes::shade_points`], which shades every point of the stage with its
+/// bits (tested).
+#[cfg(test)]
 pub(crate) fn shade_point(
     x: Vec3A,
     n: Vec3A,

@@ -88,8 +88,9 @@ impl ShadowFrustum {
         Vec3A::new(d.dot(self.right), d.dot(self.up), d.dot(self.axis))
     }
 
-    /// The texel holding light-space point `l`, or `None` outside the frustum.
-    #[inline]
+    /// The texel holding light-space point `l`, or `None` outside the frustum. (The
+    /// scalar reference: the stage's lanes compute the same texels.)
+    #[cfg(test)]
     pub fn texel(&self, l: Vec3A) -> Option<usize> {
         if l.z.is_nan() || l.z <= 0.0 {
             return None;
@@ -100,8 +101,8 @@ impl ShadowFrustum {
     }
 
     /// The texel at map coordinates (`fx`, `fy`) (texel edges at integers), or `None`
-    /// off the map.
-    #[inline]
+    /// off the map. (The scalar reference, as `texel`.)
+    #[cfg(test)]
     pub fn texel_at(&self, fx: f32, fy: f32) -> Option<usize> {
         let s = self.size as f32;
         (fx >= 0.0 && fx < s && fy >= 0.0 && fy < s).then(|| {
@@ -117,7 +118,7 @@ impl ShadowFrustum {
     }
 
     /// World size of one texel at light-space depth `z`.
-    #[inline]
+    #[cfg(test)]
     pub fn footprint(&self, z: f32) -> f32 {
         z / self.scale
     }

@@ -1,5 +1,6 @@
 //! Eight f32 lanes, one pixel per lane, for the per-pixel loops that the compiler does
-//! not vectorize well by itself (the filter's tap loops, `sample.val`'s shading): AVX2
+//! not vectorize well by itself (the filter's tap loops, `sample.val`'s shading and
+//! shadow maps): AVX2
 //! with FMA where the CPU has them (detected at run time, [`Kernel::detect`]), plain
 //! arrays with `f32::mul_add` elsewhere. Both compute the same operations with the same
 //! roundings (a fused multiply-add rounds once in either), so outputs do not depend on
@@ -15,7 +16,8 @@
 /// Number of lanes (target pixels per vector).
 pub const LANES: usize = 8;
 
-/// Which eight-lane code runs: the filter's passes and sample.val's shading (through
+/// Which eight-lane code runs: the filter's passes and sample.val's shading and shadow
+/// maps (through
 /// [`Lanes`]), and the screen-space tracer's batches (`ssrt::TraceBatch`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kernel {
@@ -58,10 +60,12 @@ pub trait Lanes: Copy {
     /// # Safety
     /// Every `p + index[l]` must be readable.
     unsafe fn gather(p: *const f32, index: &[i32; LANES]) -> Self;
-    /// Lane l reads `p + index[l]`, `index` holding whole numbers in [0, 2^24) (exact
-    /// in f32), so that an index computed in lanes needs no trip through memory.
+    /// Lane l reads `p + index[l]`, for an index computed in lanes (no trip through
+    /// memory).
     /// # Safety
-    /// Every `p + index[l]` must be readable.
+    /// Every `index[l]` must be a whole number in [0, 2^24) (exact in f32; others
+    /// convert to offsets that differ between kernels, or negative ones), and every
+    /// `p + index[l]` readable.
     unsafe fn gather_at(p: *const f32, index: Self) -> Self;
     /// # Safety
     /// `p..p + LANES` must be writable.

@@ -33,7 +33,7 @@
 //! `sample.path` records it: the z / cos^2(theta_occ) of paper 001 eq. 17). Pixels with
 //! no surface (no depth, or a zero normal, and no object) get NaN irradiance.
 //!
-//! Cost: the real surfaces are shaded eight pixels at a time (`shade_lanes.rs`, AVX2 +
+//! Cost: the surfaces are shaded eight pixels at a time (`shade_lanes.rs`, AVX2 +
 //! FMA where the CPU has them, [`crate::simd`]), with the bits of the per-point
 //! `shade_point` (tested). The shadow maps are built for up to eight lights per pass,
 //! one light per lane: the triangles (`virtual_maps.rs`) and the real points of the

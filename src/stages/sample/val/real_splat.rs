@@ -4,13 +4,13 @@
 //!
 //! Every point is visited once for a group of up to eight lights, one light per lane
 //! ([`Lanes`]): the point is moved into the eight light spaces and projected at once,
-//! and each lane that passes the depth test goes on, alone, to [`splat_point`] in its
-//! light's map. (Visiting the points once per light spent most of its time on moving
+//! and the lanes that land on one texel are written in lanes' order; the rare wider
+//! splats go on one by one. (Visiting the points once per light spent most of its time on moving
 //! each point into light space and testing it; the writes themselves are few per
 //! point.) The lanes do the one-light code's operations in its order (glam's
 //! `Vec3A::dot` on x86-64 is (x rx + y ry) + z rz, no fused multiply-add), each light's
 //! map sees the same points, and a depth minimum does not depend on the order of the
-//! writes: every kernel and grouping gives the maps of [`real_shadow_map`], one light
+//! writes: every kernel and grouping gives the maps of `real_shadow_map_reference`, one light
 //! and one point at a time (tested).
 
 use super::shadow::{FrustumLanes, ShadowFrustum, Tile};
@@ -200,7 +200,7 @@ fn splat_square(frustum: &ShadowFrustum, z: f32, fx: f32, fy: f32, radius: f32, 
 /// One light's real map, one point at a time: the reference the lanes are tested
 /// against.
 #[cfg(test)]
-pub(crate) fn real_shadow_map(target: &mut RealTarget, surface: &RealSurface) {
+pub(crate) fn real_shadow_map_reference(target: &mut RealTarget, surface: &RealSurface) {
     let frustum = target.frustum;
     target.map.fill(f32::INFINITY);
     let half = frustum.size as f32 * 0.5;
@@ -281,7 +281,7 @@ mod tests {
 
     /// The real maps of `frusta` (each `size`^2), built by `build` (the group pass
     /// takes all the frusta at once).
-    fn maps(build: Build, frusta: &[ShadowFrustum], surface: &RealSurface) -> Vec<Vec<f32>> {
+    fn build_maps(build: Build, frusta: &[ShadowFrustum], surface: &RealSurface) -> Vec<Vec<f32>> {
         let texels = frusta.first().map_or(0, |f| f.size * f.size);
         let mut maps = vec![vec![0.0; texels]; frusta.len()];
         let mut scratch = vec![vec![0.0; texels]; frusta.len()];
@@ -295,7 +295,9 @@ mod tests {
             })
             .collect();
         match build {
-            Build::OneByOne => targets.iter_mut().for_each(|t| real_shadow_map(t, surface)),
+            Build::OneByOne => targets
+                .iter_mut()
+                .for_each(|t| real_shadow_map_reference(t, surface)),
             Build::Group(kernel) => real_shadow_maps(kernel, &mut targets, surface),
         }
         drop(targets);
@@ -353,7 +355,7 @@ mod tests {
             width,
             tiles: &tiles,
         };
-        let map = maps(build, &[f], &surface).remove(0);
+        let map = build_maps(build, &[f], &surface).remove(0);
         let at = |p: Vec3A| map[f.texel(f.light_space(p)).unwrap()];
         assert!(
             (at(Vec3A::new(0.01, 0.0, 0.01)) - 4.5).abs() < 1e-5,
@@ -383,7 +385,7 @@ mod tests {
             width: sparse.len(),
             tiles: &tiles,
         };
-        let map = maps(build, &[f], &surface).remove(0);
+        let map = build_maps(build, &[f], &surface).remove(0);
         let inner = (4..28).flat_map(|y| (4..28).map(move |x| y * 32 + x));
         assert!(
             inner.clone().all(|t| (map[t] - 5.0).abs() < 1e-5),
@@ -444,7 +446,7 @@ mod tests {
                 ShadowFrustum::fit(light, -light, &unit_box(), 96, 1.0).unwrap()
             })
             .collect();
-        let reference = maps(Build::OneByOne, &lights, &surface);
+        let reference = build_maps(Build::OneByOne, &lights, &surface);
         let written: usize = reference
             .iter()
             .map(|m| m.iter().filter(|z| z.is_finite()).count())
@@ -461,7 +463,7 @@ mod tests {
         for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
             for group in [1, 3, 8] {
                 for (k, frusta) in lights.chunks(group).enumerate() {
-                    let maps = maps(Build::Group(kernel), frusta, &surface);
+                    let maps = build_maps(Build::Group(kernel), frusta, &surface);
                     for (j, map) in maps.iter().enumerate() {
                         let expected = &reference[k * group + j];
                         let differ = map
@@ -510,7 +512,7 @@ mod tests {
             tiles: &tiles,
         };
         for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
-            let maps = maps(Build::Group(kernel), &[f0, f1], &surface);
+            let maps = build_maps(Build::Group(kernel), &[f0, f1], &surface);
             assert!(maps[0].iter().all(|z| z.is_infinite()), "{kernel:?}");
             assert!(maps[1].iter().any(|z| z.is_finite()), "{kernel:?}");
         }

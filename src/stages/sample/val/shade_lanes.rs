@@ -1,7 +1,7 @@
-//! [`shade_point`](super::shade::shade_point) for eight points at once, one per lane
-//! ([`Lanes`]): the same operations in the same order per lane, so each lane's result
-//! has the bits the scalar function gives (tested). The real pixels of a row are shaded
-//! eight at a time; the rare virtual hits stay scalar.
+//! The scalar `shade::shade_point` for eight points at once, one per lane ([`Lanes`]):
+//! the same operations in the same order per lane, so each lane's result has the bits
+//! the scalar function gives (tested). A row's real pixels are shaded eight at a time,
+//! then its virtual hits eight at a time.
 //!
 //! Per light the branches of the scalar code become masks: a lane whose light is behind
 //! it or that lies outside the light's shadow frustum adds nothing or skips the map
@@ -9,7 +9,7 @@
 //! only when some lane's texels may occlude it.
 
 use super::shade::{Biases, Maps, PreparedLight, Shaded};
-use super::shadow::MAX_SHADOW_MAP_SIZE;
+use super::shadow::{MAX_SHADOW_MAP_SIZE, dot};
 use crate::simd::{LANES, Lanes};
 use glam::Vec3;
 
@@ -22,12 +22,6 @@ pub(crate) struct Points<V> {
     pub normal: [V; 3],
     pub patch: V,
     pub active: V,
-}
-
-/// (a.x b.x + a.y b.y) + a.z b.z: the order of glam's `Vec3A::dot`.
-#[inline(always)]
-fn dot<V: Lanes>(a: [V; 3], b: [V; 3]) -> V {
-    a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]))
 }
 
 /// `b` broadcast minus `a` per component.
@@ -79,8 +73,9 @@ impl ShadedLanes {
 }
 
 /// The eight points' [`Shaded`] values; lanes outside `points.active` are meaningless.
-/// `lookup` is the lights' frustum mask of [`shade_point`](super::shade::shade_point),
-/// the same for the eight points (they share a tile).
+/// `lookup` is the lights' frustum mask of the scalar `shade_point`, the same for the
+/// eight points (real points of one tile; `u64::MAX` for virtual hits, which lie in
+/// every frustum).
 #[inline(always)]
 pub(crate) fn shade_points<V: Lanes>(
     points: &Points<V>,

@@ -8,11 +8,12 @@
 //! triangles ([`super::virtual_maps`]); the real map splats the depth map's world points
 //! (nearest texel, nearest depth), then closes single-texel holes with the farther of
 //! two opposite neighbours, so that a surface sampled more sparsely than the map does
-//! not leak light and no occluder grows at silhouettes ([`super::real_splat`]). Real points between the light and the near plane
-//! count as occluders (the paper projects them onto the near plane), but only from
-//! `real_occluder_reach` metres in front of the objects' near side: the emitter's own
-//! surface (a VAL sits on the wall or lamp it came from, or 100 m out for a distant
-//! map, behind the room's walls) must not shadow the scene it lights.
+//! not leak light and no occluder grows at silhouettes ([`super::real_splat`]). Real
+//! points between the light and the near plane count as occluders (the paper projects
+//! them onto the near plane), but only from `real_occluder_reach` metres in front of
+//! the objects' near side: the emitter's own surface (a VAL sits on the wall or lamp it
+//! came from, or 100 m out for a distant map, behind the room's walls) must not shadow
+//! the scene it lights.
 
 #[cfg(test)]
 use super::real_splat;
@@ -225,7 +226,7 @@ fn lanes3<V: Lanes>(a: [[f32; LANES]; 3]) -> [V; 3] {
 /// (x rx + y ry) + z rz per lane, the order of glam's `Vec3A::dot` on x86-64 (no fused
 /// multiply-add), so each lane has the bits of [`ShadowFrustum::light_space`].
 #[inline(always)]
-fn dot<V: Lanes>(d: [V; 3], e: [V; 3]) -> V {
+pub(super) fn dot<V: Lanes>(d: [V; 3], e: [V; 3]) -> V {
     d[0].mul(e[0]).add(d[1].mul(e[1])).add(d[2].mul(e[2]))
 }
 
@@ -291,8 +292,8 @@ impl PointSampling {
 }
 
 impl ValRenderer {
-    /// Fits each light's frustum and builds its two shadow maps (in parallel over
-    /// lights); returns the lights prepared for shading.
+    /// Fits each light's frustum and builds its two shadow maps (in groups of up to
+    /// eight lights, the groups in parallel); returns the lights prepared for shading.
     pub(super) fn shadow_maps(
         &mut self,
         inputs: &ValInputs,
@@ -334,14 +335,18 @@ impl ValRenderer {
                 .for_each(|(maps, frustum)| {
                     if let Some(frustum) = frustum {
                         let (virtual_map, rest) = maps.split_at_mut(size * size);
-                        virtual_maps::virtual_shadow_map(frustum, inputs.objects, virtual_map);
+                        virtual_maps::virtual_shadow_map_reference(
+                            frustum,
+                            inputs.objects,
+                            virtual_map,
+                        );
                         let (map, scratch) = rest.split_at_mut(size * size);
                         let mut target = RealTarget {
                             frustum,
                             map,
                             scratch,
                         };
-                        real_splat::real_shadow_map(&mut target, &surface);
+                        real_splat::real_shadow_map_reference(&mut target, &surface);
                     }
                 });
             return self.prepare_lights(inputs, &frusta);

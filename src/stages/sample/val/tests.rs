@@ -452,7 +452,7 @@ fn objects_shadow_each_other_through_the_virtual_map() {
     assert!(shadowed > 10 && lit > 50, "{shadowed} {lit}");
 }
 
-/// The real pixels are shaded eight at a time (`shade_lanes`); with either kernel every
+/// The pixels are shaded eight at a time (`shade_lanes`); with either kernel every
 /// output has the bits of the scalar `shade_point` per pixel, in a scene with real and
 /// virtual shadows (masked lanes, the slope-bias test, occluder distances).
 #[test]

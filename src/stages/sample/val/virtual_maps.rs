@@ -5,7 +5,7 @@
 //! once, one light per lane ([`Lanes`]), and projected there; each light's map then
 //! rasterizes it alone with [`raster_screen_triangle`]. The lanes do the one-light
 //! code's operations in its order, so every kernel and grouping gives the maps of
-//! [`virtual_shadow_map`], one light at a time (tested). A triangle that crosses a
+//! `virtual_shadow_map_reference`, one light at a time (tested). A triangle that crosses a
 //! light's near plane (which a frustum fitted to the objects keeps them in front of)
 //! takes that one-light path for that light: clipped, then rasterized.
 
@@ -51,7 +51,7 @@ fn raster_avx2(targets: &mut [VirtualTarget], scene: &VirtualScene) {
 fn raster_lanes<V: Lanes>(targets: &mut [VirtualTarget], scene: &VirtualScene) {
     let frames = FrustumLanes::<V>::new(targets.iter().map(|t| t.frustum));
     // `ShadowFrustum::project`: raster coordinates, texel centres at integers.
-    let half = frames.half.sub(V::splat(0.5));
+    let raster_half = frames.half.sub(V::splat(0.5));
     let (near, one) = (V::splat(NEAR), V::splat(1.0));
     let mut maps: Vec<(&ShadowFrustum, DepthTarget)> = targets
         .iter_mut()
@@ -75,8 +75,8 @@ fn raster_lanes<V: Lanes>(targets: &mut [VirtualTarget], scene: &VirtualScene) {
             let (lx, ly, lz) = (frames.x(d), frames.y(d), frames.z(d));
             in_front = in_front.and(lz.ge(near));
             screen[k] = [
-                lx.div(lz).mul(frames.scale).add(half).to_array(),
-                ly.div(lz).mul(frames.scale).add(half).to_array(),
+                lx.div(lz).mul(frames.scale).add(raster_half).to_array(),
+                ly.div(lz).mul(frames.scale).add(raster_half).to_array(),
                 one.div(lz).to_array(),
             ];
         }
@@ -99,7 +99,11 @@ fn raster_lanes<V: Lanes>(targets: &mut [VirtualTarget], scene: &VirtualScene) {
 /// One light's virtual map, one triangle at a time: clipped at the near plane,
 /// projected and rasterized (the reference the lanes are tested against).
 #[cfg(test)]
-pub(crate) fn virtual_shadow_map(frustum: &ShadowFrustum, scene: &VirtualScene, map: &mut [f32]) {
+pub(crate) fn virtual_shadow_map_reference(
+    frustum: &ShadowFrustum,
+    scene: &VirtualScene,
+    map: &mut [f32],
+) {
     map.fill(f32::INFINITY);
     let mut target = DepthTarget {
         width: frustum.size,
@@ -151,7 +155,7 @@ mod tests {
             vec![Material::DIFFUSE_GRAY],
         );
         let mut map = vec![0.0; 64 * 64];
-        virtual_shadow_map(&f, &scene, &mut map);
+        virtual_shadow_map_reference(&f, &scene, &mut map);
         let centre = f.texel(f.light_space(Vec3A::new(0.0, 0.0, 0.0))).unwrap();
         assert!((map[centre] - 4.0).abs() < 1e-4, "{}", map[centre]);
         let outside = f.texel(f.light_space(Vec3A::new(0.45, 0.0, 0.0))).unwrap();
@@ -214,7 +218,7 @@ mod tests {
             .iter()
             .map(|f| {
                 let mut map = vec![0.0; 64 * 64];
-                virtual_shadow_map(f, &scene, &mut map);
+                virtual_shadow_map_reference(f, &scene, &mut map);
                 map
             })
             .collect();

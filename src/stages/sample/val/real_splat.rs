@@ -260,6 +260,7 @@ fn close_holes(map: &mut [f32], scratch: &mut [f32], size: usize) {
 
 #[cfg(test)]
 mod tests {
+    use super::super::shadow::test_support::{assert_groups_match, eight_lights, unit_box};
     use super::super::shadow::{PointSampling, tile_of};
     use super::*;
     use crate::objects::Aabb;
@@ -302,13 +303,6 @@ mod tests {
         }
         drop(targets);
         maps
-    }
-
-    fn unit_box() -> Aabb {
-        Aabb {
-            min: Vec3::new(-0.5, 0.0, -0.5),
-            max: Vec3::new(0.5, 1.0, 0.5),
-        }
     }
 
     #[test]
@@ -439,13 +433,7 @@ mod tests {
             width,
             tiles: &tiles,
         };
-        let lights: Vec<ShadowFrustum> = (0..8)
-            .map(|j| {
-                let angle = j as f32 * 0.8;
-                let light = Vec3::new(3.0 * angle.cos(), 1.5 + 0.5 * j as f32, 3.0 * angle.sin());
-                ShadowFrustum::fit(light, -light, &unit_box(), 96, 1.0).unwrap()
-            })
-            .collect();
+        let lights = eight_lights(96);
         let reference = build_maps(Build::OneByOne, &lights, &surface);
         let written: usize = reference
             .iter()
@@ -460,27 +448,9 @@ mod tests {
         assert!(tiles.iter().flatten().any(|t| {
             lights.iter().any(|f| reaches(f, t)) && lights.iter().any(|f| !reaches(f, t))
         }));
-        for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
-            for group in [1, 3, 8] {
-                for (k, frusta) in lights.chunks(group).enumerate() {
-                    let maps = build_maps(Build::Group(kernel), frusta, &surface);
-                    for (j, map) in maps.iter().enumerate() {
-                        let expected = &reference[k * group + j];
-                        let differ = map
-                            .iter()
-                            .zip(expected)
-                            .filter(|(a, b)| a.to_bits() != b.to_bits())
-                            .count();
-                        assert_eq!(
-                            differ,
-                            0,
-                            "{kernel:?}, groups of {group}: light {}",
-                            k * group + j
-                        );
-                    }
-                }
-            }
-        }
+        assert_groups_match(&lights, &reference, |kernel, group| {
+            build_maps(Build::Group(kernel), group, &surface)
+        });
     }
 
     /// A tile that the tile test skips for a light leaves that light's map alone in a

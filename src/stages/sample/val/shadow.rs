@@ -420,16 +420,60 @@ impl ValRenderer {
     }
 }
 
+/// What the map tests of this module and of `real_splat` and `virtual_maps` share.
 #[cfg(test)]
-mod tests {
+pub(super) mod test_support {
     use super::*;
 
-    fn unit_box() -> Aabb {
+    /// The objects' box the test frusta are fitted to.
+    pub fn unit_box() -> Aabb {
         Aabb {
             min: Vec3::new(-0.5, 0.0, -0.5),
             max: Vec3::new(0.5, 1.0, 0.5),
         }
     }
+
+    /// Eight lights on a rising spiral around the unit box, facing the origin, with
+    /// maps of `size` texels per side.
+    pub fn eight_lights(size: usize) -> Vec<ShadowFrustum> {
+        (0..8)
+            .map(|j| {
+                let angle = j as f32 * 0.8;
+                let light = Vec3::new(3.0 * angle.cos(), 1.5 + 0.5 * j as f32, 3.0 * angle.sin());
+                ShadowFrustum::fit(light, -light, &unit_box(), size, 1.0).unwrap()
+            })
+            .collect()
+    }
+
+    /// Asserts that `build(kernel, group)` gives `reference` (one map per light of
+    /// `lights`) bit for bit, with both kernels and groups of 1, 3 and 8 lights.
+    pub fn assert_groups_match(
+        lights: &[ShadowFrustum],
+        reference: &[Vec<f32>],
+        build: impl Fn(Kernel, &[ShadowFrustum]) -> Vec<Vec<f32>>,
+    ) {
+        for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+            for group in [1, 3, 8] {
+                for (k, frusta) in lights.chunks(group).enumerate() {
+                    for (j, map) in build(kernel, frusta).iter().enumerate() {
+                        let light = k * group + j;
+                        let differ = map
+                            .iter()
+                            .zip(&reference[light])
+                            .filter(|(a, b)| a.to_bits() != b.to_bits())
+                            .count();
+                        assert_eq!(differ, 0, "{kernel:?}, groups of {group}: light {light}");
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::test_support::unit_box;
+    use super::*;
 
     #[test]
     fn frustum_holds_the_bounding_sphere_and_rejects_lights_inside_or_behind() {

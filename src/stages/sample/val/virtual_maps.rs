@@ -122,17 +122,11 @@ pub(crate) fn virtual_shadow_map_reference(
 
 #[cfg(test)]
 mod tests {
+    use super::super::shadow::test_support::{assert_groups_match, eight_lights, unit_box};
     use super::*;
-    use crate::objects::{Aabb, Material, Triangle, shapes};
+    use crate::objects::{Material, Triangle, shapes};
     use crate::rng::{hash, unit_f32};
     use glam::{Affine3A, Vec3A};
-
-    fn unit_box() -> Aabb {
-        Aabb {
-            min: Vec3::new(-0.5, 0.0, -0.5),
-            max: Vec3::new(0.5, 1.0, 0.5),
-        }
-    }
 
     #[test]
     fn virtual_map_holds_the_depth_of_a_square_seen_from_above() {
@@ -207,13 +201,7 @@ mod tests {
             });
         }
         let scene = VirtualScene::new(triangles, vec![Material::DIFFUSE_GRAY]);
-        let frusta: Vec<ShadowFrustum> = (0..8)
-            .map(|j| {
-                let angle = j as f32 * 0.8;
-                let light = Vec3::new(3.0 * angle.cos(), 1.5 + 0.5 * j as f32, 3.0 * angle.sin());
-                ShadowFrustum::fit(light, -light, &unit_box(), 64, 1.0).unwrap()
-            })
-            .collect();
+        let frusta = eight_lights(64);
         let reference: Vec<Vec<f32>> = frusta
             .iter()
             .map(|f| {
@@ -236,32 +224,15 @@ mod tests {
                 .iter()
                 .any(|v| f.light_space(Vec3A::from(*v)).z < NEAR)
         })));
-        for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
-            for group in [1, 3, 8] {
-                for (k, frusta) in frusta.chunks(group).enumerate() {
-                    let mut maps = vec![vec![0.0; 64 * 64]; frusta.len()];
-                    let mut targets: Vec<VirtualTarget> = frusta
-                        .iter()
-                        .zip(maps.iter_mut())
-                        .map(|(frustum, map)| VirtualTarget { frustum, map })
-                        .collect();
-                    virtual_shadow_maps(kernel, &mut targets, &scene);
-                    for (j, map) in maps.iter().enumerate() {
-                        let expected = &reference[k * group + j];
-                        let differ = map
-                            .iter()
-                            .zip(expected)
-                            .filter(|(a, b)| a.to_bits() != b.to_bits())
-                            .count();
-                        assert_eq!(
-                            differ,
-                            0,
-                            "{kernel:?}, groups of {group}: light {}",
-                            k * group + j
-                        );
-                    }
-                }
-            }
-        }
+        assert_groups_match(&frusta, &reference, |kernel, group| {
+            let mut maps = vec![vec![0.0; 64 * 64]; group.len()];
+            let mut targets: Vec<VirtualTarget> = group
+                .iter()
+                .zip(maps.iter_mut())
+                .map(|(frustum, map)| VirtualTarget { frustum, map })
+                .collect();
+            virtual_shadow_maps(kernel, &mut targets, &scene);
+            maps
+        });
     }
 }

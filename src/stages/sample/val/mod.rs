@@ -210,18 +210,31 @@ impl ValOutputs {
     pub fn new(width: u32, height: u32) -> ValOutputs {
         let v = |x| Image::filled(width, height, x);
         let s = |x| Image::filled(width, height, x);
+        // About 30 MB at 640x480: filled on two threads.
+        let ((e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask, exponent), rest) = rayon::join(
+            || {
+                let zero = Vec3::ZERO;
+                (v(zero), v(zero), v(zero), v(zero), s(1.0), s(0.0))
+            },
+            || {
+                let zero = Vec3::ZERO;
+                let (infinity, nan) = (f32::INFINITY, Vec3::NAN);
+                (v(zero), v(nan), v(zero), s(infinity), s(infinity))
+            },
+        );
+        let (k_v, world_position, world_normal, direct_min_distance, indirect_min_distance) = rest;
         ValOutputs {
-            e_r_dir: v(Vec3::ZERO),
-            e_r_ind: v(Vec3::ZERO),
-            e_rv_dir: v(Vec3::ZERO),
-            e_rv_ind: v(Vec3::ZERO),
-            mask: s(1.0),
-            k_v: v(Vec3::ZERO),
-            exponent: s(0.0),
-            world_position: v(Vec3::NAN),
-            world_normal: v(Vec3::ZERO),
-            direct_min_distance: s(f32::INFINITY),
-            indirect_min_distance: s(f32::INFINITY),
+            e_r_dir,
+            e_r_ind,
+            e_rv_dir,
+            e_rv_ind,
+            mask,
+            k_v,
+            exponent,
+            world_position,
+            world_normal,
+            direct_min_distance,
+            indirect_min_distance,
         }
     }
 

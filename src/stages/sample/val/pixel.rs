@@ -148,26 +148,21 @@ impl PixelContext<'_> {
         let mut virtual_hits = Vec::new();
         for x0 in (0..w).step_by(LANES) {
             let lanes = LANES.min(w - x0);
-            let mut position = [[0.0f32; LANES]; 3];
-            let mut normal = [[0.0f32; LANES]; 3];
-            let mut patch = [0.0f32; LANES];
-            let mut active = [0.0f32; LANES];
+            let mut real = PointArrays::default();
             for l in 0..lanes {
-                let (real, real_normal, real_ok) = self.real_at(y * w + x0 + l);
+                let i = y * w + x0 + l;
+                let (point, normal, real_ok) = self.real_at(i);
                 if real_ok {
-                    for c in 0..3 {
-                        position[c][l] = real[c];
-                        normal[c][l] = real_normal[c];
-                    }
-                    patch[l] = self.real_patches[y * w + x0 + l];
-                    active[l] = f32::from_bits(u32::MAX);
+                    real.set(l, point, normal, self.real_patches[i]);
                 }
             }
-            let shaded = if active.iter().any(|a| a.to_bits() != 0) {
+            // An `if`, not a closure: lane operations stay out of closures (see
+            // `crate::simd`).
+            let shaded = if real.any() {
                 // x0 is a multiple of LANES, which divides TILE: one tile.
                 const _: () = assert!(TILE.is_multiple_of(LANES));
                 let lookup = self.lookup[(y / TILE) * self.tiles_per_row + x0 / TILE];
-                let points = points::<V>(position, normal, patch, active);
+                let points = real.points::<V>();
                 Some(shade_points(
                     &points,
                     lookup,
@@ -178,11 +173,11 @@ impl PixelContext<'_> {
             } else {
                 None
             };
-            for (l, active) in active.iter().enumerate().take(lanes) {
+            for l in 0..lanes {
                 let x = x0 + l;
                 let real_shaded = shaded
                     .as_ref()
-                    .filter(|_| active.to_bits() != 0)
+                    .filter(|_| real.is_set(l))
                     .map(|s| s.lane(l));
                 out.put(x, self.real_pixel(y * w + x, real_shaded));
                 let id = self.ids[y * w + x];
@@ -194,19 +189,11 @@ impl PixelContext<'_> {
             }
         }
         for hits in virtual_hits.chunks(LANES) {
-            let mut position = [[0.0f32; LANES]; 3];
-            let mut normal = [[0.0f32; LANES]; 3];
-            let mut patch = [0.0f32; LANES];
-            let mut active = [0.0f32; LANES];
+            let mut surfaces = PointArrays::default();
             for (l, hit) in hits.iter().enumerate() {
-                for c in 0..3 {
-                    position[c][l] = hit.position[c];
-                    normal[c][l] = hit.normal[c];
-                }
-                patch[l] = hit.patch;
-                active[l] = f32::from_bits(u32::MAX);
+                surfaces.set(l, hit.position, hit.normal, hit.patch);
             }
-            let points = points::<V>(position, normal, patch, active);
+            let points = surfaces.points::<V>();
             // The objects lie inside every frustum: always look up.
             let shaded = shade_points(&points, u64::MAX, self.lights, self.maps, self.biases);
             for (l, hit) in hits.iter().enumerate() {
@@ -337,26 +324,52 @@ impl PixelContext<'_> {
     }
 }
 
-/// Eight shading points from arrays (lanes outside `active` hold zeros).
-#[inline(always)]
-fn points<V: Lanes>(
+/// Up to eight shading points gathered lane by lane, then loaded as [`Points`]; lanes
+/// not set hold zeros and are inactive.
+#[derive(Default)]
+struct PointArrays {
     position: [[f32; LANES]; 3],
     normal: [[f32; LANES]; 3],
     patch: [f32; LANES],
     active: [f32; LANES],
-) -> Points<V> {
-    Points {
-        position: [
-            V::from_array(position[0]),
-            V::from_array(position[1]),
-            V::from_array(position[2]),
-        ],
-        normal: [
-            V::from_array(normal[0]),
-            V::from_array(normal[1]),
-            V::from_array(normal[2]),
-        ],
-        patch: V::from_array(patch),
-        active: V::from_array(active),
+}
+
+impl PointArrays {
+    #[inline(always)]
+    fn set(&mut self, l: usize, position: Vec3A, normal: Vec3A, patch: f32) {
+        for c in 0..3 {
+            self.position[c][l] = position[c];
+            self.normal[c][l] = normal[c];
+        }
+        self.patch[l] = patch;
+        self.active[l] = f32::from_bits(u32::MAX);
+    }
+
+    #[inline(always)]
+    fn is_set(&self, l: usize) -> bool {
+        self.active[l].to_bits() != 0
+    }
+
+    #[inline(always)]
+    fn any(&self) -> bool {
+        self.active.iter().any(|a| a.to_bits() != 0)
+    }
+
+    #[inline(always)]
+    fn points<V: Lanes>(&self) -> Points<V> {
+        Points {
+            position: [
+                V::from_array(self.position[0]),
+                V::from_array(self.position[1]),
+                V::from_array(self.position[2]),
+            ],
+            normal: [
+                V::from_array(self.normal[0]),
+                V::from_array(self.normal[1]),
+                V::from_array(self.normal[2]),
+            ],
+            patch: V::from_array(self.patch),
+            active: V::from_array(self.active),
+        }
     }
 }

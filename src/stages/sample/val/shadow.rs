@@ -334,19 +334,14 @@ impl ValRenderer {
                 .zip(frusta.par_iter())
                 .for_each(|(maps, frustum)| {
                     if let Some(frustum) = frustum {
-                        let (virtual_map, rest) = maps.split_at_mut(size * size);
+                        let (virtual_target, mut real_target) = light_targets(frustum, maps);
+                        let objects = inputs.objects;
                         virtual_maps::virtual_shadow_map_reference(
                             frustum,
-                            inputs.objects,
-                            virtual_map,
+                            objects,
+                            virtual_target.map,
                         );
-                        let (map, scratch) = rest.split_at_mut(size * size);
-                        let mut target = RealTarget {
-                            frustum,
-                            map,
-                            scratch,
-                        };
-                        real_splat::real_shadow_map_reference(&mut target, &surface);
+                        real_splat::real_shadow_map_reference(&mut real_target, &surface);
                     }
                 });
             return self.prepare_lights(inputs, &frusta);
@@ -365,22 +360,7 @@ impl ValRenderer {
                 let (mut virtual_targets, mut real_targets): (Vec<_>, Vec<_>) = maps
                     .chunks_mut(stride)
                     .zip(frusta)
-                    .filter_map(|(maps, frustum)| {
-                        let frustum = frustum.as_ref()?;
-                        let (virtual_map, rest) = maps.split_at_mut(size * size);
-                        let (map, scratch) = rest.split_at_mut(size * size);
-                        Some((
-                            VirtualTarget {
-                                frustum,
-                                map: virtual_map,
-                            },
-                            RealTarget {
-                                frustum,
-                                map,
-                                scratch,
-                            },
-                        ))
-                    })
+                    .filter_map(|(maps, frustum)| Some(light_targets(frustum.as_ref()?, maps)))
                     .unzip();
                 virtual_shadow_maps(kernel, &mut virtual_targets, inputs.objects);
                 real_shadow_maps(kernel, &mut real_targets, &surface);
@@ -418,6 +398,29 @@ impl ValRenderer {
             .map(|(l, f)| PreparedLight::new(l, *f))
             .collect()
     }
+}
+
+/// One light's slice of [`ValRenderer`]'s maps (its virtual map, real map and the
+/// real map's scratch, size^2 each) as the targets of the map builders.
+fn light_targets<'a>(
+    frustum: &'a ShadowFrustum,
+    maps: &'a mut [f32],
+) -> (VirtualTarget<'a>, RealTarget<'a>) {
+    let texels = frustum.size * frustum.size;
+    let (virtual_map, rest) = maps.split_at_mut(texels);
+    let (map, scratch) = rest.split_at_mut(texels);
+    let virtual_target = VirtualTarget {
+        frustum,
+        map: virtual_map,
+    };
+    (
+        virtual_target,
+        RealTarget {
+            frustum,
+            map,
+            scratch,
+        },
+    )
 }
 
 /// What the map tests of this module and of `real_splat` and `virtual_maps` share.

@@ -1,9 +1,10 @@
 //! The world-space Gaussian kernel of paper 001 eq. 23 and its weighted tap sums
-//! (eqs. 21-22, 24-26): a fast `exp` and the tap loop, eight target pixels at a time
-//! (one per lane, [`Lanes`]), each weight computed once for the two layers (E_R and
-//! E_RV) of a kind that share it.
+//! (eqs. 21-22, 24-26): a fast `exp` and the tap loops, eight target pixels at a time
+//! (one per lane, [`Lanes`]). A window's weights come first ([`tap_weights`]: the
+//! squared distance once per tap for both kinds, a weight per kind, shared by its two
+//! layers E_R and E_RV), then the weighted sums per kind ([`accumulate`]).
 //!
-//! The loop reads its taps from planes (see [`super::planes`]) through a [`Window`]:
+//! The loops read their taps from planes (see [`super::planes`]) through a [`Window`]:
 //! per tap, one vector per plane, either contiguous (the eight targets' taps are
 //! neighbours in memory: the X and Y passes, and the temporal taps when the eight
 //! targets found their previous pixels at one offset) or gathered per lane.
@@ -115,19 +116,111 @@ pub struct Window {
     pub taps: usize,
 }
 
-/// The eight pixels a tap sum is for: world positions and squared bandwidths B^2.
+/// Most taps in a window: 2 R + 1 for the largest radius accepted.
+pub const MAX_TAPS: usize = 2 * super::MAX_RADIUS + 1;
+
+/// Per kind (direct, indirect), one weight vector per tap of a window:
+/// [`tap_weights`] fills it, [`accumulate`] reads it.
+pub type TapWeights<V> = [[V; MAX_TAPS]; 2];
+
+/// Where one filtered kind's weights come from: the plane of the taps' squared
+/// bandwidths B^2, and the eight targets' B^2.
 #[derive(Clone, Copy, Debug)]
-pub struct Targets<V> {
-    pub position: [V; 3],
-    pub b2: V,
+pub struct Bandwidths<V> {
+    pub plane: usize,
+    pub target: V,
 }
 
-/// Adds w * value over the taps of `window` to `sums`, for each of the
-/// [`VALUE_PLANES`] value planes (so for the valid planes, the
-/// sums of weights), with w = exp(-2 Bbar^2 |p - p_i|^2),
-/// Bbar^2 = (B^2(target) + B^2(source)) / 2 (paper 001 eq. 23), the planes named by
-/// `planes` ([`TapPlanes`]). Lanes whose `limit` is below 0 add nothing. Taps in order, so each lane's sums are the same bits whatever
-/// its neighbours are.
+/// The Gaussian weight of eq. 23 of each tap of `window` for the eight targets at
+/// `target` (world positions), for each kind that is `Some`: weights[k][i] =
+/// exp(-2 Bbar^2 |p - p_i|^2), Bbar^2 = (B^2(target) + B^2(source)) / 2, the taps'
+/// positions read from the three planes from `position` on. The squared distance is
+/// computed once for both kinds. Lanes whose `limit` is below 0 get weight 0.
+///
+/// Weights first, sums after ([`accumulate`]): a loop that did both per tap carried a
+/// chain of some 60 cycles per tap (loads, distance, `exp`, sums), more than the CPU
+/// could overlap across taps.
+///
+/// # Safety
+/// Every tap of `window` that `fetch` reads must lie inside its planes.
+#[inline(always)]
+pub unsafe fn tap_weights<V: Lanes, F: Fetch<V>>(
+    fetch: &F,
+    window: &Window,
+    position: usize,
+    target: [V; 3],
+    kinds: [Option<Bandwidths<V>>; 2],
+    limit: V,
+    weights: &mut TapWeights<V>,
+) {
+    let [direct, indirect] = weights;
+    let taps = TapsAt {
+        fetch,
+        window,
+        position,
+        target,
+        limit,
+    };
+    // SAFETY (all arms): forwarded from the caller.
+    unsafe {
+        match kinds {
+            [Some(d), Some(i)] => taps.weigh([d, i], [direct, indirect]),
+            [Some(d), None] => taps.weigh([d], [direct]),
+            [None, Some(i)] => taps.weigh([i], [indirect]),
+            [None, None] => {}
+        }
+    }
+}
+
+/// The arguments of [`tap_weights`] that do not depend on the kinds.
+struct TapsAt<'a, V, F> {
+    fetch: &'a F,
+    window: &'a Window,
+    position: usize,
+    target: [V; 3],
+    limit: V,
+}
+
+impl<V: Lanes, F: Fetch<V>> TapsAt<'_, V, F> {
+    /// [`tap_weights`] for `K` kinds.
+    ///
+    /// # Safety
+    /// As for [`tap_weights`].
+    #[inline(always)]
+    unsafe fn weigh<const K: usize>(
+        &self,
+        kinds: [Bandwidths<V>; K],
+        mut weights: [&mut [V; MAX_TAPS]; K],
+    ) {
+        let (fetch, window) = (self.fetch, self.window);
+        let [tx, ty, tz] = self.target;
+        assert!(window.taps <= MAX_TAPS);
+        let stride = window.plane_stride;
+        let plane = |tap: *const f32, q: usize| tap.wrapping_add(q * stride);
+        // SAFETY (every fetch): the caller guarantees the window's taps are inside the
+        // planes.
+        unsafe {
+            let mut tap = window.planes;
+            for i in 0..window.taps {
+                let dx = fetch.fetch(plane(tap, self.position)).sub(tx);
+                let dy = fetch.fetch(plane(tap, self.position + 1)).sub(ty);
+                let dz = fetch.fetch(plane(tap, self.position + 2)).sub(tz);
+                let d2 = dz.mul_add(dz, dy.mul_add(dy, dx.mul(dx)));
+                for (kind, weights) in kinds.iter().zip(weights.iter_mut()) {
+                    let b2 = kind.target.add(fetch.fetch(plane(tap, kind.plane)));
+                    weights[i] = exp_neg_lanes(b2.mul(d2), self.limit);
+                }
+                // Wrapping: after the last tap the pointer may leave the planes unread.
+                tap = tap.wrapping_add(window.tap_step);
+            }
+        }
+    }
+}
+
+/// Adds w_i * value_i over the taps i of `window` to `sums`, for each of the
+/// [`VALUE_PLANES`] value planes from plane `values` on (so for the valid planes, the
+/// sums of weights), with the weights from [`tap_weights`]. Taps in order, so each
+/// lane's sums are the same bits whatever its neighbours are.
 ///
 /// # Safety
 /// Every tap of `window` that `fetch` reads must lie inside its planes.
@@ -135,12 +228,11 @@ pub struct Targets<V> {
 pub unsafe fn accumulate<V: Lanes, F: Fetch<V>>(
     fetch: &F,
     window: &Window,
-    planes: TapPlanes,
-    targets: &Targets<V>,
-    limit: V,
+    values: usize,
+    weights: &[V; MAX_TAPS],
     sums: &mut [V; VALUE_PLANES],
 ) {
-    let [tx, ty, tz] = targets.position;
+    assert!(window.taps <= MAX_TAPS);
     // A local copy, so the sums stay in registers (stores through `sums` could alias the
     // raw-pointer loads as far as the compiler knows).
     let mut acc = *sums;
@@ -149,28 +241,13 @@ pub unsafe fn accumulate<V: Lanes, F: Fetch<V>>(
     // SAFETY (every fetch): the caller guarantees the window's taps are inside the planes.
     unsafe {
         let mut tap = window.planes;
-        for _ in 0..window.taps {
-            let dx = fetch.fetch(plane(tap, planes.position)).sub(tx);
-            let dy = fetch.fetch(plane(tap, planes.position + 1)).sub(ty);
-            let dz = fetch.fetch(plane(tap, planes.position + 2)).sub(tz);
-            let d2 = dz.mul_add(dz, dy.mul_add(dy, dx.mul(dx)));
-            let b2 = targets.b2.add(fetch.fetch(plane(tap, planes.b2)));
-            let w = exp_neg_lanes(b2.mul(d2), limit);
+        for &w in &weights[..window.taps] {
             for (q, sum) in acc.iter_mut().enumerate() {
-                *sum = w.mul_add(fetch.fetch(plane(tap, planes.values + q)), *sum);
+                *sum = w.mul_add(fetch.fetch(plane(tap, values + q)), *sum);
             }
             // Wrapping: after the last tap the pointer may leave the planes unread.
             tap = tap.wrapping_add(window.tap_step);
         }
     }
     *sums = acc;
-}
-
-/// Where [`accumulate`] finds its planes in a set: the first of the three position
-/// planes, the squared-bandwidth plane, the first of the [`VALUE_PLANES`] value planes.
-#[derive(Clone, Copy, Debug)]
-pub struct TapPlanes {
-    pub position: usize,
-    pub b2: usize,
-    pub values: usize,
 }

@@ -16,13 +16,14 @@
 //! `#[target_feature]`, and their lane operations would not be inlined.
 
 use super::gaussian::{
-    Contiguous, EXP_CUTOFF, Gathered, TapPlanes, Targets, VALUE_PLANES, Window, accumulate,
+    Bandwidths, Contiguous, EXP_CUTOFF, Fetch, Gathered, MAX_TAPS, TapWeights, VALUE_PLANES,
+    Window, accumulate, tap_weights,
 };
 use super::planes::{
     B2_IND, B2X_DIR, B2Y_DIR, C_B2_IND, C_B2Y_DIR, C_DIR, C_IND, C_PX, C_PY, C_PZ, COLUMN_PLANES,
     DIR, IND, INPUT_PLANES, Layout, PX, PY, PZ, Planes,
 };
-use super::temporal::{PreviousView, find_previous};
+use super::temporal::{PreviousView, find_previous_lanes};
 use crate::raster::Vec3Image;
 use crate::simd::{Kernel, LANES, Lanes, Portable};
 use glam::Vec3;
@@ -32,8 +33,10 @@ use rayon::prelude::*;
 /// multiple of [`LANES`], so that no group of lanes spans two tasks). 32 was about 8 %
 /// faster than 16 once the X pass stored whole blocks; 64 was within the noise.
 const COLUMN_BAND: usize = 32;
-/// Image rows per parallel task of the Y pass (a multiple of [`LANES`]).
-const ROW_BAND: usize = 24;
+/// Image rows per parallel task of the Y pass (a multiple of [`LANES`]). A task reads
+/// R rows above and below its band: 48 rows took the temporal Y pass from 41 to 35 ms
+/// against 24 (fewer rows read twice); 96 was no faster.
+const ROW_BAND: usize = 48;
 const _: () = assert!(COLUMN_BAND.is_multiple_of(LANES) && ROW_BAND.is_multiple_of(LANES));
 
 /// The previous frame as the temporal taps read it: its column set (positions,
@@ -108,12 +111,13 @@ fn x_band<V: Lanes>(
 ) {
     let x_end = x_start + lines.len() / layout.row_step();
     let block_rows = input.height / LANES * LANES;
+    let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
     for y0 in (0..block_rows).step_by(LANES) {
         for x0 in (x_start..x_end).step_by(LANES) {
             let lanes = LANES.min(x_end - x0);
             let mut block = [[V::splat(0.0); LANES]; COLUMN_PLANES];
             for r in 0..LANES {
-                let group = x_group::<V>(input, radius, x0, y0 + r);
+                let group = x_group::<V>(input, radius, x0, y0 + r, &mut weights);
                 for (rows, v) in block.iter_mut().zip(group) {
                     rows[r] = v;
                 }
@@ -132,7 +136,7 @@ fn x_band<V: Lanes>(
     for y in block_rows..input.height {
         for x0 in (x_start..x_end).step_by(LANES) {
             let lanes = LANES.min(x_end - x0);
-            let group = x_group::<V>(input, radius, x0, y);
+            let group = x_group::<V>(input, radius, x0, y, &mut weights);
             for (q, v) in group.into_iter().enumerate() {
                 let first = (x0 - x_start) * layout.row_step() + layout.in_row(q, y);
                 for (l, v) in v.to_array().into_iter().enumerate().take(lanes) {
@@ -144,9 +148,15 @@ fn x_band<V: Lanes>(
 }
 
 /// The X pass for pixels (x0 + l, y): the column set's planes, each a vector over the
-/// lanes (0 with valid 0 where a layer has no value).
+/// lanes (0 with valid 0 where a layer has no value). `weights` is scratch.
 #[inline(always)]
-fn x_group<V: Lanes>(input: &Planes, radius: usize, x0: usize, y: usize) -> [V; COLUMN_PLANES] {
+fn x_group<V: Lanes>(
+    input: &Planes,
+    radius: usize,
+    x0: usize,
+    y: usize,
+    weights: &mut TapWeights<V>,
+) -> [V; COLUMN_PLANES] {
     let (data, s) = (input.data(), input.plane_stride());
     let mut out = [V::splat(0.0); COLUMN_PLANES];
     // Pixel (x0 + l, y) of any plane is inside the planes: the padding covers a group's
@@ -162,35 +172,25 @@ fn x_group<V: Lanes>(input: &Planes, radius: usize, x0: usize, y: usize) -> [V; 
     out[C_PZ] = position[2];
     out[C_B2Y_DIR] = load(data, c + B2Y_DIR * s);
     out[C_B2_IND] = load(data, c + B2_IND * s);
-    for (values, b2, first) in [(DIR, B2X_DIR, C_DIR), (IND, B2_IND, C_IND)] {
-        let valid: [V; 2] = [
-            load(data, c + (values + 6) * s),
-            load(data, c + (values + 7) * s),
-        ];
-        // Kinds without a value anywhere in the group: zeros, and the valid planes.
-        if valid[0].all_zero() && valid[1].all_zero() {
-            out[first + 6] = valid[0];
-            out[first + 7] = valid[1];
+    let kinds_planes = [(DIR, B2X_DIR, C_DIR), (IND, B2_IND, C_IND)];
+    let (valid, kinds) = group_kinds(data, c, s, kinds_planes.map(|(v, b2, _)| (v, b2)));
+    let window = line_window(data, c, s, radius);
+    // SAFETY: the taps |i| <= radius of the group lie inside the row's planes
+    // (`fits_radius`).
+    unsafe {
+        let limit = V::splat(EXP_CUTOFF);
+        tap_weights(&Contiguous, &window, PX, position, kinds, limit, weights);
+    }
+    for (k, (values, _, first)) in kinds_planes.into_iter().enumerate() {
+        if kinds[k].is_none() {
+            out[first + 6] = valid[k][0];
+            out[first + 7] = valid[k][1];
             continue;
         }
-        let targets = Targets {
-            position,
-            b2: load(data, c + b2 * s),
-        };
-        let window = line_window(data, c, s, radius);
-        let planes = TapPlanes {
-            position: PX,
-            b2,
-            values,
-        };
         let mut sums = [V::splat(0.0); VALUE_PLANES];
-        // SAFETY: the taps |i| <= radius of the group lie inside the row's planes
-        // (`fits_radius`).
-        unsafe {
-            let limit = V::splat(EXP_CUTOFF);
-            accumulate(&Contiguous, &window, planes, &targets, limit, &mut sums)
-        };
-        for (layer, &ok) in valid.iter().enumerate() {
+        // SAFETY: as for the weights.
+        unsafe { accumulate(&Contiguous, &window, values, &weights[k], &mut sums) };
+        for (layer, &ok) in valid[k].iter().enumerate() {
             for c in 0..3 {
                 // A missing value (NaN) is stored as 0 with valid 0.
                 out[first + 3 * layer + c] = sums[3 * layer + c]
@@ -271,7 +271,23 @@ struct BandOut<'a> {
     layers: [&'a mut [Vec3]; 4],
 }
 
+// The output rows are stored as floats: a Vec3 is three f32.
+const _: () = assert!(std::mem::size_of::<Vec3>() == 3 * std::mem::size_of::<f32>());
+
 impl BandOut<'_> {
+    /// Stores pixels `i..i + LANES` of the band's layer of kind `k` (direct,
+    /// indirect) and `layer` (E_R, E_RV) from their r, g and b lanes.
+    #[inline(always)]
+    fn store_row<V: Lanes>(&mut self, k: usize, layer: usize, i: usize, rgb: [V; 3]) {
+        let pixels = &mut self.layers[k + 2 * layer][i..i + LANES];
+        let floats = pixels.as_mut_ptr().cast::<f32>();
+        for (r, triples) in V::interleave3(rgb).into_iter().enumerate() {
+            // SAFETY: the LANES pixels are 3 LANES floats (Vec3 is #[repr(C)], three
+            // f32); this stores floats LANES r.. LANES r + LANES of them.
+            unsafe { triples.store(floats.add(LANES * r)) };
+        }
+    }
+
     /// Sets pixel `i` of the band from its values per kind (direct, indirect) and layer
     /// (E_R, E_RV): into E_R^dir, E_RV^dir, E_R^ind, E_RV^ind.
     #[inline(always)]
@@ -299,42 +315,47 @@ fn y_band_avx2(source: &YSource, out: &mut BandOut) {
 fn y_band<V: Lanes>(source: &YSource, out: &mut BandOut) {
     let rows = out.layers[0].len() / out.width;
     let block_columns = out.width / LANES * LANES;
+    let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
     for x0 in (0..block_columns).step_by(LANES) {
         for dy0 in (0..rows).step_by(LANES) {
-            let mut groups = [[[[0.0; LANES]; 6]; 2]; LANES];
+            let mut groups = [[[V::splat(0.0); 6]; 2]; LANES];
             for (dx, group) in groups.iter_mut().enumerate() {
-                *group = y_group::<V>(source, x0 + dx, out.y0 + dy0);
+                *group = y_group::<V>(source, x0 + dx, out.y0 + dy0, &mut weights);
             }
-            // by_row[k][p][l][dx]: kind k, plane p (E_R rgb, E_RV rgb) of pixel
+            // by_row[k][p][l], lane dx: kind k, plane p (E_R rgb, E_RV rgb) of pixel
             // (x0 + dx, dy0 + l).
-            let mut by_row = [[[[0.0; LANES]; LANES]; 6]; 2];
+            let mut by_row = [[[V::splat(0.0); LANES]; 6]; 2];
             for (k, kind) in by_row.iter_mut().enumerate() {
                 for (p, plane) in kind.iter_mut().enumerate() {
                     let mut columns = [V::splat(0.0); LANES];
                     for (column, group) in columns.iter_mut().zip(&groups) {
-                        *column = V::from_array(group[k][p]);
+                        *column = group[k][p];
                     }
-                    for (row, v) in plane.iter_mut().zip(V::transpose(columns)) {
-                        *row = v.to_array();
-                    }
+                    *plane = V::transpose(columns);
                 }
             }
             for l in 0..LANES.min(rows - dy0) {
                 let i = (dy0 + l) * out.width + x0;
-                for dx in 0..LANES {
-                    let rgb = |k: usize, layer: usize| {
-                        let p = &by_row[k];
+                for (k, kind) in by_row.iter().enumerate() {
+                    for layer in 0..2 {
                         let c = 3 * layer;
-                        Vec3::new(p[c][l][dx], p[c + 1][l][dx], p[c + 2][l][dx])
-                    };
-                    out.set(i + dx, [[rgb(0, 0), rgb(0, 1)], [rgb(1, 0), rgb(1, 1)]]);
+                        let rgb = [kind[c][l], kind[c + 1][l], kind[c + 2][l]];
+                        out.store_row(k, layer, i, rgb);
+                    }
                 }
             }
         }
     }
     for x in block_columns..out.width {
         for dy0 in (0..rows).step_by(LANES) {
-            let [dir, ind] = y_group::<V>(source, x, out.y0 + dy0);
+            let kinds = y_group::<V>(source, x, out.y0 + dy0, &mut weights);
+            let mut by_lane = [[[0.0; LANES]; 6]; 2];
+            for (k, kind) in kinds.iter().enumerate() {
+                for (q, plane) in kind.iter().enumerate() {
+                    by_lane[k][q] = plane.to_array();
+                }
+            }
+            let [dir, ind] = by_lane;
             for l in 0..LANES.min(rows - dy0) {
                 let i = (dy0 + l) * out.width + x;
                 let rgb = |r: &[[f32; LANES]; 6], layer: usize| {
@@ -350,24 +371,24 @@ fn y_band<V: Lanes>(source: &YSource, out: &mut BandOut) {
 }
 
 /// The Y pass for pixels (x, y0 + l): per kind, E_R rgb then E_RV rgb per lane (NaN
-/// where the target has no value of the layer).
+/// where the target has no value of the layer). `weights` is scratch.
 #[inline(always)]
-fn y_group<V: Lanes>(source: &YSource, x: usize, y0: usize) -> [[[f32; LANES]; 6]; 2] {
+fn y_group<V: Lanes>(
+    source: &YSource,
+    x: usize,
+    y0: usize,
+    weights: &mut TapWeights<V>,
+) -> [[V; 6]; 2] {
     let (columns, radius) = (source.columns, source.radius);
     let (data, s) = (columns.data(), columns.plane_stride());
     // Position y0 + l of line x: inside the planes (the padding covers lanes past the
     // height).
     let c = columns.index(y0 as isize, x);
-    let mut valid = [[V::splat(0.0); 2]; 2];
-    let mut any = false;
-    for (k, first) in [C_DIR, C_IND].into_iter().enumerate() {
-        for (layer, valid) in valid[k].iter_mut().enumerate() {
-            *valid = load(data, c + (first + 6 + layer) * s);
-            any |= !valid.all_zero();
-        }
-    }
-    let mut result = [[[f32::NAN; LANES]; 6]; 2];
-    if !any {
+    let kinds_planes = [(C_DIR, C_B2Y_DIR), (C_IND, C_B2_IND)];
+    let (valid, kinds) = group_kinds(data, c, s, kinds_planes);
+    let nan = V::splat(f32::NAN);
+    let mut result = [[nan; 6]; 2];
+    if kinds.iter().all(Option::is_none) {
         return result;
     }
     let position = [
@@ -375,56 +396,115 @@ fn y_group<V: Lanes>(source: &YSource, x: usize, y0: usize) -> [[[f32; LANES]; 6
         load::<V>(data, c + C_PY * s),
         load::<V>(data, c + C_PZ * s),
     ];
-    let spatial = line_window(data, c, s, radius);
-    let temporal = match source.previous {
-        Some(previous) => temporal_taps::<V>(previous, position, &valid, x, y0, radius),
-        None => None,
+    let mut sums = [[V::splat(0.0); VALUE_PLANES]; 2];
+    let group = GroupTaps {
+        position,
+        kinds,
+        first: kinds_planes.map(|(first, _)| first),
     };
-    let kinds = [(C_DIR, C_B2Y_DIR), (C_IND, C_B2_IND)];
-    for (k, (first, b2)) in kinds.into_iter().enumerate() {
-        let [valid_r, valid_rv] = valid[k];
-        if valid_r.all_zero() && valid_rv.all_zero() {
-            continue;
-        }
-        let targets = Targets {
-            position,
-            b2: load(data, c + b2 * s),
-        };
-        let planes = TapPlanes {
-            position: C_PX,
-            b2,
-            values: first,
-        };
-        let mut sums = [V::splat(0.0); VALUE_PLANES];
-        // SAFETY: the taps |i| <= radius lie inside the planes (`fits_radius`), and the
-        // temporal window's taps too (see `temporal_taps`).
-        unsafe {
-            let limit = V::splat(EXP_CUTOFF);
-            accumulate(&Contiguous, &spatial, planes, &targets, limit, &mut sums);
-            match &temporal {
+    // SAFETY: the taps |i| <= radius lie inside the planes (`fits_radius`), and the
+    // temporal window's taps too (see `temporal_taps`).
+    unsafe {
+        let spatial = line_window(data, c, s, radius);
+        let limit = V::splat(EXP_CUTOFF);
+        group.add(&Contiguous, &spatial, limit, weights, &mut sums);
+        if let Some(previous) = source.previous {
+            match temporal_taps::<V>(previous, position, &valid, x, y0, radius) {
                 Some((window, TemporalFetch::Contiguous, limit)) => {
-                    accumulate(&Contiguous, window, planes, &targets, *limit, &mut sums)
+                    group.add(&Contiguous, &window, limit, weights, &mut sums)
                 }
                 Some((window, TemporalFetch::Gathered(g), limit)) => {
-                    accumulate(g, window, planes, &targets, *limit, &mut sums)
+                    group.add(&g, &window, limit, weights, &mut sums)
                 }
                 None => {}
             }
         }
+    }
+    for (k, sums) in sums.iter().enumerate() {
+        if kinds[k].is_none() {
+            continue;
+        }
         for (layer, ok) in valid[k].iter().enumerate() {
-            let ok = ok.to_array();
-            let weight = sums[6 + layer].to_array();
+            let ok = ok.gt(V::splat(0.0));
             for c in 0..3 {
-                let sum = sums[3 * layer + c].to_array();
-                for l in 0..LANES {
-                    if ok[l] > 0.0 {
-                        result[k][3 * layer + c][l] = sum[l] / weight[l];
-                    }
-                }
+                let value = sums[3 * layer + c].div(sums[6 + layer]);
+                result[k][3 * layer + c] = V::select(ok, value, nan);
             }
         }
     }
     result
+}
+
+/// The valid planes (valid_R, valid_RV) of both kinds at index `c` of the planes (plane
+/// stride `s`), each kind given by its first value plane and its squared-bandwidth
+/// plane; and the bandwidths of the kinds with a value somewhere in the group (`None`
+/// for the others: they are not filtered). A loop, not closures: closures do not
+/// inherit `#[target_feature]`.
+#[inline(always)]
+#[allow(clippy::type_complexity)]
+fn group_kinds<V: Lanes>(
+    data: &[f32],
+    c: usize,
+    s: usize,
+    kinds_planes: [(usize, usize); 2],
+) -> ([[V; 2]; 2], [Option<Bandwidths<V>>; 2]) {
+    let mut valid = [[V::splat(0.0); 2]; 2];
+    let mut kinds = [None; 2];
+    for (k, (values, b2)) in kinds_planes.into_iter().enumerate() {
+        valid[k] = [
+            load(data, c + (values + 6) * s),
+            load(data, c + (values + 7) * s),
+        ];
+        if !(valid[k][0].all_zero() && valid[k][1].all_zero()) {
+            kinds[k] = Some(Bandwidths {
+                plane: b2,
+                target: load(data, c + b2 * s),
+            });
+        }
+    }
+    (valid, kinds)
+}
+
+/// A group's targets in the Y pass: their positions, the kinds being filtered, and
+/// each kind's first value plane.
+struct GroupTaps<V> {
+    position: [V; 3],
+    kinds: [Option<Bandwidths<V>>; 2],
+    first: [usize; 2],
+}
+
+impl<V: Lanes> GroupTaps<V> {
+    /// Adds the weighted taps of `window` to each filtered kind's `sums`.
+    ///
+    /// # Safety
+    /// Every tap of `window` that `fetch` reads must lie inside its planes.
+    #[inline(always)]
+    unsafe fn add<F: Fetch<V>>(
+        &self,
+        fetch: &F,
+        window: &Window,
+        limit: V,
+        weights: &mut TapWeights<V>,
+        sums: &mut [[V; VALUE_PLANES]; 2],
+    ) {
+        // SAFETY: forwarded from the caller.
+        unsafe {
+            tap_weights(
+                fetch,
+                window,
+                C_PX,
+                self.position,
+                self.kinds,
+                limit,
+                weights,
+            );
+            for k in 0..2 {
+                if self.kinds[k].is_some() {
+                    accumulate(fetch, window, self.first[k], &weights[k], &mut sums[k]);
+                }
+            }
+        }
+    }
 }
 
 /// How the temporal taps of a group are read.
@@ -434,9 +514,10 @@ enum TemporalFetch {
 }
 
 /// The temporal taps (eq. 26) of pixels (x, y0 + l): the window over the previous
-/// frame's column set around each lane's previous pixel (x', y') ([`find_previous`]),
+/// frame's column set around each lane's previous pixel (x', y') (`find_previous`),
 /// how to read it, and the per-lane exp limit ([`EXP_CUTOFF`], or -1 for lanes without
 /// a previous pixel: no weight). `None` when no lane has one.
+/// ([`find_previous_lanes`] is [`super::temporal::find_previous`] in lanes.)
 #[inline(always)]
 fn temporal_taps<V: Lanes>(
     previous: Previous,
@@ -446,11 +527,6 @@ fn temporal_taps<V: Lanes>(
     y0: usize,
     radius: usize,
 ) -> Option<(Window, TemporalFetch, V)> {
-    let (px, py, pz) = (
-        position[0].to_array(),
-        position[1].to_array(),
-        position[2].to_array(),
-    );
     let valid = [
         valid[0][0].to_array(),
         valid[0][1].to_array(),
@@ -459,13 +535,9 @@ fn temporal_taps<V: Lanes>(
     ];
     let columns = previous.columns;
     let height = columns.width;
-    let found: [Option<(usize, usize)>; LANES] = std::array::from_fn(|l| {
-        let has_value = valid.iter().any(|a| a[l] > 0.0);
-        let p = Vec3::new(px[l], py[l], pz[l]);
-        (y0 + l < height && has_value)
-            .then(|| find_previous(p, previous.view, columns))
-            .flatten()
-    });
+    let active: [bool; LANES] =
+        std::array::from_fn(|l| y0 + l < height && valid.iter().any(|a| a[l] > 0.0));
+    let found = find_previous_lanes(position, active, previous.view, columns);
     let (m, (xm, ym)) = found
         .iter()
         .enumerate()

@@ -4,6 +4,7 @@
 
 use super::planes::{C_PX, C_PY, C_PZ, Planes};
 use crate::pinhole::Pinhole;
+use crate::simd::{LANES, Lanes};
 use glam::{Affine3A, Vec3};
 
 /// Half size of the search window around the projected pixel (1: 3 x 3).
@@ -66,4 +67,110 @@ pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<
         }
     }
     best
+}
+
+/// [`find_previous`] for eight points at once, one per lane, with the same answers bit
+/// for bit (the same operations in the same order: glam's `transform_point3` and
+/// `length_squared` use no fused multiply-adds, and neither does this). Lanes that are
+/// not `active` get `None`.
+///
+/// The column set's floats must fit i32 offsets (the positions are gathered).
+#[inline(always)]
+pub fn find_previous_lanes<V: Lanes>(
+    p: [V; 3],
+    active: [bool; LANES],
+    view: &PreviousView,
+    previous: &Planes,
+) -> [Option<(usize, usize)>; LANES] {
+    debug_assert!(previous.floats() <= i32::MAX as usize);
+    let s = V::splat;
+    let [px, py, pz] = p;
+    let (m, t) = (
+        view.world_to_camera.matrix3,
+        view.world_to_camera.translation,
+    );
+    // ((x_axis x + y_axis y) + z_axis z) + translation, per component.
+    let cx = (s(m.x_axis.x).mul(px).add(s(m.y_axis.x).mul(py)))
+        .add(s(m.z_axis.x).mul(pz))
+        .add(s(t.x));
+    let cy = (s(m.x_axis.y).mul(px).add(s(m.y_axis.y).mul(py)))
+        .add(s(m.z_axis.y).mul(pz))
+        .add(s(t.y));
+    let cz = (s(m.x_axis.z).mul(px).add(s(m.y_axis.z).mul(py)))
+        .add(s(m.z_axis.z).mul(pz))
+        .add(s(t.z));
+    let cam = &view.camera;
+    let u = s(cam.fx).mul(cx).div(cz).add(s(cam.cx)).add(s(0.5));
+    let v = s(cam.fy).mul(cy).div(cz).add(s(cam.cy)).add(s(0.5));
+    let width = previous.height.min(cam.width as usize) as i32;
+    let height = previous.width.min(cam.height as usize) as i32;
+    let (w, h) = (s(width as f32), s(height as f32));
+    let zero = s(0.0);
+    let active = V::from_array(active.map(|a| f32::from_bits(if a { u32::MAX } else { 0 })));
+    // In front of the camera (false for NaN) and on screen.
+    let inside = active
+        .and(cz.gt(zero))
+        .and(u.ge(zero))
+        .and(v.ge(zero))
+        .and(u.lt(w))
+        .and(v.lt(h));
+    if !inside.any() {
+        return [None; LANES];
+    }
+    // u, v >= 0 where inside: truncation is the floor. Other lanes look at pixel (0, 0),
+    // masked out.
+    let (u, v) = (
+        V::select(inside, u, zero).trunc(),
+        V::select(inside, v, zero).trunc(),
+    );
+    let (ui, vi) = (u.trunc_to_i32(), v.trunc_to_i32());
+    let data = previous.data().as_ptr();
+    let stride = previous.plane_stride();
+    let mut best_d2 = s(Planes::MISSING_DISTANCE2);
+    // Index of the best window pixel so far, -1 for none.
+    let mut best = s(-1.0);
+    let mut k = 0;
+    for dy in -SEARCH_RADIUS..=SEARCH_RADIUS {
+        for dx in -SEARCH_RADIUS..=SEARCH_RADIUS {
+            let (x, y) = (u.add(s(dx as f32)), v.add(s(dy as f32)));
+            let ok = inside
+                .and(x.ge(zero))
+                .and(y.ge(zero))
+                .and(x.lt(w))
+                .and(y.lt(h));
+            // Pixel (x, y) is position y of line x; lanes outside read pixel (0, 0).
+            let offset: [i32; LANES] = std::array::from_fn(|l| {
+                let (x, y) = (ui[l] + dx, vi[l] + dy);
+                if x >= 0 && y >= 0 && x < width && y < height {
+                    previous.index(y as isize, x as usize) as i32
+                } else {
+                    previous.index(0, 0) as i32
+                }
+            });
+            // SAFETY: every offset is a pixel of plane 0; the position planes are
+            // inside the set.
+            let (qx, qy, qz) = unsafe {
+                (
+                    V::gather(data.add(C_PX * stride), &offset),
+                    V::gather(data.add(C_PY * stride), &offset),
+                    V::gather(data.add(C_PZ * stride), &offset),
+                )
+            };
+            let (ex, ey, ez) = (qx.sub(px), qy.sub(py), qz.sub(pz));
+            let d2 = ex.mul(ex).add(ey.mul(ey)).add(ez.mul(ez));
+            let better = ok.and(d2.lt(best_d2));
+            best_d2 = V::select(better, d2, best_d2);
+            best = V::select(better, s(k as f32), best);
+            k += 1;
+        }
+    }
+    let best = best.to_array();
+    let side = 2 * SEARCH_RADIUS + 1;
+    std::array::from_fn(|l| {
+        (best[l] >= 0.0).then(|| {
+            let k = best[l] as i32;
+            let (dx, dy) = (k % side - SEARCH_RADIUS, k / side - SEARCH_RADIUS);
+            ((ui[l] + dx) as usize, (vi[l] + dy) as usize)
+        })
+    })
 }

@@ -10,6 +10,7 @@ use crate::rng::{hash, unit_f32};
 use crate::simd::{self as lanes, Lanes, Portable};
 
 mod reference;
+mod temporal;
 
 const W: u32 = 96;
 const H: u32 = 72;
@@ -432,25 +433,6 @@ fn a_size_change_drops_the_previous_frame() {
     AxisAlignedFilter::new(params(true))
         .filter(&empty.inputs(view), &mut none)
         .unwrap();
-}
-
-#[test]
-fn a_point_behind_or_beside_the_previous_camera_has_no_match() {
-    let scene = Scene::new(plane(2.0), 1.0, 1.0);
-    let mut filter = AxisAlignedFilter::new(params(true));
-    let mut out = FilterOutputs::new(W, H);
-    filter
-        .filter(&scene.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
-        .unwrap();
-    let view = filter.previous_view.unwrap();
-    assert_eq!(
-        find_previous(Vec3::new(0.0, 0.0, -1.0), &view, &filter.previous_columns),
-        None
-    );
-    assert_eq!(
-        find_previous(Vec3::new(50.0, 0.0, 2.0), &view, &filter.previous_columns),
-        None
-    );
 }
 
 #[test]

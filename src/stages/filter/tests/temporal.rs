@@ -1,0 +1,131 @@
+//! The reprojection of the temporal filter: `find_previous` on points it must reject,
+//! and its lane form against it.
+
+use super::*;
+use crate::simd::LANES;
+use crate::stages::filter::planes::{C_PX, C_PY, C_PZ};
+use crate::stages::filter::temporal::{PreviousView, find_previous_lanes};
+
+#[test]
+fn a_point_behind_or_beside_the_previous_camera_has_no_match() {
+    let scene = Scene::new(plane(2.0), 1.0, 1.0);
+    let mut filter = AxisAlignedFilter::new(params(true));
+    let mut out = FilterOutputs::new(W, H);
+    filter
+        .filter(&scene.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
+        .unwrap();
+    let view = filter.previous_view.unwrap();
+    assert_eq!(
+        find_previous(Vec3::new(0.0, 0.0, -1.0), &view, &filter.previous_columns),
+        None
+    );
+    assert_eq!(
+        find_previous(Vec3::new(50.0, 0.0, 2.0), &view, &filter.previous_columns),
+        None
+    );
+}
+
+/// Eight points at a time through `find_previous_lanes`, each lane against
+/// `find_previous`: the scene's own positions seen from a turned camera (ties between
+/// equal distances included: the plane behind the sphere is flat), jittered points,
+/// points behind the camera, off the screen, on its edges, NaN, and inactive lanes.
+fn check_find_previous_lanes<V: Lanes>(name: &str, view: &PreviousView, previous: &Planes) {
+    let cam = camera();
+    let mut points: Vec<Vec3> = Scene::new(sphere(Vec3::new(0.0, 0.0, 1.5), 0.3, 2.0), 1.0, 1.0)
+        .position
+        .data
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| p + 0.01 * Vec3::new(noise(60, i), noise(61, i), noise(62, i)))
+        .collect();
+    // Midway between the positions of two neighbouring previous pixels (and a few
+    // ulps off): the nearest is decided by the last bits of the distances, or is a tie.
+    let q = |x: usize, y: usize| {
+        Vec3::new(
+            previous.at(C_PX, y, x),
+            previous.at(C_PY, y, x),
+            previous.at(C_PZ, y, x),
+        )
+    };
+    for y in (1..H as usize - 1).step_by(3) {
+        for x in (1..W as usize - 1).step_by(2) {
+            for (a, b) in [(q(x, y), q(x + 1, y)), (q(x, y), q(x, y + 1))] {
+                let mid = (a + b) * 0.5;
+                points.extend([mid, mid + Vec3::splat(1e-7), mid - Vec3::splat(2e-7)]);
+            }
+        }
+    }
+    // On the borders between previous pixels: the pixel a point falls in is decided by
+    // the last bits of its projection.
+    let to_world = view.world_to_camera.inverse();
+    for y in (0..H).step_by(5) {
+        for x in 0..W {
+            for du in [-1e-4, -4e-6, -2e-6, 0.0, 2e-6, 4e-6, 1e-4] {
+                let ray = cam.ray(x as f32 - 0.5 + du, y as f32 - 0.5 - du);
+                points.push(to_world.transform_point3(ray * 2.0));
+            }
+        }
+    }
+    points.extend([
+        Vec3::new(0.0, 0.0, -1.0),
+        Vec3::new(50.0, 0.0, 2.0),
+        Vec3::NAN,
+        Vec3::ZERO,
+        cam.ray(0.0, 0.0) * 2.0,
+        cam.ray(W as f32 - 0.5, H as f32 - 0.5) * 2.0,
+        cam.ray(-0.6, 3.0) * 2.0,
+        cam.ray(W as f32 + 0.1, 3.0) * 2.0,
+    ]);
+    let mut found = 0;
+    for (g, group) in points.chunks(LANES).enumerate() {
+        let lane = |l: usize| group.get(l).copied().unwrap_or(Vec3::ZERO);
+        let p = [0, 1, 2].map(|c| V::from_array(std::array::from_fn(|l| lane(l)[c])));
+        let active: [bool; LANES] = std::array::from_fn(|l| l < group.len() && (g + l) % 7 != 3);
+        let got = find_previous_lanes(p, active, view, previous);
+        for l in 0..LANES {
+            let expected = active[l]
+                .then(|| find_previous(lane(l), view, previous))
+                .flatten();
+            assert_eq!(
+                got[l],
+                expected,
+                "{name}: point {} {}",
+                LANES * g + l,
+                lane(l)
+            );
+            found += expected.is_some() as usize;
+        }
+    }
+    assert!(
+        found > points.len() / 2,
+        "{name}: {found} of {} found",
+        points.len()
+    );
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn check_find_previous_lanes_avx2(view: &PreviousView, previous: &Planes) {
+    check_find_previous_lanes::<lanes::Avx2>("Avx2", view, previous);
+}
+
+#[test]
+fn find_previous_in_lanes_gives_the_scalar_answers() {
+    let scene = Scene::new(sphere(Vec3::new(0.0, 0.0, 1.5), 0.3, 2.0), 1.0, 1.0);
+    let turned = Pose::from_parts(
+        glam::DVec3::new(0.02, 0.01, 0.0),
+        glam::DQuat::from_rotation_y(0.03),
+    );
+    let mut filter = AxisAlignedFilter::new(params(true));
+    let mut out = FilterOutputs::new(W, H);
+    filter
+        .filter(&scene.inputs(Some((turned, camera()))), &mut out)
+        .unwrap();
+    let view = filter.previous_view.unwrap();
+    check_find_previous_lanes::<Portable>("Portable", &view, &filter.previous_columns);
+    #[cfg(target_arch = "x86_64")]
+    if lanes::Kernel::detect() == lanes::Kernel::Avx2Fma {
+        // SAFETY: the CPU has AVX2 and FMA.
+        unsafe { check_find_previous_lanes_avx2(&view, &filter.previous_columns) };
+    }
+}

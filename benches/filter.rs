@@ -204,16 +204,32 @@ fn bench_filter(c: &mut Criterion) {
         exponent: &input.exponent,
     };
     let settings = BandwidthSettings { b_f: 1.0, b_e: 4.0 };
+    let kernel = Kernel::detect();
     let mut rows = Planes::new(INPUT_PLANES, w, h, RADIUS);
     let mut width_dir = Image::filled(W, H, 0.0);
     let mut width_ind = Image::filled(W, H, 0.0);
     // Filled once here too, so that the passes below have their inputs when the prepare
     // bench is filtered out.
-    planes::prepare(&prep, settings, &mut rows, &mut width_dir, &mut width_ind);
+    planes::prepare(
+        kernel,
+        &prep,
+        settings,
+        &mut rows,
+        &mut width_dir,
+        &mut width_ind,
+    );
     group.bench_function("pass/prepare", |b| {
-        b.iter(|| planes::prepare(&prep, settings, &mut rows, &mut width_dir, &mut width_ind))
+        b.iter(|| {
+            planes::prepare(
+                kernel,
+                &prep,
+                settings,
+                &mut rows,
+                &mut width_dir,
+                &mut width_ind,
+            )
+        })
     });
-    let kernel = Kernel::detect();
     let mut columns = Planes::new(COLUMN_PLANES, h, w, RADIUS);
     group.bench_function("pass/x", |b| {
         b.iter(|| passes::x_pass(kernel, &rows, RADIUS, &mut columns))

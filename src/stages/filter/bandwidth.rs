@@ -170,23 +170,33 @@ pub(super) fn curvature_row(
     kx_row: &mut [f32],
     ky_row: &mut [f32],
 ) {
+    for (x, (kx, ky)) in kx_row.iter_mut().zip(ky_row.iter_mut()).enumerate() {
+        (*kx, *ky) = curvature_at(positions, normals, x, y);
+    }
+}
+
+/// kappa_X and kappa_Y of pixel (x, y) (see [`screen_curvature`]).
+pub(super) fn curvature_at(
+    positions: &Vec3Image,
+    normals: &Vec3Image,
+    x: usize,
+    y: usize,
+) -> (f32, f32) {
     let (w, h) = (positions.width as usize, positions.height as usize);
     let p = &positions.data;
     let n = &normals.data;
-    for x in 0..w {
-        let i = y * w + x;
-        let (pc, nc) = (p[i], n[i]);
-        if !usable(pc, nc) {
-            kx_row[x] = 0.0;
-            ky_row[x] = 0.0;
-            continue;
-        }
-        let along = |fwd: Option<usize>, bwd: Option<usize>| {
-            fwd.and_then(|j| curvature_to(pc, nc, p[j], n[j]))
-                .or_else(|| bwd.and_then(|j| curvature_to(pc, nc, p[j], n[j])))
-                .unwrap_or(0.0)
-        };
-        kx_row[x] = along((x + 1 < w).then_some(i + 1), (x > 0).then(|| i - 1));
-        ky_row[x] = along((y + 1 < h).then_some(i + w), (y > 0).then(|| i - w));
+    let i = y * w + x;
+    let (pc, nc) = (p[i], n[i]);
+    if !usable(pc, nc) {
+        return (0.0, 0.0);
     }
+    let along = |fwd: Option<usize>, bwd: Option<usize>| {
+        fwd.and_then(|j| curvature_to(pc, nc, p[j], n[j]))
+            .or_else(|| bwd.and_then(|j| curvature_to(pc, nc, p[j], n[j])))
+            .unwrap_or(0.0)
+    };
+    (
+        along((x + 1 < w).then_some(i + 1), (x > 0).then(|| i - 1)),
+        along((y + 1 < h).then_some(i + w), (y > 0).then(|| i - w)),
+    )
 }

@@ -56,6 +56,7 @@ pub mod bandwidth;
 pub mod gaussian;
 pub mod passes;
 pub mod planes;
+mod prepare_lanes;
 pub mod spectrum;
 pub mod temporal;
 
@@ -381,6 +382,7 @@ impl AxisAlignedFilter {
             exponent: input.exponent,
         };
         planes::prepare(
+            self.kernel,
             &prepare_inputs,
             settings,
             &mut self.input,

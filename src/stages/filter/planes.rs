@@ -11,10 +11,11 @@
 //! valid 0, so zero weight. The passes only read along rows, so there are no padding
 //! rows.
 
-use super::bandwidth::{brdf_bandwidth, curvature_row, direct_bandwidth, indirect_bandwidth};
+use super::bandwidth::{brdf_bandwidth, curvature_at, direct_bandwidth, indirect_bandwidth};
 use super::gaussian::VALUE_PLANES;
+use super::prepare_lanes::{RowOut, prepare_group};
 use crate::raster::{ScalarImage, Vec3Image};
-use crate::simd::LANES;
+use crate::simd::{Kernel, LANES, Lanes, Portable};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -180,6 +181,12 @@ impl Planes {
         let step = self.row_step();
         self.data.par_chunks_mut((rows * step).max(1))
     }
+
+    /// The planes' floats, for tests that fill them by hand.
+    #[cfg(test)]
+    pub(super) fn data_mut(&mut self) -> &mut [f32] {
+        &mut self.data
+    }
 }
 
 /// What the preparation pass reads (all images of the same size).
@@ -204,8 +211,11 @@ pub struct BandwidthSettings {
 /// positions, squared bandwidths (eqs. 17, 18 from the curvatures of eq. 20) and cleaned
 /// values (0 with valid 0 where a layer has no finite value or the pixel no position),
 /// and writes the filter widths sigma = 1 / B (direct: mean of the X and Y sigmas;
-/// INFINITY where B = 0, NaN where there is no position).
+/// INFINITY where B = 0, NaN where there is no position). Eight pixels at a time
+/// (`prepare_lanes`, with `kernel`) where a row's X neighbours of all eight exist, one
+/// by one at the row's ends; the same bits either way.
 pub fn prepare(
+    kernel: Kernel,
     images: &PrepareInputs,
     settings: BandwidthSettings,
     input: &mut Planes,
@@ -216,60 +226,113 @@ pub fn prepare(
     if w == 0 || input.height == 0 {
         return;
     }
+    let kernel = kernel.available();
     let layout = input.layout();
     input
         .bands_mut(1)
         .zip(width_dir.data.par_chunks_mut(w))
         .zip(width_ind.data.par_chunks_mut(w))
         .enumerate()
-        .for_each_init(
-            || (vec![0.0f32; w], vec![0.0f32; w]),
-            |(kx, ky), (y, ((row, wd), wi))| {
-                curvature_row(images.world_position, images.world_normal, y, kx, ky);
-                for x in 0..w {
-                    let i = y * w + x;
-                    let mut put = |q: usize, v: f32| row[layout.in_row(q, x)] = v;
-                    let p = images.world_position.data[i];
-                    let has_position = p.is_finite();
-                    let m = images.exponent.data[i];
-                    let m = if m.is_finite() { m.max(0.0) } else { 0.0 };
-                    let b_rho = brdf_bandwidth(m);
-                    let zd = images.direct_min_distance.data[i];
-                    let zi = images.indirect_min_distance.data[i];
-                    let bx = direct_bandwidth(kx[x], zd, settings.b_f, b_rho, settings.b_e);
-                    let by = direct_bandwidth(ky[x], zd, settings.b_f, b_rho, settings.b_e);
-                    let bi = indirect_bandwidth(zi, m);
-                    let stored = if has_position {
-                        p
-                    } else {
-                        Vec3::splat(MISSING_POSITION)
-                    };
-                    put(PX, stored.x);
-                    put(PY, stored.y);
-                    put(PZ, stored.z);
-                    let keep = |b: f32| if has_position { b * b } else { 0.0 };
-                    put(B2X_DIR, keep(bx));
-                    put(B2Y_DIR, keep(by));
-                    put(B2_IND, keep(bi));
-                    for (kind, r, rv) in [(DIR, 0, 2), (IND, 1, 3)] {
-                        for (slot, layer) in [(0, r), (3, rv)] {
-                            let v = images.layers[layer].data[i];
-                            let ok = has_position && v.is_finite();
-                            let v = if ok { v } else { Vec3::ZERO };
-                            put(kind + slot, v.x);
-                            put(kind + slot + 1, v.y);
-                            put(kind + slot + 2, v.z);
-                            put(kind + 6 + slot / 3, if ok { 1.0 } else { 0.0 });
-                        }
-                    }
-                    let sigma = |b: f32| 1.0 / b;
-                    wd[x] = if has_position {
-                        0.5 * (sigma(bx) + sigma(by))
-                    } else {
-                        f32::NAN
-                    };
-                    wi[x] = if has_position { sigma(bi) } else { f32::NAN };
-                }
-            },
-        );
+        .for_each(|(y, ((row, width_dir), width_ind))| {
+            let mut out = RowOut {
+                row,
+                width_dir,
+                width_ind,
+            };
+            match kernel {
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and FMA.
+                Kernel::Avx2Fma => unsafe {
+                    prepare_row_avx2(images, settings, &layout, y, &mut out)
+                },
+                _ => prepare_row::<Portable>(images, settings, &layout, y, &mut out),
+            }
+        });
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn prepare_row_avx2(
+    images: &PrepareInputs,
+    settings: BandwidthSettings,
+    layout: &Layout,
+    y: usize,
+    out: &mut RowOut,
+) {
+    prepare_row::<crate::simd::Avx2>(images, settings, layout, y, out)
+}
+
+/// [`prepare`] for row `y`: groups of eight pixels from x = 1 while pixel x + 8 is
+/// inside the row, single pixels before and after.
+#[inline(always)]
+fn prepare_row<V: Lanes>(
+    images: &PrepareInputs,
+    settings: BandwidthSettings,
+    layout: &Layout,
+    y: usize,
+    out: &mut RowOut,
+) {
+    let w = layout.width;
+    let groups = if w > LANES + 1 { (w - 2) / LANES } else { 0 };
+    let lanes_end = 1 + groups * LANES;
+    for x0 in (1..lanes_end).step_by(LANES) {
+        prepare_group::<V>(images, settings, layout, y, x0, out);
+    }
+    for x in (0..1.min(w)).chain(lanes_end.max(1)..w) {
+        prepare_pixel(images, settings, layout, y, x, out);
+    }
+}
+
+/// [`prepare`] for pixel (x, y) alone.
+pub(super) fn prepare_pixel(
+    images: &PrepareInputs,
+    settings: BandwidthSettings,
+    layout: &Layout,
+    y: usize,
+    x: usize,
+    out: &mut RowOut,
+) {
+    let i = y * layout.width + x;
+    let (kx, ky) = curvature_at(images.world_position, images.world_normal, x, y);
+    let mut put = |q: usize, v: f32| out.row[layout.in_row(q, x)] = v;
+    let p = images.world_position.data[i];
+    let has_position = p.is_finite();
+    let m = images.exponent.data[i];
+    let m = if m.is_finite() { m.max(0.0) } else { 0.0 };
+    let b_rho = brdf_bandwidth(m);
+    let zd = images.direct_min_distance.data[i];
+    let zi = images.indirect_min_distance.data[i];
+    let bx = direct_bandwidth(kx, zd, settings.b_f, b_rho, settings.b_e);
+    let by = direct_bandwidth(ky, zd, settings.b_f, b_rho, settings.b_e);
+    let bi = indirect_bandwidth(zi, m);
+    let stored = if has_position {
+        p
+    } else {
+        Vec3::splat(MISSING_POSITION)
+    };
+    put(PX, stored.x);
+    put(PY, stored.y);
+    put(PZ, stored.z);
+    let keep = |b: f32| if has_position { b * b } else { 0.0 };
+    put(B2X_DIR, keep(bx));
+    put(B2Y_DIR, keep(by));
+    put(B2_IND, keep(bi));
+    for (kind, r, rv) in [(DIR, 0, 2), (IND, 1, 3)] {
+        for (slot, layer) in [(0, r), (3, rv)] {
+            let v = images.layers[layer].data[i];
+            let ok = has_position && v.is_finite();
+            let v = if ok { v } else { Vec3::ZERO };
+            put(kind + slot, v.x);
+            put(kind + slot + 1, v.y);
+            put(kind + slot + 2, v.z);
+            put(kind + 6 + slot / 3, if ok { 1.0 } else { 0.0 });
+        }
+    }
+    let sigma = |b: f32| 1.0 / b;
+    out.width_dir[x] = if has_position {
+        0.5 * (sigma(bx) + sigma(by))
+    } else {
+        f32::NAN
+    };
+    out.width_ind[x] = if has_position { sigma(bi) } else { f32::NAN };
 }

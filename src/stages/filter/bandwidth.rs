@@ -163,7 +163,7 @@ pub fn screen_curvature(
 }
 
 /// kappa_X and kappa_Y of row `y` (see [`screen_curvature`]).
-pub(super) fn curvature_row(
+fn curvature_row(
     positions: &Vec3Image,
     normals: &Vec3Image,
     y: usize,

@@ -8,13 +8,15 @@
 //! way a tap of all eight targets is eight consecutive floats of each plane, one vector
 //! load, and a task's taps stay in cache. Both passes store through 8 x 8 blocks
 //! transposed in registers ([`Lanes::transpose`]): the X pass writes the column set's
-//! lines eight positions at a time, the Y pass the output rows eight pixels at a time.
+//! lines eight positions at a time, the Y pass the output rows eight pixels at a time
+//! (three vector stores of interleaved rgb, [`Lanes::interleave3`]).
 //! The kernel (AVX2 + FMA or portable, [`Kernel`]) is chosen
 //! per band; both give the same bits.
 //!
 //! The lane operations are never called from closures: closures do not inherit
 //! `#[target_feature]`, and their lane operations would not be inlined.
 
+use super::MAX_RADIUS;
 use super::gaussian::{
     Bandwidths, Contiguous, EXP_CUTOFF, Fetch, Gathered, MAX_TAPS, TapWeights, VALUE_PLANES,
     Window, accumulate, tap_weights,
@@ -73,6 +75,7 @@ fn line_window(data: &[f32], i: usize, plane_stride: usize, radius: usize) -> Wi
 pub fn x_pass(kernel: Kernel, input: &Planes, radius: usize, columns: &mut Planes) {
     assert!(input.planes() == INPUT_PLANES && columns.planes() == COLUMN_PLANES);
     assert!(input.fits_radius(radius) && columns.fits_radius(radius));
+    assert!(radius <= MAX_RADIUS, "radius {radius} over {MAX_RADIUS}");
     assert_eq!((columns.width, columns.height), (input.height, input.width));
     let kernel = kernel.available();
     let layout = columns.layout();
@@ -217,6 +220,7 @@ pub fn y_pass(
     // The column set is the transposed image.
     let (w, h) = (columns.height, columns.width);
     assert!(columns.planes() == COLUMN_PLANES && columns.fits_radius(radius));
+    assert!(radius <= MAX_RADIUS, "radius {radius} over {MAX_RADIUS}");
     // Gather offsets are i32.
     assert!(columns.floats() <= i32::MAX as usize);
     if let Some(p) = previous {
@@ -514,10 +518,10 @@ enum TemporalFetch {
 }
 
 /// The temporal taps (eq. 26) of pixels (x, y0 + l): the window over the previous
-/// frame's column set around each lane's previous pixel (x', y') (`find_previous`),
+/// frame's column set around each lane's previous pixel (x', y')
+/// ([`find_previous_lanes`]),
 /// how to read it, and the per-lane exp limit ([`EXP_CUTOFF`], or -1 for lanes without
 /// a previous pixel: no weight). `None` when no lane has one.
-/// ([`find_previous_lanes`] is [`super::temporal::find_previous`] in lanes.)
 #[inline(always)]
 fn temporal_taps<V: Lanes>(
     previous: Previous,

@@ -278,7 +278,7 @@ fn prepare_row<V: Lanes>(
     for x0 in (1..lanes_end).step_by(LANES) {
         prepare_group::<V>(images, settings, layout, y, x0, out);
     }
-    for x in (0..1.min(w)).chain(lanes_end.max(1)..w) {
+    for x in (0..1.min(w)).chain(lanes_end..w) {
         prepare_pixel(images, settings, layout, y, x, out);
     }
 }

@@ -271,9 +271,6 @@ mod tests {
     use crate::rng::{hash, unit_f32};
     use crate::simd::Kernel;
 
-    const W: usize = 37;
-    const H: usize = 6;
-
     fn noise(seed: u64, i: usize) -> f32 {
         unit_f32(hash(&[seed, i as u64]))
     }
@@ -296,22 +293,22 @@ mod tests {
     /// A bumpy surface with what the bandwidths must survive: missing positions and
     /// normals (NaN, infinite), zero normals, neighbours at the same position, missing
     /// and non-positive distances and exponents, missing values.
-    fn images() -> Images {
+    fn images(w: usize, h: usize) -> Images {
         let vec3 = |f: &dyn Fn(usize) -> Vec3| -> Vec3Image {
-            Image::from_vec(W as u32, H as u32, (0..W * H).map(f).collect()).unwrap()
+            Image::from_vec(w as u32, h as u32, (0..w * h).map(f).collect()).unwrap()
         };
         let scalar = |f: &dyn Fn(usize) -> f32| -> ScalarImage {
-            Image::from_vec(W as u32, H as u32, (0..W * H).map(f).collect()).unwrap()
+            Image::from_vec(w as u32, h as u32, (0..w * h).map(f).collect()).unwrap()
         };
         let position = vec3(&|i| {
-            let (x, y) = ((i % W) as f32, (i / W) as f32);
+            let (x, y) = ((i % w) as f32, (i / w) as f32);
             let z = 2.0 + 0.05 * noise(1, i);
             let p = Vec3::new(0.01 * x, 0.01 * y, z);
             match (noise(2, i) * 20.0) as u32 {
                 0 => Vec3::NAN,
                 1 => Vec3::new(f32::INFINITY, 0.0, 1.0),
                 // The same position as the left neighbour (distance below the minimum).
-                2 if i % W > 0 => Vec3::new(0.01 * (x - 1.0), 0.01 * y, z),
+                2 if i % w > 0 => Vec3::new(0.01 * (x - 1.0), 0.01 * y, z),
                 _ => p,
             }
         });
@@ -351,6 +348,7 @@ mod tests {
 
     /// The planes and filter widths of `prepare` with `kernel`, or pixel by pixel.
     fn prepared(images: &Images, kernel: Option<Kernel>) -> Vec<u32> {
+        let (w, h) = (images.position.width, images.position.height);
         let inputs = PrepareInputs {
             layers: [
                 &images.layers[0],
@@ -365,9 +363,10 @@ mod tests {
             exponent: &images.exponent,
         };
         let settings = BandwidthSettings { b_f: 1.0, b_e: 3.0 };
-        let mut planes = Planes::new(INPUT_PLANES, W, H, 15);
-        let mut width_dir = Image::filled(W as u32, H as u32, 0.0);
-        let mut width_ind = Image::filled(W as u32, H as u32, 0.0);
+        let mut planes = Planes::new(INPUT_PLANES, w as usize, h as usize, 15);
+        let mut width_dir = Image::filled(w, h, 0.0);
+        let mut width_ind = Image::filled(w, h, 0.0);
+        let (w, h) = (w as usize, h as usize);
         match kernel {
             Some(kernel) => prepare(
                 kernel,
@@ -380,14 +379,14 @@ mod tests {
             None => {
                 let layout = planes.layout();
                 let step = layout.row_step();
-                for y in 0..H {
+                for y in 0..h {
                     let row = &mut planes.data_mut()[y * step..(y + 1) * step];
                     let mut out = RowOut {
                         row,
-                        width_dir: &mut width_dir.data[y * W..(y + 1) * W],
-                        width_ind: &mut width_ind.data[y * W..(y + 1) * W],
+                        width_dir: &mut width_dir.data[y * w..(y + 1) * w],
+                        width_ind: &mut width_ind.data[y * w..(y + 1) * w],
                     };
-                    for x in 0..W {
+                    for x in 0..w {
                         prepare_pixel(&inputs, settings, &layout, y, x, &mut out);
                     }
                 }
@@ -401,15 +400,28 @@ mod tests {
         floats.map(|v| v.to_bits()).collect()
     }
 
+    /// Widths around the group boundaries (a group needs a pixel on each side), and
+    /// single rows.
     #[test]
     fn groups_of_eight_give_the_bits_of_single_pixels() {
-        let images = images();
-        let expected = prepared(&images, None);
-        for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
-            assert!(
-                prepared(&images, Some(kernel)) == expected,
-                "{kernel:?} differs from pixel by pixel"
-            );
+        for (w, h) in [
+            (37, 6),
+            (1, 1),
+            (2, 3),
+            (9, 2),
+            (10, 1),
+            (11, 2),
+            (17, 3),
+            (18, 1),
+        ] {
+            let images = images(w, h);
+            let expected = prepared(&images, None);
+            for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+                assert!(
+                    prepared(&images, Some(kernel)) == expected,
+                    "{kernel:?} differs from pixel by pixel at {w}x{h}"
+                );
+            }
         }
     }
 }

@@ -25,7 +25,8 @@ pub struct PreviousView {
 /// row order). `previous` is the previous frame's column set (position y of line x
 /// is pixel (x, y)).
 /// `None` when `p` is behind the previous camera or projects off-screen, or
-/// when no pixel of the window has a position.
+/// when no pixel of the window has a position. The filter runs its lane form,
+/// [`find_previous_lanes`]; this is the reference the tests hold it to.
 #[inline]
 pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<(usize, usize)> {
     let c = view.world_to_camera.transform_point3(p);
@@ -74,15 +75,15 @@ pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<
 /// `length_squared` use no fused multiply-adds, and neither does this). Lanes that are
 /// not `active` get `None`.
 ///
-/// The column set's floats must fit i32 offsets (the positions are gathered).
+/// `previous` must be a column set (its position planes are gathered, at i32 offsets).
 #[inline(always)]
-pub fn find_previous_lanes<V: Lanes>(
+pub(super) fn find_previous_lanes<V: Lanes>(
     p: [V; 3],
     active: [bool; LANES],
     view: &PreviousView,
     previous: &Planes,
 ) -> [Option<(usize, usize)>; LANES] {
-    debug_assert!(previous.floats() <= i32::MAX as usize);
+    assert!(previous.planes() > C_PZ && previous.floats() <= i32::MAX as usize);
     let s = V::splat;
     let [px, py, pz] = p;
     let (m, t) = (

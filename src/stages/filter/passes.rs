@@ -410,11 +410,14 @@ fn y_group<V: Lanes>(
     // temporal window's taps too (see `temporal_taps`).
     unsafe {
         let spatial = line_window(data, c, s, radius);
+        // The next line's window, which the next group reads (see `prefetch_next_line`).
+        prefetch_next_line(&spatial, columns.row_step());
         let limit = V::splat(EXP_CUTOFF);
         group.add(&Contiguous, &spatial, limit, weights, &mut sums);
         if let Some(previous) = source.previous {
             match temporal_taps::<V>(previous, position, &valid, x, y0, radius) {
                 Some((window, TemporalFetch::Contiguous, limit)) => {
+                    prefetch_next_line(&window, previous.columns.row_step());
                     group.add(&Contiguous, &window, limit, weights, &mut sums)
                 }
                 Some((window, TemporalFetch::Gathered(g), limit)) => {
@@ -578,4 +581,36 @@ fn temporal_taps<V: Lanes>(
         taps: 2 * radius + 1,
     };
     Some((window, TemporalFetch::Gathered(Gathered(first_tap)), limit))
+}
+
+/// Asks the CPU to fetch the window `window` of the next line of a column set
+/// (`row_step` floats further): the next group of the Y pass reads it (the groups of a
+/// block go line by line). Each group's taps are some 3 cache lines in each of the 21
+/// planes, too short a run for the hardware prefetchers; the previous frame's column
+/// set does not fit the L3 beside the current one. This took the temporal Y pass from
+/// 34 to 27 ms and the spatial one from 13.5 to 11.4 ms (the X pass, whose rows are
+/// read the same way, was 1 ms slower with it).
+#[inline(always)]
+fn prefetch_next_line(window: &Window, row_step: usize) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // The window's floats in a plane: its taps and the lanes past the last.
+        let floats = window.taps + LANES - 1;
+        let next = window.planes.wrapping_add(row_step);
+        for q in 0..COLUMN_PLANES {
+            let first = next.wrapping_add(q * window.plane_stride);
+            // Every cache line (16 floats) from the first float to the last.
+            let mut i = 0;
+            while i < floats {
+                // SAFETY (both): a prefetch reads nothing and never faults, whatever
+                // the address (past the last line it fetches nothing useful).
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(first.wrapping_add(i).cast()) };
+                i += 16;
+            }
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(first.wrapping_add(floats - 1).cast()) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (window, row_step);
 }

@@ -203,4 +203,33 @@ impl Lanes for Avx2 {
             [Avx2(r0), Avx2(r1), Avx2(r2)]
         }
     }
+    #[inline(always)]
+    fn deinterleave3(triples: [Self; 3]) -> [Self; 3] {
+        let [r0, r1, r2] = triples.map(|t| t.0);
+        unsafe {
+            // The blends of interleave3 pick each plane's lanes out of the three
+            // vectors (x_i sits at position 3 i mod 8 of vector 3 i / 8, and so on);
+            // one permutation per plane puts them in order.
+            // x: from r0 at 0, 3, 6; r1 at 1, 4, 7; r2 at 2, 5.
+            let x = _mm256_blend_ps::<0b0010_0100>(_mm256_blend_ps::<0b1001_0010>(r0, r1), r2);
+            // y: from r0 at 1, 4, 7; r1 at 2, 5; r2 at 0, 3, 6.
+            let y = _mm256_blend_ps::<0b0100_1001>(_mm256_blend_ps::<0b0010_0100>(r0, r1), r2);
+            // z: from r0 at 2, 5; r1 at 0, 3, 6; r2 at 1, 4, 7.
+            let z = _mm256_blend_ps::<0b1001_0010>(_mm256_blend_ps::<0b0100_1001>(r0, r1), r2);
+            [
+                Avx2(_mm256_permutevar8x32_ps(
+                    x,
+                    _mm256_setr_epi32(0, 3, 6, 1, 4, 7, 2, 5),
+                )),
+                Avx2(_mm256_permutevar8x32_ps(
+                    y,
+                    _mm256_setr_epi32(1, 4, 7, 2, 5, 0, 3, 6),
+                )),
+                Avx2(_mm256_permutevar8x32_ps(
+                    z,
+                    _mm256_setr_epi32(2, 5, 0, 3, 6, 1, 4, 7),
+                )),
+            ]
+        }
+    }
 }

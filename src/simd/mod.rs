@@ -116,6 +116,9 @@ pub trait Lanes: Copy {
     /// Three planes interleaved: lane j of result r is lane (8 r + j) / 3 of plane
     /// (8 r + j) % 3, so that the three results are eight (x, y, z) triples in a row.
     fn interleave3(planes: [Self; 3]) -> [Self; 3];
+    /// The inverse of [`Lanes::interleave3`]: eight (x, y, z) triples in a row, three
+    /// vectors, into their three planes.
+    fn deinterleave3(triples: [Self; 3]) -> [Self; 3];
 }
 
 /// The portable lanes.
@@ -288,6 +291,15 @@ impl Lanes for Portable {
             Portable(std::array::from_fn(|j| {
                 let i = LANES * r + j;
                 planes[i % 3].0[i / 3]
+            }))
+        })
+    }
+    #[inline(always)]
+    fn deinterleave3(triples: [Self; 3]) -> [Self; 3] {
+        std::array::from_fn(|c| {
+            Portable(std::array::from_fn(|j| {
+                let i = 3 * j + c;
+                triples[i / LANES].0[i % LANES]
             }))
         })
     }

@@ -93,6 +93,14 @@ fn check_interleave3<V: Lanes>(name: &str) {
         .flat_map(|l| (0..3).map(move |c| (10 * l + c) as f32))
         .collect();
     assert_eq!(triples, expected, "{name}");
+    let back = V::deinterleave3(V::interleave3(planes));
+    for (c, (got, plane)) in back.iter().zip(&planes).enumerate() {
+        assert_eq!(
+            got.to_array(),
+            plane.to_array(),
+            "{name}: deinterleave3 plane {c}"
+        );
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -102,7 +110,7 @@ fn check_interleave3_avx2() {
 }
 
 #[test]
-fn interleave3_makes_eight_triples_from_three_planes() {
+fn interleave3_makes_eight_triples_from_three_planes_and_deinterleave3_undoes_it() {
     check_interleave3::<Portable>("Portable");
     #[cfg(target_arch = "x86_64")]
     if Kernel::detect() == Kernel::Avx2Fma {

@@ -9,6 +9,10 @@
 //! - `filter.axis_aligned/temporal_rv_differs`: the same with E_RV != E_R everywhere
 //!   (as on real frames, where the objects change E_RV a little almost everywhere; the
 //!   filter's cost does not depend on it).
+//! - `filter.axis_aligned/temporal_moving`: temporal on, the camera moving between
+//!   frames (2 cm sideways, 0.5 degrees of turn; the world positions are kept, so only
+//!   the reprojection changes): pixels find their previous pixels at varying offsets, and
+//!   lane groups whose offsets differ read their temporal taps by gathers.
 //! - `filter.axis_aligned/spatial`: temporal off (E_RV == E_R off the sphere).
 //! - `pass/prepare`, `pass/x`, `pass/y_spatial`, `pass/y_temporal`: the passes alone
 //!   (where the time goes), with the kernel the CPU runs (AVX2 + FMA where it has them);
@@ -141,13 +145,22 @@ fn inputs(frames: usize) -> Inputs {
 }
 
 impl Inputs {
-    fn frame(&self, f: usize, rv_equal: bool) -> FilterInputs<'_> {
+    fn frame(&self, f: usize, rv_equal: bool, moving: bool) -> FilterInputs<'_> {
         let layers = if rv_equal {
             &self.layers_rv_equal
         } else {
             &self.layers
         };
         let l = &layers[f % layers.len()];
+        // Alternating between two poses.
+        let pose = if moving && f % 2 == 1 {
+            Pose::from_parts(
+                glam::DVec3::new(0.02, 0.0, 0.0),
+                glam::DQuat::from_rotation_y(0.5f64.to_radians()),
+            )
+        } else {
+            Pose::IDENTITY
+        };
         FilterInputs {
             layers: [&l[0], &l[1], &l[2], &l[3]],
             world_position: &self.position,
@@ -156,7 +169,7 @@ impl Inputs {
             indirect_min_distance: &self.zi,
             exponent: &self.exponent,
             environment: None,
-            view: Some((Pose::IDENTITY, Pinhole::new(&Intrinsics::PRIMESENSE, W, H))),
+            view: Some((pose, Pinhole::new(&Intrinsics::PRIMESENSE, W, H))),
         }
     }
 }
@@ -167,10 +180,11 @@ fn bench_filter(c: &mut Criterion) {
     let input = inputs(2);
     let mut group = c.benchmark_group("filter_640x480");
     group.sample_size(30);
-    for (name, temporal, rv_equal) in [
-        ("temporal", true, true),
-        ("temporal_rv_differs", true, false),
-        ("spatial", false, true),
+    for (name, temporal, rv_equal, moving) in [
+        ("temporal", true, true, false),
+        ("temporal_rv_differs", true, false, false),
+        ("temporal_moving", true, true, true),
+        ("spatial", false, true, false),
     ] {
         let params = FilterParams {
             radius: RADIUS,
@@ -180,12 +194,16 @@ fn bench_filter(c: &mut Criterion) {
         };
         let mut filter = AxisAlignedFilter::new(params);
         let mut out = FilterOutputs::new(W, H);
-        filter.filter(&input.frame(0, rv_equal), &mut out).unwrap();
+        filter
+            .filter(&input.frame(0, rv_equal, moving), &mut out)
+            .unwrap();
         let mut f = 1;
         group.bench_function(format!("filter.axis_aligned/{name}"), |b| {
             b.iter(|| {
                 let mut out = FilterOutputs::new(W, H);
-                filter.filter(&input.frame(f, rv_equal), &mut out).unwrap();
+                filter
+                    .filter(&input.frame(f, rv_equal, moving), &mut out)
+                    .unwrap();
                 f += 1;
                 black_box(out)
             })

@@ -205,7 +205,7 @@ impl Lanes for Avx2 {
     }
     #[inline(always)]
     fn deinterleave3(triples: [Self; 3]) -> [Self; 3] {
-        let [r0, r1, r2] = triples.map(|t| t.0);
+        let [Avx2(r0), Avx2(r1), Avx2(r2)] = triples;
         unsafe {
             // The blends of interleave3 pick each plane's lanes out of the three
             // vectors (x_i sits at position 3 i mod 8 of vector 3 i / 8, and so on);

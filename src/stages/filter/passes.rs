@@ -588,8 +588,9 @@ fn temporal_taps<V: Lanes>(
 /// block go line by line). Each group's taps are some 3 cache lines in each of the 21
 /// planes, too short a run for the hardware prefetchers; the previous frame's column
 /// set does not fit the L3 beside the current one. This took the temporal Y pass from
-/// 34 to 27 ms and the spatial one from 13.5 to 11.4 ms (the X pass, whose rows are
-/// read the same way, was 1 ms slower with it).
+/// 34 to 27-29 ms and the spatial one from 13.5 to 11.4-12 ms (640x480, 2 threads).
+/// The X pass has none: prefetching its next row made it 1 ms slower, 8 rows ahead
+/// was within the noise.
 #[inline(always)]
 fn prefetch_next_line(window: &Window, row_step: usize) {
     #[cfg(target_arch = "x86_64")]

@@ -56,6 +56,20 @@ pub trait Lanes: Copy {
     /// # Safety
     /// `p..p + LANES` must be readable.
     unsafe fn load(p: *const f32) -> Self;
+    /// Lanes of `data[i..i + LANES]` (panics past the end of `data`).
+    #[inline(always)]
+    fn load_slice(data: &[f32], i: usize) -> Self {
+        let lanes = &data[i..i + LANES];
+        // SAFETY: `lanes` holds LANES floats.
+        unsafe { Self::load(lanes.as_ptr()) }
+    }
+    /// Stores the lanes at `out[i..i + LANES]` (panics past the end of `out`).
+    #[inline(always)]
+    fn store_slice(self, out: &mut [f32], i: usize) {
+        let lanes = &mut out[i..i + LANES];
+        // SAFETY: `lanes` holds LANES floats.
+        unsafe { self.store(lanes.as_mut_ptr()) }
+    }
     /// Lane l reads `p + index[l]`.
     /// # Safety
     /// Every `p + index[l]` must be readable.
@@ -119,6 +133,13 @@ pub trait Lanes: Copy {
     /// The inverse of [`Lanes::interleave3`]: eight (x, y, z) triples in a row, three
     /// vectors, into their three planes.
     fn deinterleave3(triples: [Self; 3]) -> [Self; 3];
+}
+
+/// a . b per lane in glam's order (`Vec3::dot`, and `Vec3A::dot` on x86-64):
+/// (x x' + y y') + z z', no fused multiply-add, so each lane has glam's bits.
+#[inline(always)]
+pub fn dot3<V: Lanes>(a: [V; 3], b: [V; 3]) -> V {
+    a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]))
 }
 
 /// The portable lanes.

@@ -49,14 +49,6 @@ pub struct Previous<'a> {
     pub view: &'a PreviousView,
 }
 
-/// Lanes of `data[i..i + LANES]`.
-#[inline(always)]
-fn load<V: Lanes>(data: &[f32], i: usize) -> V {
-    let lanes = &data[i..i + LANES];
-    // SAFETY: `lanes` holds LANES floats.
-    unsafe { V::load(lanes.as_ptr()) }
-}
-
 /// The taps |i| <= `radius` along a line around lane 0's target at `data[i]`: the
 /// following lanes' targets and taps are the following floats.
 #[inline(always)]
@@ -128,10 +120,7 @@ fn x_band<V: Lanes>(
             for (q, rows) in block.into_iter().enumerate() {
                 let first = (x0 - x_start) * layout.row_step() + layout.in_row(q, y0);
                 for (l, column) in V::transpose(rows).into_iter().enumerate().take(lanes) {
-                    let at = first + l * layout.row_step();
-                    let positions = &mut lines[at..at + LANES];
-                    // SAFETY: `positions` holds LANES floats.
-                    unsafe { column.store(positions.as_mut_ptr()) };
+                    column.store_slice(lines, first + l * layout.row_step());
                 }
             }
         }
@@ -166,15 +155,15 @@ fn x_group<V: Lanes>(
     // lanes past the width.
     let c = input.index(x0 as isize, y);
     let position = [
-        load::<V>(data, c + PX * s),
-        load::<V>(data, c + PY * s),
-        load::<V>(data, c + PZ * s),
+        V::load_slice(data, c + PX * s),
+        V::load_slice(data, c + PY * s),
+        V::load_slice(data, c + PZ * s),
     ];
     out[C_PX] = position[0];
     out[C_PY] = position[1];
     out[C_PZ] = position[2];
-    out[C_B2Y_DIR] = load(data, c + B2Y_DIR * s);
-    out[C_B2_IND] = load(data, c + B2_IND * s);
+    out[C_B2Y_DIR] = V::load_slice(data, c + B2Y_DIR * s);
+    out[C_B2_IND] = V::load_slice(data, c + B2_IND * s);
     let kinds_planes = [(DIR, B2X_DIR, C_DIR), (IND, B2_IND, C_IND)];
     let (valid, kinds) = group_kinds(data, c, s, kinds_planes.map(|(v, b2, _)| (v, b2)));
     let window = line_window(data, c, s, radius);
@@ -396,9 +385,9 @@ fn y_group<V: Lanes>(
         return result;
     }
     let position = [
-        load::<V>(data, c + C_PX * s),
-        load::<V>(data, c + C_PY * s),
-        load::<V>(data, c + C_PZ * s),
+        V::load_slice(data, c + C_PX * s),
+        V::load_slice(data, c + C_PY * s),
+        V::load_slice(data, c + C_PZ * s),
     ];
     let mut sums = [[V::splat(0.0); VALUE_PLANES]; 2];
     let group = GroupTaps {
@@ -459,13 +448,13 @@ fn group_kinds<V: Lanes>(
     let mut kinds = [None; 2];
     for (k, (values, b2)) in kinds_planes.into_iter().enumerate() {
         valid[k] = [
-            load(data, c + (values + 6) * s),
-            load(data, c + (values + 7) * s),
+            V::load_slice(data, c + (values + 6) * s),
+            V::load_slice(data, c + (values + 7) * s),
         ];
         if !(valid[k][0].all_zero() && valid[k][1].all_zero()) {
             kinds[k] = Some(Bandwidths {
                 plane: b2,
-                target: load(data, c + b2 * s),
+                target: V::load_slice(data, c + b2 * s),
             });
         }
     }

@@ -12,7 +12,7 @@ use super::planes::{
     B2_IND, B2X_DIR, B2Y_DIR, BandwidthSettings, DIR, IND, Layout, MISSING_POSITION, PX, PY, PZ,
     PrepareInputs,
 };
-use crate::simd::{LANES, Lanes};
+use crate::simd::{LANES, Lanes, dot3};
 use glam::Vec3;
 
 /// Three coordinate planes of eight pixels.
@@ -54,12 +54,6 @@ fn is_zero<V: Lanes>(v: V) -> V {
     v.ge(zero).and(zero.ge(v))
 }
 
-/// `a.dot(b)` as glam computes it: (x x' + y y') + z z'.
-#[inline(always)]
-fn dot<V: Lanes>(a: &Xyz<V>, b: &Xyz<V>) -> V {
-    a[0].mul(b[0]).add(a[1].mul(b[1])).add(a[2].mul(b[2]))
-}
-
 /// `a - b` per coordinate.
 #[inline(always)]
 fn sub<V: Lanes>(a: &Xyz<V>, b: &Xyz<V>) -> Xyz<V> {
@@ -69,7 +63,7 @@ fn sub<V: Lanes>(a: &Xyz<V>, b: &Xyz<V>) -> Xyz<V> {
 /// `v.normalize()` as glam computes it: v * (1 / sqrt(v . v)).
 #[inline(always)]
 fn normalize<V: Lanes>(v: &Xyz<V>) -> Xyz<V> {
-    let recip = V::splat(1.0).div(dot(v, v).sqrt());
+    let recip = V::splat(1.0).div(dot3(*v, *v).sqrt());
     [v[0].mul(recip), v[1].mul(recip), v[2].mul(recip)]
 }
 
@@ -86,11 +80,11 @@ fn usable<V: Lanes>(p: &Xyz<V>, n: &Xyz<V>) -> V {
 #[inline(always)]
 fn curvature_to<V: Lanes>(p: &Xyz<V>, n_unit: &Xyz<V>, q: &Xyz<V>, m: &Xyz<V>) -> (V, V) {
     let offset = sub(p, q);
-    let d = dot(&offset, &offset).sqrt();
+    let d = dot3(offset, offset).sqrt();
     let exists = usable(q, m).and(d.ge(V::splat(MIN_NEIGHBOUR_DISTANCE)));
     // angle_between: c (1 + c^2 (1/24 + c^2 3/640)), c = |a/|a| - b/|b||.
     let chord = sub(n_unit, &normalize(m));
-    let c = dot(&chord, &chord).sqrt();
+    let c = dot3(chord, chord).sqrt();
     let c2 = c.mul(c);
     let series = c2
         .mul(V::splat(3.0 / 640.0))
@@ -155,14 +149,6 @@ pub(super) struct RowOut<'a> {
     pub width_ind: &'a mut [f32],
 }
 
-/// Stores `v` at `out[i..i + LANES]`.
-#[inline(always)]
-fn store<V: Lanes>(v: V, out: &mut [f32], i: usize) {
-    let lanes = &mut out[i..i + LANES];
-    // SAFETY: `lanes` holds LANES floats.
-    unsafe { v.store(lanes.as_mut_ptr()) };
-}
-
 /// Prepares pixels (x0 + l, y) of row `y` (see [`super::planes::prepare`]). Pixels
 /// x0 - 1 and x0 + LANES must be inside the row (the X neighbours are read in lanes).
 #[inline(always)]
@@ -197,14 +183,14 @@ pub(super) fn prepare_group<V: Lanes>(
     let kx = curvature_along(target, Some(right), Some(left)).and(target_usable);
     let ky = curvature_along(target, below, above).and(target_usable);
     // Bandwidths (eqs. 17, 18).
-    let m = load::<V>(&images.exponent.data, i);
+    let m = V::load_slice(&images.exponent.data, i);
     let m = V::select(finite(m), m.max(zero), zero);
     let glossy = m.gt(zero);
     let b_rho = V::select(glossy, V::splat(1.25).mul(m.sqrt()), zero);
     let angular = V::splat(settings.b_f).add(V::splat(2.0).mul(b_rho));
     let b_e = V::splat(settings.b_e);
-    let inverse_zd = inverse_distance(load::<V>(&images.direct_min_distance.data, i));
-    let inverse_zi = inverse_distance(load::<V>(&images.indirect_min_distance.data, i));
+    let inverse_zd = inverse_distance(V::load_slice(&images.direct_min_distance.data, i));
+    let inverse_zi = inverse_distance(V::load_slice(&images.indirect_min_distance.data, i));
     let bx = direct_bandwidth(kx, inverse_zd, angular, b_e);
     let by = direct_bandwidth(ky, inverse_zd, angular, b_e);
     let indirect_brdf = V::select(
@@ -218,32 +204,32 @@ pub(super) fn prepare_group<V: Lanes>(
     let missing = V::splat(MISSING_POSITION);
     let row = &mut *out.row;
     for (q, c) in [(PX, 0), (PY, 1), (PZ, 2)] {
-        store(
-            V::select(has_position, p[c], missing),
-            row,
-            layout.in_row(q, x0),
-        );
+        V::select(has_position, p[c], missing).store_slice(row, layout.in_row(q, x0));
     }
     for (q, b) in [(B2X_DIR, bx), (B2Y_DIR, by), (B2_IND, bi)] {
-        store(b.mul(b).and(has_position), row, layout.in_row(q, x0));
+        b.mul(b)
+            .and(has_position)
+            .store_slice(row, layout.in_row(q, x0));
     }
     for (kind, r, rv) in [(DIR, 0, 2), (IND, 1, 3)] {
         for (slot, layer) in [(0, r), (3, rv)] {
             let v = load_xyz::<V>(&images.layers[layer].data, i);
             let ok = has_position.and(finite_xyz(&v));
             for (c, value) in v.into_iter().enumerate() {
-                store(value.and(ok), row, layout.in_row(kind + slot + c, x0));
+                value
+                    .and(ok)
+                    .store_slice(row, layout.in_row(kind + slot + c, x0));
             }
             let valid = V::splat(1.0).and(ok);
-            store(valid, row, layout.in_row(kind + 6 + slot / 3, x0));
+            valid.store_slice(row, layout.in_row(kind + 6 + slot / 3, x0));
         }
     }
     // Filter widths sigma = 1 / B.
     let one = V::splat(1.0);
     let nan = V::splat(f32::NAN);
     let sigma_dir = V::splat(0.5).mul(one.div(bx).add(one.div(by)));
-    store(V::select(has_position, sigma_dir, nan), out.width_dir, x0);
-    store(V::select(has_position, one.div(bi), nan), out.width_ind, x0);
+    V::select(has_position, sigma_dir, nan).store_slice(out.width_dir, x0);
+    V::select(has_position, one.div(bi), nan).store_slice(out.width_ind, x0);
 }
 
 /// Positions and normals of pixels `j..j + LANES`.
@@ -253,14 +239,6 @@ fn neighbours<V: Lanes>(images: &PrepareInputs, j: usize) -> (Xyz<V>, Xyz<V>) {
         load_xyz(&images.world_position.data, j),
         load_xyz(&images.world_normal.data, j),
     )
-}
-
-/// Lanes of `data[i..i + LANES]`.
-#[inline(always)]
-fn load<V: Lanes>(data: &[f32], i: usize) -> V {
-    let lanes = &data[i..i + LANES];
-    // SAFETY: `lanes` holds LANES floats.
-    unsafe { V::load(lanes.as_ptr()) }
 }
 
 #[cfg(test)]

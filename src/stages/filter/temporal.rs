@@ -4,7 +4,7 @@
 
 use super::planes::{C_PX, C_PY, C_PZ, Planes};
 use crate::pinhole::Pinhole;
-use crate::simd::{LANES, Lanes};
+use crate::simd::{LANES, Lanes, dot3};
 use glam::{Affine3A, Vec3};
 
 /// Half size of the search window around the projected pixel (1: 3 x 3).
@@ -90,16 +90,11 @@ pub(super) fn find_previous_lanes<V: Lanes>(
         view.world_to_camera.matrix3,
         view.world_to_camera.translation,
     );
-    // ((x_axis x + y_axis y) + z_axis z) + translation, per component.
-    let cx = (s(m.x_axis.x).mul(px).add(s(m.y_axis.x).mul(py)))
-        .add(s(m.z_axis.x).mul(pz))
-        .add(s(t.x));
-    let cy = (s(m.x_axis.y).mul(px).add(s(m.y_axis.y).mul(py)))
-        .add(s(m.z_axis.y).mul(pz))
-        .add(s(t.y));
-    let cz = (s(m.x_axis.z).mul(px).add(s(m.y_axis.z).mul(py)))
-        .add(s(m.z_axis.z).mul(pz))
-        .add(s(t.z));
+    // ((x_axis x + y_axis y) + z_axis z) + translation, per component: a dot product
+    // of a matrix row with p, in glam's order.
+    let cx = dot3([s(m.x_axis.x), s(m.y_axis.x), s(m.z_axis.x)], p).add(s(t.x));
+    let cy = dot3([s(m.x_axis.y), s(m.y_axis.y), s(m.z_axis.y)], p).add(s(t.y));
+    let cz = dot3([s(m.x_axis.z), s(m.y_axis.z), s(m.z_axis.z)], p).add(s(t.z));
     let cam = &view.camera;
     let u = s(cam.fx).mul(cx).div(cz).add(s(cam.cx)).add(s(0.5));
     let v = s(cam.fy).mul(cy).div(cz).add(s(cam.cy)).add(s(0.5));
@@ -157,8 +152,8 @@ pub(super) fn find_previous_lanes<V: Lanes>(
                     V::gather(data.add(C_PZ * stride), &offset),
                 )
             };
-            let (ex, ey, ez) = (qx.sub(px), qy.sub(py), qz.sub(pz));
-            let d2 = ex.mul(ex).add(ey.mul(ey)).add(ez.mul(ez));
+            let offset = [qx.sub(px), qy.sub(py), qz.sub(pz)];
+            let d2 = dot3(offset, offset);
             let better = ok.and(d2.lt(best_d2));
             best_d2 = V::select(better, d2, best_d2);
             best = V::select(better, s(k as f32), best);

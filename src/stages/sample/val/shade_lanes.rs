@@ -9,8 +9,8 @@
 //! only when some lane's texels may occlude it.
 
 use super::shade::{Biases, Maps, PreparedLight, Shaded};
-use super::shadow::{MAX_SHADOW_MAP_SIZE, dot};
-use crate::simd::{LANES, Lanes};
+use super::shadow::MAX_SHADOW_MAP_SIZE;
+use crate::simd::{LANES, Lanes, dot3};
 use glam::Vec3;
 
 /// Eight shading points: world positions and unit normals (x, y, z lanes), the world
@@ -93,9 +93,9 @@ pub(crate) fn shade_points<V: Lanes>(
     for (j, light) in lights.iter().enumerate() {
         // Eq. 6 as in `light_irradiance`.
         let v = sub_from(light.position.into(), x);
-        let cos_receiver = dot(n, v);
+        let cos_receiver = dot3(n, v);
         // -(n_j . v): negating the normal first gives the same bits.
-        let cos_light = dot(splat3(-Vec3::from(light.normal)), v);
+        let cos_light = dot3(splat3(-Vec3::from(light.normal)), v);
         let lit = cos_receiver
             .gt(zero)
             .and(cos_light.gt(zero))
@@ -103,7 +103,7 @@ pub(crate) fn shade_points<V: Lanes>(
         if !lit.any() {
             continue;
         }
-        let r2 = dot(v, v);
+        let r2 = dot3(v, v);
         let scale = cos_receiver
             .mul(cos_light)
             .div(r2.mul(r2.max(V::splat(light.min_r2))));
@@ -117,9 +117,9 @@ pub(crate) fn shade_points<V: Lanes>(
         let frustum = light.frustum_to_look_up(j, lookup);
         if let Some(f) = frustum {
             let d = sub_splat(x, f.origin.into());
-            let lx = dot(d, splat3(f.right.into()));
-            let ly = dot(d, splat3(f.up.into()));
-            let lz = dot(d, splat3(f.axis.into()));
+            let lx = dot3(d, splat3(f.right.into()));
+            let ly = dot3(d, splat3(f.up.into()));
+            let lz = dot3(d, splat3(f.axis.into()));
             // `ShadowFrustum::texel`.
             let k = V::splat(f.scale).div(lz);
             let half = V::splat(f.size as f32 * 0.5);

@@ -24,7 +24,7 @@ use super::virtual_maps;
 use super::virtual_maps::{VirtualTarget, virtual_shadow_maps};
 use super::{ValInputs, ValRenderer, ValShadingParams};
 use crate::objects::Aabb;
-use crate::simd::{Kernel, LANES, Lanes};
+use crate::simd::{Kernel, LANES, Lanes, dot3};
 use glam::{Vec2, Vec3, Vec3A};
 use rayon::prelude::*;
 
@@ -200,17 +200,17 @@ impl<V: Lanes> FrustumLanes<V> {
 
     #[inline(always)]
     pub fn x(&self, d: [V; 3]) -> V {
-        dot(d, self.right)
+        dot3(d, self.right)
     }
 
     #[inline(always)]
     pub fn y(&self, d: [V; 3]) -> V {
-        dot(d, self.up)
+        dot3(d, self.up)
     }
 
     #[inline(always)]
     pub fn z(&self, d: [V; 3]) -> V {
-        dot(d, self.axis)
+        dot3(d, self.axis)
     }
 }
 
@@ -221,13 +221,6 @@ fn lanes3<V: Lanes>(a: [[f32; LANES]; 3]) -> [V; 3] {
         V::from_array(a[1]),
         V::from_array(a[2]),
     ]
-}
-
-/// (x rx + y ry) + z rz per lane, the order of glam's `Vec3A::dot` on x86-64 (no fused
-/// multiply-add), so each lane has the bits of [`ShadowFrustum::light_space`].
-#[inline(always)]
-pub(super) fn dot<V: Lanes>(d: [V; 3], e: [V; 3]) -> V {
-    d[0].mul(e[0]).add(d[1].mul(e[1])).add(d[2].mul(e[2]))
 }
 
 /// Bounding spheres of tiles of the real points, to skip whole tiles per light.

@@ -39,7 +39,12 @@ struct Packet {
     found_inv: [f32; LANES],
     /// The lane's queued ray, `usize::MAX` for none.
     slot: [usize; LANES],
+    /// A bit per lane whose ray is still marching (`active` as a bit mask).
+    live: u32,
 }
+
+/// The bits of every lane in [`Packet::live`].
+const ALL_LANES: u32 = (1 << LANES) - 1;
 
 impl Packet {
     fn new() -> Packet {
@@ -68,31 +73,31 @@ impl Packet {
 
     /// Hands the results of the lanes whose rays ended to `found`, and fills idle
     /// lanes from `queued` (starting at `*next`); returns the lanes now marching.
+    /// Only the idle lanes are visited (a bit per lane in `live`): which lanes ended is
+    /// unpredictable, so a branch per lane would mostly be mispredicted.
     fn refill(
         &mut self,
         queued: &[Queued],
         next: &mut usize,
         found: &mut [Option<(i32, f32)>],
     ) -> usize {
-        let mut marching = 0;
-        for lane in 0..LANES {
-            if self.active[lane] != 0 {
-                marching += 1;
-                continue;
-            }
-            if self.slot[lane] != usize::MAX {
-                if self.found[lane] != 0 {
-                    found[self.slot[lane]] = Some((self.found_a[lane], self.found_inv[lane]));
-                }
+        let mut idle = !self.live & ALL_LANES;
+        while idle != 0 {
+            let lane = idle.trailing_zeros() as usize;
+            idle &= idle - 1;
+            let slot = self.slot[lane];
+            if slot != usize::MAX {
+                found[slot] =
+                    (self.found[lane] != 0).then_some((self.found_a[lane], self.found_inv[lane]));
                 self.slot[lane] = usize::MAX;
             }
             if *next < queued.len() {
                 self.fill(lane, &queued[*next], *next);
+                self.live |= 1 << lane;
                 *next += 1;
-                marching += 1;
             }
         }
-        marching
+        self.live.count_ones() as usize
     }
 }
 
@@ -257,16 +262,16 @@ unsafe fn step(p: &mut Packet, pyramid: &Pyramid) -> u32 {
             ),
         );
         store(&mut p.a, _mm256_blendv_epi8(a, a_next, skip));
-        let ended_bits = _mm256_movemask_ps(_mm256_castsi256_ps(ended));
-        if ended_bits != 0 {
-            let (found, found_a) = (load(&p.found), load(&p.found_a));
-            store(&mut p.found, _mm256_blendv_epi8(found, hit, ended));
-            store(&mut p.found_a, _mm256_blendv_epi8(found_a, a, ended));
-            let found_inv = _mm256_loadu_ps(p.found_inv.as_ptr());
-            let found_inv = _mm256_blendv_ps(found_inv, inv_a, _mm256_castsi256_ps(ended));
-            _mm256_storeu_ps(p.found_inv.as_mut_ptr(), found_inv);
-            store(&mut p.active, _mm256_andnot_si256(ended, active));
-        }
+        // Recorded without a branch: which steps end a ray is unpredictable.
+        let (found, found_a) = (load(&p.found), load(&p.found_a));
+        store(&mut p.found, _mm256_blendv_epi8(found, hit, ended));
+        store(&mut p.found_a, _mm256_blendv_epi8(found_a, a, ended));
+        let found_inv = _mm256_loadu_ps(p.found_inv.as_ptr());
+        let found_inv = _mm256_blendv_ps(found_inv, inv_a, _mm256_castsi256_ps(ended));
+        _mm256_storeu_ps(p.found_inv.as_mut_ptr(), found_inv);
+        store(&mut p.active, _mm256_andnot_si256(ended, active));
+        let ended_bits = _mm256_movemask_ps(_mm256_castsi256_ps(ended)) as u32;
+        p.live &= !ended_bits;
         ended_bits.count_ones()
     }
 }

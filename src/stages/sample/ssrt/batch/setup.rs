@@ -234,28 +234,36 @@ unsafe fn set_up_lanes(
         let (minor_c, minor_slope) = (ints(minor_c), ints(minor_slope));
         let (first_a, last_a) = (ints(first_a), ints(last_a));
         let (inv_c, dinv) = (floats(inv_c), floats(dinv));
+        // Each lane queues at most one ray. Whether a ray's segment is empty is
+        // unpredictable, so every lane's march is written past the end and kept by
+        // moving the end, without a branch.
+        queued.reserve(LANES);
         for lane in 0..LANES {
             let i = first + lane;
             if rare >> lane & 1 == 1 {
                 pending.set_up(i, tracer, queued);
-            } else if empty >> lane & 1 == 0 {
-                let (origin, dir, _) = pending.get(i);
-                queued.push(Queued {
-                    march: March {
-                        transposed: transposed[lane] != 0,
-                        minor_c: minor_c[lane],
-                        minor_slope: minor_slope[lane],
-                        inv_c: inv_c[lane],
-                        dinv: dinv[lane],
-                        first: first_a[lane],
-                        last: last_a[lane],
-                        step: step[lane],
-                    },
-                    origin: origin.point,
-                    dir,
-                    ray: pending.ray[i],
-                });
+                continue;
             }
+            let (origin, dir, _) = pending.get(i);
+            let len = queued.len();
+            queued.spare_capacity_mut()[0].write(Queued {
+                march: March {
+                    transposed: transposed[lane] != 0,
+                    minor_c: minor_c[lane],
+                    minor_slope: minor_slope[lane],
+                    inv_c: inv_c[lane],
+                    dinv: dinv[lane],
+                    first: first_a[lane],
+                    last: last_a[lane],
+                    step: step[lane],
+                },
+                origin: origin.point,
+                dir,
+                ray: pending.ray[i],
+            });
+            // SAFETY (inside the function's unsafe block): element `len` was just
+            // written (the reserve leaves a slot for every lane).
+            queued.set_len(len + (empty >> lane & 1 == 0) as usize);
         }
     }
 }

@@ -101,9 +101,16 @@ pub fn sin_cos_turns(turns: f32) -> (f32, f32) {
     let x2 = x * x;
     let s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0))));
     let c = 1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0))));
-    // Rotate by q quarter turns: (sin, cos) of q pi/2 + x.
-    let (s1, c1) = if q & 1 == 0 { (s, c) } else { (c, -s) };
-    if q & 2 == 0 { (s1, c1) } else { (-s1, -c1) }
+    // Rotate by q quarter turns: (sin, cos) of q pi/2 + x, that is (s, c), (c, -s),
+    // (-s, -c) or (-c, s). The quarter is random, so the choice is made with bit masks
+    // rather than branches (the same values: a negation flips the sign bit).
+    const SIGN: u32 = 0x8000_0000;
+    let odd = 0u32.wrapping_sub(q as u32 & 1); // all ones for an odd quarter
+    let (s_bits, c_bits) = (s.to_bits(), c.to_bits());
+    let s1 = (s_bits & !odd) | (c_bits & odd);
+    let c1 = (c_bits & !odd) | ((s_bits ^ SIGN) & odd);
+    let flip = (q as u32 & 2) << 30; // the sign bit for the second half turn
+    (f32::from_bits(s1 ^ flip), f32::from_bits(c1 ^ flip))
 }
 
 /// A cosine-weighted direction about +z (pdf cos(theta) / pi) from two uniforms.

@@ -2,7 +2,7 @@
 //! and its lane form against it.
 
 use super::*;
-use crate::simd::LANES;
+use crate::simd::{LANES, Portable};
 use crate::stages::filter::planes::{C_PX, C_PY, C_PZ};
 use crate::stages::filter::temporal::{PreviousView, find_previous_lanes};
 

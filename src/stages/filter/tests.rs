@@ -1,7 +1,7 @@
 //! Tests of `filter.axis_aligned`'s behaviour: constancy, edges, noise, temporal reuse,
 //! NaNs, E_RV == E_R bits, determinism. Its formulas (bandwidths, curvature, the fast
-//! exp, B_e) are tested in `tests/formulas.rs`, the passes against eqs. 21-23 evaluated directly in
-//! `tests/reference.rs`, the reprojection in `tests/temporal.rs`.
+//! exp, B_e) are tested in `tests/formulas.rs`, the passes against eqs. 21-23
+//! evaluated directly in `tests/reference.rs`, the reprojection in `tests/temporal.rs`.
 
 use super::temporal::find_previous;
 use super::*;

@@ -92,14 +92,18 @@ fn bench_sampling(c: &mut Criterion) {
             });
         }
         // The budget case: objects covering about a tenth of the image. The
-        // pipeline's objects, scaled about the floor point under the torus (the world
-        // origin) so that they still stand on the floor.
+        // pipeline's objects scaled about the world origin: in the default pipeline the
+        // floor point under the torus, so that they still stand on the floor.
         let scaled = scaled_objects(&pipeline.objects, TENTH_SCALE);
         let inputs = PathInputs {
             objects: &scaled,
             ..inputs
         };
-        let params = PathParams::from_params(&spec.params, 1);
+        let params = PathParams {
+            object_aware: false,
+            seed: 1,
+            ..PathParams::from_params(&spec.params, 1)
+        };
         let mut out = PathOutputs::new(depth.width, depth.height);
         sample_path(&inputs, &params, &mut out).unwrap();
         eprintln!(
@@ -158,8 +162,8 @@ fn bench_sampling(c: &mut Criterion) {
     group.finish();
 }
 
-/// The scale of `sample.path/tenth`'s objects: the pipeline's cover about 5 % of the
-/// bench frame, these about 10 % (the bench prints the measured share).
+/// The scale of `sample.path/tenth`'s objects: the default pipeline's cover about 5 %
+/// of the bench frame, these about 10 % (the bench prints the measured share).
 const TENTH_SCALE: f32 = 1.45;
 
 /// The share of the image whose primaries see an object: the mean of 1 - M.

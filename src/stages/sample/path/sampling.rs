@@ -212,6 +212,44 @@ mod tests {
     }
 
     #[test]
+    fn the_quarter_rotation_has_the_bits_of_the_branches() {
+        // The rotation as it was written with branches.
+        let branches = |turns: f32| {
+            let quarters = turns * 4.0;
+            let q = (quarters + 0.5) as i32;
+            let x = (quarters - q as f32) * FRAC_PI_2;
+            let x2 = x * x;
+            let s = x * (1.0 + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0))));
+            let c =
+                1.0 + x2 * (-0.5 + x2 * (1.0 / 24.0 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40320.0))));
+            let (s1, c1) = if q & 1 == 0 { (s, c) } else { (c, -s) };
+            if q & 2 == 0 { (s1, c1) } else { (-s1, -c1) }
+        };
+        let mut turns: Vec<f32> = (0..=4000).map(|k| k as f32 / 4000.0).collect();
+        // Quarter boundaries, outside [0, 1) (negative and saturating quarters), NaN.
+        turns.extend([
+            0.125,
+            0.375,
+            0.625,
+            0.875,
+            1.0 - f32::EPSILON,
+            -0.3,
+            -2.6,
+            7.1,
+        ]);
+        turns.extend([1e12, -1e12, f32::INFINITY, f32::NAN]);
+        for t in turns {
+            let (s, c) = sin_cos_turns(t);
+            let (s0, c0) = branches(t);
+            assert_eq!(
+                (s.to_bits(), c.to_bits()),
+                (s0.to_bits(), c0.to_bits()),
+                "{t}"
+            );
+        }
+    }
+
+    #[test]
     fn cosine_and_phong_samples_have_their_moments() {
         let rng = PixelRng::new(3, 0, 17).stream(StreamId::Indirect);
         let n = 200_000;

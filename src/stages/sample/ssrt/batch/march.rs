@@ -39,7 +39,8 @@ struct Packet {
     found_inv: [f32; LANES],
     /// The lane's queued ray, `usize::MAX` for none.
     slot: [usize; LANES],
-    /// A bit per lane whose ray is still marching (`active` as a bit mask).
+    /// A bit per lane whose ray is still marching: `active` as a bit mask, set with
+    /// it by `refill` and cleared with it by `step`.
     live: u32,
 }
 

@@ -235,8 +235,8 @@ unsafe fn set_up_lanes(
         let (first_a, last_a) = (ints(first_a), ints(last_a));
         let (inv_c, dinv) = (floats(inv_c), floats(dinv));
         // Each lane queues at most one ray. Whether a ray's segment is empty is
-        // unpredictable, so every lane's march is written past the end and kept by
-        // moving the end, without a branch.
+        // unpredictable, so every non-rare lane's march is written past the end and
+        // kept by moving the end, without a branch.
         queued.reserve(LANES);
         for lane in 0..LANES {
             let i = first + lane;

@@ -7,7 +7,7 @@ fn main() {
     match cli::main() {
         Ok(code) => std::process::exit(code),
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", cli::report(&e));
             std::process::exit(1);
         }
     }

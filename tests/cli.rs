@@ -264,10 +264,43 @@ fn bad_files_are_clear_errors() {
     );
     let o = run_in(d, &["replay", "missing.relume"]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(
-        stderr(&o).starts_with("error: missing.relume: No such file"),
-        "{}",
-        stderr(&o)
+    // The cause once, not repeated by the error's source chain.
+    let cause = std::fs::File::open(d.join("missing.relume")).unwrap_err();
+    assert_eq!(stderr(&o), format!("error: missing.relume: {cause}\n"));
+}
+
+#[test]
+fn an_unwritable_output_folder_is_named_with_its_cause_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 1);
+    std::fs::write(d.join("a_file"), b"").unwrap();
+    let pipeline = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"write\"\nparams = { products = [\"depth\"] }\n";
+    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    let o = run_in(
+        d,
+        &[
+            "replay",
+            "small.relume",
+            "-p",
+            "p.toml",
+            "--out",
+            "a_file/out",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("error: "))
+        .unwrap_or_default();
+    let cause = std::fs::create_dir_all(d.join("a_file/out/depth")).unwrap_err();
+    assert_eq!(
+        line,
+        format!(
+            "error: replay of small.relume stopped: stage `write` could not be set up: a_file/out/depth: {cause}"
+        ),
+        "{err}"
     );
 }
 

@@ -61,6 +61,26 @@ Examples:
   relume stages                                    what a pipeline can use
   relume validate my.toml";
 
+/// The message for an error that ended a command: its causes from the outermost in,
+/// joined by ": ", each said once. The library's errors name their cause in their own
+/// message (so that `{}` alone is complete) and also hand it on as their `source`, so
+/// the plain chain would repeat it (`a: b: b`); a cause whose text already ends the
+/// message is left out.
+pub fn report(error: &anyhow::Error) -> String {
+    let mut message = String::new();
+    for cause in error.chain() {
+        let text = cause.to_string();
+        if message.ends_with(&text) {
+            continue;
+        }
+        if !message.is_empty() {
+            message.push_str(": ");
+        }
+        message.push_str(&text);
+    }
+    message
+}
+
 /// Runs the command line; returns the exit code.
 pub fn main() -> anyhow::Result<i32> {
     let cli = Cli::parse();
@@ -82,4 +102,57 @@ pub fn main() -> anyhow::Result<i32> {
 /// Where the built-in default recording is kept.
 pub(crate) fn default_recording_path() -> PathBuf {
     PathBuf::from("recordings").join("default.relume")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::report;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("{path}: {source}")]
+    struct Named {
+        path: &'static str,
+        #[source]
+        source: std::io::Error,
+    }
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("stage `write` could not be set up: {source}")]
+    struct Setup {
+        #[source]
+        source: Named,
+    }
+
+    fn not_a_directory() -> std::io::Error {
+        std::io::Error::other("Not a directory")
+    }
+
+    #[test]
+    fn each_cause_is_said_once() {
+        let error = anyhow::Error::new(Setup {
+            source: Named {
+                path: "/dev/null/x/final",
+                source: not_a_directory(),
+            },
+        })
+        .context("replay of r.relume stopped");
+        assert_eq!(
+            report(&error),
+            "replay of r.relume stopped: stage `write` could not be set up: \
+             /dev/null/x/final: Not a directory"
+        );
+    }
+
+    #[test]
+    fn causes_not_in_the_message_are_kept() {
+        // A context over an error that does not repeat it, and an error whose message
+        // does not name its source: every part is said.
+        let error = anyhow::Error::new(not_a_directory())
+            .context("cannot write out/final/000001.png")
+            .context("frame 1");
+        assert_eq!(
+            report(&error),
+            "frame 1: cannot write out/final/000001.png: Not a directory"
+        );
+    }
 }

@@ -6,6 +6,7 @@ fn main() {
     relume::graph::memory::keep_freed_memory();
     match cli::main() {
         Ok(code) => std::process::exit(code),
+        Err(e) if cli::is_broken_pipe(&e) => std::process::exit(0),
         Err(e) => {
             eprintln!("error: {}", cli::report(&e));
             std::process::exit(1);

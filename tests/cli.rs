@@ -483,3 +483,35 @@ fn the_main_job_generates_its_recording_and_writes_finished_frames() {
     let o = ok(run_in(d, &["replay", "--frames", "0..1"]));
     assert!(!stderr(&o).contains("generating"), "{}", stderr(&o));
 }
+
+#[test]
+fn a_closed_or_full_standard_output_ends_the_command_without_a_panic() {
+    // A reader that went away (`relume stages | head -1`): quietly, status 0.
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let o = common::relume()
+        .arg("stages")
+        .stdout(writer)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(stderr(&o), "");
+    // A full disk: an error that says so, status 1.
+    #[cfg(target_os = "linux")]
+    {
+        let full = std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap();
+        let o = common::relume()
+            .arg("stages")
+            .stdout(full)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(1));
+        assert_eq!(
+            stderr(&o),
+            "error: cannot write to standard output: No space left on device (os error 28)\n"
+        );
+    }
+}

@@ -27,7 +27,7 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
         };
         let params: Vec<serde_json::Value> = info.params.iter().map(|p| serde_json::json!({ "name": p.name, "type": p.type_name(), "default": p.default_value().to_string(), "min": p.min, "max": p.max, "choices": p.choices, "doc": p.doc })).collect();
         if !a.json {
-            println!("{}\n    {}", info.kind, info.summary);
+            outln!("{}\n    {}", info.kind, info.summary)?;
             let show = |ports: &[relume::graph::Port]| {
                 if ports.is_empty() {
                     "-".to_string()
@@ -39,11 +39,11 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
                         .join(", ")
                 }
             };
-            println!(
+            outln!(
                 "    reads: {}   writes: {}",
                 show(&ports.inputs),
                 show(&ports.outputs)
-            );
+            )?;
             for p in info.params {
                 let mut line =
                     format!("    {} = {}  ({}", p.name, p.default_value(), p.type_name());
@@ -53,14 +53,14 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
                 if !p.choices.is_empty() {
                     line.push_str(&format!(", one of {}", p.choices.join(" | ")));
                 }
-                println!("{line})\n        {}", p.doc);
+                outln!("{line})\n        {}", p.doc)?;
             }
-            println!();
+            outln!()?;
         }
         docs.push(serde_json::json!({ "kind": info.kind, "summary": info.summary, "inputs": port_list(&ports.inputs), "outputs": port_list(&ports.outputs), "params": params }));
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&docs)?);
+        outln!("{}", serde_json::to_string_pretty(&docs)?)?;
     }
     Ok(0)
 }
@@ -78,22 +78,24 @@ pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
             }
         })
         .collect();
-    println!(
+    outln!(
         "{}: ok, {} stages: {}",
         a.pipeline.display(),
         pipeline.stages.len(),
         chain.join(" -> ")
-    );
+    )?;
     for fb in &pipeline.feedback {
-        println!(
+        outln!(
             "  feedback: `{}` from stage `{}` reaches stage `{}` one frame later",
-            fb.product, pipeline.stages[fb.producer].name, pipeline.stages[fb.consumer].name
-        );
+            fb.product,
+            pipeline.stages[fb.producer].name,
+            pipeline.stages[fb.consumer].name
+        )?;
     }
     let objects = &pipeline.objects;
     if !objects.is_empty() {
         let b = objects.bounds();
-        println!(
+        outln!(
             "  objects: {} triangles in {} materials, bounds [{:.3}, {:.3}, {:.3}] .. [{:.3}, {:.3}, {:.3}] m",
             objects.triangles.len(),
             objects.materials.len(),
@@ -103,7 +105,7 @@ pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
             b.max.x,
             b.max.y,
             b.max.z
-        );
+        )?;
     }
     Ok(0)
 }

@@ -133,35 +133,36 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     doc.insert("recording".into(), path.clone().into());
     doc.insert("pipeline".into(), loaded.pipeline.name.clone().into());
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
         return Ok(0);
     }
-    println!(
+    outln!(
         "{} on {path}: {} frames",
-        loaded.pipeline.name, report["frames"]
-    );
+        loaded.pipeline.name,
+        report["frames"]
+    )?;
     if !evaluator.has_truth() {
-        println!(
+        outln!(
             "{path} has no ground truth: only self-consistency scores (depth warped from the \
              previous frame, reference against the camera image) are reported"
-        );
+        )?;
     }
     if let Some(Value::Object(stages)) = report.get("stages") {
         for (name, scores) in stages {
             let Value::Object(scores) = scores else {
                 continue;
             };
-            println!("{name} ({})", scores["kind"].as_str().unwrap_or("?"));
+            outln!("{name} ({})", scores["kind"].as_str().unwrap_or("?"))?;
             let mut any = false;
             for (key, value) in scores.iter().filter(|(k, _)| *k != "kind") {
                 any = true;
                 match value.as_f64() {
-                    Some(v) if value.is_f64() => println!("  {key:<34} {v:.5}"),
-                    _ => println!("  {key:<34} {value}"),
+                    Some(v) if value.is_f64() => outln!("  {key:<34} {v:.5}")?,
+                    _ => outln!("  {key:<34} {value}")?,
                 }
             }
             if !any {
-                println!("  (nothing to score without ground truth)");
+                outln!("  (nothing to score without ground truth)")?;
             }
         }
     }

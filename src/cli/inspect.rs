@@ -68,74 +68,91 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
         "corrupt_records": corrupt,
     });
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        outln!("{}", serde_json::to_string_pretty(&doc)?)?;
     } else {
-        println!(
+        outln!(
             "{} ({}, format {}, {:.1} MB)",
             rec.path().display(),
             h.name,
             rec.version(),
             rec.file_len() as f64 / 1e6
-        );
-        println!(
+        )?;
+        outln!(
             "  made by   {} {} from {}",
-            h.provenance.tool, h.provenance.tool_version, h.provenance.source
-        );
+            h.provenance.tool,
+            h.provenance.tool_version,
+            h.provenance.source
+        )?;
         let k = &h.color_intrinsics;
-        println!(
+        outln!(
             "  color     {}x{}  fx {:.2} fy {:.2} cx {:.2} cy {:.2}",
-            k.width, k.height, k.fx, k.fy, k.cx, k.cy
-        );
+            k.width,
+            k.height,
+            k.fx,
+            k.fy,
+            k.cx,
+            k.cy
+        )?;
         let k = &h.depth_intrinsics;
-        println!(
+        outln!(
             "  depth     {}x{}  fx {:.2} fy {:.2} cx {:.2} cy {:.2}  unit {} m",
-            k.width, k.height, k.fx, k.fy, k.cx, k.cy, h.depth_unit_m
-        );
+            k.width,
+            k.height,
+            k.fx,
+            k.fy,
+            k.cx,
+            k.cy,
+            h.depth_unit_m
+        )?;
         for st in &streams {
-            println!(
+            outln!(
                 "  stream    {:<6} {:>6} records  {:>7.2} Hz  {:>9.1} MB",
                 st["stream"].as_str().unwrap_or(""),
                 st["records"],
                 st["rate_hz"].as_f64().unwrap_or(0.0),
                 st["bytes"].as_u64().unwrap_or(0) as f64 / 1e6
-            );
+            )?;
         }
-        println!(
+        outln!(
             "  frames    {} associated over {:.2} s: {} with pose, {} with ground truth",
             s.frames,
             replay.duration_s(),
             s.frames_with_pose,
             s.frames_with_truth
-        );
-        println!(
+        )?;
+        outln!(
             "  skipped   {} color records without depth within {} ms, {} corrupt pose records",
             s.skipped_no_depth,
             relume::recording::association::DEFAULT_TOLERANCE_NS / 1_000_000,
             s.skipped_corrupt_poses
-        );
+        )?;
         if let Some(gt) = &h.ground_truth {
-            println!(
+            outln!(
                 "  truth     {} (object at {:?})",
-                gt.description, gt.object_position
-            );
+                gt.description,
+                gt.object_position
+            )?;
         }
         for att in &h.attachments {
-            println!(
+            outln!(
                 "  attached  {} ({}, {}x{})",
-                att.name, att.kind, att.image.width, att.image.height
-            );
+                att.name,
+                att.kind,
+                att.image.width,
+                att.image.height
+            )?;
         }
         if let Some(d) = rec.damage() {
-            println!("  DAMAGED   {d}");
+            outln!("  DAMAGED   {d}")?;
         }
         if a.verify {
-            println!(
+            outln!(
                 "  verified  {} records, {} corrupt",
                 index.len(),
                 corrupt.len()
-            );
+            )?;
             for c in &corrupt {
-                println!("    {c}");
+                outln!("    {c}")?;
             }
         }
     }

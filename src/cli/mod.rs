@@ -1,6 +1,24 @@
 //! Command-line definitions and dispatch. Errors are `anyhow` here, at the edge; the
 //! library's typed errors carry the file, line, frame or stage they concern.
 
+/// `println!` that returns an error instead of panicking when standard output fails
+/// (a closed pipe, a full disk); see [`stdout_write`].
+macro_rules! outln {
+    () => {
+        $crate::cli::stdout_write(format_args!("\n"))
+    };
+    ($($arg:tt)*) => {
+        $crate::cli::stdout_write(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
+/// `print!` that returns an error instead of panicking (see [`outln!`]).
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::cli::stdout_write(format_args!($($arg)*))
+    };
+}
+
 mod catalog;
 mod eval;
 mod inspect;
@@ -60,6 +78,27 @@ Examples:
   relume bench lr.relume --repeat 5
   relume stages                                    what a pipeline can use
   relume validate my.toml";
+
+/// Writes to standard output: an error naming it when that fails, where `print!`
+/// would panic. A reader that went away ([`is_broken_pipe`]) ends the command quietly.
+pub fn stdout_write(text: std::fmt::Arguments) -> anyhow::Result<()> {
+    use std::io::Write;
+    std::io::stdout()
+        .lock()
+        .write_fmt(text)
+        .map_err(|e| anyhow::Error::new(e).context("cannot write to standard output"))
+}
+
+/// Whether `error` comes from writing into a pipe whose reader has closed it (as in
+/// `relume stages | head`): the output is no longer wanted, so the command ends with
+/// status 0 and no message, as ripgrep does.
+pub fn is_broken_pipe(error: &anyhow::Error) -> bool {
+    error.chain().any(|cause| {
+        cause
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
 
 /// The message for an error that ended a command: its causes from the outermost in,
 /// joined by ": ", each said once. The library's errors name their cause in their own

@@ -64,7 +64,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
     };
     let start = std::time::Instant::now();
     let summary = generate(&config, &a.out)?;
-    println!(
+    outln!(
         "wrote {} ({} frames, {}x{}, {:.1} MB) in {:.2} s",
         summary.path.display(),
         summary.frames,
@@ -72,7 +72,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
         config.height,
         summary.bytes as f64 / 1e6,
         start.elapsed().as_secs_f64()
-    );
+    )?;
     Ok(0)
 }
 
@@ -193,7 +193,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     };
     bar.finish_and_clear();
     let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
-    println!(
+    outln!(
         "wrote {} ({} color, {} depth, {} poses, {:.1} MB) in {:.2} s",
         out.display(),
         summary.color,
@@ -201,6 +201,6 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         summary.poses,
         bytes as f64 / 1e6,
         start.elapsed().as_secs_f64()
-    );
+    )?;
     Ok(0)
 }

@@ -256,7 +256,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
     if a.hash {
         eprint!("{table}")
     } else {
-        print!("{table}")
+        out!("{table}")?
     }
     for (frame, cause) in &report.skipped_corrupt {
         eprintln!("skipped corrupt frame {frame}: {cause}");
@@ -413,7 +413,7 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
     if a.json {
         let stages: serde_json::Map<String, serde_json::Value> = names.iter().zip(&per_stage).map(|((n, k), s)| (n.clone(), serde_json::json!({ "kind": k, "median_ms": s.median_ms, "p95_ms": s.p95_ms, "max_ms": s.max_ms }))).collect();
         let doc = serde_json::json!({ "pipeline": loaded.pipeline.name, "recording": loaded.replay.recording.path().display().to_string(), "frames": frames, "repeat": reports.len(), "stages": stages, "fps": median_fps });
-        println!("{}", serde_json::to_string_pretty(&doc)?);
+        outln!("{}", serde_json::to_string_pretty(&doc)?)?;
     } else {
         let width = names
             .iter()
@@ -421,32 +421,40 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
             .max()
             .unwrap_or(5)
             .max(5);
-        println!(
+        outln!(
             "{} on {}: {} frames x {} runs (after 1 warm-up)",
             loaded.pipeline.name,
             loaded.replay.recording.path().display(),
             frames,
             reports.len()
-        );
-        println!(
+        )?;
+        outln!(
             "{:<width$}  {:<width$}  {:>9}  {:>9}  {:>9}  {:>10}",
-            "stage", "kind", "median ms", "p95 ms", "max ms", "frames/s"
-        );
+            "stage",
+            "kind",
+            "median ms",
+            "p95 ms",
+            "max ms",
+            "frames/s"
+        )?;
         for ((n, k), s) in names.iter().zip(&per_stage) {
             let rate = if s.median_ms > 0.0 {
                 1e3 / s.median_ms
             } else {
                 f64::INFINITY
             };
-            println!(
+            outln!(
                 "{n:<width$}  {k:<width$}  {:>9.3}  {:>9.3}  {:>9.3}  {:>10.1}",
-                s.median_ms, s.p95_ms, s.max_ms, rate
-            );
+                s.median_ms,
+                s.p95_ms,
+                s.max_ms,
+                rate
+            )?;
         }
-        println!(
+        outln!(
             "end to end: {median_fps:.1} frames/s (median of {} runs)",
             reports.len()
-        );
+        )?;
     }
     Ok(0)
 }

@@ -106,6 +106,13 @@ fn wrong_types_ranges_and_choices_are_located() {
     );
     let e = error(&format!("{head}params = {{ step = 40 }}\n"));
     assert_eq!(e.message, "parameter `step` = 40 is out of range (1 to 16)");
+    let e = error(
+        "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"write\"\nparams = { products = [\"color\", \"depth\",\n  \"color\"] }\n",
+    );
+    assert_eq!(
+        (e.line, e.column, e.message.as_str()),
+        (6, 3, "parameter `products` names \"color\" twice")
+    );
     let e = error(&format!("{head}params = {{ difference = \"centrl\" }}\n"));
     assert_eq!(
         e.message,

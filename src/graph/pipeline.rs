@@ -473,6 +473,15 @@ fn check_value(
                 match &item.value {
                     RawValue::Str(s) => {
                         choice(s, &item.span)?;
+                        // A list names things (products to save, formats): twice would
+                        // do the same work twice, and two writers race for one file.
+                        if out.contains(s) {
+                            return Err(src.error(
+                                item.span.clone(),
+                                format!("parameter `{}` names {s:?} twice", spec.name),
+                                None,
+                            ));
+                        }
                         out.push(s.clone());
                     }
                     other => {

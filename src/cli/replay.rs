@@ -80,19 +80,21 @@ pub struct BenchArgs {
 }
 
 fn parse_frames(text: &str) -> Result<Range<usize>, String> {
+    let invalid = || format!("invalid frame range {text:?}: expected A..B, A.., ..B or N");
     let num = |s: &str, default: usize| {
         if s.is_empty() {
             Ok(default)
         } else {
-            s.parse::<usize>()
-                .map_err(|_| format!("invalid frame range {text:?}: expected A..B, A.., ..B or N"))
+            s.parse::<usize>().map_err(|_| invalid())
         }
     };
     let range = match text.split_once("..") {
         Some((a, b)) => num(a, 0)?..num(b, usize::MAX)?,
+        // A single index; an empty one is a mistake, not frame 0.
+        None if text.is_empty() => return Err(invalid()),
         None => {
             let n = num(text, 0)?;
-            n..n + 1
+            n..n.saturating_add(1)
         }
     };
     if range.start >= range.end {
@@ -457,4 +459,35 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
         )?;
     }
     Ok(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_frames;
+
+    #[test]
+    fn frame_ranges_parse_or_say_what_is_expected() {
+        assert_eq!(parse_frames("3..7"), Ok(3..7));
+        assert_eq!(parse_frames("3.."), Ok(3..usize::MAX));
+        assert_eq!(parse_frames("..7"), Ok(0..7));
+        assert_eq!(parse_frames(".."), Ok(0..usize::MAX));
+        assert_eq!(parse_frames("5"), Ok(5..6));
+        let expected = |text: &str| {
+            Err(format!(
+                "invalid frame range {text:?}: expected A..B, A.., ..B or N"
+            ))
+        };
+        for text in ["", "x", "1..x", "-1", "1...3"] {
+            assert_eq!(parse_frames(text), expected(text), "{text:?}");
+        }
+        assert_eq!(
+            parse_frames("5..5"),
+            Err("frame range \"5..5\" is empty".into())
+        );
+        let max = usize::MAX.to_string();
+        assert_eq!(
+            parse_frames(&max),
+            Err(format!("frame range {max:?} is empty"))
+        );
+    }
 }

@@ -197,12 +197,14 @@ fn writer_publishes_only_on_finish_and_cleans_up_when_dropped() {
 #[test]
 fn a_failed_finish_leaves_no_temporary_file() {
     let dir = tempfile::tempdir().unwrap();
-    // The final name is a non-empty directory: the rename in finish fails.
+    // The final name becomes a non-empty directory while the recording is written:
+    // the rename in finish fails. (A directory there from the start is refused by
+    // create.)
     let path = dir.path().join("blocked.relume");
-    std::fs::create_dir(&path).unwrap();
-    std::fs::write(path.join("keep"), b"x").unwrap();
     let mut w = RecordingWriter::create(&path, &header()).unwrap();
     w.write(&records()[0]).unwrap();
+    std::fs::create_dir(&path).unwrap();
+    std::fs::write(path.join("keep"), b"x").unwrap();
     match w.finish() {
         Err(RecordingError::Io { path: p, .. }) => assert_eq!(p, path),
         other => panic!("{other:?}"),

@@ -23,12 +23,15 @@ pub struct RecordingWriter {
 impl RecordingWriter {
     /// Starts a recording at `path` with `header`.
     pub fn create(path: &Path, header: &Header) -> Result<Self, RecordingError> {
-        let tmp_path = temp_path_for(path);
-        let file = File::create(&tmp_path).map_err(|e| RecordingError::io(&tmp_path, e))?;
+        let final_path = output_target(path).map_err(|e| RecordingError::io(path, e))?;
+        let tmp_path = temp_path_for(&final_path);
+        // A missing folder is reported under the name the caller gave, not the
+        // temporary one.
+        let file = File::create(&tmp_path).map_err(|e| RecordingError::io(path, e))?;
         let mut w = RecordingWriter {
             out: Some(BufWriter::with_capacity(1 << 20, file)),
             tmp_path,
-            final_path: path.to_path_buf(),
+            final_path,
             offset: 0,
             index: Vec::new(),
         };
@@ -133,6 +136,43 @@ impl Drop for RecordingWriter {
     }
 }
 
+/// The file that an output written to `path` replaces: `path` itself, or the file a
+/// symbolic link there leads to (so that the link stays a link). Outputs are written
+/// to a temporary file and renamed over their target, which would replace anything
+/// else that stands there, so a path holding something other than a regular file (a
+/// device such as /dev/null, a FIFO, a directory) is an error.
+pub fn output_target(path: &Path) -> std::io::Result<PathBuf> {
+    use std::io::{Error, ErrorKind};
+    let mut target = path.to_path_buf();
+    // As many links as Linux follows (MAXSYMLINKS).
+    for _ in 0..40 {
+        let meta = match std::fs::symlink_metadata(&target) {
+            Err(e) if e.kind() == ErrorKind::NotFound => return Ok(target),
+            other => other?,
+        };
+        if meta.is_file() {
+            return Ok(target);
+        }
+        if !meta.file_type().is_symlink() {
+            return Err(Error::new(
+                ErrorKind::InvalidInput,
+                "not a regular file (outputs are written beside their target and renamed \
+                 over it, which would replace it)",
+            ));
+        }
+        // A relative link leads from the link's folder; `join` keeps an absolute one.
+        let link = std::fs::read_link(&target)?;
+        target = match target.parent() {
+            Some(folder) => folder.join(link),
+            None => link,
+        };
+    }
+    Err(Error::new(
+        ErrorKind::InvalidInput,
+        "too many levels of symbolic links",
+    ))
+}
+
 /// A hidden temporary name beside `path`, unique per process.
 pub fn temp_path_for(path: &Path) -> PathBuf {
     let name = path
@@ -142,18 +182,87 @@ pub fn temp_path_for(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.{}.partial", std::process::id()))
 }
 
-/// Writes `bytes` to `path` atomically (temporary file, then rename): a process stopped
+/// Writes `bytes` to `path` ([`output_target`]) atomically (temporary file, then rename): a process stopped
 /// midway leaves the old file or the new one, never half of one. No fsync: per-frame
 /// outputs guard against interruption, not power loss.
 pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let tmp = temp_path_for(path);
+    let target = output_target(path)?;
+    let tmp = temp_path_for(&target);
     let result = (|| {
         let mut f = File::create(&tmp)?;
         f.write_all(bytes)?;
-        std::fs::rename(&tmp, path)
+        std::fs::rename(&tmp, &target)
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn outputs_replace_a_link_target_and_refuse_what_is_not_a_file() {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
+        std::fs::write(d.join("real.png"), b"old").unwrap();
+        std::os::unix::fs::symlink("real.png", d.join("link.png")).unwrap();
+        std::os::unix::fs::symlink("link.png", d.join("link2.png")).unwrap();
+        write_file_atomic(&d.join("link2.png"), b"new").unwrap();
+        assert_eq!(std::fs::read(d.join("real.png")).unwrap(), b"new");
+        for link in ["link.png", "link2.png"] {
+            let meta = std::fs::symlink_metadata(d.join(link)).unwrap();
+            assert!(meta.file_type().is_symlink(), "{link} stays a link");
+        }
+        // A dangling link: the file is created where it leads.
+        std::os::unix::fs::symlink("made.png", d.join("dangling.png")).unwrap();
+        write_file_atomic(&d.join("dangling.png"), b"made").unwrap();
+        assert_eq!(std::fs::read(d.join("made.png")).unwrap(), b"made");
+
+        std::fs::create_dir(d.join("folder")).unwrap();
+        let e = write_file_atomic(&d.join("folder"), b"x").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "not a regular file (outputs are written beside their target and renamed over \
+             it, which would replace it)"
+        );
+        assert!(d.join("folder").is_dir());
+        std::os::unix::fs::symlink("loop.png", d.join("loop.png")).unwrap();
+        let e = write_file_atomic(&d.join("loop.png"), b"x").unwrap_err();
+        assert_eq!(e.to_string(), "too many levels of symbolic links");
+        // Nothing temporary is left behind by the refusals.
+        let mut names: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(
+            names,
+            [
+                "dangling.png",
+                "folder",
+                "link.png",
+                "link2.png",
+                "loop.png",
+                "made.png",
+                "real.png"
+            ]
+        );
+    }
+
+    #[test]
+    fn a_recording_into_a_missing_folder_names_the_path_given() {
+        let tmp = tempfile::tempdir().unwrap();
+        let path = tmp.path().join("no/such/x.relume");
+        let header = Header::new("x", crate::recording::Intrinsics::PRIMESENSE, 0.001);
+        let e = match RecordingWriter::create(&path, &header) {
+            Err(e) => e,
+            Ok(_) => panic!("the folder does not exist"),
+        };
+        let cause = std::fs::File::create(&path).unwrap_err();
+        assert_eq!(e.to_string(), format!("{}: {cause}", path.display()));
+    }
 }

@@ -452,7 +452,10 @@ fn the_main_job_generates_its_recording_and_writes_finished_frames() {
         assert!(table.contains(stage), "{table}");
     }
     assert!(
-        stderr(&o).contains("generating the built-in synthetic recording"),
+        stderr(&o).contains(
+            "generating the built-in synthetic recording into recordings/default.relume \
+             (first use; 30 frames at 640x480)"
+        ),
         "{}",
         stderr(&o)
     );
@@ -482,6 +485,33 @@ fn the_main_job_generates_its_recording_and_writes_finished_frames() {
     // The second run reuses the recording instead of rendering it again.
     let o = ok(run_in(d, &["replay", "--frames", "0..1"]));
     assert!(!stderr(&o).contains("generating"), "{}", stderr(&o));
+    // A damaged one is rendered again, and the message says what was wrong with it.
+    let path = d.join("recordings/default.relume");
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = bytes.len() - 1000;
+    std::fs::write(&path, &bytes[..cut]).unwrap();
+    let o = ok(run_in(d, &["replay", "--frames", "0..1"]));
+    let damaged =
+        format!("(the old one is damaged: recordings/default.relume: truncated at byte {cut}:");
+    assert!(stderr(&o).contains(&damaged), "{}", stderr(&o));
+    assert_eq!(
+        std::fs::read(&path).unwrap(),
+        bytes,
+        "the same recording again"
+    );
+}
+
+#[test]
+fn the_built_in_recording_needs_a_folder_for_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(tmp.path().join("recordings"), b"").unwrap();
+    let o = run_in(tmp.path(), &["replay", "--frames", "0..1"]);
+    assert_eq!(o.status.code(), Some(1));
+    let cause = std::fs::create_dir_all(tmp.path().join("recordings")).unwrap_err();
+    assert_eq!(
+        stderr(&o),
+        format!("error: cannot create the folder recordings: {cause}\n")
+    );
 }
 
 #[test]

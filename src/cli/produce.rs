@@ -87,14 +87,18 @@ pub fn ensure_default_recording(path: &Path) -> anyhow::Result<()> {
     {
         return Ok(());
     }
+    // The reason, with the damage or read error, so that a replaced file is explained.
     let why = match existing {
-        Ok(rec) if rec.damage().is_some() => "the old one is damaged",
-        Ok(_) => "the old one does not match the current generator",
-        Err(_) if path.exists() => "the old one cannot be read",
-        Err(_) => "first use",
+        Ok(rec) => match rec.damage() {
+            Some(damage) => format!("the old one is damaged: {damage}"),
+            None => "the old one does not match the current generator".to_string(),
+        },
+        Err(e) if path.exists() => format!("the old one cannot be read: {e}"),
+        Err(_) => "first use".to_string(),
     };
     if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the folder {}", dir.display()))?;
     }
     eprintln!(
         "generating the built-in synthetic recording into {} ({why}; {} frames at {}x{}) ...",

@@ -545,3 +545,71 @@ fn a_closed_or_full_standard_output_ends_the_command_without_a_panic() {
         );
     }
 }
+
+#[test]
+fn verify_decodes_images_and_fails_on_damage() {
+    use relume::recording::{
+        ColorRecord, DepthRecord, EncodedImage, Header, ImageEncoding, Intrinsics, Record,
+        RecordingWriter,
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let intrinsics = Intrinsics {
+        width: 4,
+        height: 3,
+        fx: 4.0,
+        fy: 4.0,
+        cx: 1.5,
+        cy: 1.0,
+    };
+    let mut w =
+        RecordingWriter::create(&d.join("x.relume"), &Header::new("x", intrinsics, 0.001)).unwrap();
+    // A PNG signature and nothing else: the record's checksum is right, its image is not.
+    let color = EncodedImage {
+        encoding: ImageEncoding::Png,
+        width: 4,
+        height: 3,
+        channels: 3,
+        bytes: b"\x89PNG\r\n\x1a\n".to_vec(),
+    };
+    let depth = EncodedImage {
+        encoding: ImageEncoding::RawU16,
+        width: 4,
+        height: 3,
+        channels: 1,
+        bytes: vec![0x10; 24],
+    };
+    for r in [
+        Record::Color(ColorRecord {
+            stamp_ns: 0,
+            image: color,
+        }),
+        Record::Depth(DepthRecord {
+            stamp_ns: 0,
+            image: depth,
+        }),
+    ] {
+        w.write(&r).unwrap();
+    }
+    w.finish().unwrap();
+    let o = run_in(d, &["inspect", "x.relume", "--verify"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(out.contains("  verified  2 records, 1 corrupt\n"), "{out}");
+    assert!(
+        out.contains("\n    x.relume: record 0 (color): cannot decode its image: "),
+        "{out}"
+    );
+    // A damaged file (its index cut off) fails the check too; without --verify,
+    // inspect describes what it can and succeeds.
+    let bytes = std::fs::read(d.join("x.relume")).unwrap();
+    std::fs::write(d.join("cut.relume"), &bytes[..bytes.len() - 30]).unwrap();
+    let o = run_in(d, &["inspect", "cut.relume", "--verify"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
+    assert!(
+        stdout(&o).contains("  DAMAGED   cut.relume: "),
+        "{}",
+        stdout(&o)
+    );
+    ok(run_in(d, &["inspect", "cut.relume"]));
+}

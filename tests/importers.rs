@@ -198,6 +198,16 @@ fn tum_errors_name_file_and_line() {
     );
     let e = tum_error(|d| std::fs::write(d.join("rgb/0.png"), b"not an image").unwrap());
     assert!(e.starts_with("rgb/0.png: not an image"), "{e}");
+    // A file whose header is whole but whose data is cut short: refused at import, not
+    // stored to fail the replay at its frame.
+    let cut = |path: std::path::PathBuf| {
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() - 20]).unwrap();
+    };
+    let e = tum_error(|d| cut(d.join("rgb/1.png")));
+    assert_eq!(e, "rgb/1.png: cannot decode Png: unexpected end of file");
+    let e = tum_error(|d| cut(d.join("depth/1.png")));
+    assert_eq!(e, "depth/1.png: cannot decode Png: unexpected end of file");
 }
 
 fn write_redwood(dir: &Path, frames: usize, trajectory: &str) {

@@ -1,7 +1,7 @@
 //! `relume inspect`: what a recording holds.
 
 use clap::Args;
-use relume::recording::{Replay, ReplayOptions, StreamKind};
+use relume::recording::{Record, Recording, Replay, ReplayOptions, StreamKind, codec};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -11,7 +11,8 @@ pub struct InspectArgs {
     /// Print JSON (keys include frames, frames_with_pose, streams, association).
     #[arg(long)]
     json: bool,
-    /// Read every record and check its checksum and encoding.
+    /// Read every record and check its checksum and encoding, images decoded; the exit
+    /// status is 1 when a record is corrupt or the file is damaged.
     #[arg(long)]
     verify: bool,
 }
@@ -40,7 +41,7 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
         .collect();
     let corrupt: Vec<String> = if a.verify {
         (0..index.len())
-            .filter_map(|i| rec.read_record(i).err().map(|e| e.to_string()))
+            .filter_map(|i| verify_record(rec, i).err())
             .collect()
     } else {
         Vec::new()
@@ -156,5 +157,22 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
             }
         }
     }
-    Ok(if corrupt.is_empty() { 0 } else { 1 })
+    let damaged = a.verify && rec.damage().is_some();
+    Ok(if corrupt.is_empty() && !damaged { 0 } else { 1 })
+}
+
+/// Reads record `i` and decodes its image, if it has one: what is wrong with it.
+fn verify_record(rec: &Recording, i: usize) -> Result<(), String> {
+    let image = match rec.read_record(i).map_err(|e| e.to_string())? {
+        Record::Color(r) => codec::decode_color(&r.image).map(drop),
+        Record::Depth(r) => codec::decode_depth_units(&r.image).map(drop),
+        Record::Pose(_) | Record::Truth(_) => Ok(()),
+    };
+    let kind = rec.index()[i].kind.name();
+    image.map_err(|e| {
+        format!(
+            "{}: record {i} ({kind}): cannot decode its image: {e}",
+            rec.path().display()
+        )
+    })
 }

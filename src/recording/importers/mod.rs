@@ -130,9 +130,12 @@ pub(crate) fn read_color(path: &Path, store: StoreMode) -> Result<EncodedImage, 
             format!("a color image must have 8-bit samples, found {bits}-bit"),
         ));
     }
+    // Decoded either way: a damaged file (a truncated PNG) is refused here, naming it,
+    // rather than stored to fail the replay at its frame.
+    let raw = codec::to_raw_color(&img).map_err(|e| file_error(path, e.to_string()))?;
     match store {
         StoreMode::Compressed => Ok(img),
-        StoreMode::Raw => codec::to_raw_color(&img).map_err(|e| file_error(path, e.to_string())),
+        StoreMode::Raw => Ok(raw),
     }
 }
 
@@ -148,9 +151,10 @@ pub(crate) fn read_depth(path: &Path, store: StoreMode) -> Result<EncodedImage, 
             ),
         ));
     }
+    let raw = codec::to_raw_depth(&img).map_err(|e| file_error(path, e.to_string()))?;
     match store {
         StoreMode::Compressed => Ok(img),
-        StoreMode::Raw => codec::to_raw_depth(&img).map_err(|e| file_error(path, e.to_string())),
+        StoreMode::Raw => Ok(raw),
     }
 }
 

@@ -613,3 +613,39 @@ fn verify_decodes_images_and_fails_on_damage() {
     );
     ok(run_in(d, &["inspect", "cut.relume"]));
 }
+
+#[test]
+fn import_warns_of_frames_without_a_pose() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let rw = d.join("rw");
+    std::fs::create_dir_all(rw.join("color")).unwrap();
+    std::fs::create_dir_all(rw.join("depth")).unwrap();
+    for i in 0..2 {
+        image::RgbImage::from_pixel(8, 6, image::Rgb([90, 80, 70]))
+            .save(rw.join(format!("color/{i:05}.png")))
+            .unwrap();
+        image::ImageBuffer::<image::Luma<u16>, _>::from_pixel(8, 6, image::Luma([1500]))
+            .save(rw.join(format!("depth/{i:05}.png")))
+            .unwrap();
+    }
+    // One pose for two frames.
+    std::fs::write(
+        rw.join("trajectory.log"),
+        "0 0 1\n1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n",
+    )
+    .unwrap();
+    let o = ok(run_in(d, &["import", "redwood", "rw", "-o", "r.relume"]));
+    assert_eq!(
+        stderr(&o),
+        "warning: r.relume: only 1 of 2 frames have a camera pose: pipelines that read \
+         `pose` stop at the first frame without one\n"
+    );
+    std::fs::remove_file(rw.join("trajectory.log")).unwrap();
+    let o = ok(run_in(d, &["import", "redwood", "rw", "-o", "r.relume"]));
+    assert_eq!(
+        stderr(&o),
+        "warning: r.relume: no camera poses: pipelines that read `pose` (the default one \
+         does) will not run\n"
+    );
+}

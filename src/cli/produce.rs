@@ -3,9 +3,10 @@
 use super::progress;
 use anyhow::Context;
 use clap::{Args, Subcommand};
+use relume::recording::association::AssociationStats;
 use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, tum};
 use relume::recording::synth::{self, SynthConfig};
-use relume::recording::{Intrinsics, Recording};
+use relume::recording::{Intrinsics, Recording, Replay, ReplayOptions};
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -206,5 +207,34 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         bytes as f64 / 1e6,
         start.elapsed().as_secs_f64()
     )?;
+    // What the recording lacks that most pipelines need, from its frames as replay
+    // builds them. A dataset may lack it, so this warns rather than fails.
+    let stats = Replay::open(out, ReplayOptions::default())?.stats;
+    for warning in missing_streams(&stats) {
+        eprintln!("warning: {}: {warning}", out.display());
+    }
     Ok(0)
+}
+
+/// Warnings for frames without depth (every stage after `decode` but the color ones
+/// reads it) or without a camera pose (`depth.fuse`, `cloud.samples` and what follows
+/// them read it).
+fn missing_streams(stats: &AssociationStats) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if stats.depth_records == 0 {
+        warnings.push("no depth images: pipelines that read `depth` will not run".to_string());
+    }
+    if stats.frames_with_pose == 0 {
+        warnings.push(
+            "no camera poses: pipelines that read `pose` (the default one does) will not run"
+                .to_string(),
+        );
+    } else if stats.frames_with_pose < stats.frames {
+        warnings.push(format!(
+            "only {} of {} frames have a camera pose: pipelines that read `pose` stop at \
+             the first frame without one",
+            stats.frames_with_pose, stats.frames
+        ));
+    }
+    warnings
 }

@@ -649,3 +649,38 @@ fn import_warns_of_frames_without_a_pose() {
          does) will not run\n"
     );
 }
+
+#[test]
+fn a_run_with_every_frame_skipped_as_corrupt_fails() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let path = small_recording(d, 2);
+    for nth in 0..2 {
+        corrupt_record(&path, StreamKind::Color, nth);
+    }
+    let expected = "error: small.relume: all 2 frames in the range are corrupt and were \
+                    skipped: nothing was replayed\n";
+    for args in [
+        &["replay", "small.relume", "--skip-corrupt", "-p", "p.toml"][..],
+        &[
+            "bench",
+            "small.relume",
+            "--skip-corrupt",
+            "-p",
+            "p.toml",
+            "--repeat",
+            "1",
+        ],
+        &["eval", "small.relume", "--skip-corrupt", "-p", "p.toml"],
+    ] {
+        std::fs::write(
+            d.join("p.toml"),
+            "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"depth.to_points\"\n[[stage]]\nkind = \"normals.cross\"\n",
+        )
+        .unwrap();
+        let o = run_in(d, args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stderr(&o));
+        let err = stderr(&o);
+        assert!(err.ends_with(expected), "{args:?}: {err}");
+    }
+}

@@ -52,8 +52,8 @@ Example:
 pub struct EvalArgs {
     #[command(flatten)]
     run: RunArgs,
-    /// Print the scores as JSON: {recording, pipeline, frames, ground_truth,
-    /// stages: {<stage name>: {kind, <score keys>}}}.
+    /// Print the scores as JSON: {recording, pipeline, frames, interrupted,
+    /// ground_truth, stages: {<stage name>: {kind, <score keys>}}}.
     #[arg(long)]
     json: bool,
     /// Directory for files that `write` stages of the pipeline save (default: a temporary
@@ -122,19 +122,37 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     bar.finish_and_clear();
     let _ = std::fs::remove_dir_all(&scratch);
     let path = loaded.replay.recording.path().display().to_string();
-    if let Err(f) = result {
-        return Err(anyhow::Error::new(f.error).context(format!("evaluation of {path} stopped")));
-    }
+    let run = match result {
+        Ok(run) => run,
+        Err(f) => {
+            return Err(
+                anyhow::Error::new(f.error).context(format!("evaluation of {path} stopped"))
+            );
+        }
+    };
     if let Some(e) = truth_error {
         bail!("{path}: {e}");
     }
+    super::replay::some_frame_replayed(&loaded, &run)?;
+    // Scores of an interrupted run cover the frames complete: printed, but the exit
+    // status says they are partial (as replay's does).
+    let status = if run.interrupted {
+        eprintln!(
+            "interrupted: the scores cover the {} frames complete",
+            run.frames_out
+        );
+        130
+    } else {
+        0
+    };
     let mut report = evaluator.report();
     let doc = report.as_object_mut().expect("an object");
     doc.insert("recording".into(), path.clone().into());
     doc.insert("pipeline".into(), loaded.pipeline.name.clone().into());
+    doc.insert("interrupted".into(), run.interrupted.into());
     if a.json {
         outln!("{}", serde_json::to_string_pretty(&report)?)?;
-        return Ok(0);
+        return Ok(status);
     }
     outln!(
         "{} on {path}: {} frames",
@@ -166,5 +184,5 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
             }
         }
     }
-    Ok(0)
+    Ok(status)
 }

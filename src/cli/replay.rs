@@ -308,7 +308,21 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
         eprintln!("interrupted: {} frames complete", report.frames_out);
         return Ok(130);
     }
+    some_frame_replayed(&loaded, &report)?;
     Ok(0)
+}
+
+/// An error when a run went through but replayed no frame: every frame in the range was
+/// corrupt and skipped (`--skip-corrupt`), so there is nothing to show for it.
+pub(super) fn some_frame_replayed(loaded: &Loaded, report: &RunReport) -> anyhow::Result<()> {
+    if report.frames_out == 0 && !report.skipped_corrupt.is_empty() {
+        bail!(
+            "{}: all {} frames in the range are corrupt and were skipped: nothing was replayed",
+            loaded.replay.recording.path().display(),
+            report.skipped_corrupt.len()
+        );
+    }
+    Ok(())
 }
 
 /// Saves the products named in `names` (or all writable ones for `all`) of `frame` into
@@ -394,6 +408,7 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
     if reports.is_empty() {
         bail!("interrupted before a measured run");
     }
+    some_frame_replayed(&loaded, &reports[0])?;
     let names: Vec<(String, String)> = reports[0]
         .stages
         .iter()

@@ -684,3 +684,56 @@ fn a_run_with_every_frame_skipped_as_corrupt_fails() {
         assert!(err.ends_with(expected), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn output_options_that_cannot_work_fail_before_the_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 2);
+    std::fs::create_dir(d.join("folder")).unwrap();
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["--timings", "folder"],
+            "error: --timings folder: that is a folder\n",
+        ),
+        (
+            &["--trace", "no/t.json"],
+            "error: --trace no/t.json: the folder no does not exist\n",
+        ),
+        (
+            &["--export-cloud", "folder"],
+            "error: --export-cloud folder: that is a folder\n",
+        ),
+        (
+            &["-p", "p.toml", "--export-cloud", "c.ply"],
+            "error: --export-cloud: pipeline `p.toml` produces no environment-sample cloud (add a \
+             cloud.samples stage)\n",
+        ),
+    ];
+    std::fs::write(d.join("p.toml"), "[[stage]]\nkind = \"decode\"\n").unwrap();
+    for (options, expected) in cases {
+        let mut args = vec!["replay", "small.relume"];
+        args.extend_from_slice(options);
+        let o = run_in(d, &args);
+        assert_eq!(o.status.code(), Some(1), "{options:?}");
+        assert_eq!(stderr(&o), expected, "{options:?}");
+        assert_eq!(stdout(&o), "", "{options:?}: nothing ran");
+    }
+    let o = run_in(
+        d,
+        &[
+            "replay",
+            "small.relume",
+            "-p",
+            "p.toml",
+            "--save",
+            "nonsense",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("error: --save stopped: frame 0 has no product `nonsense`; it has: "),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -209,8 +209,49 @@ pub(super) fn stop_on_ctrl_c() -> Arc<AtomicBool> {
     stop
 }
 
+/// An error before the run, rather than after it, when the file an option names cannot
+/// be written: a folder stands there, or its folder does not exist.
+fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
+    if path.is_dir() {
+        bail!("{option} {}: that is a folder", path.display());
+    }
+    if let Some(folder) = path.parent()
+        && !folder.as_os_str().is_empty()
+        && !folder.is_dir()
+    {
+        bail!(
+            "{option} {}: the folder {} does not exist",
+            path.display(),
+            folder.display()
+        );
+    }
+    Ok(())
+}
+
 pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
     let loaded = load(&a.run)?;
+    for (option, path) in [
+        ("--timings", &a.timings),
+        ("--trace", &a.trace),
+        ("--export-cloud", &a.export_cloud),
+    ] {
+        if let Some(path) = path {
+            check_output_file(option, path)?;
+        }
+    }
+    if a.export_cloud.is_some()
+        && !loaded
+            .pipeline
+            .stages
+            .iter()
+            .any(|s| s.kind == "cloud.samples")
+    {
+        bail!(
+            "--export-cloud: pipeline `{}` produces no environment-sample cloud (add a \
+             cloud.samples stage)",
+            loaded.pipeline.name
+        );
+    }
     let stop = stop_on_ctrl_c();
     let bar = progress::bar(loaded.frames.len() as u64, "replaying");
     let stdout = std::io::stdout();
@@ -230,7 +271,9 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             && save_error.is_none()
             && let Err(e) = save_products(&frame, &a.save, &a.save_format, &a.out)
         {
+            // The run ends after the frames in flight: the error is reported then.
             save_error = Some(e);
+            stop.store(true, Ordering::SeqCst);
         }
         if a.hash {
             let mut line = format!("{:06} {}", frame.index, frame.stamp_ns);

@@ -298,7 +298,7 @@ fn an_unwritable_output_folder_is_named_with_its_cause_once() {
     assert_eq!(
         line,
         format!(
-            "error: replay of small.relume stopped: stage `write` could not be set up: a_file/out/depth: {cause}"
+            "error: replay of small.relume stopped: p.toml:3: stage `write` could not be set up: a_file/out/depth: {cause}"
         ),
         "{err}"
     );

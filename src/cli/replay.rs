@@ -181,8 +181,13 @@ impl Loaded {
         ) {
             Ok(s) => s,
             Err((stage, source)) => {
+                let line = self.pipeline.stages.iter().find(|s| s.name == stage);
+                let at = match line {
+                    Some(s) => format!("{}:{}", self.pipeline.file, s.line),
+                    None => self.pipeline.file.clone(),
+                };
                 return Err(Box::new(RunFailure {
-                    error: relume::graph::PipelineError::Build { stage, source },
+                    error: relume::graph::PipelineError::Build { at, stage, source },
                     report: RunReport::default(),
                 }));
             }

@@ -50,8 +50,10 @@ impl FrameSource for Replay {
 /// Why a run stopped early.
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
-    #[error("stage `{stage}` could not be set up: {source}")]
+    #[error("{at}: stage `{stage}` could not be set up: {source}")]
     Build {
+        /// The stage's place in its pipeline file, `file:line`.
+        at: String,
         stage: String,
         #[source]
         source: StageError,

@@ -65,7 +65,8 @@ pub const INFO: StageInfo = StageInfo {
 fn load(ctx: &BuildContext) -> Result<Arc<EnvMap>, StageError> {
     let p = ctx.params;
     let stage = ctx.stage_name;
-    let fail = |what: String| StageError::Failed(format!("stage `{stage}` (light.envmap): {what}"));
+    // The runtime's error names the stage ("stage `x` could not be set up: ...").
+    let fail = StageError::Failed;
     let LoadedEnvMap {
         mut map,
         replaced_texels,
@@ -185,13 +186,14 @@ mod tests {
     }
 
     #[test]
-    fn missing_attachment_and_bad_file_fail_at_build_naming_the_stage() {
+    fn missing_attachment_and_bad_file_fail_at_build_saying_why() {
+        // The runtime's error names the stage and its line around these messages.
         let message = build(&header(false), &[]).err().unwrap().to_string();
-        assert!(
-            message.contains("`env`")
-                && message.contains("it has none")
-                && message.contains("source = \"file\""),
-            "{message}"
+        assert_eq!(
+            message,
+            "attachment `environment`: recording `room` has no such attachment (it has \
+             none); light from a file with `source = \"file\"` and `path`, or from the \
+             cloud with `light.impostor`"
         );
         let source = ("source", ParamValue::Str("file".into()));
         let message = build(&header(false), std::slice::from_ref(&source))
@@ -204,10 +206,7 @@ mod tests {
             .err()
             .unwrap()
             .to_string();
-        assert!(
-            message.contains("`env`") && message.contains("/nonexistent/probe.exr"),
-            "{message}"
-        );
+        assert!(message.starts_with("/nonexistent/probe.exr: "), "{message}");
     }
 
     #[test]

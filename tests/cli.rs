@@ -737,3 +737,48 @@ fn output_options_that_cannot_work_fail_before_the_run() {
         stderr(&o)
     );
 }
+
+#[test]
+fn an_interrupted_synth_leaves_no_partial_file() {
+    for signal in ["-INT", "-TERM"] {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
+        let child = common::relume()
+            .args([
+                "synth",
+                "-o",
+                "big.relume",
+                "--frames",
+                "400",
+                "--size",
+                "320x240",
+            ])
+            .current_dir(d)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Wait until the temporary file has data, then interrupt.
+        let start = std::time::Instant::now();
+        let partial = d.join(format!(".big.relume.{}.partial", child.id()));
+        while partial.metadata().map_or(true, |m| m.len() < 1_000_000)
+            && start.elapsed().as_secs() < 30
+        {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        assert!(partial.exists(), "the recording is being written");
+        let status = std::process::Command::new("kill")
+            .args([signal, &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(130), "{signal}: {}", stderr(&o));
+        assert!(
+            stderr(&o).ends_with("interrupted: nothing written\n"),
+            "{}",
+            stderr(&o)
+        );
+        assert_eq!(common::file_names(d), Vec::<String>::new(), "{signal}");
+    }
+}

@@ -6,7 +6,7 @@ use clap::{Args, Subcommand};
 use relume::recording::association::AssociationStats;
 use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, tum};
 use relume::recording::synth::{self, SynthConfig};
-use relume::recording::{Intrinsics, Recording, Replay, ReplayOptions};
+use relume::recording::{Intrinsics, Recording, Replay, ReplayOptions, writer};
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -64,6 +64,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
         ..SynthConfig::default()
     };
     let start = std::time::Instant::now();
+    remove_partial_on_ctrl_c(&a.out);
     let summary = generate(&config, &a.out)?;
     outln!(
         "wrote {} ({} frames, {}x{}, {:.1} MB) in {:.2} s",
@@ -167,8 +168,27 @@ impl CommonImportArgs {
     }
 }
 
+/// On Ctrl-C (or SIGTERM), removes the temporary file that a recording to `out` is
+/// being written into, then exits with 130: the writer deletes it when it stops with an
+/// error, but a signal would end the process first and leave it behind. Only for the
+/// commands that write one recording (the writer names the file after the process).
+fn remove_partial_on_ctrl_c(out: &Path) {
+    let partial = writer::output_target(out).map(|target| writer::temp_path_for(&target));
+    let _ = ctrlc::set_handler(move || {
+        if let Ok(partial) = &partial {
+            let _ = std::fs::remove_file(partial);
+        }
+        eprintln!("\ninterrupted: nothing written");
+        std::process::exit(130);
+    });
+}
+
 pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     let start = std::time::Instant::now();
+    let out = match &command {
+        ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => &common.out,
+    };
+    remove_partial_on_ctrl_c(out);
     let bar = progress::bar(0, "importing");
     let mut tick = |done: usize, total: usize| {
         bar.set_length(total as u64);

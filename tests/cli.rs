@@ -719,6 +719,23 @@ fn output_options_that_cannot_work_fail_before_the_run() {
         assert_eq!(stderr(&o), expected, "{options:?}");
         assert_eq!(stdout(&o), "", "{options:?}: nothing ran");
     }
+    // A write stage's `dir` stays under --out.
+    for dir in ["../escape", "/tmp/escape"] {
+        let pipeline = format!(
+            "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"write\"\nparams = {{ dir = {dir:?}, products = [\"color\"] }}\n"
+        );
+        std::fs::write(d.join("w.toml"), pipeline).unwrap();
+        let o = run_in(d, &["replay", "small.relume", "-p", "w.toml"]);
+        assert_eq!(o.status.code(), Some(1));
+        assert_eq!(
+            stderr(&o),
+            format!(
+                "error: replay of small.relume stopped: w.toml:3: stage `write` could not be \
+                 set up: dir = {dir:?} must be a folder under the output directory (--out): \
+                 no absolute path, no `..`\n"
+            )
+        );
+    }
     let o = run_in(
         d,
         &[

@@ -182,6 +182,15 @@ fn roles_names_and_products_are_checked() {
         e.message,
         "a second stage named `decode` (the first is on line 1)"
     );
+    let e = error("[[stage]]\nname = \" \"\nkind = \"decode\"\n");
+    assert_eq!(
+        (e.line, e.message.as_str(), e.hint.as_deref()),
+        (
+            2,
+            "a stage name may not be blank: errors and timing tables name stages by it",
+            Some("leave `name` out to use the kind, `decode`")
+        )
+    );
     let e = error("[[stage]]\nkind = \"decode\"\n[[stage]]\nname = \"again\"\nkind = \"decode\"\n");
     assert_eq!(
         e.message,

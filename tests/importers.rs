@@ -261,6 +261,21 @@ fn redwood_errors_name_file_and_line() {
         std::fs::remove_file(dir.join("depth/00001.png")).unwrap()
     });
     assert!(e.contains("holds 2 images but"), "{e}");
+    let e = redwood_error(IDENTITY_RECORD, |dir| std::fs::remove_dir_all(dir).unwrap());
+    assert!(e.ends_with("/rw: no such directory"), "{e}");
+    let tmp = tempfile::tempdir().unwrap();
+    let missing = tmp.path().join("tum");
+    let e = tum::import(
+        &missing,
+        &tmp.path().join("t.relume"),
+        &ImportOptions::default(),
+        &mut |_, _| {},
+    )
+    .unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        format!("{}: no such directory", missing.display())
+    );
 }
 
 #[test]

@@ -123,6 +123,16 @@ impl Pipeline {
                 .name
                 .as_ref()
                 .map_or(info.kind.to_string(), |n| n.value.clone());
+            if let Some(n) = &d.name
+                && n.value.trim().is_empty()
+            {
+                return Err(src.error(
+                    n.span.clone(),
+                    "a stage name may not be blank: errors and timing tables name stages by it"
+                        .to_string(),
+                    Some(format!("leave `name` out to use the kind, `{}`", info.kind)),
+                ));
+            }
             if let Some(prev) = stages.iter().find(|s: &&ResolvedStage| s.name == name) {
                 let span = d
                     .name

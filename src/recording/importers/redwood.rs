@@ -189,6 +189,9 @@ pub fn import(
             format!("--fps must be positive, got {}", options.fps),
         ));
     }
+    if !dir.is_dir() {
+        return Err(file_error(dir, "no such directory".into()));
+    }
     let color_dir = ["color", "image", "rgb"]
         .iter()
         .map(|d| dir.join(d))

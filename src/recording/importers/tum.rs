@@ -114,6 +114,9 @@ pub fn import(
     options: &ImportOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ImportSummary, ImportError> {
+    if !dir.is_dir() {
+        return Err(file_error(dir, "no such directory".into()));
+    }
     let rgb_list = dir.join("rgb.txt");
     let depth_list = dir.join("depth.txt");
     let gt_list = dir.join("groundtruth.txt");

@@ -55,7 +55,21 @@ pub const INFO: StageInfo = StageInfo {
     ports,
     build: |ctx| {
         let p = ctx.params;
-        let dir = ctx.out_dir.join(p.str("dir"));
+        // `dir` is a folder under --out: an absolute path or `..` would write elsewhere.
+        let sub = Path::new(p.str("dir"));
+        if sub.components().any(|c| {
+            !matches!(
+                c,
+                std::path::Component::Normal(_) | std::path::Component::CurDir
+            )
+        }) {
+            return Err(StageError::Failed(format!(
+                "dir = {:?} must be a folder under the output directory (--out): no absolute \
+                 path, no `..`",
+                p.str("dir")
+            )));
+        }
+        let dir = ctx.out_dir.join(sub);
         let products: Vec<(String, PathBuf)> = p
             .str_list("products")
             .iter()

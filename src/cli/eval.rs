@@ -2,7 +2,7 @@
 //! truth (see `relume::eval` for every key).
 
 use super::progress;
-use super::replay::{RunArgs, load, stop_on_ctrl_c};
+use super::replay::{RunArgs, load, stop_on_interrupt};
 use anyhow::bail;
 use clap::Parser;
 use relume::eval::{EvalOptions, Evaluator};
@@ -108,7 +108,7 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     }
     let scratch = std::env::temp_dir().join(format!("relume-eval-{}", std::process::id()));
     let out_dir = a.out.clone().unwrap_or_else(|| scratch.clone());
-    let stop = stop_on_ctrl_c();
+    let stop = stop_on_interrupt();
     let bar = progress::bar(loaded.frames.len() as u64, "evaluating");
     let mut truth_error = None;
     let result = loaded.run_once(&out_dir, a.run.seed, a.run.skip_corrupt, &stop, &mut |f| {

@@ -22,6 +22,7 @@ macro_rules! out {
 mod catalog;
 mod eval;
 mod inspect;
+mod interrupt;
 mod produce;
 mod progress;
 mod replay;
@@ -109,7 +110,8 @@ pub fn report(error: &anyhow::Error) -> String {
     let mut message = String::new();
     for cause in error.chain() {
         let text = cause.to_string();
-        if message.ends_with(&text) {
+        // The cause ends the message as its own part (after ": "), not by chance.
+        if message == text || message.ends_with(&format!(": {text}")) {
             continue;
         }
         if !message.is_empty() {
@@ -123,6 +125,7 @@ pub fn report(error: &anyhow::Error) -> String {
 /// Runs the command line; returns the exit code.
 pub fn main() -> anyhow::Result<i32> {
     let cli = Cli::parse();
+    interrupt::install();
     let command = cli
         .command
         .unwrap_or_else(|| Command::Replay(replay::ReplayArgs::parse_from(["replay"])));

@@ -1,12 +1,13 @@
 //! `relume synth` and `relume import`: commands that produce recordings.
 
+use super::interrupt::PartialFile;
 use super::progress;
 use anyhow::Context;
 use clap::{Args, Subcommand};
 use relume::recording::association::AssociationStats;
 use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, tum};
 use relume::recording::synth::{self, SynthConfig};
-use relume::recording::{Intrinsics, Recording, Replay, ReplayOptions, writer};
+use relume::recording::{Intrinsics, Recording, Replay, ReplayOptions};
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -64,11 +65,11 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
         ..SynthConfig::default()
     };
     let start = std::time::Instant::now();
-    remove_partial_on_ctrl_c(&a.out);
+    let _partial = PartialFile::watch(&a.out);
     let summary = generate(&config, &a.out)?;
     outln!(
         "wrote {} ({} frames, {}x{}, {:.1} MB) in {:.2} s",
-        summary.path.display(),
+        a.out.display(),
         summary.frames,
         config.width,
         config.height,
@@ -109,6 +110,7 @@ pub fn ensure_default_recording(path: &Path) -> anyhow::Result<()> {
         config.width,
         config.height
     );
+    let _partial = PartialFile::watch(path);
     generate(&config, path)?;
     Ok(())
 }
@@ -168,27 +170,12 @@ impl CommonImportArgs {
     }
 }
 
-/// On Ctrl-C (or SIGTERM), removes the temporary file that a recording to `out` is
-/// being written into, then exits with 130: the writer deletes it when it stops with an
-/// error, but a signal would end the process first and leave it behind. Only for the
-/// commands that write one recording (the writer names the file after the process).
-fn remove_partial_on_ctrl_c(out: &Path) {
-    let partial = writer::output_target(out).map(|target| writer::temp_path_for(&target));
-    let _ = ctrlc::set_handler(move || {
-        if let Ok(partial) = &partial {
-            let _ = std::fs::remove_file(partial);
-        }
-        eprintln!("\ninterrupted: nothing written");
-        std::process::exit(130);
-    });
-}
-
 pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     let start = std::time::Instant::now();
     let out = match &command {
         ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => &common.out,
     };
-    remove_partial_on_ctrl_c(out);
+    let _partial = PartialFile::watch(out);
     let bar = progress::bar(0, "importing");
     let mut tick = |done: usize, total: usize| {
         bar.set_length(total as u64);
@@ -241,6 +228,15 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
 /// them read it).
 fn missing_streams(stats: &AssociationStats) -> Vec<String> {
     let mut warnings = Vec::new();
+    if stats.frames == 0 {
+        // Every color image lacks depth near its stamp: nothing else matters.
+        warnings.push(format!(
+            "no frames: none of the {} color images has a depth image within {} ms",
+            stats.color_records,
+            relume::recording::association::DEFAULT_TOLERANCE_NS / 1_000_000
+        ));
+        return warnings;
+    }
     if stats.depth_records == 0 {
         warnings.push("no depth images: pipelines that read `depth` will not run".to_string());
     }

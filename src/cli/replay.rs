@@ -6,7 +6,7 @@ use clap::{Args, Parser};
 use relume::graph::{
     Frame, Pipeline, Product, ProductKind, Registry, RunFailure, RunOptions, RunReport, Stats, run,
 };
-use relume::recording::writer::write_file_atomic;
+use relume::recording::writer::{output_target, write_file_atomic};
 use relume::recording::{Replay, ReplayOptions};
 use relume::stages::write::ply::ply_bytes;
 use relume::stages::write::{write_exr, write_png, write_record};
@@ -201,26 +201,19 @@ impl Loaded {
     }
 }
 
-/// Sets `stop` on the first Ctrl-C; exits on the second.
-pub(super) fn stop_on_ctrl_c() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    let _ = ctrlc::set_handler(move || {
-        if flag.swap(true, Ordering::SeqCst) {
-            std::process::exit(130);
-        }
-        eprintln!("\nstopping after the frames in flight (Ctrl-C again to abort) ...");
-    });
-    stop
+/// A flag that the first Ctrl-C (or SIGTERM) sets; a second one exits (see
+/// [`super::interrupt`]).
+pub(super) fn stop_on_interrupt() -> Arc<AtomicBool> {
+    super::interrupt::stop_flag()
 }
 
 /// An error before the run, rather than after it, when the file an option names cannot
 /// be written: a folder stands there, or its folder does not exist.
 fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
-    if path.is_dir() {
-        bail!("{option} {}: that is a folder", path.display());
-    }
-    if let Some(folder) = path.parent()
+    // Where the file will be written: through a symbolic link, to what it leads to.
+    let target =
+        output_target(path).map_err(|e| anyhow::anyhow!("{option} {}: {e}", path.display()))?;
+    if let Some(folder) = target.parent()
         && !folder.as_os_str().is_empty()
         && !folder.is_dir()
     {
@@ -233,8 +226,21 @@ fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// An error when a comma-separated option names an entry twice (two writers would race
+/// for one file).
+fn check_no_repeats(option: &str, names: &[String]) -> anyhow::Result<()> {
+    for (i, name) in names.iter().enumerate() {
+        if names[..i].contains(name) {
+            bail!("{option} names {name:?} twice");
+        }
+    }
+    Ok(())
+}
+
 pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
     let loaded = load(&a.run)?;
+    check_no_repeats("--save", &a.save)?;
+    check_no_repeats("--save-format", &a.save_format)?;
     for (option, path) in [
         ("--timings", &a.timings),
         ("--trace", &a.trace),
@@ -257,7 +263,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             loaded.pipeline.name
         );
     }
-    let stop = stop_on_ctrl_c();
+    let stop = stop_on_interrupt();
     let bar = progress::bar(loaded.frames.len() as u64, "replaying");
     let stdout = std::io::stdout();
     let mut hash_error = None;
@@ -285,8 +291,12 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             for (name, product) in frame.products() {
                 line.push_str(&format!(" {name}={:016x}", product.digest()));
             }
-            if let Err(e) = writeln!(stdout.lock(), "{line}") {
-                hash_error.get_or_insert(e);
+            if hash_error.is_none()
+                && let Err(e) = writeln!(stdout.lock(), "{line}")
+            {
+                // Nobody reads the lines any more, or they cannot be written: stop.
+                hash_error = Some(e);
+                stop.store(true, Ordering::SeqCst);
             }
         }
     };
@@ -303,11 +313,13 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
         loaded.pipeline.file,
         report.table()
     );
-    if a.hash {
-        eprint!("{table}")
+    // A stdout error is reported last: the files asked for and a failed run come first.
+    let table_written = if a.hash {
+        eprint!("{table}");
+        Ok(())
     } else {
-        out!("{table}")?
-    }
+        out!("{table}")
+    };
     for (frame, cause) in &report.skipped_corrupt {
         eprintln!("skipped corrupt frame {frame}: {cause}");
     }
@@ -344,7 +356,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
         );
     }
     if let Some(e) = hash_error {
-        bail!("cannot write hash lines: {e}");
+        return Err(anyhow::Error::new(e).context("cannot write hash lines"));
     }
     if let Some(error) = failure {
         return Err(anyhow::Error::new(error).context(format!(
@@ -352,6 +364,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             loaded.replay.recording.path().display()
         )));
     }
+    table_written?;
     if report.interrupted {
         eprintln!("interrupted: {} frames complete", report.frames_out);
         return Ok(130);
@@ -363,7 +376,8 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
 /// An error when a run went through but replayed no frame: every frame in the range was
 /// corrupt and skipped (`--skip-corrupt`), so there is nothing to show for it.
 pub(super) fn some_frame_replayed(loaded: &Loaded, report: &RunReport) -> anyhow::Result<()> {
-    if report.frames_out == 0 && !report.skipped_corrupt.is_empty() {
+    // An interrupted run may not have reached its good frames.
+    if report.frames_out == 0 && !report.skipped_corrupt.is_empty() && !report.interrupted {
         bail!(
             "{}: all {} frames in the range are corrupt and were skipped: nothing was replayed",
             loaded.replay.recording.path().display(),
@@ -431,7 +445,7 @@ fn save_products(
 
 pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
     let loaded = load(&a.run)?;
-    let stop = stop_on_ctrl_c();
+    let stop = stop_on_interrupt();
     let scratch = std::env::temp_dir().join(format!("relume-bench-{}", std::process::id()));
     let result = (|| -> anyhow::Result<Vec<RunReport>> {
         let mut reports = Vec::new();

@@ -182,9 +182,9 @@ pub fn temp_path_for(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.{}.partial", std::process::id()))
 }
 
-/// Writes `bytes` to `path` ([`output_target`]) atomically (temporary file, then rename): a process stopped
-/// midway leaves the old file or the new one, never half of one. No fsync: per-frame
-/// outputs guard against interruption, not power loss.
+/// Writes `bytes` to `path` ([`output_target`]) atomically (temporary file, then
+/// rename): a process stopped midway leaves the old file or the new one, never half of
+/// one. No fsync: per-frame outputs guard against interruption, not power loss.
 pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let target = output_target(path)?;
     let tmp = temp_path_for(&target);

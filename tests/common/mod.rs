@@ -103,3 +103,23 @@ pub fn pipeline(name: &str) -> String {
         .display()
         .to_string()
 }
+
+/// A small synthetic recording in `dir`.
+pub fn small_recording(dir: &std::path::Path, frames: usize) -> PathBuf {
+    let path = dir.join("small.relume");
+    ok(run_in(
+        dir,
+        &[
+            "synth",
+            "-o",
+            "small.relume",
+            "--frames",
+            &frames.to_string(),
+            "--size",
+            "64x48",
+            "--seed",
+            "3",
+        ],
+    ));
+    path
+}

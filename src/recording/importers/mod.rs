@@ -90,7 +90,8 @@ fn intrinsics_hint(text: &str) -> String {
 /// How image bytes are stored.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum StoreMode {
-    /// Keep the PNG/JPEG bytes as found; decode on replay.
+    /// Keep the PNG/JPEG bytes as found (decoded once at import, to check them); decode
+    /// on replay.
     #[default]
     Compressed,
     /// Decode at import and store raw pixels (bigger files, no decoding on replay).
@@ -132,11 +133,11 @@ pub(crate) fn read_color(path: &Path, store: StoreMode) -> Result<EncodedImage, 
     }
     // Decoded either way: a damaged file (a truncated PNG) is refused here, naming it,
     // rather than stored to fail the replay at its frame.
-    let raw = codec::to_raw_color(&img).map_err(|e| file_error(path, e.to_string()))?;
     match store {
-        StoreMode::Compressed => Ok(img),
-        StoreMode::Raw => Ok(raw),
+        StoreMode::Compressed => codec::decode_color(&img).map(|_| img),
+        StoreMode::Raw => codec::to_raw_color(&img),
     }
+    .map_err(|e| file_error(path, e.to_string()))
 }
 
 /// Reads an image file and checks it is a 16-bit single-channel depth image.
@@ -151,11 +152,11 @@ pub(crate) fn read_depth(path: &Path, store: StoreMode) -> Result<EncodedImage, 
             ),
         ));
     }
-    let raw = codec::to_raw_depth(&img).map_err(|e| file_error(path, e.to_string()))?;
     match store {
-        StoreMode::Compressed => Ok(img),
-        StoreMode::Raw => Ok(raw),
+        StoreMode::Compressed => codec::decode_depth_units(&img).map(|_| img),
+        StoreMode::Raw => codec::to_raw_depth(&img),
     }
+    .map_err(|e| file_error(path, e.to_string()))
 }
 
 fn read_image(path: &Path) -> Result<(EncodedImage, u16), ImportError> {

@@ -190,7 +190,12 @@ pub fn import(
         ));
     }
     if !dir.is_dir() {
-        return Err(file_error(dir, "no such directory".into()));
+        let why = if dir.exists() {
+            "not a directory"
+        } else {
+            "no such directory"
+        };
+        return Err(file_error(dir, why.into()));
     }
     let color_dir = ["color", "image", "rgb"]
         .iter()

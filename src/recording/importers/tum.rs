@@ -115,7 +115,12 @@ pub fn import(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ImportSummary, ImportError> {
     if !dir.is_dir() {
-        return Err(file_error(dir, "no such directory".into()));
+        let why = if dir.exists() {
+            "not a directory"
+        } else {
+            "no such directory"
+        };
+        return Err(file_error(dir, why.into()));
     }
     let rgb_list = dir.join("rgb.txt");
     let depth_list = dir.join("depth.txt");

@@ -73,13 +73,11 @@ pub const INFO: StageInfo = StageInfo {
     },
     build: |ctx| {
         let p = ctx.params;
-        // The runtime's error names the stage ("stage `x` could not be set up: ...").
-        let fail = StageError::Failed;
         let center = match p.str("center").trim() {
             "" => object_center(ctx).ok_or_else(|| {
-                fail("no centre for the distance impostor: set `center = \"x,y,z\"`, add a virtual object, or use a recording with ground truth".into())
+                StageError::Failed("no centre for the distance impostor: set `center = \"x,y,z\"`, add a virtual object, or use a recording with ground truth".into())
             })?,
-            text => parse_center(text).map_err(fail)?,
+            text => parse_center(text).map_err(StageError::Failed)?,
         };
         let params = ImpostorParams {
             face_size: p.int("face_size") as u32,
@@ -94,7 +92,7 @@ pub const INFO: StageInfo = StageInfo {
             cloud: ctx.input("cloud"),
             environment: ctx.output("environment"),
             center,
-            builder: ImpostorBuilder::new(params).map_err(fail)?,
+            builder: ImpostorBuilder::new(params).map_err(StageError::Failed)?,
             last: None,
         }))
     },

@@ -65,8 +65,8 @@ pub const INFO: StageInfo = StageInfo {
 fn load(ctx: &BuildContext) -> Result<Arc<EnvMap>, StageError> {
     let p = ctx.params;
     let stage = ctx.stage_name;
-    // The runtime's error names the stage ("stage `x` could not be set up: ...").
-    let fail = StageError::Failed;
+    // The runtime's error names the stage ("stage `x` could not be set up: ..."), so
+    // these say only what is wrong.
     let LoadedEnvMap {
         mut map,
         replaced_texels,
@@ -74,17 +74,17 @@ fn load(ctx: &BuildContext) -> Result<Arc<EnvMap>, StageError> {
         "file" => {
             let path = p.str("path");
             if path.is_empty() {
-                return Err(fail(
+                return Err(StageError::Failed(
                     "source = \"file\" needs `path` = an OpenEXR or .hdr lat-long map".into(),
                 ));
             }
-            let mut loaded =
-                load_envmap_counted(Path::new(path)).map_err(|e| fail(e.to_string()))?;
+            let mut loaded = load_envmap_counted(Path::new(path))
+                .map_err(|e| StageError::Failed(e.to_string()))?;
             loaded.map.center = super::impostor::object_center(ctx).unwrap_or_default();
             loaded
         }
         _ => environment_from_header(ctx.header, p.str("attachment"))
-            .map_err(|e| fail(e.to_string()))?,
+            .map_err(|e| StageError::Failed(e.to_string()))?,
     };
     if replaced_texels > 0 {
         eprintln!(

@@ -208,7 +208,8 @@ pub(super) fn stop_on_interrupt() -> Arc<AtomicBool> {
 }
 
 /// An error before the run, rather than after it, when the file an option names cannot
-/// be written: a folder stands there, or its folder does not exist.
+/// be written: something other than a regular file stands there (a folder, a device),
+/// or its folder does not exist.
 fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
     // Where the file will be written: through a symbolic link, to what it leads to.
     let target =
@@ -238,7 +239,7 @@ fn check_no_repeats(option: &str, names: &[String]) -> anyhow::Result<()> {
 }
 
 pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
-    let loaded = load(&a.run)?;
+    // The options first: loading may render the built-in recording.
     check_no_repeats("--save", &a.save)?;
     check_no_repeats("--save-format", &a.save_format)?;
     for (option, path) in [
@@ -250,6 +251,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             check_output_file(option, path)?;
         }
     }
+    let loaded = load(&a.run)?;
     if a.export_cloud.is_some()
         && !loaded
             .pipeline

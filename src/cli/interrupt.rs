@@ -54,9 +54,9 @@ pub struct PartialFile;
 impl PartialFile {
     /// Registers the temporary file that a recording written to `out` goes to first.
     pub fn watch(out: &std::path::Path) -> PartialFile {
-        let partial = relume::recording::writer::output_target(out)
+        let partial = relume::recording::writer::output_paths(out)
             .ok()
-            .map(|target| relume::recording::writer::temp_path_for(&target));
+            .map(|(_, temporary)| temporary);
         WATCH.lock().unwrap_or_else(|e| e.into_inner()).partial = partial;
         PartialFile
     }

@@ -23,8 +23,7 @@ pub struct RecordingWriter {
 impl RecordingWriter {
     /// Starts a recording at `path` with `header`.
     pub fn create(path: &Path, header: &Header) -> Result<Self, RecordingError> {
-        let final_path = output_target(path).map_err(|e| RecordingError::io(path, e))?;
-        let tmp_path = temp_path_for(&final_path);
+        let (final_path, tmp_path) = output_paths(path).map_err(|e| RecordingError::io(path, e))?;
         // A missing folder is reported under the name the caller gave, not the
         // temporary one.
         let file = File::create(&tmp_path).map_err(|e| RecordingError::io(path, e))?;
@@ -173,6 +172,14 @@ pub fn output_target(path: &Path) -> std::io::Result<PathBuf> {
     ))
 }
 
+/// Where an output to `path` goes: its [`output_target`], and the temporary file beside
+/// it ([`temp_path_for`]) that is written first and renamed over it.
+pub fn output_paths(path: &Path) -> std::io::Result<(PathBuf, PathBuf)> {
+    let target = output_target(path)?;
+    let temporary = temp_path_for(&target);
+    Ok((target, temporary))
+}
+
 /// A hidden temporary name beside `path`, unique per process.
 pub fn temp_path_for(path: &Path) -> PathBuf {
     let name = path
@@ -186,8 +193,7 @@ pub fn temp_path_for(path: &Path) -> PathBuf {
 /// rename): a process stopped midway leaves the old file or the new one, never half of
 /// one. No fsync: per-frame outputs guard against interruption, not power loss.
 pub fn write_file_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let target = output_target(path)?;
-    let tmp = temp_path_for(&target);
+    let (target, tmp) = output_paths(path)?;
     let result = (|| {
         let mut f = File::create(&tmp)?;
         f.write_all(bytes)?;

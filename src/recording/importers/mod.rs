@@ -122,6 +122,19 @@ pub struct ImportSummary {
     pub poses: usize,
 }
 
+/// An error unless `dir`, a dataset folder given by the user, is a directory.
+pub(crate) fn check_dataset_dir(dir: &Path) -> Result<(), ImportError> {
+    if dir.is_dir() {
+        return Ok(());
+    }
+    let why = if dir.exists() {
+        "not a directory"
+    } else {
+        "no such directory"
+    };
+    Err(file_error(dir, why.into()))
+}
+
 /// Reads an image file and checks it is a color image (8-bit, 1, 3 or 4 channels).
 pub(crate) fn read_color(path: &Path, store: StoreMode) -> Result<EncodedImage, ImportError> {
     let (img, bits) = read_image(path)?;

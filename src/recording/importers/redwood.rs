@@ -9,8 +9,8 @@
 //! The layout has no timestamps: frame k is stamped k / fps.
 
 use super::{
-    ImportOptions, ImportSummary, check_size, file_error, import_header, line_error, read_color,
-    read_depth,
+    ImportOptions, ImportSummary, check_dataset_dir, check_size, file_error, import_header,
+    line_error, read_color, read_depth,
 };
 use crate::recording::error::ImportError;
 use crate::recording::types::{ColorRecord, DepthRecord, Pose, PoseRecord, Record, StreamKind};
@@ -189,14 +189,7 @@ pub fn import(
             format!("--fps must be positive, got {}", options.fps),
         ));
     }
-    if !dir.is_dir() {
-        let why = if dir.exists() {
-            "not a directory"
-        } else {
-            "no such directory"
-        };
-        return Err(file_error(dir, why.into()));
-    }
+    check_dataset_dir(dir)?;
     let color_dir = ["color", "image", "rgb"]
         .iter()
         .map(|d| dir.join(d))

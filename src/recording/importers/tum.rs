@@ -8,8 +8,8 @@
 //! Streams keep their own stamps; association happens at replay.
 
 use super::{
-    ImportOptions, ImportSummary, check_size, file_error, import_header, line_error,
-    parse_stamp_ns, read_color, read_depth,
+    ImportOptions, ImportSummary, check_dataset_dir, check_size, file_error, import_header,
+    line_error, parse_stamp_ns, read_color, read_depth,
 };
 use crate::recording::error::ImportError;
 use crate::recording::types::{ColorRecord, DepthRecord, Pose, PoseRecord, Record, StreamKind};
@@ -114,14 +114,7 @@ pub fn import(
     options: &ImportOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ImportSummary, ImportError> {
-    if !dir.is_dir() {
-        let why = if dir.exists() {
-            "not a directory"
-        } else {
-            "no such directory"
-        };
-        return Err(file_error(dir, why.into()));
-    }
+    check_dataset_dir(dir)?;
     let rgb_list = dir.join("rgb.txt");
     let depth_list = dir.join("depth.txt");
     let gt_list = dir.join("groundtruth.txt");

@@ -137,6 +137,11 @@ impl Lanes for Avx2 {
         Avx2(unsafe { _mm256_blendv_ps(b.0, a.0, mask.0) })
     }
     #[inline(always)]
+    fn rotate_up(self, r: usize) -> Self {
+        let index: [i32; LANES] = std::array::from_fn(|l| ((l + LANES - r) % LANES) as i32);
+        Avx2(unsafe { _mm256_permutevar8x32_ps(self.0, _mm256_loadu_si256(index.as_ptr().cast())) })
+    }
+    #[inline(always)]
     fn any(self) -> bool {
         unsafe { _mm256_movemask_ps(self.0) != 0 }
     }

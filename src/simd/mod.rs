@@ -127,6 +127,9 @@ pub trait Lanes: Copy {
     fn trunc(self) -> Self;
     /// The 8 x 8 transpose: lane r of result l is lane l of `rows[r]`.
     fn transpose(rows: [Self; LANES]) -> [Self; LANES];
+    /// The lanes rotated up by `r` (0 <= r < 8): lane (l + r) mod 8 of the result is
+    /// lane l of `self`.
+    fn rotate_up(self, r: usize) -> Self;
     /// Three planes interleaved: lane j of result r is lane (8 r + j) / 3 of plane
     /// (8 r + j) % 3, so that the three results are eight (x, y, z) triples in a row.
     fn interleave3(planes: [Self; 3]) -> [Self; 3];
@@ -305,6 +308,10 @@ impl Lanes for Portable {
     #[inline(always)]
     fn transpose(rows: [Self; LANES]) -> [Self; LANES] {
         std::array::from_fn(|l| Portable(std::array::from_fn(|r| rows[r].0[l])))
+    }
+    #[inline(always)]
+    fn rotate_up(self, r: usize) -> Self {
+        Portable(std::array::from_fn(|l| self.0[(l + LANES - r) % LANES]))
     }
     #[inline(always)]
     fn interleave3(planes: [Self; 3]) -> [Self; 3] {

@@ -28,6 +28,30 @@ fn transpose_moves_lane_l_of_row_r_to_lane_r_of_row_l() {
     }
 }
 
+fn check_rotate_up<V: Lanes>(name: &str) {
+    let v = rows::<V>()[3];
+    for r in 0..LANES {
+        let expected: [f32; LANES] = std::array::from_fn(|l| (30 + (l + LANES - r) % LANES) as f32);
+        assert_eq!(v.rotate_up(r).to_array(), expected, "{name}, r = {r}");
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn check_rotate_up_avx2() {
+    check_rotate_up::<Avx2>("Avx2");
+}
+
+#[test]
+fn rotate_up_moves_lane_l_to_lane_l_plus_r() {
+    check_rotate_up::<Portable>("Portable");
+    #[cfg(target_arch = "x86_64")]
+    if Kernel::detect() == Kernel::Avx2Fma {
+        // SAFETY: the CPU has AVX2 and FMA.
+        unsafe { check_rotate_up_avx2() };
+    }
+}
+
 /// `trunc` as `f32::trunc` (negative, halves, just below whole numbers, large,
 /// infinite, NaN), and `gather_at` reading at whole-number float indices up to
 /// just below 2^24.

@@ -29,9 +29,10 @@ use relume::raster::{Image, ScalarImage, Vec3Image};
 use relume::recording::{Intrinsics, Pose};
 use relume::rng::{hash, unit_f32};
 use relume::simd::Kernel;
+use relume::stages::filter::lane_planes::{LaneLayout, LanePlanes};
 use relume::stages::filter::passes::{self, Previous};
 use relume::stages::filter::planes::{
-    self, BandwidthSettings, COLUMN_PLANES, INPUT_PLANES, Planes, PrepareInputs,
+    self, BandwidthSettings, INPUT_PLANES, PrepareInputs, X_PLANES,
 };
 use relume::stages::filter::temporal::PreviousView;
 use relume::stages::filter::{
@@ -223,7 +224,7 @@ fn bench_filter(c: &mut Criterion) {
     };
     let settings = BandwidthSettings { b_f: 1.0, b_e: 4.0 };
     let kernel = Kernel::detect();
-    let mut rows = Planes::new(INPUT_PLANES, w, h, RADIUS);
+    let mut rows = LanePlanes::new(LaneLayout::segments(INPUT_PLANES, w, h, RADIUS));
     let mut width_dir = Image::filled(W, H, 0.0);
     let mut width_ind = Image::filled(W, H, 0.0);
     let mut prepare = || {
@@ -240,7 +241,7 @@ fn bench_filter(c: &mut Criterion) {
     // bench is filtered out.
     prepare();
     group.bench_function("pass/prepare", |b| b.iter(&mut prepare));
-    let mut columns = Planes::new(COLUMN_PLANES, h, w, RADIUS);
+    let mut columns = LanePlanes::new(LaneLayout::blocks(X_PLANES, w, h, RADIUS));
     group.bench_function("pass/x", |b| {
         b.iter(|| passes::x_pass(kernel, &rows, RADIUS, &mut columns))
     });
@@ -258,7 +259,7 @@ fn bench_filter(c: &mut Criterion) {
     };
     let previous_columns = columns.clone();
     let previous = Previous {
-        columns: &previous_columns,
+        x_set: &previous_columns,
         view: &view,
     };
     group.bench_function("pass/y_temporal", |b| {

@@ -104,6 +104,27 @@ impl<V: Lanes> Fetch<V> for Gathered {
     }
 }
 
+/// Lane l's tap is at `p + second` where `mask` selects it, at `p` elsewhere (windows
+/// that straddle two blocks of a blocks set, see `passes`): two vector loads,
+/// blended.
+#[derive(Clone, Copy)]
+pub struct Straddling<V> {
+    pub second: isize,
+    pub mask: V,
+}
+
+impl<V: Lanes> Fetch<V> for Straddling<V> {
+    #[inline(always)]
+    unsafe fn fetch(&self, p: *const f32) -> V {
+        // SAFETY (both loads): forwarded from the caller.
+        unsafe {
+            let first = V::load(p);
+            let second = V::load(p.wrapping_offset(self.second));
+            V::select(self.mask, second, first)
+        }
+    }
+}
+
 /// The taps of one window in a set of planes: lane 0's first tap of plane 0 (for
 /// [`Gathered`] taps: the planes' start), and the distances in floats between planes
 /// and between consecutive taps. Pointers are advanced with wrapping arithmetic, since
@@ -151,7 +172,7 @@ pub unsafe fn tap_weights<V: Lanes, F: Fetch<V>>(
     target: [V; 3],
     kinds: [Option<Bandwidths<V>>; 2],
     limit: V,
-    weights: &mut TapWeights<V>,
+    weights: [&mut [V]; 2],
 ) {
     let [direct, indirect] = weights;
     let taps = TapsAt {
@@ -187,14 +208,12 @@ impl<V: Lanes, F: Fetch<V>> TapsAt<'_, V, F> {
     /// # Safety
     /// As for [`tap_weights`].
     #[inline(always)]
-    unsafe fn weigh<const K: usize>(
-        &self,
-        kinds: [Bandwidths<V>; K],
-        mut weights: [&mut [V; MAX_TAPS]; K],
-    ) {
+    unsafe fn weigh<const K: usize>(&self, kinds: [Bandwidths<V>; K], mut weights: [&mut [V]; K]) {
         let (fetch, window) = (self.fetch, self.window);
         let [tx, ty, tz] = self.target;
-        assert!(window.taps <= MAX_TAPS);
+        for weights in &weights {
+            assert!(weights.len() >= window.taps);
+        }
         let stride = window.plane_stride;
         let plane = |tap: *const f32, q: usize| tap.wrapping_add(q * stride);
         // SAFETY (every fetch): the caller guarantees the window's taps are inside the
@@ -229,10 +248,10 @@ pub unsafe fn accumulate<V: Lanes, F: Fetch<V>>(
     fetch: &F,
     window: &Window,
     values: usize,
-    weights: &[V; MAX_TAPS],
+    weights: &[V],
     sums: &mut [V; VALUE_PLANES],
 ) {
-    assert!(window.taps <= MAX_TAPS);
+    assert!(weights.len() >= window.taps);
     // A local copy, so the sums stay in registers (stores through `sums` could alias the
     // raw-pointer loads as far as the compiler knows).
     let mut acc = *sums;

@@ -36,17 +36,20 @@
 //! Fig. 7; INFINITY where B = 0 (flat over the window), NaN where there is no position.
 //!
 //! Cost: per pixel and kind (direct, indirect) 3 windows of 2R + 1 taps (X, Y, temporal
-//! Y), each tap one fast `exp` ([`gaussian::exp_neg_lanes`]) shared by E_R and E_RV and 8
-//! multiply-adds. The passes ([`passes`]) take eight target pixels at a time, one per
-//! lane of an AVX2 + FMA vector where the CPU has them (a portable kernel with the same
-//! bits elsewhere, [`crate::simd`]): the X pass eight neighbours in a row of the row-major
-//! input planes, the Y pass eight neighbours in a column of the column set (the X pass
-//! writes its output transposed, [`planes`]), so that every tap of the eight targets is
-//! one contiguous load per plane in either pass. The temporal taps are contiguous too
-//! where the eight targets found their previous pixels at one offset (a still or slowly
-//! moving camera), and gathered per lane elsewhere. No tap cutting: at R = 15 and
-//! 640x480 a weight falls below e^-14 inside the window only where B exceeds ~60 per
-//! metre (occluders nearer than ~8 cm), so a per-pixel radius bound would rarely help.
+//! Y), each tap 8 multiply-adds and a fast `exp` ([`gaussian::exp_neg_lanes`]) shared by
+//! E_R and E_RV; the X and Y windows weigh each pair of pixels once (eq. 23 is
+//! symmetric), so they take R + 1 `exp` per pixel, not 2 R + 1. The passes ([`passes`])
+//! take eight target pixels at a time, one per lane of an AVX2 + FMA vector where the
+//! CPU has them (a portable kernel with the same bits elsewhere, [`crate::simd`]), from
+//! lane-interleaved planes ([`lane_planes`]) in which every spatial tap of the eight
+//! targets is one aligned load per plane: the X pass eight pixels 80 apart in a row
+//! (pixels l S + j), the Y pass eight neighbours in a row (pixels 8 n + l), walking down
+//! the image. The temporal taps are one aligned load per plane too where the eight
+//! targets found their previous pixels at one offset that is a multiple of 8, two
+//! blended loads at any other common offset, and gathered per lane elsewhere. No tap
+//! cutting: at R = 15 and 640x480 a weight falls below e^-14 inside the window only
+//! where B exceeds ~60 per metre (occluders nearer than ~8 cm), so a per-pixel radius
+//! bound would rarely help.
 //! E_RV is always summed in full: on real frames the objects change E_RV a little almost
 //! everywhere (2-6 % of the pixels of the built-in recording's frames 10-13 have
 //! E_RV == E_R), so a shortcut for E_RV == E_R rarely applies.
@@ -54,6 +57,7 @@
 
 pub mod bandwidth;
 pub mod gaussian;
+pub mod lane_planes;
 pub mod passes;
 pub mod planes;
 mod prepare_lanes;
@@ -76,8 +80,9 @@ use crate::raster::{Image, ScalarImage, Vec3Image};
 use crate::recording::{Intrinsics, Pose};
 use crate::simd::Kernel;
 use glam::{Affine3A, Vec3};
+use lane_planes::{LaneLayout, LanePlanes};
 use passes::Previous;
-use planes::{BandwidthSettings, COLUMN_PLANES, INPUT_PLANES, Planes, PrepareInputs};
+use planes::{BandwidthSettings, INPUT_PLANES, PrepareInputs, X_PLANES};
 use std::sync::Arc;
 use temporal::PreviousView;
 
@@ -266,11 +271,11 @@ impl FilterOutputs {
 pub struct AxisAlignedFilter {
     params: FilterParams,
     kernel: Kernel,
-    /// This frame's input planes (row-major) and column set (the X pass's output).
-    input: Planes,
-    columns: Planes,
-    /// The previous frame's column set (swapped with `columns` after each frame).
-    previous_columns: Planes,
+    /// This frame's input planes and X set (the X pass's output).
+    input: LanePlanes,
+    x_set: LanePlanes,
+    /// The previous frame's X set (swapped with `x_set` after each frame).
+    previous_x_set: LanePlanes,
     previous_view: Option<PreviousView>,
     /// B_e of the last environment map, keyed by its `Arc`.
     environment_cache: Option<(Arc<EnvMap>, f32)>,
@@ -287,9 +292,9 @@ impl AxisAlignedFilter {
         AxisAlignedFilter {
             params,
             kernel,
-            input: Planes::default(),
-            columns: Planes::default(),
-            previous_columns: Planes::default(),
+            input: LanePlanes::default(),
+            x_set: LanePlanes::default(),
+            previous_x_set: LanePlanes::default(),
             previous_view: None,
             environment_cache: None,
         }
@@ -364,9 +369,9 @@ impl AxisAlignedFilter {
         let (wu, hu) = (w as usize, h as usize);
         if (self.input.width, self.input.height) != (wu, hu) {
             let radius = self.params.radius;
-            self.input = Planes::new(INPUT_PLANES, wu, hu, radius);
-            self.columns = Planes::new(COLUMN_PLANES, hu, wu, radius);
-            self.previous_columns = self.columns.clone();
+            self.input = LanePlanes::new(LaneLayout::segments(INPUT_PLANES, wu, hu, radius));
+            self.x_set = LanePlanes::new(LaneLayout::blocks(X_PLANES, wu, hu, radius));
+            self.previous_x_set = self.x_set.clone();
             self.previous_view = None;
         }
         let settings = BandwidthSettings {
@@ -390,22 +395,16 @@ impl AxisAlignedFilter {
             &mut out.width_ind,
         );
         let radius = self.params.radius;
-        passes::x_pass(self.kernel, &self.input, radius, &mut self.columns);
+        passes::x_pass(self.kernel, &self.input, radius, &mut self.x_set);
         let previous = match (&self.previous_view, self.params.temporal) {
             (Some(view), true) => Some(Previous {
-                columns: &self.previous_columns,
+                x_set: &self.previous_x_set,
                 view,
             }),
             _ => None,
         };
-        passes::y_pass(
-            self.kernel,
-            &self.columns,
-            previous,
-            radius,
-            &mut out.layers,
-        );
-        std::mem::swap(&mut self.columns, &mut self.previous_columns);
+        passes::y_pass(self.kernel, &self.x_set, previous, radius, &mut out.layers);
+        std::mem::swap(&mut self.x_set, &mut self.previous_x_set);
         self.previous_view = match (self.params.temporal, input.view) {
             (true, Some((pose, camera))) => Some(PreviousView {
                 world_to_camera: Affine3A::from_mat4(pose.matrix().inverse().as_mat4()),

@@ -1,18 +1,12 @@
-//! The filter's planes (paper 001 Sec. 7): one f32 plane per quantity, padded with
-//! zeros so that every tap window lies inside them, and the preparation pass that fills
-//! the input planes (positions, bandwidths, cleaned values) from the stage's images.
-//!
-//! Layout: image row by image row, each row holding its planes one after the other, each
-//! plane row `stride` floats: [`LANES`] consecutive pixels of a plane are consecutive
-//! floats (one vector, one target per lane), a pixel's tap to the right is the next
-//! float, the next row is `planes * stride` floats further. The padding (at least
-//! R + [`LANES`] - 1 columns on each side, so that the taps |i| <= R of a group of lanes
-//! that starts up to [`LANES`] - 1 pixels off the image stay inside) is never written:
-//! valid 0, so zero weight. The passes only read along rows, so there are no padding
-//! rows.
+//! The filter's planes (paper 001 Sec. 7): one f32 plane per quantity (the plane
+//! indices of the input set and the X set), and the preparation pass that fills the
+//! input planes (positions, bandwidths, cleaned values) from the stage's images. The
+//! sets are lane-interleaved ([`super::lane_planes`]); the preparation writes each row
+//! plainly first, eight consecutive pixels at a time ([`Layout`]), then interleaves it.
 
 use super::bandwidth::{brdf_bandwidth, curvature_at, direct_bandwidth, indirect_bandwidth};
 use super::gaussian::VALUE_PLANES;
+use super::lane_planes::{LaneLayout, LanePlanes, fill_line};
 use super::prepare_lanes::{RowOut, prepare_group};
 use crate::raster::{ScalarImage, Vec3Image};
 use crate::simd::{Kernel, LANES, Lanes, Portable};
@@ -32,160 +26,65 @@ pub const IND: usize = DIR + VALUE_PLANES;
 /// Planes of the input set.
 pub const INPUT_PLANES: usize = IND + VALUE_PLANES;
 
-/// Plane indices of the column set, the X pass's output and the Y pass's input: the
-/// planes of the transposed image (line x is image column x, position y along it), so
-/// that the Y pass reads its taps as consecutive floats too. World position, the
-/// squared bandwidths the Y pass uses, then the X-filtered value planes of both kinds.
-pub const C_PX: usize = 0;
-pub const C_PY: usize = 1;
-pub const C_PZ: usize = 2;
-pub const C_B2Y_DIR: usize = 3;
-pub const C_B2_IND: usize = 4;
-pub const C_DIR: usize = 5;
-pub const C_IND: usize = C_DIR + VALUE_PLANES;
-/// Planes of the column set.
-pub const COLUMN_PLANES: usize = C_IND + VALUE_PLANES;
+/// Plane indices of the X set, the X pass's output and the Y pass's input (lane
+/// planes with the input's segments, and R lines of zeros above and below for the Y
+/// pass's taps): world position, the squared bandwidths the Y pass uses, then the
+/// X-filtered value planes of both kinds.
+pub const X_PX: usize = 0;
+pub const X_PY: usize = 1;
+pub const X_PZ: usize = 2;
+pub const X_B2Y_DIR: usize = 3;
+pub const X_B2_IND: usize = 4;
+pub const X_DIR: usize = 5;
+pub const X_IND: usize = X_DIR + VALUE_PLANES;
+/// Planes of the X set.
+pub const X_PLANES: usize = X_IND + VALUE_PLANES;
 
 /// A missing world position is stored as this coordinate: far from every real point, so
 /// its weight is exactly 0, yet finite (no NaN in the tap loop).
 pub const MISSING_POSITION: f32 = 1e15;
 
-/// The shape of a set of zero-padded planes (see the module docs) and its indexing.
+/// Squared distances at or above this mean the position is missing.
+pub const MISSING_DISTANCE2: f32 = 1e28;
+
+/// The shape of one prepared row before [`fill_line`] interleaves it: the planes one
+/// after the other, each `stride` floats, pixel x of plane q at `in_row(q, x)`, with
+/// zero padding on both sides (never written).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Layout {
     /// Image size in pixels.
     pub width: usize,
     pub height: usize,
-    planes: usize,
     /// Padding columns on each side.
     pad_x: usize,
     /// Floats per plane row.
     stride: usize,
+    planes: usize,
 }
 
 impl Layout {
-    /// `planes` planes of `width` x `height`, padded for tap windows of `radius`.
-    pub fn new(planes: usize, width: usize, height: usize, radius: usize) -> Layout {
-        let pad_x = (radius + LANES - 1).next_multiple_of(LANES);
-        // An odd number of cache lines (16 floats) per plane row, so that the same pixel
-        // of consecutive planes falls in different cache sets: with a power-of-two
-        // stride (480 + 2 * 16 = 512 floats for the 640x480 column set) the 21 planes of
-        // a tap would share two L1 sets and evict each other, which cost 3x.
-        let lines = (pad_x + width.next_multiple_of(LANES) + pad_x).div_ceil(16);
-        let lines = if lines.is_multiple_of(2) {
-            lines + 1
-        } else {
-            lines
-        };
+    /// `planes` planes of rows of `width` pixels (of an image `height` rows high),
+    /// padded by at least `pad` columns on each side.
+    pub fn new(planes: usize, width: usize, height: usize, pad: usize) -> Layout {
+        let pad_x = pad.next_multiple_of(LANES);
         Layout {
             width,
             height,
-            planes,
             pad_x,
-            stride: 16 * lines,
+            stride: pad_x + width.next_multiple_of(LANES) + pad_x,
+            planes,
         }
     }
 
-    /// Floats in the planes.
-    pub fn floats(&self) -> usize {
-        self.height * self.row_step()
-    }
-
-    /// Planes in the set.
-    pub fn planes(&self) -> usize {
-        self.planes
-    }
-
-    /// Whether the taps |i| <= `radius` of [`LANES`] consecutive pixels of a row stay
-    /// inside the row's planes when the first pixel is anywhere from -([`LANES`] - 1)
-    /// to the width.
-    pub fn fits_radius(&self, radius: usize) -> bool {
-        self.pad_x >= radius + LANES - 1
-    }
-
-    /// Floats per plane row: from one plane to the next in an image row.
-    #[inline(always)]
-    pub fn plane_stride(&self) -> usize {
-        self.stride
-    }
-
-    /// Floats from an image row to the next.
-    #[inline(always)]
+    /// Floats in a row.
     pub fn row_step(&self) -> usize {
         self.planes * self.stride
     }
 
-    /// Index of plane 0 at pixel (x, y), 0 <= y < height; x may go down to -pad_x.
-    #[inline(always)]
-    pub fn index(&self, x: isize, y: usize) -> usize {
-        y * self.row_step() + (x + self.pad_x as isize) as usize
-    }
-
-    /// The index of pixel `x` of plane `q` within one image row of the planes (as
-    /// [`Planes::bands_mut`] gives them).
+    /// The index of pixel `x` of plane `q` within the row.
     #[inline(always)]
     pub fn in_row(&self, q: usize, x: usize) -> usize {
         q * self.stride + self.pad_x + x
-    }
-}
-
-/// A set of zero-padded planes of one image size.
-#[derive(Clone, Debug, Default)]
-pub struct Planes {
-    layout: Layout,
-    data: Vec<f32>,
-}
-
-impl std::ops::Deref for Planes {
-    type Target = Layout;
-    fn deref(&self) -> &Layout {
-        &self.layout
-    }
-}
-
-impl Planes {
-    /// Squared distances at or above this mean the position is missing.
-    pub const MISSING_DISTANCE2: f32 = 1e28;
-
-    /// `planes` zeroed planes of `width` x `height`, padded for tap windows of `radius`.
-    pub fn new(planes: usize, width: usize, height: usize, radius: usize) -> Planes {
-        let layout = Layout::new(planes, width, height, radius);
-        Planes {
-            layout,
-            data: vec![0.0; layout.floats()],
-        }
-    }
-
-    /// The planes' shape (the data's length always matches it).
-    pub fn layout(&self) -> Layout {
-        self.layout
-    }
-
-    /// The planes' floats.
-    #[inline(always)]
-    pub fn data(&self) -> &[f32] {
-        &self.data
-    }
-
-    /// Plane `q` at pixel (x, y) of the planes' image (for a column set, x is the
-    /// image row and y the image column).
-    #[inline]
-    pub fn at(&self, q: usize, x: usize, y: usize) -> f32 {
-        assert!(q < self.planes && x < self.width && y < self.height);
-        self.data[self.index(x as isize, y) + q * self.stride]
-    }
-
-    /// The image rows (all planes, padding columns included), top to bottom, in bands
-    /// of `rows` rows (the last may be shorter), for writing in parallel.
-    pub fn bands_mut(&mut self, rows: usize) -> rayon::slice::ChunksMut<'_, f32> {
-        let step = self.row_step();
-        self.data.par_chunks_mut((rows * step).max(1))
-    }
-
-    /// The planes' floats, for tests that fill them by hand.
-    #[cfg(test)]
-    pub(super) fn data_mut(&mut self) -> &mut [f32] {
-        &mut self.data
     }
 }
 
@@ -207,47 +106,63 @@ pub struct BandwidthSettings {
     pub b_e: f32,
 }
 
-/// Fills the input planes `input` ([`INPUT_PLANES`] planes of the images' size) with
-/// positions, squared bandwidths (eqs. 17, 18 from the curvatures of eq. 20) and cleaned
-/// values (0 with valid 0 where a layer has no finite value or the pixel no position),
-/// and writes the filter widths sigma = 1 / B (direct: mean of the X and Y sigmas;
-/// INFINITY where B = 0, NaN where there is no position). Eight pixels at a time
-/// (`prepare_lanes`, with `kernel`) where a row's X neighbours of all eight exist, one
-/// by one at the row's ends; the same bits either way.
+/// Fills the input planes `input` ([`INPUT_PLANES`] lane-interleaved planes of the
+/// images' size) with positions, squared bandwidths (eqs. 17, 18 from the curvatures of
+/// eq. 20) and cleaned values (0 with valid 0 where a layer has no finite value or the
+/// pixel no position), and writes the filter widths sigma = 1 / B (direct: mean of the
+/// X and Y sigmas; INFINITY where B = 0, NaN where there is no position). Eight pixels
+/// at a time (`prepare_lanes`, with `kernel`) where a row's X neighbours of all eight
+/// exist, one by one at the row's ends; the same bits either way. Each row is prepared
+/// in row-major order ([`row_scratch`]), then interleaved ([`fill_line`]).
 pub fn prepare(
     kernel: Kernel,
     images: &PrepareInputs,
     settings: BandwidthSettings,
-    input: &mut Planes,
+    input: &mut LanePlanes,
     width_dir: &mut ScalarImage,
     width_ind: &mut ScalarImage,
 ) {
-    let w = input.width;
-    if w == 0 || input.height == 0 {
+    let (w, h) = (input.width, input.height);
+    if w == 0 || h == 0 {
         return;
     }
     let kernel = kernel.available();
-    let layout = input.layout();
+    let lanes = input.layout();
+    let layout = row_scratch(&lanes);
     input
         .bands_mut(1)
         .zip(width_dir.data.par_chunks_mut(w))
         .zip(width_ind.data.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(y, ((row, width_dir), width_ind))| {
-            let mut out = RowOut {
-                row,
-                width_dir,
-                width_ind,
-            };
-            match kernel {
-                #[cfg(target_arch = "x86_64")]
-                // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and FMA.
-                Kernel::Avx2Fma => unsafe {
-                    prepare_row_avx2(images, settings, &layout, y, &mut out)
-                },
-                _ => prepare_row::<Portable>(images, settings, &layout, y, &mut out),
-            }
-        });
+        .for_each_init(
+            || vec![0.0; layout.row_step()],
+            |scratch, (y, ((line, width_dir), width_ind))| {
+                let mut out = RowOut {
+                    row: scratch,
+                    width_dir,
+                    width_ind,
+                };
+                match kernel {
+                    #[cfg(target_arch = "x86_64")]
+                    // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and
+                    // FMA.
+                    Kernel::Avx2Fma => unsafe {
+                        prepare_row_avx2(images, settings, &layout, &lanes, y, &mut out, line)
+                    },
+                    _ => {
+                        prepare_row::<Portable>(images, settings, &layout, y, &mut out);
+                        fill_line::<Portable>(&lanes, out.row, |q| layout.in_row(q, 0), line);
+                    }
+                }
+            },
+        );
+}
+
+/// The layout of one prepared row before [`fill_line`] interleaves it: padded wide
+/// enough for the lane planes' halos (and the runs of eight that the fill reads).
+pub(super) fn row_scratch(lanes: &LaneLayout) -> Layout {
+    let pad = lanes.slots() * LANES - lanes.width + 2 * LANES + lanes.halo();
+    Layout::new(INPUT_PLANES, lanes.width, lanes.height, pad)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -256,10 +171,14 @@ fn prepare_row_avx2(
     images: &PrepareInputs,
     settings: BandwidthSettings,
     layout: &Layout,
+    lanes: &LaneLayout,
     y: usize,
     out: &mut RowOut,
+    line: &mut [f32],
 ) {
-    prepare_row::<crate::simd::Avx2>(images, settings, layout, y, out)
+    use crate::simd::Avx2;
+    prepare_row::<Avx2>(images, settings, layout, y, out);
+    fill_line::<Avx2>(lanes, out.row, |q| layout.in_row(q, 0), line);
 }
 
 /// [`prepare`] for row `y`: groups of eight pixels from x = 1 while pixel x + 8 is

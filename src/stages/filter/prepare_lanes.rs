@@ -243,11 +243,13 @@ fn neighbours<V: Lanes>(images: &PrepareInputs, j: usize) -> (Xyz<V>, Xyz<V>) {
 
 #[cfg(test)]
 mod tests {
-    use super::super::planes::{INPUT_PLANES, Planes, prepare, prepare_pixel};
+    use super::super::lane_planes::{LaneLayout, LanePlanes, fill_line};
+    use super::super::planes::{INPUT_PLANES, prepare, prepare_pixel, row_scratch};
     use super::*;
     use crate::raster::{Image, ScalarImage, Vec3Image};
     use crate::rng::{hash, unit_f32};
     use crate::simd::Kernel;
+    use crate::simd::Portable;
 
     fn noise(seed: u64, i: usize) -> f32 {
         unit_f32(hash(&[seed, i as u64]))
@@ -341,7 +343,8 @@ mod tests {
             exponent: &images.exponent,
         };
         let settings = BandwidthSettings { b_f: 1.0, b_e: 3.0 };
-        let mut planes = Planes::new(INPUT_PLANES, w as usize, h as usize, 15);
+        let lanes = LaneLayout::segments(INPUT_PLANES, w as usize, h as usize, 15);
+        let mut planes = LanePlanes::new(lanes);
         let mut width_dir = Image::filled(w, h, 0.0);
         let mut width_ind = Image::filled(w, h, 0.0);
         let (w, h) = (w as usize, h as usize);
@@ -355,18 +358,20 @@ mod tests {
                 &mut width_ind,
             ),
             None => {
-                let layout = planes.layout();
-                let step = layout.row_step();
+                let layout = row_scratch(&lanes);
+                let mut scratch = vec![0.0; layout.row_step()];
+                let step = lanes.line_step();
                 for y in 0..h {
-                    let row = &mut planes.data_mut()[y * step..(y + 1) * step];
                     let mut out = RowOut {
-                        row,
+                        row: &mut scratch,
                         width_dir: &mut width_dir.data[y * w..(y + 1) * w],
                         width_ind: &mut width_ind.data[y * w..(y + 1) * w],
                     };
                     for x in 0..w {
                         prepare_pixel(&inputs, settings, &layout, y, x, &mut out);
                     }
+                    let line = &mut planes.data_mut()[y * step..(y + 1) * step];
+                    fill_line::<Portable>(&lanes, &scratch, |q| layout.in_row(q, 0), line);
                 }
             }
         }

@@ -2,7 +2,8 @@
 //! the pixel (x', y') of the previous frame whose world position is nearest the current
 //! pixel's.
 
-use super::planes::{C_PX, C_PY, C_PZ, Planes};
+use super::lane_planes::LanePlanes;
+use super::planes::{MISSING_DISTANCE2, X_PX, X_PY, X_PZ};
 use crate::pinhole::Pinhole;
 use crate::simd::{LANES, Lanes, dot3};
 use glam::{Affine3A, Vec3};
@@ -22,13 +23,16 @@ pub struct PreviousView {
 /// The previous pixel (x', y') matching world position `p`: `p` is projected into the
 /// previous camera and rounded to a pixel, then the [`SEARCH_RADIUS`] window around it is
 /// searched for the previous pixel with the nearest world position (ties: the first in
-/// row order). `previous` is the previous frame's column set (position y of line x
-/// is pixel (x, y)).
+/// row order). `previous` is the previous frame's X set.
 /// `None` when `p` is behind the previous camera or projects off-screen, or
 /// when no pixel of the window has a position. The filter runs its lane form,
 /// [`find_previous_lanes`]; this is the reference the tests hold it to.
 #[inline]
-pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<(usize, usize)> {
+pub fn find_previous(
+    p: Vec3,
+    view: &PreviousView,
+    previous: &LanePlanes,
+) -> Option<(usize, usize)> {
     let c = view.world_to_camera.transform_point3(p);
     if c.z.is_nan() || c.z <= 0.0 {
         return None;
@@ -36,10 +40,9 @@ pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<
     let cam = &view.camera;
     let u = cam.fx * c.x / c.z + cam.cx + 0.5;
     let v = cam.fy * c.y / c.z + cam.cy + 0.5;
-    // The search stays inside both the camera and the previous planes (the column set
-    // is the transposed image: its lines are image columns).
-    let width = previous.height.min(cam.width as usize) as i32;
-    let height = previous.width.min(cam.height as usize) as i32;
+    // The search stays inside both the camera and the previous planes.
+    let width = previous.width.min(cam.width as usize) as i32;
+    let height = previous.height.min(cam.height as usize) as i32;
     let (w, h) = (width as f32, height as f32);
     if !(u >= 0.0 && v >= 0.0 && u < w && v < h) {
         return None;
@@ -47,7 +50,7 @@ pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<
     // u, v >= 0: truncation is the floor.
     let (u, v) = (u as i32, v as i32);
     let mut best: Option<(usize, usize)> = None;
-    let mut best_d2 = Planes::MISSING_DISTANCE2;
+    let mut best_d2 = MISSING_DISTANCE2;
     for dy in -SEARCH_RADIUS..=SEARCH_RADIUS {
         for dx in -SEARCH_RADIUS..=SEARCH_RADIUS {
             let (x, y) = (u + dx, v + dy);
@@ -56,9 +59,9 @@ pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<
             }
             let (x, y) = (x as usize, y as usize);
             let q = Vec3::new(
-                previous.at(C_PX, y, x),
-                previous.at(C_PY, y, x),
-                previous.at(C_PZ, y, x),
+                previous.at(X_PX, x, y),
+                previous.at(X_PY, x, y),
+                previous.at(X_PZ, x, y),
             );
             let d2 = (q - p).length_squared();
             if d2 < best_d2 {
@@ -75,15 +78,15 @@ pub fn find_previous(p: Vec3, view: &PreviousView, previous: &Planes) -> Option<
 /// `length_squared` use no fused multiply-adds, and neither does this). Lanes that are
 /// not `active` get `None`.
 ///
-/// `previous` must be a column set (its position planes are gathered, at i32 offsets).
+/// `previous` must be an X set (its position planes are gathered, at i32 offsets).
 #[inline(always)]
 pub(super) fn find_previous_lanes<V: Lanes>(
     p: [V; 3],
     active: [bool; LANES],
     view: &PreviousView,
-    previous: &Planes,
+    previous: &LanePlanes,
 ) -> [Option<(usize, usize)>; LANES] {
-    assert!(previous.planes() > C_PZ && previous.floats() <= i32::MAX as usize);
+    assert!(previous.planes() > X_PZ && previous.floats() <= i32::MAX as usize);
     let s = V::splat;
     let [px, py, pz] = p;
     let (m, t) = (
@@ -98,8 +101,8 @@ pub(super) fn find_previous_lanes<V: Lanes>(
     let cam = &view.camera;
     let u = s(cam.fx).mul(cx).div(cz).add(s(cam.cx)).add(s(0.5));
     let v = s(cam.fy).mul(cy).div(cz).add(s(cam.cy)).add(s(0.5));
-    let width = previous.height.min(cam.width as usize) as i32;
-    let height = previous.width.min(cam.height as usize) as i32;
+    let width = previous.width.min(cam.width as usize) as i32;
+    let height = previous.height.min(cam.height as usize) as i32;
     let (w, h) = (s(width as f32), s(height as f32));
     let zero = s(0.0);
     let active = V::from_array(active.map(|a| f32::from_bits(if a { u32::MAX } else { 0 })));
@@ -122,7 +125,7 @@ pub(super) fn find_previous_lanes<V: Lanes>(
     let (ui, vi) = (u.trunc_to_i32(), v.trunc_to_i32());
     let data = previous.data().as_ptr();
     let stride = previous.plane_stride();
-    let mut best_d2 = s(Planes::MISSING_DISTANCE2);
+    let mut best_d2 = s(MISSING_DISTANCE2);
     // Index of the best window pixel so far, -1 for none.
     let mut best = s(-1.0);
     let mut k = 0;
@@ -134,22 +137,22 @@ pub(super) fn find_previous_lanes<V: Lanes>(
                 .and(y.ge(zero))
                 .and(x.lt(w))
                 .and(y.lt(h));
-            // Pixel (x, y) is position y of line x; lanes outside read pixel (0, 0).
+            // Lanes outside read pixel (0, 0).
             let offset: [i32; LANES] = std::array::from_fn(|l| {
                 let (x, y) = (ui[l] + dx, vi[l] + dy);
                 if x >= 0 && y >= 0 && x < width && y < height {
-                    previous.index(y as isize, x as usize) as i32
+                    previous.pixel_index(x as isize, y as isize) as i32
                 } else {
-                    previous.index(0, 0) as i32
+                    previous.pixel_index(0, 0) as i32
                 }
             });
             // SAFETY: every offset is a pixel of plane 0; the position planes are
             // inside the set.
             let (qx, qy, qz) = unsafe {
                 (
-                    V::gather(data.add(C_PX * stride), &offset),
-                    V::gather(data.add(C_PY * stride), &offset),
-                    V::gather(data.add(C_PZ * stride), &offset),
+                    V::gather(data.add(X_PX * stride), &offset),
+                    V::gather(data.add(X_PY * stride), &offset),
+                    V::gather(data.add(X_PZ * stride), &offset),
                 )
             };
             let offset = [qx.sub(px), qy.sub(py), qz.sub(pz)];

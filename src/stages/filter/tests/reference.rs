@@ -151,8 +151,9 @@ fn the_filter_matches_eqs_21_to_23_evaluated_directly() {
 /// The temporal extension (eq. 26) with a moving camera against a direct evaluation:
 /// the Y pass of frame 2 adds, at the previous pixel (x', y') that [`find_previous`]
 /// picks (tested separately), the taps (x', y' + j) of frame 1's X-filtered layer, with
-/// frame 1's positions and bandwidths. The camera turns, so neighbouring pixels find
-/// their previous pixels at different offsets (the filter then gathers per lane).
+/// frame 1's positions and bandwidths. The camera turns, so lane groups find their
+/// previous pixels off the block boundaries (the filter then rotates the lanes) or at
+/// different offsets (the filter then gathers per lane).
 #[test]
 fn the_temporal_taps_match_eq_26_evaluated_directly() {
     let mut first = Scene::new(sphere(Vec3::new(0.05, 0.0, 1.5), 0.3, 2.0), 0.3, 0.2);
@@ -174,25 +175,33 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
         .position
         .data
         .iter()
-        .map(|&p| find_previous(p, &view, &filter.previous_columns))
+        .map(|&p| find_previous(p, &view, &filter.previous_x_set))
         .collect();
     filter
         .filter(&second.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
         .unwrap();
-    // How many lane groups of the Y pass (eight pixels down a column, all with a
-    // previous pixel) find them at mixed offsets: those are gathered.
+    // How the lane groups of the Y pass (eight pixels along a row, x0 = 8 n) read
+    // their temporal taps: at one offset from a block boundary (rotated), or at mixed
+    // offsets (gathered). Both paths must be exercised.
     let lanes = crate::simd::LANES as u32;
-    let offset =
-        |x: u32, y: u32| found[(y * W + x) as usize].map(|(xp, yp)| (xp, yp as i64 - y as i64));
-    let mixed = (0..W)
-        .flat_map(|x| (0..H).step_by(lanes as usize).map(move |y0| (x, y0)))
-        .filter(|&(x, y0)| {
-            let first = offset(x, y0);
-            first.is_some() && (y0..y0 + lanes).any(|y| offset(x, y) != first)
-        })
-        .count();
-    eprintln!("temporal: {mixed} lane groups with mixed offsets");
-    assert!(mixed > 100, "{mixed}");
+    let offset = |x: u32, y: u32| {
+        found[(y * W + x) as usize].map(|(xp, yp)| (xp as i64 - x as i64, yp as i64 - y as i64))
+    };
+    let (mut rotated, mut mixed) = (0, 0);
+    for y in 0..H {
+        for x0 in (0..W).step_by(lanes as usize) {
+            let offsets: Vec<_> = (x0..x0 + lanes).filter_map(|x| offset(x, y)).collect();
+            match offsets.first() {
+                Some(&first) if offsets.iter().all(|&o| o == first) => {
+                    rotated += usize::from((x0 as i64 + first.0).rem_euclid(8) != 0)
+                }
+                Some(_) => mixed += 1,
+                None => {}
+            }
+        }
+    }
+    eprintln!("temporal: {rotated} lane groups rotated, {mixed} with mixed offsets");
+    assert!(rotated > 100 && mixed > 20, "{rotated}, {mixed}");
     let ([b1x, b1y, b1i], [b2x, b2y, b2i]) =
         (squared_bandwidths(&first), squared_bandwidths(&second));
     let (radius, w) = (15i64, W as i64);
@@ -323,8 +332,8 @@ fn the_stage_reads_its_products_caches_b_e_and_writes_every_output() {
     assert!(bad.check().unwrap_err().to_string().contains("radius is 0"));
 }
 
-/// Two frames with a moving camera (so the temporal taps are read both contiguously and
-/// gathered per lane) give the same bits with the portable kernel as with AVX2 + FMA.
+/// Two frames with a moving camera (so the temporal taps are read contiguously, rotated
+/// and gathered per lane) give the same bits with the portable kernel as with AVX2 + FMA.
 #[test]
 fn kernels_give_the_same_bits() {
     let mut first = Scene::new(sphere(Vec3::new(0.1, -0.05, 2.0), 0.4, 3.0), 0.7, 0.4);

@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::simd::{LANES, Portable};
-use crate::stages::filter::planes::{C_PX, C_PY, C_PZ};
+use crate::stages::filter::planes::{X_PX, X_PY, X_PZ};
 use crate::stages::filter::temporal::{PreviousView, find_previous_lanes};
 
 #[test]
@@ -16,11 +16,11 @@ fn a_point_behind_or_beside_the_previous_camera_has_no_match() {
         .unwrap();
     let view = filter.previous_view.unwrap();
     assert_eq!(
-        find_previous(Vec3::new(0.0, 0.0, -1.0), &view, &filter.previous_columns),
+        find_previous(Vec3::new(0.0, 0.0, -1.0), &view, &filter.previous_x_set),
         None
     );
     assert_eq!(
-        find_previous(Vec3::new(50.0, 0.0, 2.0), &view, &filter.previous_columns),
+        find_previous(Vec3::new(50.0, 0.0, 2.0), &view, &filter.previous_x_set),
         None
     );
 }
@@ -29,7 +29,7 @@ fn a_point_behind_or_beside_the_previous_camera_has_no_match() {
 /// `find_previous`: the scene's own positions seen from a turned camera (ties between
 /// equal distances included: the plane behind the sphere is flat), jittered points,
 /// points behind the camera, off the screen, on its edges, NaN, and inactive lanes.
-fn check_find_previous_lanes<V: Lanes>(name: &str, view: &PreviousView, previous: &Planes) {
+fn check_find_previous_lanes<V: Lanes>(name: &str, view: &PreviousView, previous: &LanePlanes) {
     let cam = camera();
     let mut points: Vec<Vec3> = Scene::new(sphere(Vec3::new(0.0, 0.0, 1.5), 0.3, 2.0), 1.0, 1.0)
         .position
@@ -42,9 +42,9 @@ fn check_find_previous_lanes<V: Lanes>(name: &str, view: &PreviousView, previous
     // ulps off): the nearest is decided by the last bits of the distances, or is a tie.
     let q = |x: usize, y: usize| {
         Vec3::new(
-            previous.at(C_PX, y, x),
-            previous.at(C_PY, y, x),
-            previous.at(C_PZ, y, x),
+            previous.at(X_PX, x, y),
+            previous.at(X_PY, x, y),
+            previous.at(X_PZ, x, y),
         )
     };
     for y in (1..H as usize - 1).step_by(3) {
@@ -105,7 +105,7 @@ fn check_find_previous_lanes<V: Lanes>(name: &str, view: &PreviousView, previous
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn check_find_previous_lanes_avx2(view: &PreviousView, previous: &Planes) {
+fn check_find_previous_lanes_avx2(view: &PreviousView, previous: &LanePlanes) {
     check_find_previous_lanes::<lanes::Avx2>("Avx2", view, previous);
 }
 
@@ -122,10 +122,10 @@ fn find_previous_in_lanes_gives_the_scalar_answers() {
         .filter(&scene.inputs(Some((turned, camera()))), &mut out)
         .unwrap();
     let view = filter.previous_view.unwrap();
-    check_find_previous_lanes::<Portable>("Portable", &view, &filter.previous_columns);
+    check_find_previous_lanes::<Portable>("Portable", &view, &filter.previous_x_set);
     #[cfg(target_arch = "x86_64")]
     if lanes::Kernel::detect() == lanes::Kernel::Avx2Fma {
         // SAFETY: the CPU has AVX2 and FMA.
-        unsafe { check_find_previous_lanes_avx2(&view, &filter.previous_columns) };
+        unsafe { check_find_previous_lanes_avx2(&view, &filter.previous_x_set) };
     }
 }

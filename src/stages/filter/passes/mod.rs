@@ -1,0 +1,120 @@
+//! The separable filter's passes (paper 001 Sec. 7): the X pass (eq. 21, [`x_pass`])
+//! from the input planes into the X set, and the Y pass (eq. 22, [`y_pass`]) with the
+//! temporal taps of the previous frame (eq. 26) from the X set into the output images.
+//!
+//! Both sets are lane-interleaved ([`super::lane_planes`]), and both passes work on
+//! groups of eight targets, one per lane: the X pass on pixels (l S + j, y) of the input
+//! set (segments order), whose taps are slots j + i of the same row; the Y pass on
+//! pixels (8 n + l, y) of the X set (blocks order), whose taps are block n of rows
+//! y + i. Either way a tap of the eight targets is one aligned vector per plane, and
+//! every tap of a lane is a pixel of the same image row (X) or column (Y). The X pass
+//! transposes each eight groups of a row into eight blocks of the X set.
+//!
+//! Eq. 23's weight is symmetric in target and source: the squared distance and the
+//! summed squared bandwidths do not change, bit for bit, when the two swap (each
+//! difference only changes sign). So each pass walks its direction group by group and
+//! weighs each pair of groups (j, j + k), k = 0..=R, once, when the walk reaches j
+//! ([`PairRing`]): that weight is tap +k of group j and tap -k of group j + k, both in
+//! the same lanes. A pass costs R + 1 `exp` per pixel and kind instead of 2 R + 1. The
+//! temporal taps pair the current frame with the previous one and are weighed per tap.
+//!
+//! The kernel (AVX2 + FMA or portable, [`Kernel`]) is chosen per band; both give the
+//! same bits. The lane operations are never called from closures: closures do not
+//! inherit `#[target_feature]`, and their lane operations would not be inlined.
+
+mod x;
+mod y;
+
+pub use x::x_pass;
+pub use y::y_pass;
+
+use super::gaussian::{Bandwidths, MAX_TAPS};
+use super::lane_planes::LanePlanes;
+use super::temporal::PreviousView;
+#[cfg(doc)]
+use crate::simd::Kernel;
+use crate::simd::Lanes;
+
+/// The previous frame as the temporal taps read it: its X set (positions, bandwidths,
+/// and its X-filtered layers, E'_X of eq. 26) and its camera.
+#[derive(Clone, Copy)]
+pub struct Previous<'a> {
+    pub x_set: &'a LanePlanes,
+    pub view: &'a PreviousView,
+}
+
+/// The forward pair weights of the last R + 1 groups along a pass's direction (slots
+/// j of a row in the X pass, lines y of a slot in the Y pass): for group j (ring row
+/// (j + R) mod (R + 1)) and kind, the weights of pairs (j, j + k), k = 0..=R (k = 0:
+/// the targets with themselves). See the module docs.
+struct PairRing<V> {
+    radius: usize,
+    weights: Vec<V>,
+}
+
+impl<V: Lanes> PairRing<V> {
+    fn new(radius: usize) -> PairRing<V> {
+        PairRing {
+            radius,
+            weights: vec![V::splat(0.0); (radius + 1) * 2 * (radius + 1)],
+        }
+    }
+
+    /// Index of kind `kind`'s pair (j, j) in the ring (j >= -R).
+    #[inline(always)]
+    fn first(&self, j: isize, kind: usize) -> usize {
+        let taps = self.radius + 1;
+        let row = (j + self.radius as isize) as usize % taps;
+        (2 * row + kind) * taps
+    }
+
+    /// Both kinds' weights of group j, for writing.
+    #[inline(always)]
+    fn row_mut(&mut self, j: isize) -> [&mut [V]; 2] {
+        let (first, taps) = (self.first(j, 0), self.radius + 1);
+        let (direct, indirect) = self.weights[first..first + 2 * taps].split_at_mut(taps);
+        [direct, indirect]
+    }
+
+    /// Group j's weights of `kind` for its taps i = -R..=R into `taps[0..2 R + 1]`:
+    /// tap -k from group j - k's pair k, taps 0..=R from group j's pairs.
+    #[inline(always)]
+    fn group_taps(&self, j: isize, kind: usize, taps: &mut [V; MAX_TAPS]) {
+        let r = self.radius;
+        for k in 1..=r {
+            taps[r - k] = self.weights[self.first(j - k as isize, kind) + k];
+        }
+        let first = self.first(j, kind);
+        taps[r..=2 * r].copy_from_slice(&self.weights[first..=first + r]);
+    }
+}
+
+/// The valid planes (valid_R, valid_RV) of both kinds at index `c` of the planes (plane
+/// stride `s`), each kind given by its first value plane and its squared-bandwidth
+/// plane; and the bandwidths of the kinds with a value somewhere in the group (`None`
+/// for the others: they are not filtered). A loop, not closures: closures do not
+/// inherit `#[target_feature]`.
+#[inline(always)]
+#[allow(clippy::type_complexity)]
+fn group_kinds<V: Lanes>(
+    data: &[f32],
+    c: usize,
+    s: usize,
+    kinds_planes: [(usize, usize); 2],
+) -> ([[V; 2]; 2], [Option<Bandwidths<V>>; 2]) {
+    let mut valid = [[V::splat(0.0); 2]; 2];
+    let mut kinds = [None; 2];
+    for (k, (values, b2)) in kinds_planes.into_iter().enumerate() {
+        valid[k] = [
+            V::load_slice(data, c + (values + 6) * s),
+            V::load_slice(data, c + (values + 7) * s),
+        ];
+        if !(valid[k][0].all_zero() && valid[k][1].all_zero()) {
+            kinds[k] = Some(Bandwidths {
+                plane: b2,
+                target: V::load_slice(data, c + b2 * s),
+            });
+        }
+    }
+    (valid, kinds)
+}

@@ -1,0 +1,449 @@
+//! The Y pass (paper 001 eq. 22) with the temporal taps of the previous frame (eq. 26),
+//! from the X set (blocks order) into the output images.
+//!
+//! A task takes one block n (pixels 8 n..8 n + 8 of every row) and walks it down the
+//! image, line by line: the pair weights of the line (see the module docs of
+//! `passes`), then its group of eight targets, whose results are eight consecutive
+//! pixels of the line, stored as three vectors of interleaved rgb per layer
+//! ([`Lanes::interleave3`]).
+
+use super::super::MAX_RADIUS;
+use super::super::gaussian::{
+    Bandwidths, Contiguous, EXP_CUTOFF, Fetch, Gathered, MAX_TAPS, Straddling, TapWeights,
+    VALUE_PLANES, Window, accumulate, tap_weights,
+};
+use super::super::lane_planes::LanePlanes;
+use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ};
+use super::super::temporal::find_previous_lanes;
+use super::{PairRing, Previous, group_kinds};
+use crate::raster::Vec3Image;
+use crate::simd::{Kernel, LANES, Lanes, Portable};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// The Y pass, eq. 22, with the temporal taps of eq. 26 when `previous` is given:
+/// filters the X set along image columns into the four output layers (E_R^dir,
+/// E_R^ind, E_RV^dir, E_RV^ind; NaN where the pixel has no value of that layer).
+pub fn y_pass(
+    kernel: Kernel,
+    x_set: &LanePlanes,
+    previous: Option<Previous>,
+    radius: usize,
+    out: &mut [Vec3Image; 4],
+) {
+    let (w, h) = (x_set.width, x_set.height);
+    assert!(x_set.planes() == X_PLANES && x_set.fits_lines(radius));
+    assert!(radius <= MAX_RADIUS, "radius {radius} over {MAX_RADIUS}");
+    // Gather offsets are i32.
+    assert!(x_set.floats() <= i32::MAX as usize);
+    if let Some(p) = previous {
+        assert_eq!(p.x_set.layout(), x_set.layout());
+    }
+    let kernel = kernel.available();
+    for layer in out.iter() {
+        assert_eq!((layer.width as usize, layer.height as usize), (w, h));
+    }
+    if w == 0 || h == 0 {
+        return;
+    }
+    let out = ImagesOut::new(out);
+    let source = YSource {
+        x_set,
+        previous,
+        radius,
+    };
+    (0..w.div_ceil(LANES))
+        .into_par_iter()
+        .for_each(|n| match kernel {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and FMA.
+            Kernel::Avx2Fma => unsafe { y_block_avx2(&source, n, &out) },
+            _ => y_block::<Portable>(&source, n, &out),
+        });
+}
+
+/// What the Y pass reads.
+struct YSource<'a> {
+    x_set: &'a LanePlanes,
+    previous: Option<Previous<'a>>,
+    radius: usize,
+}
+
+// The output rows are stored as floats: a Vec3 is three f32.
+const _: () = assert!(std::mem::size_of::<Vec3>() == 3 * std::mem::size_of::<f32>());
+
+/// The four output layers, written by the Y pass's tasks at once: a task writes the
+/// pixels 8 n..8 n + 8 of every row for its block n, and no other task does.
+struct ImagesOut<'a> {
+    layers: [*mut Vec3; 4],
+    width: usize,
+    height: usize,
+    images: std::marker::PhantomData<&'a mut [Vec3Image; 4]>,
+}
+
+// SAFETY: the tasks write disjoint pixels (see the type's docs).
+unsafe impl Sync for ImagesOut<'_> {}
+
+impl<'a> ImagesOut<'a> {
+    fn new(images: &'a mut [Vec3Image; 4]) -> ImagesOut<'a> {
+        let (width, height) = (images[0].width as usize, images[0].height as usize);
+        ImagesOut {
+            layers: images.each_mut().map(|image| image.data.as_mut_ptr()),
+            width,
+            height,
+            images: std::marker::PhantomData,
+        }
+    }
+
+    /// Stores pixels x..x + LANES of row y of the layer of kind `k` (direct,
+    /// indirect) and `layer` (E_R, E_RV) from their r, g and b lanes.
+    ///
+    /// # Safety
+    /// No other thread may access those pixels meanwhile.
+    #[inline(always)]
+    unsafe fn store_run<V: Lanes>(&self, k: usize, layer: usize, x: usize, y: usize, rgb: [V; 3]) {
+        assert!(x + LANES <= self.width && y < self.height);
+        // SAFETY: the LANES pixels are inside the image (asserted), 3 LANES floats
+        // (Vec3 is #[repr(C)], three f32); exclusive by the caller.
+        unsafe {
+            let floats = self.layers[k + 2 * layer]
+                .add(y * self.width + x)
+                .cast::<f32>();
+            for (r, triples) in V::interleave3(rgb).into_iter().enumerate() {
+                triples.store(floats.add(LANES * r));
+            }
+        }
+    }
+
+    /// Sets pixel (x, y) of the layer of kind `k` and `layer`.
+    ///
+    /// # Safety
+    /// As for [`ImagesOut::store_run`].
+    #[inline(always)]
+    unsafe fn set(&self, k: usize, layer: usize, x: usize, y: usize, value: Vec3) {
+        assert!(x < self.width && y < self.height);
+        // SAFETY: inside the image (asserted); exclusive by the caller.
+        unsafe { *self.layers[k + 2 * layer].add(y * self.width + x) = value };
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn y_block_avx2(source: &YSource, n: usize, out: &ImagesOut) {
+    y_block::<crate::simd::Avx2>(source, n, out)
+}
+
+/// The Y pass for block n, walked down the image: the pair weights of each line from
+/// -R on, then from line 0 on the line's group, stored into `out`.
+#[inline(always)]
+fn y_block<V: Lanes>(source: &YSource, n: usize, out: &ImagesOut) {
+    let (x_set, radius) = (source.x_set, source.radius);
+    let (data, s) = (x_set.data(), x_set.plane_stride());
+    let mut ring = PairRing::<V>::new(radius);
+    let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
+    let limit = V::splat(EXP_CUTOFF);
+    let x0 = n * LANES;
+    let pixels = LANES.min(out.width - x0);
+    for y in -(radius as isize)..x_set.height as isize {
+        let c = x_set.slot_index(n as isize, y);
+        let position = [
+            V::load_slice(data, c + X_PX * s),
+            V::load_slice(data, c + X_PY * s),
+            V::load_slice(data, c + X_PZ * s),
+        ];
+        let both = [
+            Some(Bandwidths {
+                plane: X_B2Y_DIR,
+                target: V::load_slice(data, c + X_B2Y_DIR * s),
+            }),
+            Some(Bandwidths {
+                plane: X_B2_IND,
+                target: V::load_slice(data, c + X_B2_IND * s),
+            }),
+        ];
+        let pairs = Window {
+            planes: data[c..].as_ptr(),
+            plane_stride: s,
+            tap_step: x_set.line_step(),
+            taps: radius + 1,
+        };
+        // SAFETY: lines y..=y + R lie inside the set (`fits_lines`, -R <= y < height).
+        unsafe {
+            tap_weights(
+                &Contiguous,
+                &pairs,
+                X_PX,
+                position,
+                both,
+                limit,
+                ring.row_mut(y),
+            )
+        };
+        if y < 0 {
+            continue;
+        }
+        let y = y as usize;
+        let group = y_group::<V>(source, n, y, &ring, &mut weights);
+        for (k, kind) in group.iter().enumerate() {
+            for layer in 0..2 {
+                let c = 3 * layer;
+                let rgb = [kind[c], kind[c + 1], kind[c + 2]];
+                if pixels == LANES {
+                    // SAFETY: pixels x0..x0 + 8 of row y belong to this task's block.
+                    unsafe { out.store_run(k, layer, x0, y, rgb) };
+                } else {
+                    let (r, g, b) = (rgb[0].to_array(), rgb[1].to_array(), rgb[2].to_array());
+                    for l in 0..pixels {
+                        // SAFETY: as above.
+                        unsafe { out.set(k, layer, x0 + l, y, Vec3::new(r[l], g[l], b[l])) };
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The Y pass for the group at block n of line y (pixels (8 n + l, y)): per kind, E_R
+/// rgb then E_RV rgb per lane (NaN where the target has no value of the layer). Lines
+/// y - R..=y must be in `ring`. `weights` is scratch.
+#[inline(always)]
+fn y_group<V: Lanes>(
+    source: &YSource,
+    n: usize,
+    y: usize,
+    ring: &PairRing<V>,
+    weights: &mut TapWeights<V>,
+) -> [[V; 6]; 2] {
+    let (x_set, radius) = (source.x_set, source.radius);
+    let (data, s) = (x_set.data(), x_set.plane_stride());
+    let c = x_set.slot_index(n as isize, y as isize);
+    let kinds_planes = [(X_DIR, X_B2Y_DIR), (X_IND, X_B2_IND)];
+    let (valid, kinds) = group_kinds(data, c, s, kinds_planes);
+    let nan = V::splat(f32::NAN);
+    let mut result = [[nan; 6]; 2];
+    if kinds.iter().all(Option::is_none) {
+        return result;
+    }
+    let position = [
+        V::load_slice(data, c + X_PX * s),
+        V::load_slice(data, c + X_PY * s),
+        V::load_slice(data, c + X_PZ * s),
+    ];
+    let mut sums = [[V::splat(0.0); VALUE_PLANES]; 2];
+    let spatial = Window {
+        planes: data[c - radius * x_set.line_step()..].as_ptr(),
+        plane_stride: s,
+        tap_step: x_set.line_step(),
+        taps: 2 * radius + 1,
+    };
+    for (k, (values, _)) in kinds_planes.into_iter().enumerate() {
+        if kinds[k].is_some() {
+            ring.group_taps(y as isize, k, &mut weights[k]);
+            // SAFETY: lines y - R..=y + R lie inside the set (`fits_lines`).
+            unsafe { accumulate(&Contiguous, &spatial, values, &weights[k], &mut sums[k]) };
+        }
+    }
+    if let Some(previous) = source.previous {
+        let group = GroupTaps {
+            position,
+            kinds,
+            first: kinds_planes.map(|(first, _)| first),
+        };
+        // SAFETY: the temporal windows' taps lie inside the previous set (see
+        // `temporal_taps`).
+        unsafe {
+            match temporal_taps::<V>(previous, position, &valid, n * LANES, y, radius) {
+                TemporalTaps::Contiguous(window, limit) => {
+                    group.add(&Contiguous, &window, limit, weights, &mut sums)
+                }
+                TemporalTaps::Rotated(window, straddling, limit, r) => {
+                    // Each target to the lane of its source (see `TemporalTaps`), and
+                    // its sums back after.
+                    let mut rotated = GroupTaps { ..group };
+                    for p in &mut rotated.position {
+                        *p = p.rotate_up(r);
+                    }
+                    for b in rotated.kinds.iter_mut().flatten() {
+                        b.target = b.target.rotate_up(r);
+                    }
+                    rotate_sums(&mut sums, r);
+                    rotated.add(&straddling, &window, limit.rotate_up(r), weights, &mut sums);
+                    rotate_sums(&mut sums, LANES - r);
+                }
+                TemporalTaps::Gathered(window, g, limit) => {
+                    group.add(&g, &window, limit, weights, &mut sums)
+                }
+                TemporalTaps::None => {}
+            }
+        }
+    }
+    for (k, sums) in sums.iter().enumerate() {
+        if kinds[k].is_none() {
+            continue;
+        }
+        for (layer, ok) in valid[k].iter().enumerate() {
+            let ok = ok.gt(V::splat(0.0));
+            for c in 0..3 {
+                let value = sums[3 * layer + c].div(sums[6 + layer]);
+                result[k][3 * layer + c] = V::select(ok, value, nan);
+            }
+        }
+    }
+    result
+}
+
+/// Rotates every lane of `sums` up by `r` ([`Lanes::rotate_up`]).
+#[inline(always)]
+fn rotate_sums<V: Lanes>(sums: &mut [[V; VALUE_PLANES]; 2], r: usize) {
+    for kind in sums.iter_mut() {
+        for sum in kind.iter_mut() {
+            *sum = sum.rotate_up(r);
+        }
+    }
+}
+
+/// A group's targets in the Y pass: their positions, the kinds being filtered, and
+/// each kind's first value plane.
+#[derive(Clone, Copy)]
+struct GroupTaps<V> {
+    position: [V; 3],
+    kinds: [Option<Bandwidths<V>>; 2],
+    first: [usize; 2],
+}
+
+impl<V: Lanes> GroupTaps<V> {
+    /// Adds the weighted taps of `window` to each filtered kind's `sums`.
+    ///
+    /// # Safety
+    /// Every tap of `window` that `fetch` reads must lie inside its planes.
+    #[inline(always)]
+    unsafe fn add<F: Fetch<V>>(
+        &self,
+        fetch: &F,
+        window: &Window,
+        limit: V,
+        weights: &mut TapWeights<V>,
+        sums: &mut [[V; VALUE_PLANES]; 2],
+    ) {
+        let [direct, indirect] = weights;
+        // SAFETY: forwarded from the caller.
+        unsafe {
+            tap_weights(
+                fetch,
+                window,
+                X_PX,
+                self.position,
+                self.kinds,
+                limit,
+                [direct, indirect],
+            );
+            for k in 0..2 {
+                if self.kinds[k].is_some() {
+                    accumulate(fetch, window, self.first[k], &weights[k], &mut sums[k]);
+                }
+            }
+        }
+    }
+}
+
+/// How the temporal taps of a group are read.
+enum TemporalTaps<V> {
+    /// No lane has a previous pixel.
+    None,
+    /// Every lane's previous pixel at the same offset from its target, a multiple of
+    /// 8: one window of aligned vectors, lane for lane.
+    Contiguous(Window, V),
+    /// Every lane's previous pixel at the same offset, 8 b + r from the block's start
+    /// with 0 < r < 8: target lane l's source is lane (l + r) mod 8 of block b (l + r
+    /// < 8) or b + 1. With the targets rotated up by r (positions, bandwidths, limits,
+    /// sums), each lane reads its own lane of one of two windows ([`Straddling`]).
+    Rotated(Window, Straddling<V>, V, usize),
+    /// Different offsets: gathered lane by lane.
+    Gathered(Window, Gathered, V),
+}
+
+/// The temporal taps (eq. 26) of pixels (x0 + l, y): the window over the previous
+/// frame's X set around each lane's previous pixel (x', y') ([`find_previous_lanes`]),
+/// along its column (lines y' - R..=y' + R), and how to read it.
+#[inline(always)]
+fn temporal_taps<V: Lanes>(
+    previous: Previous,
+    position: [V; 3],
+    valid: &[[V; 2]; 2],
+    x0: usize,
+    y: usize,
+    radius: usize,
+) -> TemporalTaps<V> {
+    let valid = [
+        valid[0][0].to_array(),
+        valid[0][1].to_array(),
+        valid[1][0].to_array(),
+        valid[1][1].to_array(),
+    ];
+    let x_set = previous.x_set;
+    let active: [bool; LANES] =
+        std::array::from_fn(|l| x0 + l < x_set.width && valid.iter().any(|a| a[l] > 0.0));
+    let found = find_previous_lanes(position, active, previous.view, x_set);
+    if found.iter().all(Option::is_none) {
+        return TemporalTaps::None;
+    }
+    // The lanes' common offset (dx, dy), if they have one.
+    let mut common = None;
+    for (l, f) in found.iter().enumerate() {
+        let Some((xp, yp)) = *f else { continue };
+        let offset = (xp as isize - (x0 + l) as isize, yp as isize - y as isize);
+        match common {
+            None => common = Some(offset),
+            Some(c) if c == offset => {}
+            Some(_) => {
+                common = None;
+                break;
+            }
+        }
+    }
+    let limit = V::from_array(found.map(|f| if f.is_some() { EXP_CUTOFF } else { -1.0 }));
+    let (data, s, step) = (x_set.data(), x_set.plane_stride(), x_set.line_step());
+    let taps = 2 * radius + 1;
+    if let Some((dx, dy)) = common {
+        // Pixels x0 + dx.. of lines y + dy - R..=y + dy + R: x0 + dx >= -7 (some lane's
+        // x0 + l + dx is a pixel), so blocks -1..=slots, inside the set with its block
+        // of zeros on each side; y + dy inside the image, so the lines are inside the
+        // set (`fits_lines`). Lanes without a previous pixel read the same windows, with
+        // no weight.
+        let x = x0 as isize + dx;
+        let (b, r) = (
+            x.div_euclid(LANES as isize),
+            x.rem_euclid(LANES as isize) as usize,
+        );
+        let first = x_set.slot_index(b, y as isize + dy - radius as isize);
+        let window = Window {
+            planes: data[first..].as_ptr(),
+            plane_stride: s,
+            tap_step: step,
+            taps,
+        };
+        if r == 0 {
+            return TemporalTaps::Contiguous(window, limit);
+        }
+        // Rotated lane s reads block b + 1 where s < r.
+        let next: [bool; LANES] = std::array::from_fn(|s| s < r);
+        let straddling = Straddling {
+            second: x_set.slot_step() as isize,
+            mask: V::from_array(next.map(|n| f32::from_bits(if n { !0 } else { 0 }))),
+        };
+        return TemporalTaps::Rotated(window, straddling, limit, r);
+    }
+    // Gather, each lane from its previous pixel's window (a lane without one from its
+    // own pixel's, with no weight).
+    let first_tap: [i32; LANES] = std::array::from_fn(|l| {
+        let (x, y) = found[l].unwrap_or((x0 + l, y));
+        x_set.pixel_index(x as isize, y as isize - radius as isize) as i32
+    });
+    let window = Window {
+        planes: data.as_ptr(),
+        plane_stride: s,
+        tap_step: step,
+        taps,
+    };
+    TemporalTaps::Gathered(window, Gathered(first_tap), limit)
+}

@@ -224,7 +224,7 @@ fn bench_filter(c: &mut Criterion) {
     };
     let settings = BandwidthSettings { b_f: 1.0, b_e: 4.0 };
     let kernel = Kernel::detect();
-    let mut rows = LanePlanes::new(LaneLayout::segments(INPUT_PLANES, w, h, RADIUS));
+    let mut input = LanePlanes::new(LaneLayout::segments(INPUT_PLANES, w, h, RADIUS));
     let mut width_dir = Image::filled(W, H, 0.0);
     let mut width_ind = Image::filled(W, H, 0.0);
     let mut prepare = || {
@@ -232,7 +232,7 @@ fn bench_filter(c: &mut Criterion) {
             kernel,
             &prep,
             settings,
-            &mut rows,
+            &mut input,
             &mut width_dir,
             &mut width_ind,
         )
@@ -241,29 +241,29 @@ fn bench_filter(c: &mut Criterion) {
     // bench is filtered out.
     prepare();
     group.bench_function("pass/prepare", |b| b.iter(&mut prepare));
-    let mut columns = LanePlanes::new(LaneLayout::blocks(X_PLANES, w, h, RADIUS));
+    let mut x_set = LanePlanes::new(LaneLayout::blocks(X_PLANES, w, h, RADIUS));
     group.bench_function("pass/x", |b| {
-        b.iter(|| passes::x_pass(kernel, &rows, RADIUS, &mut columns))
+        b.iter(|| passes::x_pass(kernel, &input, RADIUS, &mut x_set))
     });
     group.bench_function("pass/x_portable", |b| {
-        b.iter(|| passes::x_pass(Kernel::Portable, &rows, RADIUS, &mut columns))
+        b.iter(|| passes::x_pass(Kernel::Portable, &input, RADIUS, &mut x_set))
     });
-    passes::x_pass(kernel, &rows, RADIUS, &mut columns);
+    passes::x_pass(kernel, &input, RADIUS, &mut x_set);
     let mut out: [Vec3Image; 4] = std::array::from_fn(|_| Image::filled(W, H, Vec3::ZERO));
     group.bench_function("pass/y_spatial", |b| {
-        b.iter(|| passes::y_pass(kernel, &columns, None, RADIUS, &mut out))
+        b.iter(|| passes::y_pass(kernel, &x_set, None, RADIUS, &mut out))
     });
     let view = PreviousView {
         world_to_camera: Affine3A::IDENTITY,
         camera: Pinhole::new(&Intrinsics::PRIMESENSE, W, H),
     };
-    let previous_columns = columns.clone();
+    let previous_x_set = x_set.clone();
     let previous = Previous {
-        x_set: &previous_columns,
+        x_set: &previous_x_set,
         view: &view,
     };
     group.bench_function("pass/y_temporal", |b| {
-        b.iter(|| passes::y_pass(kernel, &columns, Some(previous), RADIUS, &mut out))
+        b.iter(|| passes::y_pass(kernel, &x_set, Some(previous), RADIUS, &mut out))
     });
     let map = EnvMap::from_fn(512, 256, |d| {
         Vec3::splat(1.0 + (4.0 * d.x).sin().abs() + 10.0 * d.y.max(0.0).powi(8))

@@ -4,10 +4,11 @@
 //! squared distance once per tap for both kinds, a weight per kind, shared by its two
 //! layers E_R and E_RV), then the weighted sums per kind ([`accumulate`]).
 //!
-//! The loops read their taps from planes (see [`super::planes`]) through a [`Window`]:
-//! per tap, one vector per plane, either contiguous (the eight targets' taps are
-//! neighbours in memory: the X and Y passes, and the temporal taps when the eight
-//! targets found their previous pixels at one offset) or gathered per lane.
+//! The loops read their taps from lane-interleaved planes (see [`super::lane_planes`])
+//! through a [`Window`]: per tap, one vector per plane, read by a [`Fetch`]: one load
+//! ([`Contiguous`]: the X and Y passes, and the temporal taps when the eight targets
+//! found their previous pixels at one offset that is a multiple of 8), two blended
+//! loads ([`Straddling`]: any other common offset) or gathered per lane ([`Gathered`]).
 
 use crate::simd::{LANES, Lanes};
 

@@ -6,7 +6,8 @@
 //!
 //! - **Segments** (the input planes, for the X pass). The line is cut into eight
 //!   segments of S pixels (S = ceil(width / 8), rounded up to a multiple of 8), and lane
-//!   l holds segment l: slot j is the vector of pixels (l S + j) for l = 0..8. A group
+//!   l holds segment l: slot j is the vector of pixels (l S + j) for l = 0..8 (S = 80
+//!   at 640 pixels wide). A group
 //!   of eight targets at slot j finds its taps along the row, pixels (l S + j + i), as
 //!   one vector at slot j + i: every tap load is aligned, never split across cache
 //!   lines, and the symmetric Gaussian weight of a pair of slots serves both ends (see
@@ -21,7 +22,7 @@
 //!   its taps along the column, pixels (8 n + l, y + i), as consecutive aligned vectors
 //!   (so a walk down a block reads a window that slides by one vector), and their
 //!   previous pixels (the temporal taps) in at most two neighbouring blocks where they
-//!   all moved alike, as neighbouring pixels mostly do between frames. (Lanes 80
+//!   all moved alike, as neighbouring pixels mostly do between frames. (Lanes S
 //!   pixels apart, as in segments, mostly find theirs at different offsets, which cost
 //!   gathers.) Blocks sets have `pad_lines` lines of zeros above and below, so that
 //!   taps |i| <= pad_lines across lines stay inside.
@@ -124,6 +125,11 @@ impl LaneLayout {
         self.planes
     }
 
+    /// The set's order.
+    pub fn order(&self) -> Order {
+        self.order
+    }
+
     /// Slots per line (segments: per segment), halos left out.
     #[inline(always)]
     pub fn slots(&self) -> usize {
@@ -223,8 +229,18 @@ impl std::ops::Deref for LanePlanes {
 }
 
 impl LanePlanes {
-    /// Zeroed planes of `layout`.
+    /// Zeroed planes of `layout` (as [`LaneLayout::segments`] or [`LaneLayout::blocks`]
+    /// made it: the passes index it through raw pointers).
     pub fn new(layout: LaneLayout) -> LanePlanes {
+        let made = match layout.order {
+            Order::Segments => {
+                LaneLayout::segments(layout.planes, layout.width, layout.height, layout.halo)
+            }
+            Order::Blocks => {
+                LaneLayout::blocks(layout.planes, layout.width, layout.height, layout.pad_lines)
+            }
+        };
+        assert_eq!(layout, made, "a lane layout changed after it was made");
         // Plane strides are whole cache lines.
         assert!(layout.plane_stride().is_multiple_of(LINE_FLOATS));
         LanePlanes {
@@ -278,8 +294,9 @@ impl LanePlanes {
 
 /// Fills one line of lane planes in segments order, `line` (a chunk of
 /// [`LanePlanes::bands_mut`]), from the same planes in row-major order: plane q's
-/// pixel x at `row[first(q) + x]`, with zeros (or nothing that matters) from
-/// x = -halo to 8 S + halo + 16 beyond the width. Eight slots at a time: the eight
+/// pixel x at `row[first(q) + x]`. It reads x = -halo..8 S + halo + 7, which must be
+/// zeros off 0..width (at least up to 8 S + halo: the halos and the lanes past the
+/// width). Eight slots at a time: the eight
 /// segments' runs of eight pixels, transposed.
 #[inline(always)]
 pub fn fill_line<V: Lanes>(

@@ -42,8 +42,8 @@
 //! take eight target pixels at a time, one per lane of an AVX2 + FMA vector where the
 //! CPU has them (a portable kernel with the same bits elsewhere, [`crate::simd`]), from
 //! lane-interleaved planes ([`lane_planes`]) in which every spatial tap of the eight
-//! targets is one aligned load per plane: the X pass eight pixels 80 apart in a row
-//! (pixels l S + j), the Y pass eight neighbours in a row (pixels 8 n + l), walking down
+//! targets is one aligned load per plane: the X pass eight pixels S apart in a row
+//! (pixels l S + j, S = 80 at 640 wide), the Y pass eight neighbours in a row (pixels 8 n + l), walking down
 //! the image. The temporal taps are one aligned load per plane too where the eight
 //! targets found their previous pixels at one offset that is a multiple of 8, two
 //! blended loads at any other common offset, and gathered per lane elsewhere. No tap

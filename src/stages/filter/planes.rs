@@ -2,7 +2,7 @@
 //! indices of the input set and the X set), and the preparation pass that fills the
 //! input planes (positions, bandwidths, cleaned values) from the stage's images. The
 //! sets are lane-interleaved ([`super::lane_planes`]); the preparation writes each row
-//! plainly first, eight consecutive pixels at a time ([`Layout`]), then interleaves it.
+//! plainly first, eight consecutive pixels at a time ([`RowLayout`]), then interleaves it.
 
 use super::bandwidth::{brdf_bandwidth, curvature_at, direct_bandwidth, indirect_bandwidth};
 use super::gaussian::VALUE_PLANES;
@@ -27,7 +27,7 @@ pub const IND: usize = DIR + VALUE_PLANES;
 pub const INPUT_PLANES: usize = IND + VALUE_PLANES;
 
 /// Plane indices of the X set, the X pass's output and the Y pass's input (lane
-/// planes with the input's segments, and R lines of zeros above and below for the Y
+/// planes in blocks order, with at least R lines of zeros above and below for the Y
 /// pass's taps): world position, the squared bandwidths the Y pass uses, then the
 /// X-filtered value planes of both kinds.
 pub const X_PX: usize = 0;
@@ -51,7 +51,7 @@ pub const MISSING_DISTANCE2: f32 = 1e28;
 /// after the other, each `stride` floats, pixel x of plane q at `in_row(q, x)`, with
 /// zero padding on both sides (never written).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Layout {
+pub struct RowLayout {
     /// Image size in pixels.
     pub width: usize,
     pub height: usize,
@@ -62,12 +62,12 @@ pub struct Layout {
     planes: usize,
 }
 
-impl Layout {
+impl RowLayout {
     /// `planes` planes of rows of `width` pixels (of an image `height` rows high),
     /// padded by at least `pad` columns on each side.
-    pub fn new(planes: usize, width: usize, height: usize, pad: usize) -> Layout {
+    pub fn new(planes: usize, width: usize, height: usize, pad: usize) -> RowLayout {
         let pad_x = pad.next_multiple_of(LANES);
-        Layout {
+        RowLayout {
             width,
             height,
             pad_x,
@@ -160,9 +160,9 @@ pub fn prepare(
 
 /// The layout of one prepared row before [`fill_line`] interleaves it: padded wide
 /// enough for the lane planes' halos (and the runs of eight that the fill reads).
-pub(super) fn row_scratch(lanes: &LaneLayout) -> Layout {
+pub(super) fn row_scratch(lanes: &LaneLayout) -> RowLayout {
     let pad = lanes.slots() * LANES - lanes.width + 2 * LANES + lanes.halo();
-    Layout::new(INPUT_PLANES, lanes.width, lanes.height, pad)
+    RowLayout::new(INPUT_PLANES, lanes.width, lanes.height, pad)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -170,7 +170,7 @@ pub(super) fn row_scratch(lanes: &LaneLayout) -> Layout {
 fn prepare_row_avx2(
     images: &PrepareInputs,
     settings: BandwidthSettings,
-    layout: &Layout,
+    layout: &RowLayout,
     lanes: &LaneLayout,
     y: usize,
     out: &mut RowOut,
@@ -187,7 +187,7 @@ fn prepare_row_avx2(
 fn prepare_row<V: Lanes>(
     images: &PrepareInputs,
     settings: BandwidthSettings,
-    layout: &Layout,
+    layout: &RowLayout,
     y: usize,
     out: &mut RowOut,
 ) {
@@ -206,7 +206,7 @@ fn prepare_row<V: Lanes>(
 pub(super) fn prepare_pixel(
     images: &PrepareInputs,
     settings: BandwidthSettings,
-    layout: &Layout,
+    layout: &RowLayout,
     y: usize,
     x: usize,
     out: &mut RowOut,

@@ -9,8 +9,8 @@
 
 use super::bandwidth::{MAX_BANDWIDTH, MIN_NEIGHBOUR_DISTANCE, MIN_OCCLUDER_DISTANCE};
 use super::planes::{
-    B2_IND, B2X_DIR, B2Y_DIR, BandwidthSettings, DIR, IND, Layout, MISSING_POSITION, PX, PY, PZ,
-    PrepareInputs,
+    B2_IND, B2X_DIR, B2Y_DIR, BandwidthSettings, DIR, IND, MISSING_POSITION, PX, PY, PZ,
+    PrepareInputs, RowLayout,
 };
 use crate::simd::{LANES, Lanes, dot3};
 use glam::Vec3;
@@ -155,7 +155,7 @@ pub(super) struct RowOut<'a> {
 pub(super) fn prepare_group<V: Lanes>(
     images: &PrepareInputs,
     settings: BandwidthSettings,
-    layout: &Layout,
+    layout: &RowLayout,
     y: usize,
     x0: usize,
     out: &mut RowOut,

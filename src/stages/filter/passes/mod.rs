@@ -18,7 +18,7 @@
 //! the same lanes. A pass costs R + 1 `exp` per pixel and kind instead of 2 R + 1. The
 //! temporal taps pair the current frame with the previous one and are weighed per tap.
 //!
-//! The kernel (AVX2 + FMA or portable, [`Kernel`]) is chosen per band; both give the
+//! The kernel (AVX2 + FMA or portable, [`Kernel`]) is chosen per task; both give the
 //! same bits. The lane operations are never called from closures: closures do not
 //! inherit `#[target_feature]`, and their lane operations would not be inlined.
 

@@ -7,7 +7,7 @@ use super::super::gaussian::{
     Bandwidths, Contiguous, EXP_CUTOFF, MAX_TAPS, TapWeights, VALUE_PLANES, Window, accumulate,
     tap_weights,
 };
-use super::super::lane_planes::{LaneLayout, LanePlanes};
+use super::super::lane_planes::{LaneLayout, LanePlanes, Order};
 use super::super::planes::{
     B2_IND, B2X_DIR, B2Y_DIR, DIR, IND, INPUT_PLANES, PX, PY, PZ, X_B2_IND, X_B2Y_DIR, X_DIR,
     X_IND, X_PLANES, X_PX, X_PY, X_PZ,
@@ -25,6 +25,10 @@ const ROW_BAND: usize = 16;
 /// with the positions and the bandwidths the Y pass needs.
 pub fn x_pass(kernel: Kernel, input: &LanePlanes, radius: usize, output: &mut LanePlanes) {
     assert!(input.planes() == INPUT_PLANES && output.planes() == X_PLANES);
+    assert_eq!(
+        (input.order(), output.order()),
+        (Order::Segments, Order::Blocks)
+    );
     assert!(input.fits_radius(radius));
     assert!(radius <= MAX_RADIUS, "radius {radius} over {MAX_RADIUS}");
     assert_eq!(

@@ -12,7 +12,7 @@ use super::super::gaussian::{
     Bandwidths, Contiguous, EXP_CUTOFF, Fetch, Gathered, MAX_TAPS, Straddling, TapWeights,
     VALUE_PLANES, Window, accumulate, tap_weights,
 };
-use super::super::lane_planes::LanePlanes;
+use super::super::lane_planes::{LanePlanes, Order};
 use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ};
 use super::super::temporal::find_previous_lanes;
 use super::{PairRing, Previous, group_kinds};
@@ -40,8 +40,11 @@ pub fn y_pass(
         assert_eq!(p.x_set.layout(), x_set.layout());
     }
     let kernel = kernel.available();
+    assert_eq!(x_set.order(), Order::Blocks);
     for layer in out.iter() {
         assert_eq!((layer.width as usize, layer.height as usize), (w, h));
+        // `ImagesOut` writes through raw pointers.
+        assert_eq!(layer.data.len(), w * h);
     }
     if w == 0 || h == 0 {
         return;
@@ -259,7 +262,7 @@ fn y_group<V: Lanes>(
                 TemporalTaps::Rotated(window, straddling, limit, r) => {
                     // Each target to the lane of its source (see `TemporalTaps`), and
                     // its sums back after.
-                    let mut rotated = GroupTaps { ..group };
+                    let mut rotated = group;
                     for p in &mut rotated.position {
                         *p = p.rotate_up(r);
                     }

@@ -130,10 +130,16 @@ fn the_filter_matches_eqs_21_to_23_evaluated_directly() {
     scene.set_layers(|i| Vec3::new(1.0 + noise(20, i), 0.5 + noise(21, i), 2.0 * noise(22, i)));
     scene.layers[0].data[700] = Vec3::NAN;
     scene.exponent.data[(30 * W + 48) as usize..(30 * W + 60) as usize].fill(20.0);
-    // The full image, and a crop whose size is no multiple of the lanes (groups of
-    // lanes past the right and bottom edges, partial bands).
+    // The full image, a crop whose size is no multiple of the lanes (groups of lanes
+    // past the right and bottom edges, partial bands), and narrow crops whose segments
+    // are narrower than the taps' reach (X taps cross several segments).
     let mut worst = 0.0f64;
-    for scene in [scene.clone(), scene.crop(93, 70)] {
+    for scene in [
+        scene.clone(),
+        scene.crop(93, 70),
+        scene.crop(9, 11),
+        scene.crop(1, 4),
+    ] {
         let (w, h) = (scene.position.width, scene.position.height);
         let mut filter = AxisAlignedFilter::new(params(false));
         let mut out = FilterOutputs::new(w, h);
@@ -161,91 +167,102 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
     let mut second = Scene::new(sphere(Vec3::new(0.08, 0.01, 1.52), 0.3, 2.1), 0.3, 0.2);
     second.set_layers(|i| Vec3::new(1.0 + noise(33, i), 0.5 + noise(34, i), noise(35, i)));
     second.layers[1].data[900] = Vec3::NAN;
-    let turned = Pose::from_parts(
-        glam::DVec3::new(0.02, 0.0, 0.0),
-        glam::DQuat::from_rotation_y(0.03),
-    );
-    let mut filter = AxisAlignedFilter::new(params(true));
-    let mut out = FilterOutputs::new(W, H);
-    filter
-        .filter(&first.inputs(Some((turned, camera()))), &mut out)
-        .unwrap();
-    let view = filter.previous_view.unwrap();
-    let found: Vec<Option<(usize, usize)>> = second
-        .position
-        .data
-        .iter()
-        .map(|&p| find_previous(p, &view, &filter.previous_x_set))
-        .collect();
-    filter
-        .filter(&second.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
-        .unwrap();
-    // How the lane groups of the Y pass (eight pixels along a row, x0 = 8 n) read
-    // their temporal taps: at one offset from a block boundary (rotated), or at mixed
-    // offsets (gathered). Both paths must be exercised.
-    let lanes = crate::simd::LANES as u32;
-    let offset = |x: u32, y: u32| {
-        found[(y * W + x) as usize].map(|(xp, yp)| (xp as i64 - x as i64, yp as i64 - y as i64))
-    };
-    let (mut rotated, mut mixed) = (0, 0);
-    for y in 0..H {
-        for x0 in (0..W).step_by(lanes as usize) {
-            let offsets: Vec<_> = (x0..x0 + lanes).filter_map(|x| offset(x, y)).collect();
-            match offsets.first() {
-                Some(&first) if offsets.iter().all(|&o| o == first) => {
-                    rotated += usize::from((x0 as i64 + first.0).rem_euclid(8) != 0)
+    // The full image, and a crop whose width is no multiple of the lanes (a last block
+    // of the X set partly past the width).
+    for (first, second) in [
+        (first.clone(), second.clone()),
+        (first.crop(93, 70), second.crop(93, 70)),
+    ] {
+        let (width, height) = (first.position.width, first.position.height);
+        let turned = Pose::from_parts(
+            glam::DVec3::new(0.02, 0.0, 0.0),
+            glam::DQuat::from_rotation_y(0.03),
+        );
+        let mut filter = AxisAlignedFilter::new(params(true));
+        let mut out = FilterOutputs::new(width, height);
+        filter
+            .filter(&first.inputs(Some((turned, camera()))), &mut out)
+            .unwrap();
+        let view = filter.previous_view.unwrap();
+        let found: Vec<Option<(usize, usize)>> = second
+            .position
+            .data
+            .iter()
+            .map(|&p| find_previous(p, &view, &filter.previous_x_set))
+            .collect();
+        filter
+            .filter(&second.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
+            .unwrap();
+        // How the lane groups of the Y pass (eight pixels along a row, x0 = 8 n) read
+        // their temporal taps: at one offset from a block boundary (rotated), or at mixed
+        // offsets (gathered). Both paths must be exercised.
+        let lanes = crate::simd::LANES as u32;
+        let offset = |x: u32, y: u32| {
+            found[(y * width + x) as usize]
+                .map(|(xp, yp)| (xp as i64 - x as i64, yp as i64 - y as i64))
+        };
+        let (mut rotated, mut mixed) = (0, 0);
+        for y in 0..height {
+            for x0 in (0..width).step_by(lanes as usize) {
+                let offsets: Vec<_> = (x0..(x0 + lanes).min(width))
+                    .filter_map(|x| offset(x, y))
+                    .collect();
+                match offsets.first() {
+                    Some(&first) if offsets.iter().all(|&o| o == first) => {
+                        rotated += usize::from((x0 as i64 + first.0).rem_euclid(8) != 0)
+                    }
+                    Some(_) => mixed += 1,
+                    None => {}
                 }
-                Some(_) => mixed += 1,
-                None => {}
             }
         }
-    }
-    eprintln!("temporal: {rotated} lane groups rotated, {mixed} with mixed offsets");
-    assert!(rotated > 100 && mixed > 20, "{rotated}, {mixed}");
-    let ([b1x, b1y, b1i], [b2x, b2y, b2i]) =
-        (squared_bandwidths(&first), squared_bandwidths(&second));
-    let (radius, w) = (15i64, W as i64);
-    let mut worst = 0.0f64;
-    for (layer, (prev_b2x, prev_b2y, b2x, b2y)) in
-        [(0, (&b1x, &b1y, &b2x, &b2y)), (1, (&b1i, &b1i, &b2i, &b2i))]
-    {
-        let prev_x = pass(
-            &first.position,
-            &layer_values(&first, layer),
-            prev_b2x,
-            true,
-            radius,
-            &no_taps,
-        );
-        let ex = pass(
-            &second.position,
-            &layer_values(&second, layer),
-            b2x,
-            true,
-            radius,
-            &no_taps,
-        );
-        let temporal_taps = |x: i64, y: i64| -> Vec<ExtraTap> {
-            let Some((xp, yp)) = found[(y * w + x) as usize] else {
-                return Vec::new();
+        eprintln!("temporal: {rotated} lane groups rotated, {mixed} with mixed offsets");
+        assert!(rotated > 100 && mixed > 20, "{rotated}, {mixed}");
+        let ([b1x, b1y, b1i], [b2x, b2y, b2i]) =
+            (squared_bandwidths(&first), squared_bandwidths(&second));
+        let (radius, w) = (15i64, width as i64);
+        let mut worst = 0.0f64;
+        for (layer, (prev_b2x, prev_b2y, b2x, b2y)) in
+            [(0, (&b1x, &b1y, &b2x, &b2y)), (1, (&b1i, &b1i, &b2i, &b2i))]
+        {
+            let prev_x = pass(
+                &first.position,
+                &layer_values(&first, layer),
+                prev_b2x,
+                true,
+                radius,
+                &no_taps,
+            );
+            let ex = pass(
+                &second.position,
+                &layer_values(&second, layer),
+                b2x,
+                true,
+                radius,
+                &no_taps,
+            );
+            let temporal_taps = |x: i64, y: i64| -> Vec<ExtraTap> {
+                let Some((xp, yp)) = found[(y * w + x) as usize] else {
+                    return Vec::new();
+                };
+                (yp as i64 - radius..=yp as i64 + radius)
+                    .filter(|&sy| sy >= 0 && sy < height as i64)
+                    .filter_map(|sy| {
+                        let i = (sy * w + xp as i64) as usize;
+                        prev_x[i].map(|v| (first.position.data[i].as_dvec3(), prev_b2y[i], v))
+                    })
+                    .collect()
             };
-            (yp as i64 - radius..=yp as i64 + radius)
-                .filter(|&sy| sy >= 0 && sy < H as i64)
-                .filter_map(|sy| {
-                    let i = (sy * w + xp as i64) as usize;
-                    prev_x[i].map(|v| (first.position.data[i].as_dvec3(), prev_b2y[i], v))
-                })
-                .collect()
-        };
-        let expected: Vec<[f64; 3]> =
-            pass(&second.position, &ex, b2y, false, radius, &temporal_taps)
-                .into_iter()
-                .map(|v| v.unwrap_or([f64::NAN; 3]))
-                .collect();
-        worst = worst.max(worst_difference(&expected, &out.layers[layer]));
+            let expected: Vec<[f64; 3]> =
+                pass(&second.position, &ex, b2y, false, radius, &temporal_taps)
+                    .into_iter()
+                    .map(|v| v.unwrap_or([f64::NAN; 3]))
+                    .collect();
+            worst = worst.max(worst_difference(&expected, &out.layers[layer]));
+        }
+        eprintln!("temporal filter vs direct eq. 26: worst relative difference {worst:e}");
+        assert!(worst < 1e-4, "{worst}");
     }
-    eprintln!("temporal filter vs direct eq. 26: worst relative difference {worst:e}");
-    assert!(worst < 1e-4, "{worst}");
 }
 
 #[test]

@@ -28,12 +28,12 @@ mod y;
 pub use x::x_pass;
 pub use y::y_pass;
 
-use super::gaussian::{Bandwidths, MAX_TAPS};
+use super::gaussian::{Bandwidths, Contiguous, EXP_CUTOFF, MAX_TAPS, Window, tap_weights};
 use super::lane_planes::LanePlanes;
 use super::temporal::PreviousView;
 #[cfg(doc)]
 use crate::simd::Kernel;
-use crate::simd::Lanes;
+use crate::simd::{LANES, Lanes};
 
 /// The previous frame as the temporal taps read it: its X set (positions, bandwidths,
 /// and its X-filtered layers, E'_X of eq. 26) and its camera.
@@ -74,6 +74,60 @@ impl<V: Lanes> PairRing<V> {
         let (first, taps) = (self.first(j, 0), self.radius + 1);
         let (direct, indirect) = self.weights[first..first + 2 * taps].split_at_mut(taps);
         [direct, indirect]
+    }
+
+    /// Weighs group j's pairs (j, j + k), k = 0..=R, both kinds: the eight targets at
+    /// `data[c..]`, the groups `step` floats apart, planes `plane_stride` apart, the
+    /// positions in three planes from `position` on, the squared bandwidths of the
+    /// kinds in planes `bandwidths`. Returns the targets' positions.
+    #[inline(always)]
+    fn weigh(
+        &mut self,
+        j: isize,
+        data: &[f32],
+        (c, step, plane_stride): (usize, usize, usize),
+        position: usize,
+        bandwidths: [usize; 2],
+    ) -> [V; 3] {
+        let s = plane_stride;
+        let last_plane = bandwidths.into_iter().max().unwrap_or(0).max(position + 2);
+        assert!(c + self.radius * step + last_plane * s + LANES <= data.len());
+        let targets = [
+            V::load_slice(data, c + position * s),
+            V::load_slice(data, c + (position + 1) * s),
+            V::load_slice(data, c + (position + 2) * s),
+        ];
+        let [direct, indirect] = bandwidths;
+        let both = [
+            Some(Bandwidths {
+                plane: direct,
+                target: V::load_slice(data, c + direct * s),
+            }),
+            Some(Bandwidths {
+                plane: indirect,
+                target: V::load_slice(data, c + indirect * s),
+            }),
+        ];
+        let pairs = Window {
+            planes: data[c..].as_ptr(),
+            plane_stride: s,
+            tap_step: step,
+            taps: self.radius + 1,
+        };
+        let limit = V::splat(EXP_CUTOFF);
+        // SAFETY: the R + 1 groups' planes lie inside `data` (asserted).
+        unsafe {
+            tap_weights(
+                &Contiguous,
+                &pairs,
+                position,
+                targets,
+                both,
+                limit,
+                self.row_mut(j),
+            )
+        };
+        targets
     }
 
     /// Group j's weights of `kind` for its taps i = -R..=R into `taps[0..2 R + 1]`:

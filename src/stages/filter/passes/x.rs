@@ -3,14 +3,11 @@
 //! once (see the module docs of `passes`).
 
 use super::super::MAX_RADIUS;
-use super::super::gaussian::{
-    Bandwidths, Contiguous, EXP_CUTOFF, MAX_TAPS, TapWeights, VALUE_PLANES, Window, accumulate,
-    tap_weights,
-};
+use super::super::gaussian::{Contiguous, MAX_TAPS, TapWeights, VALUE_PLANES, Window, accumulate};
 use super::super::lane_planes::{LaneLayout, LanePlanes, Order};
 use super::super::planes::{
-    B2_IND, B2X_DIR, B2Y_DIR, DIR, IND, INPUT_PLANES, PX, PY, PZ, X_B2_IND, X_B2Y_DIR, X_DIR,
-    X_IND, X_PLANES, X_PX, X_PY, X_PZ,
+    B2_IND, B2X_DIR, B2Y_DIR, DIR, IND, INPUT_PLANES, PX, X_B2_IND, X_B2Y_DIR, X_DIR, X_IND,
+    X_PLANES, X_PX, X_PY, X_PZ,
 };
 use super::{PairRing, group_kinds};
 use crate::simd::{Kernel, LANES, Lanes, Portable};
@@ -121,42 +118,9 @@ fn x_row<V: Lanes>(
     let mut groups = [[V::splat(0.0); X_PLANES]; LANES];
     let segment = input.slots();
     let (data, s) = (input.data(), input.plane_stride());
-    let limit = V::splat(EXP_CUTOFF);
     for j in -(radius as isize)..segment as isize {
         let c = input.slot_index(j, y as isize);
-        let position = [
-            V::load_slice(data, c + PX * s),
-            V::load_slice(data, c + PY * s),
-            V::load_slice(data, c + PZ * s),
-        ];
-        let both = [
-            Some(Bandwidths {
-                plane: B2X_DIR,
-                target: V::load_slice(data, c + B2X_DIR * s),
-            }),
-            Some(Bandwidths {
-                plane: B2_IND,
-                target: V::load_slice(data, c + B2_IND * s),
-            }),
-        ];
-        let pairs = Window {
-            planes: data[c..].as_ptr(),
-            plane_stride: s,
-            tap_step: LANES,
-            taps: radius + 1,
-        };
-        // SAFETY: slots j..=j + R lie inside the line (`fits_radius`, -R <= j < S).
-        unsafe {
-            tap_weights(
-                &Contiguous,
-                &pairs,
-                PX,
-                position,
-                both,
-                limit,
-                ring.row_mut(j),
-            )
-        };
+        let position = ring.weigh(j, data, (c, LANES, s), PX, [B2X_DIR, B2_IND]);
         if j >= 0 {
             let j = j as usize;
             groups[j % LANES] = x_group(input, radius, c, position, ring, j as isize, weights);

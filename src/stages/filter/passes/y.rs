@@ -144,44 +144,17 @@ fn y_block<V: Lanes>(source: &YSource, n: usize, out: &ImagesOut) {
     let (data, s) = (x_set.data(), x_set.plane_stride());
     let mut ring = PairRing::<V>::new(radius);
     let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
-    let limit = V::splat(EXP_CUTOFF);
     let x0 = n * LANES;
     let pixels = LANES.min(out.width - x0);
     for y in -(radius as isize)..x_set.height as isize {
         let c = x_set.slot_index(n as isize, y);
-        let position = [
-            V::load_slice(data, c + X_PX * s),
-            V::load_slice(data, c + X_PY * s),
-            V::load_slice(data, c + X_PZ * s),
-        ];
-        let both = [
-            Some(Bandwidths {
-                plane: X_B2Y_DIR,
-                target: V::load_slice(data, c + X_B2Y_DIR * s),
-            }),
-            Some(Bandwidths {
-                plane: X_B2_IND,
-                target: V::load_slice(data, c + X_B2_IND * s),
-            }),
-        ];
-        let pairs = Window {
-            planes: data[c..].as_ptr(),
-            plane_stride: s,
-            tap_step: x_set.line_step(),
-            taps: radius + 1,
-        };
-        // SAFETY: lines y..=y + R lie inside the set (`fits_lines`, -R <= y < height).
-        unsafe {
-            tap_weights(
-                &Contiguous,
-                &pairs,
-                X_PX,
-                position,
-                both,
-                limit,
-                ring.row_mut(y),
-            )
-        };
+        ring.weigh(
+            y,
+            data,
+            (c, x_set.line_step(), s),
+            X_PX,
+            [X_B2Y_DIR, X_B2_IND],
+        );
         if y < 0 {
             continue;
         }

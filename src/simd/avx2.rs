@@ -138,8 +138,14 @@ impl Lanes for Avx2 {
     }
     #[inline(always)]
     fn rotate_up(self, r: usize) -> Self {
-        let index: [i32; LANES] = std::array::from_fn(|l| ((l + LANES - r) % LANES) as i32);
-        Avx2(unsafe { _mm256_permutevar8x32_ps(self.0, _mm256_loadu_si256(index.as_ptr().cast())) })
+        // Lane l takes lane (l + 8 - r) mod 8, the index computed in a register (the
+        // Y pass rotates some 25 vectors per group that straddles two blocks).
+        Avx2(unsafe {
+            let iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+            let shifted = _mm256_add_epi32(iota, _mm256_set1_epi32((LANES - r) as i32));
+            let index = _mm256_and_si256(shifted, _mm256_set1_epi32(LANES as i32 - 1));
+            _mm256_permutevar8x32_ps(self.0, index)
+        })
     }
     #[inline(always)]
     fn any(self) -> bool {

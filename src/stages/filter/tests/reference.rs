@@ -167,6 +167,10 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
     let mut second = Scene::new(sphere(Vec3::new(0.08, 0.01, 1.52), 0.3, 2.1), 0.3, 0.2);
     second.set_layers(|i| Vec3::new(1.0 + noise(33, i), 0.5 + noise(34, i), noise(35, i)));
     second.layers[1].data[900] = Vec3::NAN;
+    let turned = Pose::from_parts(
+        glam::DVec3::new(0.02, 0.0, 0.0),
+        glam::DQuat::from_rotation_y(0.03),
+    );
     // The full image, and a crop whose width is no multiple of the lanes (a last block
     // of the X set partly past the width).
     for (first, second) in [
@@ -174,10 +178,6 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
         (first.crop(93, 70), second.crop(93, 70)),
     ] {
         let (width, height) = (first.position.width, first.position.height);
-        let turned = Pose::from_parts(
-            glam::DVec3::new(0.02, 0.0, 0.0),
-            glam::DQuat::from_rotation_y(0.03),
-        );
         let mut filter = AxisAlignedFilter::new(params(true));
         let mut out = FilterOutputs::new(width, height);
         filter

@@ -2,7 +2,7 @@
 //! the pixel (x', y') of the previous frame whose world position is nearest the current
 //! pixel's.
 
-use super::lane_planes::LanePlanes;
+use super::lane_planes::{LanePlanes, Order};
 use super::planes::{MISSING_DISTANCE2, X_PX, X_PY, X_PZ};
 use crate::pinhole::Pinhole;
 use crate::simd::{LANES, Lanes, dot3};
@@ -33,22 +33,10 @@ pub fn find_previous(
     view: &PreviousView,
     previous: &LanePlanes,
 ) -> Option<(usize, usize)> {
-    let c = view.world_to_camera.transform_point3(p);
-    if c.z.is_nan() || c.z <= 0.0 {
-        return None;
-    }
+    let (u, v) = projected_pixel(p, view, previous)?;
     let cam = &view.camera;
-    let u = cam.fx * c.x / c.z + cam.cx + 0.5;
-    let v = cam.fy * c.y / c.z + cam.cy + 0.5;
-    // The search stays inside both the camera and the previous planes.
     let width = previous.width.min(cam.width as usize) as i32;
     let height = previous.height.min(cam.height as usize) as i32;
-    let (w, h) = (width as f32, height as f32);
-    if !(u >= 0.0 && v >= 0.0 && u < w && v < h) {
-        return None;
-    }
-    // u, v >= 0: truncation is the floor.
-    let (u, v) = (u as i32, v as i32);
     let mut best: Option<(usize, usize)> = None;
     let mut best_d2 = MISSING_DISTANCE2;
     for dy in -SEARCH_RADIUS..=SEARCH_RADIUS {
@@ -73,10 +61,36 @@ pub fn find_previous(
     best
 }
 
+/// The pixel of the previous camera that `p` projects into (the centre of
+/// [`find_previous`]'s search window), `None` when `p` is behind the camera or off the
+/// image (or the previous planes).
+#[inline]
+pub fn projected_pixel(p: Vec3, view: &PreviousView, previous: &LanePlanes) -> Option<(i32, i32)> {
+    let c = view.world_to_camera.transform_point3(p);
+    if c.z.is_nan() || c.z <= 0.0 {
+        return None;
+    }
+    let cam = &view.camera;
+    let u = cam.fx * c.x / c.z + cam.cx + 0.5;
+    let v = cam.fy * c.y / c.z + cam.cy + 0.5;
+    // The search stays inside both the camera and the previous planes.
+    let width = previous.width.min(cam.width as usize);
+    let height = previous.height.min(cam.height as usize);
+    let (w, h) = (width as f32, height as f32);
+    // u, v >= 0: truncation is the floor.
+    (u >= 0.0 && v >= 0.0 && u < w && v < h).then_some((u as i32, v as i32))
+}
+
 /// [`find_previous`] for eight points at once, one per lane, with the same answers bit
 /// for bit (the same operations in the same order: glam's `transform_point3` and
 /// `length_squared` use no fused multiply-adds, and neither does this). Lanes that are
 /// not `active` get `None`.
+///
+/// The window's positions are read per lane by gathers, or, where the eight points
+/// project onto consecutive pixels of one line (most groups: the Y pass's targets are
+/// eight neighbours in a row), as runs of eight pixels by aligned loads
+/// ([`consecutive_run`]). Gathering every group's window cost about 7 ms a frame at
+/// 640x480 (`benches/filter.rs`, `pass/y_temporal`).
 ///
 /// `previous` must be an X set (its position planes are gathered, at i32 offsets).
 #[inline(always)]
@@ -123,6 +137,7 @@ pub(super) fn find_previous_lanes<V: Lanes>(
         V::select(inside, v, zero).trunc(),
     );
     let (ui, vi) = (u.trunc_to_i32(), v.trunc_to_i32());
+    let run = consecutive_run(&ui, &vi, inside.to_array(), previous);
     let data = previous.data().as_ptr();
     let stride = previous.plane_stride();
     let mut best_d2 = s(MISSING_DISTANCE2);
@@ -137,23 +152,28 @@ pub(super) fn find_previous_lanes<V: Lanes>(
                 .and(y.ge(zero))
                 .and(x.lt(w))
                 .and(y.lt(h));
-            // Lanes outside read pixel (0, 0).
-            let offset: [i32; LANES] = std::array::from_fn(|l| {
-                let (x, y) = (ui[l] + dx, vi[l] + dy);
-                if x >= 0 && y >= 0 && x < width && y < height {
-                    previous.pixel_index(x as isize, y as isize) as i32
-                } else {
-                    previous.pixel_index(0, 0) as i32
+            let [qx, qy, qz] = match run {
+                Some((u0, v0)) => run_positions(previous, u0 + dx, v0 + dy),
+                None => {
+                    // Lanes outside read pixel (0, 0).
+                    let offset: [i32; LANES] = std::array::from_fn(|l| {
+                        let (x, y) = (ui[l] + dx, vi[l] + dy);
+                        if x >= 0 && y >= 0 && x < width && y < height {
+                            previous.pixel_index(x as isize, y as isize) as i32
+                        } else {
+                            previous.pixel_index(0, 0) as i32
+                        }
+                    });
+                    // SAFETY: every offset is a pixel of plane 0; the position planes
+                    // are inside the set.
+                    unsafe {
+                        [
+                            V::gather(data.add(X_PX * stride), &offset),
+                            V::gather(data.add(X_PY * stride), &offset),
+                            V::gather(data.add(X_PZ * stride), &offset),
+                        ]
+                    }
                 }
-            });
-            // SAFETY: every offset is a pixel of plane 0; the position planes are
-            // inside the set.
-            let (qx, qy, qz) = unsafe {
-                (
-                    V::gather(data.add(X_PX * stride), &offset),
-                    V::gather(data.add(X_PY * stride), &offset),
-                    V::gather(data.add(X_PZ * stride), &offset),
-                )
             };
             let offset = [qx.sub(px), qy.sub(py), qz.sub(pz)];
             let d2 = dot3(offset, offset);
@@ -172,4 +192,61 @@ pub(super) fn find_previous_lanes<V: Lanes>(
             ((ui[l] + dx) as usize, (vi[l] + dy) as usize)
         })
     })
+}
+
+/// When the eight lanes all project inside the image onto consecutive pixels of one
+/// line, (u0 + l, v0) for lane l, that line's first pixel (u0, v0): then each pixel of
+/// the search window is a run of eight consecutive pixels, read by two aligned loads
+/// per plane ([`run_positions`]) instead of a gather. `None` otherwise, or where the
+/// window's lines or blocks would leave the set.
+#[inline(always)]
+pub(super) fn consecutive_run(
+    ui: &[i32; LANES],
+    vi: &[i32; LANES],
+    inside: [f32; LANES],
+    previous: &LanePlanes,
+) -> Option<(i32, i32)> {
+    let (u0, v0) = (ui[0], vi[0]);
+    let run = (0..LANES).all(|l| inside[l].to_bits() != 0 && ui[l] == u0 + l as i32 && vi[l] == v0);
+    // Lines v0 - 1..=v0 + 1 and pixels u0 - 1..u0 + 9 (blocks -1..=slots) are in the
+    // set: u0 >= 0 and u0 + 7 < width <= 8 slots since the lanes are inside.
+    let lines = previous.fits_lines(SEARCH_RADIUS as usize);
+    (run && lines && previous.order() == Order::Blocks).then_some((u0, v0))
+}
+
+/// The positions of pixels x0 + l (lane l) of line `line` of the X set `previous`
+/// (blocks order): the two blocks they straddle, blended and rotated into place.
+/// Panics unless blocks x0.div_euclid(8) and the next one, line `line`, are in the set.
+#[inline(always)]
+pub(super) fn run_positions<V: Lanes>(previous: &LanePlanes, x0: i32, line: i32) -> [V; 3] {
+    let (b, r) = (
+        x0.div_euclid(LANES as i32),
+        x0.rem_euclid(LANES as i32) as usize,
+    );
+    let first = previous.slot_index(b as isize, line as isize);
+    let second = first + previous.slot_step();
+    let data = previous.data();
+    // Lane m of the blend holds pixel 8 b + m (m >= r) or 8 (b + 1) + m (m < r); lane l
+    // of the result is its lane (l + r) mod 8, pixel x0 + l.
+    let next = V::from_array(std::array::from_fn(|m| {
+        f32::from_bits(if m < r { u32::MAX } else { 0 })
+    }));
+    let (s, up) = (previous.plane_stride(), (LANES - r) % LANES);
+    let (x, y, z) = (X_PX * s, X_PY * s, X_PZ * s);
+    let px = V::select(
+        next,
+        V::load_slice(data, second + x),
+        V::load_slice(data, first + x),
+    );
+    let py = V::select(
+        next,
+        V::load_slice(data, second + y),
+        V::load_slice(data, first + y),
+    );
+    let pz = V::select(
+        next,
+        V::load_slice(data, second + z),
+        V::load_slice(data, first + z),
+    );
+    [px.rotate_up(up), py.rotate_up(up), pz.rotate_up(up)]
 }

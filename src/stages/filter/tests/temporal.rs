@@ -4,7 +4,9 @@
 use super::*;
 use crate::simd::{LANES, Portable};
 use crate::stages::filter::planes::{X_PX, X_PY, X_PZ};
-use crate::stages::filter::temporal::{PreviousView, find_previous_lanes};
+use crate::stages::filter::temporal::{
+    PreviousView, consecutive_run, find_previous_lanes, projected_pixel, run_positions,
+};
 
 #[test]
 fn a_point_behind_or_beside_the_previous_camera_has_no_match() {
@@ -66,6 +68,36 @@ fn check_find_previous_lanes<V: Lanes>(name: &str, view: &PreviousView, previous
             }
         }
     }
+    // Runs: the previous pixels' own positions, eight consecutive pixels of a line per
+    // group (block-aligned or not, on the first and last lines and columns too), which
+    // the lane form reads as runs rather than gathers.
+    points.resize(points.len().next_multiple_of(LANES), Vec3::ZERO);
+    let runs_start = points.len();
+    for y in (0..H as usize).step_by(7).chain([H as usize - 1]) {
+        for start in [0, 3, 5] {
+            for x in (start..W as usize - LANES + 1)
+                .step_by(LANES)
+                .chain([W as usize - LANES])
+            {
+                points.extend((x..x + LANES).map(|x| q(x, y)));
+            }
+        }
+    }
+    let runs = points[runs_start..]
+        .chunks(LANES)
+        .filter(|group| {
+            let pixels: [_; LANES] =
+                std::array::from_fn(|l| projected_pixel(group[l], view, previous));
+            let (ui, vi) = (
+                pixels.map(|p| p.map_or(-1, |p| p.0)),
+                pixels.map(|p| p.map_or(-1, |p| p.1)),
+            );
+            let inside = pixels.map(|p| f32::from_bits(if p.is_some() { !0 } else { 0 }));
+            consecutive_run(&ui, &vi, inside, previous).is_some()
+        })
+        .count();
+    assert!(runs > 100, "{name}: only {runs} groups are runs");
+    let runs_end = points.len();
     points.extend([
         Vec3::new(0.0, 0.0, -1.0),
         Vec3::new(50.0, 0.0, 2.0),
@@ -80,7 +112,10 @@ fn check_find_previous_lanes<V: Lanes>(name: &str, view: &PreviousView, previous
     for (g, group) in points.chunks(LANES).enumerate() {
         let lane = |l: usize| group.get(l).copied().unwrap_or(Vec3::ZERO);
         let p = [0, 1, 2].map(|c| V::from_array(std::array::from_fn(|l| lane(l)[c])));
-        let active: [bool; LANES] = std::array::from_fn(|l| l < group.len() && (g + l) % 7 != 3);
+        // Some lanes inactive, except in the runs (a run needs all eight).
+        let in_runs = (runs_start..runs_end).contains(&(LANES * g));
+        let active: [bool; LANES] =
+            std::array::from_fn(|l| l < group.len() && (in_runs || (g + l) % 7 != 3));
         let got = find_previous_lanes(p, active, view, previous);
         for l in 0..LANES {
             let expected = active[l]
@@ -107,6 +142,36 @@ fn check_find_previous_lanes<V: Lanes>(name: &str, view: &PreviousView, previous
 #[target_feature(enable = "avx2,fma")]
 fn check_find_previous_lanes_avx2(view: &PreviousView, previous: &LanePlanes) {
     check_find_previous_lanes::<lanes::Avx2>("Avx2", view, previous);
+}
+
+#[test]
+fn a_run_reads_eight_consecutive_pixels() {
+    let scene = Scene::new(sphere(Vec3::new(0.0, 0.0, 1.5), 0.3, 2.0), 1.0, 1.0);
+    let mut filter = AxisAlignedFilter::new(params(true));
+    let mut out = FilterOutputs::new(W, H);
+    filter.filter(&scene.inputs(None), &mut out).unwrap();
+    let set = &filter.previous_x_set;
+    let at = |q: usize, x: i32, y: i32| {
+        let inside = x >= 0 && y >= 0 && x < W as i32 && y < H as i32;
+        // Outside the image: the set's zero block or padding lines.
+        if inside {
+            set.at(q, x as usize, y as usize)
+        } else {
+            0.0
+        }
+    };
+    for y in [-1, 0, 1, H as i32 / 2, H as i32 - 1, H as i32] {
+        for x0 in -1..W as i32 - LANES as i32 + 2 {
+            let got = run_positions::<Portable>(set, x0, y);
+            for (c, q) in [X_PX, X_PY, X_PZ].into_iter().enumerate() {
+                let expected: [f32; LANES] = std::array::from_fn(|l| at(q, x0 + l as i32, y));
+                assert_eq!(
+                    got[c].to_array().map(f32::to_bits),
+                    expected.map(f32::to_bits)
+                );
+            }
+        }
+    }
 }
 
 #[test]

@@ -5,13 +5,14 @@
 //! gets the area-weighted mean of the normals of the faces around it, so that shading is
 //! smooth across faces that share the vertex.
 
+use super::obj_lines::{Problem, locate};
 use super::{ObjectError, Triangle, tri_normal};
 use glam::Vec3;
 use std::path::Path;
 
 /// Loads the OBJ file at `path` as triangles in its own coordinates (material 0).
-/// Errors name the file and what is wrong: unreadable, not OBJ, bad indices, non-finite
-/// positions, no triangles.
+/// Errors name the file, what is wrong (unreadable, not OBJ, bad indices, non-finite
+/// positions, no triangles) and, where one line is at fault, the line.
 pub fn load_obj(path: &Path) -> Result<Vec<Triangle>, ObjectError> {
     let bytes = std::fs::read(path).map_err(|source| ObjectError::MeshUnreadable {
         path: path.to_path_buf(),
@@ -22,9 +23,29 @@ pub fn load_obj(path: &Path) -> Result<Vec<Triangle>, ObjectError> {
 
 /// [`load_obj`] on the bytes of an OBJ file; `path` names it in errors.
 pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<Triangle>, ObjectError> {
-    let invalid = |reason: String| ObjectError::MeshInvalid {
-        path: path.to_path_buf(),
-        reason,
+    // tobj reads lines of text: say where one is not.
+    let text = std::str::from_utf8(bytes).map_err(|e| {
+        let line = bytes[..e.valid_up_to()]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1;
+        ObjectError::MeshInvalid {
+            path: path.to_path_buf(),
+            reason: format!("line {line}: not UTF-8 text"),
+        }
+    })?;
+    let invalid = |reason: String, problem: Option<Problem>| {
+        // The line at fault, where one is (tobj does not say which).
+        let line = problem.and_then(|problem| locate(text, problem));
+        let reason = match line {
+            Some((number, text)) => format!("line {number} (`{}`): {reason}", shorten(text)),
+            None => reason,
+        };
+        ObjectError::MeshInvalid {
+            path: path.to_path_buf(),
+            reason,
+        }
     };
     // The update keeps this compiling when features of tobj enabled elsewhere add fields.
     #[allow(clippy::needless_update)]
@@ -38,15 +59,16 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<Triangle>, ObjectError
     let (models, _materials) = tobj::load_obj_buf(&mut &bytes[..], &options, |_| {
         Err(tobj::LoadError::OpenFileFailed)
     })
-    .map_err(|e| invalid(e.to_string()))?;
+    .map_err(|e| invalid(e.to_string(), Some(Problem::Load(e))))?;
     let mut triangles = Vec::new();
     for model in &models {
-        append_model(&model.mesh, &mut triangles).map_err(|reason| {
-            invalid(if model.name.is_empty() || model.name == "unnamed_object" {
+        append_model(&model.mesh, &mut triangles).map_err(|(reason, problem)| {
+            let reason = if model.name.is_empty() || model.name == "unnamed_object" {
                 reason
             } else {
                 format!("{reason} (in object `{}`)", model.name)
-            })
+            };
+            invalid(reason, problem)
         })?;
     }
     if triangles.is_empty() {
@@ -57,10 +79,23 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<Triangle>, ObjectError
     Ok(triangles)
 }
 
-/// Appends the triangles of one `tobj` mesh; the error says what is wrong.
-fn append_model(mesh: &tobj::Mesh, out: &mut Vec<Triangle>) -> Result<(), String> {
+/// A line of the file for an error message: trimmed, and cut after 60 characters.
+fn shorten(line: &str) -> String {
+    let line = line.trim();
+    match line.char_indices().nth(60) {
+        Some((end, _)) => format!("{}...", line[..end].trim_end()),
+        None => line.to_string(),
+    }
+}
+
+/// Appends the triangles of one `tobj` mesh; the error says what is wrong, and which
+/// problem of a line it is where it is one.
+fn append_model(
+    mesh: &tobj::Mesh,
+    out: &mut Vec<Triangle>,
+) -> Result<(), (String, Option<Problem>)> {
     if !mesh.positions.len().is_multiple_of(3) || !mesh.indices.len().is_multiple_of(3) {
-        return Err("the faces do not triangulate".into());
+        return Err(("the faces do not triangulate".into(), None));
     }
     let positions: Vec<Vec3> = mesh
         .positions
@@ -68,16 +103,24 @@ fn append_model(mesh: &tobj::Mesh, out: &mut Vec<Triangle>) -> Result<(), String
         .map(|p| Vec3::new(p[0], p[1], p[2]))
         .collect();
     if let Some(p) = positions.iter().find(|p| !p.is_finite()) {
-        return Err(format!("a vertex position is not finite: {p}"));
+        return Err((
+            format!("a vertex position is not finite: {p}"),
+            Some(Problem::NonFinitePosition),
+        ));
     }
-    let bad_index = |indices: &[u32], count: usize, what: &str| -> Result<(), String> {
-        match indices.iter().find(|&&i| i as usize >= count) {
-            Some(&i) => Err(format!(
+    // tobj checks the file's indices; these are of the mesh it made.
+    let bad_index = |indices: &[u32], count: usize, what: &str| match indices
+        .iter()
+        .find(|&&i| i as usize >= count)
+    {
+        Some(&i) => Err((
+            format!(
                 "a face refers to {what} {}, but there are only {count}",
                 i + 1
-            )),
-            None => Ok(()),
-        }
+            ),
+            None,
+        )),
+        None => Ok(()),
     };
     bad_index(&mesh.indices, positions.len(), "vertex")?;
     let file_normals = !mesh.normals.is_empty() && mesh.normal_indices.len() == mesh.indices.len();
@@ -187,19 +230,33 @@ mod tests {
         let e = parse("v 0 0 0\nv 1 0 0\nf 1 2 7\n").unwrap_err();
         assert_eq!(
             e.to_string(),
-            "the mesh `m.obj` is not a valid OBJ file: face vertex index out of bounds"
+            "the mesh `m.obj` is not a valid OBJ file: line 3 (`f 1 2 7`): face vertex index out of bounds"
         );
         let e = parse("# only points and lines\nv 0 0 0\nv 1 0 0\nl 1 2\np 1\n").unwrap_err();
         assert_eq!(e.to_string(), "the mesh `m.obj` has no triangles");
         let e = parse("v 0 nan 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap_err();
         assert_eq!(
             e.to_string(),
-            "the mesh `m.obj` is not a valid OBJ file: a vertex position is not finite: [0, NaN, 0]"
+            "the mesh `m.obj` is not a valid OBJ file: line 1 (`v 0 nan 0`): a vertex position is not finite: [0, NaN, 0]"
         );
-        let e = parse("v 0 zero 0\n").unwrap_err();
+        let e = parse("# a cube\nv 0 0 0\n\nv 0 zero 0\n").unwrap_err();
         assert_eq!(
             e.to_string(),
-            "the mesh `m.obj` is not a valid OBJ file: position parse error"
+            "the mesh `m.obj` is not a valid OBJ file: line 4 (`v 0 zero 0`): position parse error"
+        );
+        // A long line is cut.
+        let long = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3{}x\r\n", " 1".repeat(40));
+        assert_eq!(
+            parse(&long).unwrap_err().to_string(),
+            format!(
+                "the mesh `m.obj` is not a valid OBJ file: line 4 (`f 1 2 3{}...`): face parse error",
+                " 1".repeat(26)
+            )
+        );
+        let e = parse_obj(b"v 0 0 0\n# caf\xe9\n", Path::new("m.obj")).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "the mesh `m.obj` is not a valid OBJ file: line 2: not UTF-8 text"
         );
         let e = load_obj(Path::new("/nonexistent/relume/m.obj")).unwrap_err();
         assert_eq!(

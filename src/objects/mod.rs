@@ -44,6 +44,7 @@
 pub mod bvh;
 pub mod config;
 pub mod mesh;
+mod obj_lines;
 pub mod shapes;
 pub mod spec;
 

@@ -178,6 +178,32 @@ fn eval_scores_the_light_and_sampling_stages() {
     assert!(path["unbiased_p"].as_f64().unwrap() > 1e-3, "{path}");
 }
 
+/// A recording too short for frames 14 and 29 is scored on its last frame, not left
+/// without scores.
+#[test]
+fn eval_scores_a_short_recording_on_its_last_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    small_recording(tmp.path(), 4);
+    let p = pipeline("mixed-reality-sampling.toml");
+    let o = ok(run_in(
+        tmp.path(),
+        &[
+            "eval",
+            "s.relume",
+            "-p",
+            &p,
+            "--stage",
+            "sample.path",
+            "--json",
+        ],
+    ));
+    let report: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let path = &report["stages"]["sample.path"];
+    assert_eq!(path["frames_scored"], 1, "{path}");
+    let ratio_rmse = path["ratio_rmse"].as_f64().unwrap();
+    assert!(ratio_rmse > 0.0 && ratio_rmse < 0.3, "{path}");
+}
+
 #[test]
 fn sampling_products_are_identical_across_thread_counts() {
     let tmp = tempfile::tempdir().unwrap();

@@ -26,7 +26,8 @@ Scores (per stage, keyed by the stage's name):
   sample.path       ratio_rmse (E_RV/E_R vs a 1024-samples-per-pixel reference where a path
                     met an object), ratio_rmse_alternative (the other scheme, object-aware
                     on/off), unbiased_p (z-test of 8 more seeds vs the reference); scored on
-                    frames 14 and 29, each costing about 70 runs of the stage
+                    frames 14 and 29 (a replay with neither: its last frame), each
+                    costing about 70 runs of the stage
   filter.axis_aligned
                     mse_unfiltered, mse_filtered, mse_gaussian_same_radius (a plain image
                     Gaussian over the same window) against the same references, on the
@@ -94,6 +95,7 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     let options = EvalOptions {
         stages: a.stages.clone(),
         reference_stride: a.reference_stride,
+        frames: Some(loaded.frames.clone()),
     };
     let mut evaluator = Evaluator::new(&loaded.pipeline, header, a.run.seed, &options)
         .map_err(|e| anyhow::anyhow!("{}: {e}", loaded.pipeline.file))?;

@@ -1,7 +1,8 @@
 //! Scores of `filter.axis_aligned` against the 1024-sample reference layers that the
 //! evaluator's [`ReferenceSchedule`](super::sampling::ReferenceSchedule) computes on
-//! frames 14 and 29 (on every pixel, or on the lattice of `--reference-stride`: then
-//! every score below averages over the lattice).
+//! frames 14 and 29, or on the last frame of a replay without them (on every pixel, or
+//! on the lattice of `--reference-stride`: then every score below averages over the
+//! lattice).
 //!
 //! - `mse_unfiltered`, `mse_filtered`: mean squared error of the filter's input and
 //!   output layers against the reference, over the four layers, three channels and

@@ -64,6 +64,9 @@ pub struct EvalOptions {
     /// of this (1: every pixel; n: n^2 times less work, the scores then average over
     /// that lattice).
     pub reference_stride: u32,
+    /// The frames the run will replay (`None`: not known). They decide which frames get
+    /// references ([`sampling::scored_frames`]).
+    pub frames: Option<std::ops::Range<usize>>,
 }
 
 impl Default for EvalOptions {
@@ -71,6 +74,7 @@ impl Default for EvalOptions {
         EvalOptions {
             stages: Vec::new(),
             reference_stride: 1,
+            frames: None,
         }
     }
 }
@@ -192,9 +196,10 @@ impl Evaluator {
                 Scorer::Path(_) | Scorer::Filter(_) | Scorer::Composite(_)
             )
         });
-        let references = runner
-            .filter(|_| needs_references)
-            .map(|r| sampling::ReferenceSchedule::new(r, options.reference_stride));
+        let references = runner.filter(|_| needs_references).map(|r| {
+            let scored = sampling::scored_frames(options.frames.clone());
+            sampling::ReferenceSchedule::new(r, options.reference_stride, scored)
+        });
         Ok(Evaluator {
             scorers,
             references,

@@ -1,7 +1,8 @@
 //! Scores of `sample.path` against references computed with many more samples.
 //!
-//! On a scored frame (every [`SCORE_EVERY`]-th, at most [`MAX_SCORED_FRAMES`]) the
-//! evaluator re-runs the stage's own math on the frame's inputs:
+//! On a scored frame (every [`SCORE_EVERY`]-th, at most [`MAX_SCORED_FRAMES`]; the last
+//! frame of a replay that has none of those, see [`scored_frames`]) the evaluator
+//! re-runs the stage's own math on the frame's inputs:
 //! - a reference with 4 x 64 direct and 4 x 64 indirect samples per primary sample, from
 //!   four independent seeds (1024 samples per pixel and layer, 64 times the default),
 //!   on every pixel or on a lattice of them ([`ReferenceSchedule`]); the scores below
@@ -26,6 +27,7 @@ use crate::rng;
 use crate::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
 use glam::{Affine3A, Vec3};
 use serde_json::{Value, json};
+use std::ops::Range;
 use std::sync::Arc;
 
 /// Every how many frames `sample.path` is scored (frames 14, 29, ...: late enough that
@@ -199,33 +201,55 @@ impl ReferenceLayers {
     }
 }
 
-/// Which frames get a reference: every [`SCORE_EVERY`]-th (frames 14, 29, ...), at
-/// most [`MAX_SCORED_FRAMES`], each on the lattice of `stride` pixels.
+/// The frames of a replay of `frames` that get references: every [`SCORE_EVERY`]-th
+/// (14, 29, ...), at most [`MAX_SCORED_FRAMES`] of them; where the replay has none of
+/// those (a short recording, or a range between them), its last frame, so that the
+/// scores are never empty for want of a frame. `None` (not known) gives the rule alone:
+/// frames 14 and 29.
+pub fn scored_frames(frames: Option<Range<usize>>) -> Vec<usize> {
+    let Some(frames) = frames else {
+        return (1..=MAX_SCORED_FRAMES)
+            .map(|k| k * SCORE_EVERY - 1)
+            .collect();
+    };
+    let last = frames.end.checked_sub(1).filter(|&l| l >= frames.start);
+    let scored: Vec<usize> = frames
+        .filter(|f| f % SCORE_EVERY == SCORE_EVERY - 1)
+        .take(MAX_SCORED_FRAMES)
+        .collect();
+    if scored.is_empty() {
+        last.into_iter().collect()
+    } else {
+        scored
+    }
+}
+
+/// Which frames get a reference ([`scored_frames`]), each on the lattice of `stride`
+/// pixels.
 pub struct ReferenceSchedule {
     runner: PathRunner,
     stride: u32,
-    computed: usize,
+    scored: Vec<usize>,
 }
 
 impl ReferenceSchedule {
-    pub fn new(runner: PathRunner, stride: u32) -> ReferenceSchedule {
+    pub fn new(runner: PathRunner, stride: u32, scored: Vec<usize>) -> ReferenceSchedule {
         ReferenceSchedule {
             runner,
             stride: stride.max(1),
-            computed: 0,
+            scored,
         }
     }
 
     /// The reference layers of `frame` when it is a scored frame and holds the
     /// sampling's inputs, else `None`.
     pub fn reference(&mut self, frame: &Frame) -> Result<Option<Arc<ReferenceLayers>>, String> {
-        if self.computed >= MAX_SCORED_FRAMES || frame.index % SCORE_EVERY != SCORE_EVERY - 1 {
+        if !self.scored.contains(&frame.index) {
             return Ok(None);
         }
         let Some(reference) = ReferenceLayers::compute(&self.runner, frame, self.stride) else {
             return Ok(None);
         };
-        self.computed += 1;
         Ok(Some(Arc::new(reference?)))
     }
 }
@@ -374,7 +398,20 @@ impl PathScorer {
 
 #[cfg(test)]
 mod tests {
-    use super::two_sided_p;
+    use super::{scored_frames, two_sided_p};
+
+    #[test]
+    fn frames_14_and_29_are_scored_else_the_last() {
+        assert_eq!(scored_frames(Some(0..30)), [14, 29]);
+        assert_eq!(scored_frames(Some(0..100)), [14, 29]);
+        assert_eq!(scored_frames(Some(20..50)), [29, 44]);
+        assert_eq!(scored_frames(Some(0..15)), [14]);
+        // None of them in the replay: its last frame.
+        assert_eq!(scored_frames(Some(0..6)), [5]);
+        assert_eq!(scored_frames(Some(15..29)), [28]);
+        assert_eq!(scored_frames(Some(3..3)), [] as [usize; 0]);
+        assert_eq!(scored_frames(None), [14, 29]);
+    }
 
     #[test]
     fn p_values_of_the_normal_distribution() {

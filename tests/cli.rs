@@ -182,6 +182,48 @@ fn bench_reports_stage_medians_as_json() {
     );
 }
 
+/// `--isolated` runs one frame at a time: two stages of 20 ms each then take at least
+/// 40 ms a frame together (pipelined they would overlap).
+#[test]
+fn bench_isolated_runs_one_frame_at_a_time() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 6);
+    let pipeline = "[[stage]]\nname = \"a\"\nkind = \"debug.sleep\"\nparams = { ms = 20.0 }\n\
+                    [[stage]]\nname = \"b\"\nkind = \"debug.sleep\"\nparams = { ms = 20.0 }\n";
+    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    let args = [
+        "bench",
+        "small.relume",
+        "-p",
+        "p.toml",
+        "--repeat",
+        "1",
+        "--json",
+    ];
+    let o = ok(run_in(d, &[&args[..], &["--isolated"]].concat()));
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(doc["isolated"], true);
+    for stage in ["a", "b"] {
+        assert!(
+            doc["stages"][stage]["median_ms"].as_f64().unwrap() >= 20.0,
+            "{doc}"
+        );
+    }
+    let fps = doc["fps"].as_f64().unwrap();
+    assert!(fps > 0.0 && fps < 25.0, "{fps} frames/s");
+    let o = ok(run_in(d, &args));
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(doc["isolated"], false);
+    // The table says what pipelined stage times hold.
+    let o = ok(run_in(d, &args[..args.len() - 1]));
+    assert!(
+        stdout(&o).contains("--isolated times each stage alone"),
+        "{}",
+        stdout(&o)
+    );
+}
+
 #[test]
 fn ctrl_c_stops_after_the_frames_in_flight_and_keeps_complete_outputs() {
     let tmp = tempfile::tempdir().unwrap();

@@ -13,10 +13,12 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::time::Duration;
 
-/// Frames with no products, counting how many were read.
+/// Frames with no products, counting how many were read; the frames in `corrupt` fail
+/// to read.
 struct CountingSource {
     frames: usize,
     read: AtomicUsize,
+    corrupt: Vec<usize>,
 }
 
 impl CountingSource {
@@ -24,6 +26,7 @@ impl CountingSource {
         CountingSource {
             frames,
             read: AtomicUsize::new(0),
+            corrupt: Vec::new(),
         }
     }
 }
@@ -34,6 +37,13 @@ impl FrameSource for CountingSource {
     }
 
     fn read(&self, n: usize) -> Result<Frame, RecordingError> {
+        if self.corrupt.contains(&n) {
+            return Err(RecordingError::Corrupt {
+                path: "test".into(),
+                offset: n as u64,
+                reason: "made corrupt by the test".into(),
+            });
+        }
         self.read.fetch_add(1, Ordering::SeqCst);
         Ok(Frame::new(n, n as i64 * 1_000_000))
     }
@@ -404,6 +414,81 @@ fn a_stop_request_ends_after_the_frames_in_flight() {
         (0..n).collect::<Vec<_>>(),
         "complete frames only, in order"
     );
+}
+
+const THREE_STAGES: &str = r#"
+[[stage]]
+kind = "test.index"
+outputs = { value = "input" }
+[[stage]]
+kind = "test.copy"
+params = { sleep_ms = 1.0 }
+[[stage]]
+kind = "debug.noop"
+"#;
+
+/// Lockstep: one frame in the pipeline at a time, so no two stages (nor the source)
+/// ever process at once, and every frame still arrives, in order.
+#[test]
+fn lockstep_runs_one_frame_at_a_time() {
+    let frames = 20;
+    let options = RunOptions {
+        lockstep: true,
+        ..Default::default()
+    };
+    let out = run_with_timeout(
+        pipeline(THREE_STAGES),
+        Arc::new(CountingSource::new(frames)),
+        options,
+        None,
+    );
+    let report = out.result.expect("the run succeeds");
+    let indices: Vec<usize> = out.frames.iter().map(|f| f.index).collect();
+    assert_eq!(indices, (0..frames).collect::<Vec<_>>());
+    assert_eq!(out.max_in_flight, 0, "read only after the last frame left");
+    let mut intervals: Vec<(u64, u64, &str)> = report
+        .stages
+        .iter()
+        .flat_map(|s| {
+            let name = s.name.as_str();
+            s.frames
+                .iter()
+                .map(move |f| (f.start_ns, f.start_ns + f.process_ns, name))
+        })
+        .collect();
+    assert_eq!(intervals.len(), 4 * frames, "the source and three stages");
+    intervals.sort();
+    for pair in intervals.windows(2) {
+        assert!(pair[1].0 >= pair[0].1, "{pair:?} overlap");
+    }
+}
+
+/// Lockstep ends cleanly when frames are skipped (the source keeps its turn) and when a
+/// stage fails (the source waiting for its turn is let go).
+#[test]
+fn lockstep_survives_skipped_frames_and_failures() {
+    let options = || RunOptions {
+        lockstep: true,
+        skip_corrupt: true,
+        ..Default::default()
+    };
+    let source = CountingSource {
+        corrupt: vec![3, 4, 9],
+        ..CountingSource::new(10)
+    };
+    let out = run_with_timeout(pipeline(THREE_STAGES), Arc::new(source), options(), None);
+    let report = out.result.expect("the run succeeds");
+    let indices: Vec<usize> = out.frames.iter().map(|f| f.index).collect();
+    assert_eq!(indices, vec![0, 1, 2, 5, 6, 7, 8]);
+    assert_eq!(report.skipped_corrupt.len(), 3);
+    let p = pipeline(&FOUR_STAGES_FAILING_AT_5.replace("MODE", "error"));
+    let out = run_with_timeout(p, Arc::new(CountingSource::new(40)), options(), None);
+    let failure = out.result.expect_err("the run fails");
+    assert!(matches!(
+        failure.error,
+        PipelineError::Stage { frame: 5, .. }
+    ));
+    assert_eq!(out.frames.len(), 5);
 }
 
 #[test]

@@ -113,14 +113,21 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     let stop = stop_on_interrupt();
     let bar = progress::bar(loaded.frames.len() as u64, "evaluating");
     let mut truth_error = None;
-    let result = loaded.run_once(&out_dir, a.run.seed, a.run.skip_corrupt, &stop, &mut |f| {
-        bar.inc(1);
-        if truth_error.is_none()
-            && let Err(e) = evaluator.observe(&f)
-        {
-            truth_error = Some(e);
-        }
-    });
+    let result = loaded.run_once(
+        &out_dir,
+        a.run.seed,
+        a.run.skip_corrupt,
+        false,
+        &stop,
+        &mut |f| {
+            bar.inc(1);
+            if truth_error.is_none()
+                && let Err(e) = evaluator.observe(&f)
+            {
+                truth_error = Some(e);
+            }
+        },
+    );
     bar.finish_and_clear();
     let _ = std::fs::remove_dir_all(&scratch);
     let path = loaded.replay.recording.path().display().to_string();

@@ -19,6 +19,7 @@ macro_rules! out {
     };
 }
 
+mod bench;
 mod catalog;
 mod eval;
 mod inspect;
@@ -60,7 +61,7 @@ enum Command {
     /// Run a pipeline and score its stages against the recording's ground truth.
     Eval(eval::EvalArgs),
     /// Benchmark each stage of a pipeline: medians over repeated runs after a warm-up.
-    Bench(replay::BenchArgs),
+    Bench(bench::BenchArgs),
     /// List every stage kind with its inputs, outputs and parameters.
     Stages(catalog::StagesArgs),
     /// Check a pipeline file without running it.
@@ -135,7 +136,7 @@ pub fn main() -> anyhow::Result<i32> {
         Command::Inspect(a) => inspect::inspect(a),
         Command::Replay(a) => replay::replay(a),
         Command::Eval(a) => eval::eval(a),
-        Command::Bench(a) => replay::bench(a),
+        Command::Bench(a) => bench::bench(a),
         Command::Stages(a) => catalog::stages(a),
         Command::Validate(a) => catalog::validate(a),
     }

@@ -4,7 +4,7 @@ use super::{default_recording_path, produce, progress};
 use anyhow::{Context, bail};
 use clap::{Args, Parser};
 use relume::graph::{
-    Frame, Pipeline, Product, ProductKind, Registry, RunFailure, RunOptions, RunReport, Stats, run,
+    Frame, Pipeline, Product, ProductKind, Registry, RunFailure, RunOptions, RunReport, run,
 };
 use relume::recording::writer::{output_target, write_file_atomic};
 use relume::recording::{Replay, ReplayOptions};
@@ -65,18 +65,6 @@ pub struct ReplayArgs {
     /// (opens in MeshLab or CloudCompare).
     #[arg(long, value_name = "FILE.ply")]
     export_cloud: Option<PathBuf>,
-}
-
-#[derive(Args, Debug)]
-pub struct BenchArgs {
-    #[command(flatten)]
-    run: RunArgs,
-    /// Measured runs (after one warm-up run).
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
-    repeat: u32,
-    /// Print JSON: stages.<name>.{median_ms, p95_ms, max_ms}, fps.
-    #[arg(long)]
-    json: bool,
 }
 
 fn parse_frames(text: &str) -> Result<Range<usize>, String> {
@@ -165,11 +153,14 @@ pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
 }
 
 impl Loaded {
+    /// Builds the stages and runs them once over the frames (`lockstep`: one frame at a
+    /// time, see [`RunOptions::lockstep`]).
     pub(super) fn run_once(
         &self,
         out_dir: &Path,
         seed: u64,
         skip_corrupt: bool,
+        lockstep: bool,
         stop: &Arc<AtomicBool>,
         sink: &mut dyn FnMut(Frame),
     ) -> Result<RunReport, Box<RunFailure>> {
@@ -196,6 +187,7 @@ impl Loaded {
             frames: self.frames.clone(),
             skip_corrupt,
             stop: stop.clone(),
+            lockstep,
         };
         run(&self.pipeline, stages, &self.replay, &options, sink)
     }
@@ -302,7 +294,14 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             }
         }
     };
-    let result = loaded.run_once(&a.out, a.run.seed, a.run.skip_corrupt, &stop, &mut sink);
+    let result = loaded.run_once(
+        &a.out,
+        a.run.seed,
+        a.run.skip_corrupt,
+        false,
+        &stop,
+        &mut sink,
+    );
     bar.finish_and_clear();
     let (report, failure) = match result {
         Ok(r) => (r, None),
@@ -443,101 +442,6 @@ fn save_products(
         })
         .collect::<Result<(), _>>()?;
     Ok(())
-}
-
-pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
-    let loaded = load(&a.run)?;
-    let stop = stop_on_interrupt();
-    let scratch = std::env::temp_dir().join(format!("relume-bench-{}", std::process::id()));
-    let result = (|| -> anyhow::Result<Vec<RunReport>> {
-        let mut reports = Vec::new();
-        let bar = progress::bar(a.repeat as u64 + 1, "bench");
-        for i in 0..=a.repeat {
-            let report = loaded
-                .run_once(&scratch, a.run.seed, a.run.skip_corrupt, &stop, &mut |_| {})
-                .map_err(|f| anyhow::Error::new(f.error))?;
-            if i > 0 {
-                reports.push(report); // run 0 warms caches and page-ins
-            }
-            bar.inc(1);
-            if stop.load(Ordering::Relaxed) {
-                break;
-            }
-        }
-        bar.finish_and_clear();
-        Ok(reports)
-    })();
-    let _ = std::fs::remove_dir_all(&scratch);
-    let reports = result?;
-    if reports.is_empty() {
-        bail!("interrupted before a measured run");
-    }
-    some_frame_replayed(&loaded, &reports[0])?;
-    let names: Vec<(String, String)> = reports[0]
-        .stages
-        .iter()
-        .map(|s| (s.name.clone(), s.kind.clone()))
-        .collect();
-    let per_stage: Vec<Stats> = (0..names.len())
-        .map(|i| {
-            Stats::of(
-                reports
-                    .iter()
-                    .flat_map(|r| r.stages[i].frames.iter().map(|f| f.process_ns)),
-            )
-        })
-        .collect();
-    let mut fps: Vec<f64> = reports.iter().map(|r| r.fps()).collect();
-    fps.sort_by(f64::total_cmp);
-    let median_fps = fps[fps.len() / 2];
-    let frames = reports[0].frames_out;
-    if a.json {
-        let stages: serde_json::Map<String, serde_json::Value> = names.iter().zip(&per_stage).map(|((n, k), s)| (n.clone(), serde_json::json!({ "kind": k, "median_ms": s.median_ms, "p95_ms": s.p95_ms, "max_ms": s.max_ms }))).collect();
-        let doc = serde_json::json!({ "pipeline": loaded.pipeline.name, "recording": loaded.replay.recording.path().display().to_string(), "frames": frames, "repeat": reports.len(), "stages": stages, "fps": median_fps });
-        outln!("{}", serde_json::to_string_pretty(&doc)?)?;
-    } else {
-        let width = names
-            .iter()
-            .map(|(n, k)| n.len().max(k.len()))
-            .max()
-            .unwrap_or(5)
-            .max(5);
-        outln!(
-            "{} on {}: {} frames x {} runs (after 1 warm-up)",
-            loaded.pipeline.name,
-            loaded.replay.recording.path().display(),
-            frames,
-            reports.len()
-        )?;
-        outln!(
-            "{:<width$}  {:<width$}  {:>9}  {:>9}  {:>9}  {:>10}",
-            "stage",
-            "kind",
-            "median ms",
-            "p95 ms",
-            "max ms",
-            "frames/s"
-        )?;
-        for ((n, k), s) in names.iter().zip(&per_stage) {
-            let rate = if s.median_ms > 0.0 {
-                1e3 / s.median_ms
-            } else {
-                f64::INFINITY
-            };
-            outln!(
-                "{n:<width$}  {k:<width$}  {:>9.3}  {:>9.3}  {:>9.3}  {:>10.1}",
-                s.median_ms,
-                s.p95_ms,
-                s.max_ms,
-                rate
-            )?;
-        }
-        outln!(
-            "end to end: {median_fps:.1} frames/s (median of {} runs)",
-            reports.len()
-        )?;
-    }
-    Ok(0)
 }
 
 #[cfg(test)]

@@ -116,6 +116,11 @@ pub struct RunOptions {
     pub skip_corrupt: bool,
     /// Set to stop after the frames in flight (Ctrl-C).
     pub stop: Arc<AtomicBool>,
+    /// One frame in the pipeline at a time: the source reads the next frame only after
+    /// the sink has the last one, so no two stages run at once and each stage's
+    /// `process_ns` is its own work, not time spent waiting for cores that other stages
+    /// hold. Throughput drops to one over the sum of the stages.
+    pub lockstep: bool,
 }
 
 impl Default for RunOptions {
@@ -124,6 +129,7 @@ impl Default for RunOptions {
             frames: 0..usize::MAX,
             skip_corrupt: false,
             stop: Arc::new(AtomicBool::new(false)),
+            lockstep: false,
         }
     }
 }
@@ -195,6 +201,18 @@ pub fn run(
             .push((format!("{}{PREVIOUS_SUFFIX}", fb.product), rx));
     }
 
+    // Lockstep: the source takes a token before each frame it sends; the sink gives one
+    // back for each frame it gets. Dropping the sender (when the sink is done) frees a
+    // source that waits.
+    let (token_tx, token_rx) = match options.lockstep {
+        true => {
+            let (tx, rx) = bounded::<()>(1);
+            tx.send(()).expect("the receiver is alive");
+            (Some(tx), Some(rx))
+        }
+        false => (None, None),
+    };
+
     let t0 = Instant::now();
     let mut report = RunReport::default();
     let mut latencies = Vec::new();
@@ -207,7 +225,7 @@ pub fn run(
                     source,
                     frames,
                     options,
-                    source_tx,
+                    (source_tx, token_rx),
                     t0,
                     &record_error,
                     &skipped,
@@ -234,7 +252,12 @@ pub fn run(
             last_index = Some(frame.index);
             latencies.push(frame.entered.elapsed().as_nanos() as u64);
             sink(frame);
+            if let Some(tokens) = &token_tx {
+                // Fails only when the source has ended.
+                let _ = tokens.send(());
+            }
         }
+        drop(token_tx);
         let (source_timing, was_interrupted) = source_handle
             .join()
             .expect("the source thread catches its panics");
@@ -264,13 +287,24 @@ fn source_loop(
     source: &dyn FrameSource,
     frames: Range<usize>,
     options: &RunOptions,
-    output: Sender<Frame>,
+    (output, tokens): (Sender<Frame>, Option<Receiver<()>>),
     t0: Instant,
     record_error: &dyn Fn(PipelineError),
     skipped: &Mutex<Vec<(usize, String)>>,
 ) -> (StageTimings, bool) {
     let mut timings = StageTimings::new("source", "read");
+    // In lockstep, whether the source holds the token for its next frame (it keeps it
+    // over a skipped frame).
+    let mut holding = false;
     for n in frames {
+        if let Some(tokens) = &tokens
+            && !holding
+        {
+            if tokens.recv().is_err() {
+                break; // the sink is done: downstream stopped on an error
+            }
+            holding = true;
+        }
         if options.stop.load(Ordering::Relaxed) {
             return (timings, true);
         }
@@ -302,6 +336,7 @@ fn source_loop(
             }
         };
         let processed = Instant::now();
+        holding = false;
         if output.send(frame).is_err() {
             break; // downstream stopped on an error
         }

@@ -1,0 +1,156 @@
+//! `relume bench`: per-stage medians and the end-to-end rate over repeated runs.
+
+use super::progress;
+use super::replay::{RunArgs, load, some_frame_replayed, stop_on_interrupt};
+use anyhow::bail;
+use clap::Args;
+use relume::graph::{RunReport, Stats};
+use std::sync::atomic::Ordering;
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    #[command(flatten)]
+    run: RunArgs,
+    /// Measured runs (after one warm-up run).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
+    repeat: u32,
+    /// Run one frame at a time, so that each stage's time is its own work. By default
+    /// the stages run at once on different frames, as in `replay`: the end-to-end rate is
+    /// the real one, but a stage's time also holds the time it waited for cores that
+    /// other stages (sample.path's threads, say) were using.
+    #[arg(long)]
+    isolated: bool,
+    /// Print JSON: stages.<name>.{median_ms, p95_ms, max_ms}, fps, isolated.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
+    let loaded = load(&a.run)?;
+    let stop = stop_on_interrupt();
+    let scratch = std::env::temp_dir().join(format!("relume-bench-{}", std::process::id()));
+    let (seed, skip_corrupt) = (a.run.seed, a.run.skip_corrupt);
+    let result = (|| -> anyhow::Result<Vec<RunReport>> {
+        let mut reports = Vec::new();
+        let bar = progress::bar(a.repeat as u64 + 1, "bench");
+        for i in 0..=a.repeat {
+            let report = loaded
+                .run_once(&scratch, seed, skip_corrupt, a.isolated, &stop, &mut |_| {})
+                .map_err(|f| anyhow::Error::new(f.error))?;
+            if i > 0 {
+                reports.push(report); // run 0 warms caches and page-ins
+            }
+            bar.inc(1);
+            if stop.load(Ordering::Relaxed) {
+                break;
+            }
+        }
+        bar.finish_and_clear();
+        Ok(reports)
+    })();
+    let _ = std::fs::remove_dir_all(&scratch);
+    let reports = result?;
+    if reports.is_empty() {
+        bail!("interrupted before a measured run");
+    }
+    some_frame_replayed(&loaded, &reports[0])?;
+    let names: Vec<(String, String)> = reports[0]
+        .stages
+        .iter()
+        .map(|s| (s.name.clone(), s.kind.clone()))
+        .collect();
+    let per_stage: Vec<Stats> = (0..names.len())
+        .map(|i| {
+            Stats::of(
+                reports
+                    .iter()
+                    .flat_map(|r| r.stages[i].frames.iter().map(|f| f.process_ns)),
+            )
+        })
+        .collect();
+    let mut fps: Vec<f64> = reports.iter().map(|r| r.fps()).collect();
+    fps.sort_by(f64::total_cmp);
+    let median_fps = fps[fps.len() / 2];
+    let frames = reports[0].frames_out;
+    if a.json {
+        let stages: serde_json::Map<String, serde_json::Value> = names
+            .iter()
+            .zip(&per_stage)
+            .map(|((n, k), s)| {
+                let timing = serde_json::json!({
+                    "kind": k,
+                    "median_ms": s.median_ms,
+                    "p95_ms": s.p95_ms,
+                    "max_ms": s.max_ms,
+                });
+                (n.clone(), timing)
+            })
+            .collect();
+        let doc = serde_json::json!({
+            "pipeline": loaded.pipeline.name,
+            "recording": loaded.replay.recording.path().display().to_string(),
+            "frames": frames,
+            "repeat": reports.len(),
+            "isolated": a.isolated,
+            "stages": stages,
+            "fps": median_fps,
+        });
+        outln!("{}", serde_json::to_string_pretty(&doc)?)?;
+        return Ok(0);
+    }
+    let width = names
+        .iter()
+        .map(|(n, k)| n.len().max(k.len()))
+        .max()
+        .unwrap_or(5)
+        .max(5);
+    outln!(
+        "{} on {}: {} frames x {} runs (after 1 warm-up){}",
+        loaded.pipeline.name,
+        loaded.replay.recording.path().display(),
+        frames,
+        reports.len(),
+        if a.isolated {
+            ", one frame at a time"
+        } else {
+            ""
+        }
+    )?;
+    outln!(
+        "{:<width$}  {:<width$}  {:>9}  {:>9}  {:>9}  {:>10}",
+        "stage",
+        "kind",
+        "median ms",
+        "p95 ms",
+        "max ms",
+        "frames/s"
+    )?;
+    for ((n, k), s) in names.iter().zip(&per_stage) {
+        let rate = if s.median_ms > 0.0 {
+            1e3 / s.median_ms
+        } else {
+            f64::INFINITY
+        };
+        outln!(
+            "{n:<width$}  {k:<width$}  {:>9.3}  {:>9.3}  {:>9.3}  {:>10.1}",
+            s.median_ms,
+            s.p95_ms,
+            s.max_ms,
+            rate
+        )?;
+    }
+    if a.isolated {
+        outln!(
+            "end to end: {median_fps:.1} frames/s one frame at a time (median of {} runs); \
+             without --isolated the stages overlap",
+            reports.len()
+        )?;
+    } else {
+        outln!(
+            "end to end: {median_fps:.1} frames/s (median of {} runs); stage times include \
+             waiting for cores that other stages hold: --isolated times each stage alone",
+            reports.len()
+        )?;
+    }
+    Ok(0)
+}

@@ -148,6 +148,11 @@ impl Lanes for Avx2 {
         })
     }
     #[inline(always)]
+    fn permute(self, index: Self) -> Self {
+        // vpermps reads the low three bits of each index.
+        Avx2(unsafe { _mm256_permutevar8x32_ps(self.0, _mm256_castps_si256(index.0)) })
+    }
+    #[inline(always)]
     fn any(self) -> bool {
         unsafe { _mm256_movemask_ps(self.0) != 0 }
     }

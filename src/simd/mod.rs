@@ -130,6 +130,14 @@ pub trait Lanes: Copy {
     /// The lanes rotated up by `r` (0 <= r < 8): lane (l + r) mod 8 of the result is
     /// lane l of `self`.
     fn rotate_up(self, r: usize) -> Self;
+    /// Lane l of the result is lane `i & 7` of `self`, where i is lane l of `index` read
+    /// as the bits of an integer ([`Lanes::lane_indices`] makes them).
+    fn permute(self, index: Self) -> Self;
+    /// Eight lane indices for [`Lanes::permute`], each in its lane's bits.
+    #[inline(always)]
+    fn lane_indices(index: [u32; LANES]) -> Self {
+        Self::from_array(index.map(f32::from_bits))
+    }
     /// Three planes interleaved: lane j of result r is lane (8 r + j) / 3 of plane
     /// (8 r + j) % 3, so that the three results are eight (x, y, z) triples in a row.
     fn interleave3(planes: [Self; 3]) -> [Self; 3];
@@ -312,6 +320,12 @@ impl Lanes for Portable {
     #[inline(always)]
     fn rotate_up(self, r: usize) -> Self {
         Portable(std::array::from_fn(|l| self.0[(l + LANES - r) % LANES]))
+    }
+    #[inline(always)]
+    fn permute(self, index: Self) -> Self {
+        Portable(std::array::from_fn(|l| {
+            self.0[index.0[l].to_bits() as usize % LANES]
+        }))
     }
     #[inline(always)]
     fn interleave3(planes: [Self; 3]) -> [Self; 3] {

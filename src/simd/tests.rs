@@ -42,6 +42,35 @@ fn check_rotate_up_avx2() {
     check_rotate_up::<Avx2>("Avx2");
 }
 
+fn check_permute<V: Lanes>(name: &str) {
+    let v = rows::<V>()[3];
+    for index in [
+        [0, 1, 2, 3, 4, 5, 6, 7],
+        [7, 6, 5, 4, 3, 2, 1, 0],
+        [3, 3, 0, 9, 15, 8, 1, 2],
+    ] {
+        let expected: [f32; LANES] = std::array::from_fn(|l| (30 + index[l] % 8) as f32);
+        let got = v.permute(V::lane_indices(index)).to_array();
+        assert_eq!(got, expected, "{name}, {index:?}");
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn check_permute_avx2() {
+    check_permute::<Avx2>("Avx2");
+}
+
+#[test]
+fn permute_picks_lane_index_mod_8() {
+    check_permute::<Portable>("Portable");
+    #[cfg(target_arch = "x86_64")]
+    if Kernel::detect() == Kernel::Avx2Fma {
+        // SAFETY: the CPU has AVX2 and FMA.
+        unsafe { check_permute_avx2() };
+    }
+}
+
 #[test]
 fn rotate_up_moves_lane_l_to_lane_l_plus_r() {
     check_rotate_up::<Portable>("Portable");

@@ -8,7 +8,9 @@
 //! through a [`Window`]: per tap, one vector per plane, read by a [`Fetch`]: one load
 //! ([`Contiguous`]: the X and Y passes, and the temporal taps when the eight targets
 //! found their previous pixels at one offset that is a multiple of 8), two blended
-//! loads ([`Straddling`]: any other common offset) or gathered per lane ([`Gathered`]).
+//! loads ([`Straddling`]: any other common offset), two permuted loads per line
+//! ([`Permuted`]: different offsets, within two blocks and three lines) or gathered per
+//! lane ([`Gathered`]: the rest).
 
 use crate::simd::{LANES, Lanes};
 
@@ -122,6 +124,57 @@ impl<V: Lanes> Fetch<V> for Straddling<V> {
             let first = V::load(p);
             let second = V::load(p.wrapping_offset(self.second));
             V::select(self.mask, second, first)
+        }
+    }
+}
+
+/// Most lines a [`Permuted`] fetch reads per tap.
+pub const PERMUTED_LINES: usize = 3;
+
+/// Lanes whose taps lie in two consecutive blocks of a blocks set (see `passes`), on
+/// `K` different lines (the temporal taps of targets whose previous pixels are at
+/// different offsets): per line, the two blocks' vectors are loaded and each lane's
+/// float picked out by a permutation; the lines' picks are merged by lane. A handful
+/// of register operations where a gather costs some ten cycles on the CPUs measured.
+#[derive(Clone, Copy)]
+pub struct Permuted<V, const K: usize> {
+    /// Per lane, its float's lane within its block ([`Lanes::lane_indices`]).
+    pub index: V,
+    /// The lanes that read the second block.
+    pub second: V,
+    /// Floats from a block to the next.
+    pub block_step: isize,
+    /// Per line: floats from the window's base to the line, and its lanes (line 0's
+    /// mask is unused: the lanes of no other line read it).
+    pub lines: [(isize, V); K],
+}
+
+impl<V: Lanes, const K: usize> Permuted<V, K> {
+    /// The lanes' floats of the line at `p`.
+    ///
+    /// # Safety
+    /// `p..p + 8` and the same in the next block must be readable.
+    #[inline(always)]
+    unsafe fn pick(&self, p: *const f32) -> V {
+        // SAFETY (both loads): forwarded from the caller.
+        unsafe {
+            let first = V::load(p).permute(self.index);
+            let second = V::load(p.wrapping_offset(self.block_step)).permute(self.index);
+            V::select(self.second, second, first)
+        }
+    }
+}
+
+impl<V: Lanes, const K: usize> Fetch<V> for Permuted<V, K> {
+    #[inline(always)]
+    unsafe fn fetch(&self, p: *const f32) -> V {
+        // SAFETY (every pick): forwarded from the caller, for each line.
+        unsafe {
+            let mut v = self.pick(p.wrapping_offset(self.lines[0].0));
+            for &(offset, lanes) in &self.lines[1..] {
+                v = V::select(lanes, self.pick(p.wrapping_offset(offset)), v);
+            }
+            v
         }
     }
 }

@@ -43,10 +43,13 @@
 //! CPU has them (a portable kernel with the same bits elsewhere, [`crate::simd`]), from
 //! lane-interleaved planes ([`lane_planes`]) in which every spatial tap of the eight
 //! targets is one aligned load per plane: the X pass eight pixels S apart in a row
-//! (pixels l S + j, S = 80 at 640 wide), the Y pass eight neighbours in a row (pixels 8 n + l), walking down
-//! the image. The temporal taps are one aligned load per plane too where the eight
-//! targets found their previous pixels at one offset that is a multiple of 8, two
-//! blended loads at any other common offset, and gathered per lane elsewhere. No tap
+//! (pixels l S + j, S = 80 at 640 wide), the Y pass eight neighbours in a row (pixels
+//! 8 n + l), walking down the image. The temporal taps are one aligned load per plane
+//! too where the eight targets found their previous pixels at one offset that is a
+//! multiple of 8, two blended loads at any other common offset, two permuted loads per
+//! line where the offsets differ but the previous pixels lie in two neighbouring blocks
+//! and on at most three lines (most groups under a moving camera), and gathered per
+//! lane elsewhere (see `passes`). No tap
 //! cutting: at R = 15 and 640x480 a weight falls below e^-14 inside the window only
 //! where B exceeds ~60 per metre (occluders nearer than ~8 cm), so a per-pixel radius
 //! bound would rarely help.

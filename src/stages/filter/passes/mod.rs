@@ -22,6 +22,7 @@
 //! same bits. The lane operations are never called from closures: closures do not
 //! inherit `#[target_feature]`, and their lane operations would not be inlined.
 
+mod taps;
 mod x;
 mod y;
 

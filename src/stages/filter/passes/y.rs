@@ -9,12 +9,12 @@
 
 use super::super::MAX_RADIUS;
 use super::super::gaussian::{
-    Bandwidths, Contiguous, EXP_CUTOFF, Fetch, Gathered, MAX_TAPS, Straddling, TapWeights,
-    VALUE_PLANES, Window, accumulate, tap_weights,
+    Bandwidths, Contiguous, Fetch, MAX_TAPS, TapWeights, VALUE_PLANES, Window, accumulate,
+    tap_weights,
 };
 use super::super::lane_planes::{LanePlanes, Order};
 use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ};
-use super::super::temporal::find_previous_lanes;
+use super::taps::{TemporalTaps, temporal_taps};
 use super::{PairRing, Previous, group_kinds};
 use crate::raster::Vec3Image;
 use crate::simd::{Kernel, LANES, Lanes, Portable};
@@ -246,6 +246,11 @@ fn y_group<V: Lanes>(
                     rotated.add(&straddling, &window, limit.rotate_up(r), weights, &mut sums);
                     rotate_sums(&mut sums, LANES - r);
                 }
+                TemporalTaps::Permuted(window, permuted, limit) => match permuted.count() {
+                    1 => group.add(&permuted.fetch::<1>(), &window, limit, weights, &mut sums),
+                    2 => group.add(&permuted.fetch::<2>(), &window, limit, weights, &mut sums),
+                    _ => group.add(&permuted.fetch::<3>(), &window, limit, weights, &mut sums),
+                },
                 TemporalTaps::Gathered(window, g, limit) => {
                     group.add(&g, &window, limit, weights, &mut sums)
                 }
@@ -320,106 +325,4 @@ impl<V: Lanes> GroupTaps<V> {
             }
         }
     }
-}
-
-/// How the temporal taps of a group are read.
-enum TemporalTaps<V> {
-    /// No lane has a previous pixel.
-    None,
-    /// Every lane's previous pixel at the same offset from its target, a multiple of
-    /// 8: one window of aligned vectors, lane for lane.
-    Contiguous(Window, V),
-    /// Every lane's previous pixel at the same offset, 8 b + r from the block's start
-    /// with 0 < r < 8: target lane l's source is lane (l + r) mod 8 of block b (l + r
-    /// < 8) or b + 1. With the targets rotated up by r (positions, bandwidths, limits,
-    /// sums), each lane reads its own lane of one of two windows ([`Straddling`]).
-    Rotated(Window, Straddling<V>, V, usize),
-    /// Different offsets: gathered lane by lane.
-    Gathered(Window, Gathered, V),
-}
-
-/// The temporal taps (eq. 26) of pixels (x0 + l, y): the window over the previous
-/// frame's X set around each lane's previous pixel (x', y') ([`find_previous_lanes`]),
-/// along its column (lines y' - R..=y' + R), and how to read it.
-#[inline(always)]
-fn temporal_taps<V: Lanes>(
-    previous: Previous,
-    position: [V; 3],
-    valid: &[[V; 2]; 2],
-    x0: usize,
-    y: usize,
-    radius: usize,
-) -> TemporalTaps<V> {
-    let valid = [
-        valid[0][0].to_array(),
-        valid[0][1].to_array(),
-        valid[1][0].to_array(),
-        valid[1][1].to_array(),
-    ];
-    let x_set = previous.x_set;
-    let active: [bool; LANES] =
-        std::array::from_fn(|l| x0 + l < x_set.width && valid.iter().any(|a| a[l] > 0.0));
-    let found = find_previous_lanes(position, active, previous.view, x_set);
-    if found.iter().all(Option::is_none) {
-        return TemporalTaps::None;
-    }
-    // The lanes' common offset (dx, dy), if they have one.
-    let mut common = None;
-    for (l, f) in found.iter().enumerate() {
-        let Some((xp, yp)) = *f else { continue };
-        let offset = (xp as isize - (x0 + l) as isize, yp as isize - y as isize);
-        match common {
-            None => common = Some(offset),
-            Some(c) if c == offset => {}
-            Some(_) => {
-                common = None;
-                break;
-            }
-        }
-    }
-    let limit = V::from_array(found.map(|f| if f.is_some() { EXP_CUTOFF } else { -1.0 }));
-    let (data, s, step) = (x_set.data(), x_set.plane_stride(), x_set.line_step());
-    let taps = 2 * radius + 1;
-    if let Some((dx, dy)) = common {
-        // Pixels x0 + dx.. of lines y + dy - R..=y + dy + R: x0 + dx >= -7 (some lane's
-        // x0 + l + dx is a pixel), so blocks -1..=slots, inside the set with its block
-        // of zeros on each side; y + dy inside the image, so the lines are inside the
-        // set (`fits_lines`). Lanes without a previous pixel read the same windows, with
-        // no weight.
-        let x = x0 as isize + dx;
-        let (b, r) = (
-            x.div_euclid(LANES as isize),
-            x.rem_euclid(LANES as isize) as usize,
-        );
-        let first = x_set.slot_index(b, y as isize + dy - radius as isize);
-        let window = Window {
-            planes: data[first..].as_ptr(),
-            plane_stride: s,
-            tap_step: step,
-            taps,
-        };
-        if r == 0 {
-            return TemporalTaps::Contiguous(window, limit);
-        }
-        // Rotated lane s reads block b + 1 where s < r.
-        let next: [bool; LANES] = std::array::from_fn(|s| s < r);
-        let straddling = Straddling {
-            second: x_set.slot_step() as isize,
-            mask: V::from_array(next.map(|n| f32::from_bits(if n { !0 } else { 0 }))),
-        };
-        return TemporalTaps::Rotated(window, straddling, limit, r);
-    }
-    // Gather, each lane from its previous pixel's window (a lane without one from its
-    // own pixel's, with no weight).
-    let first_tap: [i32; LANES] = std::array::from_fn(|l| {
-        let (x, y) = found[l].unwrap_or((x0 + l, y));
-        x_set.pixel_index(x as isize, y as isize - radius as isize) as i32
-    });
-    let window = Window {
-        planes: data.as_ptr(),
-        plane_stride: s,
-        tap_step: step,
-        taps,
-    };
-    TemporalTaps::Gathered(window, Gathered(first_tap), limit)
 }

@@ -159,7 +159,8 @@ fn the_filter_matches_eqs_21_to_23_evaluated_directly() {
 /// picks (tested separately), the taps (x', y' + j) of frame 1's X-filtered layer, with
 /// frame 1's positions and bandwidths. The camera turns, so lane groups find their
 /// previous pixels off the block boundaries (the filter then rotates the lanes) or at
-/// different offsets (the filter then gathers per lane).
+/// different offsets (it then permutes two blocks per line, or gathers per lane where
+/// the pixels are further apart).
 #[test]
 fn the_temporal_taps_match_eq_26_evaluated_directly() {
     let mut first = Scene::new(sphere(Vec3::new(0.05, 0.0, 1.5), 0.3, 2.0), 0.3, 0.2);
@@ -171,11 +172,20 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
         glam::DVec3::new(0.02, 0.0, 0.0),
         glam::DQuat::from_rotation_y(0.03),
     );
-    // The full image, and a crop whose width is no multiple of the lanes (a last block
-    // of the X set partly past the width).
+    // Frame 2's positions scattered by up to 5 cm (some 4 pixels at this size):
+    // neighbours find their previous pixels blocks or lines apart, which the filter
+    // gathers.
+    let mut scattered = second.clone();
+    for (i, p) in scattered.position.data.iter_mut().enumerate() {
+        *p += 0.1 * Vec3::new(noise(36, i), noise(37, i), 0.0);
+    }
+    // The full image, a crop whose width is no multiple of the lanes (a last block of
+    // the X set partly past the width), and the scattered positions.
+    let mut paths = [0usize; 3];
     for (first, second) in [
         (first.clone(), second.clone()),
         (first.crop(93, 70), second.crop(93, 70)),
+        (first.clone(), scattered),
     ] {
         let (width, height) = (first.position.width, first.position.height);
         let mut filter = AxisAlignedFilter::new(params(true));
@@ -194,30 +204,42 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
             .filter(&second.inputs(Some((Pose::IDENTITY, camera()))), &mut out)
             .unwrap();
         // How the lane groups of the Y pass (eight pixels along a row, x0 = 8 n) read
-        // their temporal taps: at one offset from a block boundary (rotated), or at mixed
-        // offsets (gathered). Both paths must be exercised.
+        // their temporal taps: at one offset from a block boundary (rotated); at mixed
+        // offsets within two blocks and three lines (permuted), or beyond (gathered).
         let lanes = crate::simd::LANES as u32;
-        let offset = |x: u32, y: u32| {
-            found[(y * width + x) as usize]
-                .map(|(xp, yp)| (xp as i64 - x as i64, yp as i64 - y as i64))
-        };
-        let (mut rotated, mut mixed) = (0, 0);
+        let (mut rotated, mut permuted, mut gathered) = (0, 0, 0);
         for y in 0..height {
             for x0 in (0..width).step_by(lanes as usize) {
-                let offsets: Vec<_> = (x0..(x0 + lanes).min(width))
-                    .filter_map(|x| offset(x, y))
+                let sources: Vec<(usize, usize)> = (x0..(x0 + lanes).min(width))
+                    .filter_map(|x| found[(y * width + x) as usize])
                     .collect();
-                match offsets.first() {
-                    Some(&first) if offsets.iter().all(|&o| o == first) => {
-                        rotated += usize::from((x0 as i64 + first.0).rem_euclid(8) != 0)
-                    }
-                    Some(_) => mixed += 1,
-                    None => {}
+                let offsets: Vec<(i64, i64)> = (x0..)
+                    .zip(&sources)
+                    .map(|(x, &(xp, yp))| (xp as i64 - x as i64, yp as i64 - y as i64))
+                    .collect();
+                let Some(&first) = offsets.first() else {
+                    continue;
+                };
+                let blocks = sources.iter().map(|&(xp, _)| xp / 8);
+                let span = blocks.clone().max().unwrap() - blocks.min().unwrap();
+                let mut lines: Vec<usize> = sources.iter().map(|&(_, yp)| yp).collect();
+                lines.sort_unstable();
+                lines.dedup();
+                if offsets.iter().all(|&o| o == first) {
+                    rotated += usize::from((x0 as i64 + first.0).rem_euclid(8) != 0);
+                } else if span <= 1 && lines.len() <= 3 {
+                    permuted += 1;
+                } else {
+                    gathered += 1;
                 }
             }
         }
-        eprintln!("temporal: {rotated} lane groups rotated, {mixed} with mixed offsets");
-        assert!(rotated > 100 && mixed > 20, "{rotated}, {mixed}");
+        eprintln!(
+            "temporal: lane groups {rotated} rotated, {permuted} permuted, {gathered} gathered"
+        );
+        for (total, count) in paths.iter_mut().zip([rotated, permuted, gathered]) {
+            *total += count;
+        }
         let ([b1x, b1y, b1i], [b2x, b2y, b2i]) =
             (squared_bandwidths(&first), squared_bandwidths(&second));
         let (radius, w) = (15i64, width as i64);
@@ -263,6 +285,12 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
         eprintln!("temporal filter vs direct eq. 26: worst relative difference {worst:e}");
         assert!(worst < 1e-4, "{worst}");
     }
+    // Every way of reading the taps was checked.
+    let [rotated, permuted, gathered] = paths;
+    assert!(
+        rotated > 100 && permuted > 20 && gathered > 20,
+        "{rotated} rotated, {permuted} permuted, {gathered} gathered"
+    );
 }
 
 #[test]
@@ -350,7 +378,7 @@ fn the_stage_reads_its_products_caches_b_e_and_writes_every_output() {
 }
 
 /// Two frames with a moving camera (so the temporal taps are read contiguously, rotated
-/// and gathered per lane) give the same bits with the portable kernel as with AVX2 + FMA.
+/// and permuted) give the same bits with the portable kernel as with AVX2 + FMA.
 #[test]
 fn kernels_give_the_same_bits() {
     let mut first = Scene::new(sphere(Vec3::new(0.1, -0.05, 2.0), 0.4, 3.0), 0.7, 0.4);

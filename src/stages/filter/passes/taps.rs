@@ -1,0 +1,217 @@
+//! How the Y pass reads a group's temporal taps (paper 001 eq. 26): the window over
+//! the previous frame's X set around each lane's previous pixel, and the cheapest way
+//! to read it for the lanes' offsets ([`TemporalTaps`]).
+
+use super::super::gaussian::{EXP_CUTOFF, Gathered, PERMUTED_LINES, Permuted, Straddling, Window};
+use super::super::lane_planes::LanePlanes;
+use super::super::temporal::find_previous_lanes;
+use super::Previous;
+use crate::simd::{LANES, Lanes};
+
+/// How the temporal taps of a group are read.
+pub(super) enum TemporalTaps<V> {
+    /// No lane has a previous pixel.
+    None,
+    /// Every lane's previous pixel at the same offset from its target, a multiple of
+    /// 8: one window of aligned vectors, lane for lane.
+    Contiguous(Window, V),
+    /// Every lane's previous pixel at the same offset, 8 b + r from the block's start
+    /// with 0 < r < 8: target lane l's source is lane (l + r) mod 8 of block b (l + r
+    /// < 8) or b + 1. With the targets rotated up by r (positions, bandwidths, limits,
+    /// sums), each lane reads its own lane of one of two windows ([`Straddling`]).
+    Rotated(Window, Straddling<V>, V, usize),
+    /// Different offsets, the previous pixels within two consecutive blocks and on at
+    /// most [`PERMUTED_LINES`] lines: per line, two loads permuted ([`Permuted`]).
+    Permuted(Window, PermutedLanes<V>, V),
+    /// Other offsets: gathered lane by lane.
+    Gathered(Window, Gathered, V),
+}
+
+/// A [`Permuted`] fetch with its number of lines chosen at run time.
+#[derive(Clone, Copy)]
+pub(super) struct PermutedLanes<V> {
+    index: V,
+    second: V,
+    block_step: isize,
+    lines: [(isize, V); PERMUTED_LINES],
+    count: usize,
+}
+
+impl<V: Lanes> PermutedLanes<V> {
+    /// The fetch for `K` lines (`K` must be the count).
+    #[inline(always)]
+    pub(super) fn fetch<const K: usize>(&self) -> Permuted<V, K> {
+        assert_eq!(K, self.count);
+        Permuted {
+            index: self.index,
+            second: self.second,
+            block_step: self.block_step,
+            lines: std::array::from_fn(|k| self.lines[k]),
+        }
+    }
+
+    /// Lines read per tap.
+    pub(super) fn count(&self) -> usize {
+        self.count
+    }
+}
+
+/// The temporal taps (eq. 26) of pixels (x0 + l, y): the window over the previous
+/// frame's X set around each lane's previous pixel (x', y') ([`find_previous_lanes`]),
+/// along its column (lines y' - R..=y' + R), and how to read it.
+#[inline(always)]
+pub(super) fn temporal_taps<V: Lanes>(
+    previous: Previous,
+    position: [V; 3],
+    valid: &[[V; 2]; 2],
+    x0: usize,
+    y: usize,
+    radius: usize,
+) -> TemporalTaps<V> {
+    let valid = [
+        valid[0][0].to_array(),
+        valid[0][1].to_array(),
+        valid[1][0].to_array(),
+        valid[1][1].to_array(),
+    ];
+    let x_set = previous.x_set;
+    let active: [bool; LANES] =
+        std::array::from_fn(|l| x0 + l < x_set.width && valid.iter().any(|a| a[l] > 0.0));
+    let found = find_previous_lanes(position, active, previous.view, x_set);
+    if found.iter().all(Option::is_none) {
+        return TemporalTaps::None;
+    }
+    // The lanes' common offset (dx, dy), if they have one.
+    let mut common = None;
+    for (l, f) in found.iter().enumerate() {
+        let Some((xp, yp)) = *f else { continue };
+        let offset = (xp as isize - (x0 + l) as isize, yp as isize - y as isize);
+        match common {
+            None => common = Some(offset),
+            Some(c) if c == offset => {}
+            Some(_) => {
+                common = None;
+                break;
+            }
+        }
+    }
+    let limit = V::from_array(found.map(|f| if f.is_some() { EXP_CUTOFF } else { -1.0 }));
+    let (data, s, step) = (x_set.data(), x_set.plane_stride(), x_set.line_step());
+    let taps = 2 * radius + 1;
+    if let Some((dx, dy)) = common {
+        // Pixels x0 + dx.. of lines y + dy - R..=y + dy + R: x0 + dx >= -7 (some lane's
+        // x0 + l + dx is a pixel), so blocks -1..=slots, inside the set with its block
+        // of zeros on each side; y + dy inside the image, so the lines are inside the
+        // set (`fits_lines`). Lanes without a previous pixel read the same windows, with
+        // no weight.
+        let x = x0 as isize + dx;
+        let (b, r) = (
+            x.div_euclid(LANES as isize),
+            x.rem_euclid(LANES as isize) as usize,
+        );
+        let first = x_set.slot_index(b, y as isize + dy - radius as isize);
+        let window = Window {
+            planes: data[first..].as_ptr(),
+            plane_stride: s,
+            tap_step: step,
+            taps,
+        };
+        if r == 0 {
+            return TemporalTaps::Contiguous(window, limit);
+        }
+        // Rotated lane s reads block b + 1 where s < r.
+        let straddling = Straddling {
+            second: x_set.slot_step() as isize,
+            mask: lane_mask(std::array::from_fn(|s| s < r)),
+        };
+        return TemporalTaps::Rotated(window, straddling, limit, r);
+    }
+    if let Some((permuted, (b0, y0))) = permuted_lanes::<V>(&found, x_set) {
+        // Lines y'_0 - R.. of block b_0, each lane's line and block an offset from there:
+        // blocks b_0 and b_0 + 1 <= slots, inside the set with its block of zeros on
+        // each side; every y'_k inside the image, so lines y'_k - R..=y'_k + R are
+        // inside the set (`fits_lines`).
+        let first = x_set.slot_index(b0, y0 - radius as isize);
+        let window = Window {
+            planes: data[first..].as_ptr(),
+            plane_stride: s,
+            tap_step: step,
+            taps,
+        };
+        return TemporalTaps::Permuted(window, permuted, limit);
+    }
+    // Gather, each lane from its previous pixel's window (a lane without one from its
+    // own pixel's, with no weight).
+    let first_tap: [i32; LANES] = std::array::from_fn(|l| {
+        let (x, y) = found[l].unwrap_or((x0 + l, y));
+        x_set.pixel_index(x as isize, y as isize - radius as isize) as i32
+    });
+    let window = Window {
+        planes: data.as_ptr(),
+        plane_stride: s,
+        tap_step: step,
+        taps,
+    };
+    TemporalTaps::Gathered(window, Gathered(first_tap), limit)
+}
+
+/// [`PermutedLanes`] for lanes whose previous pixels (`found`) lie in two consecutive
+/// blocks and on at most [`PERMUTED_LINES`] lines, with the first block and line;
+/// `None` otherwise. Lanes without a previous pixel read lane 0 of the first line
+/// (with no weight).
+#[inline(always)]
+fn permuted_lanes<V: Lanes>(
+    found: &[Option<(usize, usize)>; LANES],
+    x_set: &LanePlanes,
+) -> Option<(PermutedLanes<V>, (isize, isize))> {
+    let blocks = found.iter().flatten().map(|&(x, _)| x / LANES);
+    let (b0, b1) = (blocks.clone().min()?, blocks.max()?);
+    if b1 > b0 + 1 {
+        return None;
+    }
+    let mut lines = [0usize; PERMUTED_LINES];
+    let mut count = 0;
+    for &(_, y) in found.iter().flatten() {
+        if !lines[..count].contains(&y) {
+            if count == PERMUTED_LINES {
+                return None;
+            }
+            lines[count] = y;
+            count += 1;
+        }
+    }
+    lines[..count].sort_unstable();
+    let lane_line: [usize; LANES] = std::array::from_fn(|l| {
+        found[l].map_or(0, |(_, y)| {
+            lines[..count]
+                .iter()
+                .position(|&line| line == y)
+                .unwrap_or(0)
+        })
+    });
+    let step = x_set.line_step() as isize;
+    let permuted = PermutedLanes {
+        index: V::lane_indices(std::array::from_fn(|l| {
+            found[l].map_or(0, |(x, _)| (x % LANES) as u32)
+        })),
+        second: lane_mask(std::array::from_fn(|l| {
+            found[l].is_some_and(|(x, _)| x / LANES > b0)
+        })),
+        block_step: x_set.slot_step() as isize,
+        lines: std::array::from_fn(|k| {
+            let offset = (lines[k.min(count - 1)] as isize - lines[0] as isize) * step;
+            (
+                offset,
+                lane_mask(std::array::from_fn(|l| lane_line[l] == k)),
+            )
+        }),
+        count,
+    };
+    Some((permuted, (b0 as isize, lines[0] as isize)))
+}
+
+/// All bits set in the lanes that are `on`, none elsewhere (a mask for `select`).
+#[inline(always)]
+fn lane_mask<V: Lanes>(on: [bool; LANES]) -> V {
+    V::from_array(on.map(|on| f32::from_bits(if on { u32::MAX } else { 0 })))
+}

@@ -374,7 +374,7 @@ fn mesh_paths_resolve_against_the_pipeline_directory() {
     assert_eq!(
         e.message,
         format!(
-            "object `bad`: the mesh `{}` is not a valid OBJ file: face vertex index out of bounds",
+            "object `bad`: the mesh `{}` is not a valid OBJ file: line 4 (`f 1 2 4`): face vertex index out of bounds",
             mesh.display()
         )
     );

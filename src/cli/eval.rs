@@ -26,8 +26,8 @@ Scores (per stage, keyed by the stage's name):
   sample.path       ratio_rmse (E_RV/E_R vs a 1024-samples-per-pixel reference where a path
                     met an object), ratio_rmse_alternative (the other scheme, object-aware
                     on/off), unbiased_p (z-test of 8 more seeds vs the reference); scored on
-                    frames 14 and 29 (a replay with neither: its last frame), each
-                    costing about 70 runs of the stage
+                    every 15th frame from 14, at most two (14 and 29 from the start;
+                    a replay with none: its last frame), each costing about 70 runs
   filter.axis_aligned
                     mse_unfiltered, mse_filtered, mse_gaussian_same_radius (a plain image
                     Gaussian over the same window) against the same references, on the

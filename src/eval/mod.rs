@@ -64,8 +64,8 @@ pub struct EvalOptions {
     /// of this (1: every pixel; n: n^2 times less work, the scores then average over
     /// that lattice).
     pub reference_stride: u32,
-    /// The frames the run will replay (`None`: not known). They decide which frames get
-    /// references ([`sampling::scored_frames`]).
+    /// The frames the run will replay (`None`: not known). A replay without frames 14
+    /// and 29 gets references on its last frame ([`sampling::fallback_frame`]).
     pub frames: Option<std::ops::Range<usize>>,
 }
 
@@ -197,8 +197,7 @@ impl Evaluator {
             )
         });
         let references = runner.filter(|_| needs_references).map(|r| {
-            let scored = sampling::scored_frames(options.frames.clone());
-            sampling::ReferenceSchedule::new(r, options.reference_stride, scored)
+            sampling::ReferenceSchedule::new(r, options.reference_stride, options.frames.clone())
         });
         Ok(Evaluator {
             scorers,

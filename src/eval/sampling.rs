@@ -1,7 +1,7 @@
 //! Scores of `sample.path` against references computed with many more samples.
 //!
 //! On a scored frame (every [`SCORE_EVERY`]-th, at most [`MAX_SCORED_FRAMES`]; the last
-//! frame of a replay that has none of those, see [`scored_frames`]) the evaluator
+//! frame of a replay that has none of those, see [`fallback_frame`]) the evaluator
 //! re-runs the stage's own math on the frame's inputs:
 //! - a reference with 4 x 64 direct and 4 x 64 indirect samples per primary sample, from
 //!   four independent seeds (1024 samples per pixel and layer, 64 times the default),
@@ -201,55 +201,50 @@ impl ReferenceLayers {
     }
 }
 
-/// The frames of a replay of `frames` that get references: every [`SCORE_EVERY`]-th
-/// (14, 29, ...), at most [`MAX_SCORED_FRAMES`] of them; where the replay has none of
-/// those (a short recording, or a range between them), its last frame, so that the
-/// scores are never empty for want of a frame. `None` (not known) gives the rule alone:
-/// frames 14 and 29.
-pub fn scored_frames(frames: Option<Range<usize>>) -> Vec<usize> {
-    let Some(frames) = frames else {
-        return (1..=MAX_SCORED_FRAMES)
-            .map(|k| k * SCORE_EVERY - 1)
-            .collect();
-    };
-    let last = frames.end.checked_sub(1).filter(|&l| l >= frames.start);
-    let scored: Vec<usize> = frames
-        .filter(|f| f % SCORE_EVERY == SCORE_EVERY - 1)
-        .take(MAX_SCORED_FRAMES)
-        .collect();
-    if scored.is_empty() {
-        last.into_iter().collect()
-    } else {
-        scored
-    }
+/// The frame that gets a reference in a replay of `frames` with none of frames 14, 29,
+/// ... (a short recording, or a range between them): its last, so that the scores are
+/// never empty for want of a frame (its cloud-lit environment is younger than frame
+/// 14's). `None` where the replay has one of them, or `frames` is not known.
+pub fn fallback_frame(frames: Option<Range<usize>>) -> Option<usize> {
+    let frames = frames?;
+    let last = frames.end.checked_sub(1).filter(|&l| l >= frames.start)?;
+    // The first frame f >= start with f % SCORE_EVERY == SCORE_EVERY - 1.
+    let to_next = (SCORE_EVERY - 1 + SCORE_EVERY - frames.start % SCORE_EVERY) % SCORE_EVERY;
+    (frames.start + to_next > last).then_some(last)
 }
 
-/// Which frames get a reference ([`scored_frames`]), each on the lattice of `stride`
-/// pixels.
+/// Which frames get a reference: every [`SCORE_EVERY`]-th (frames 14, 29, ...) whose
+/// inputs are there, at most [`MAX_SCORED_FRAMES`], or the [`fallback_frame`]; each on
+/// the lattice of `stride` pixels.
 pub struct ReferenceSchedule {
     runner: PathRunner,
     stride: u32,
-    scored: Vec<usize>,
+    fallback: Option<usize>,
+    computed: usize,
 }
 
 impl ReferenceSchedule {
-    pub fn new(runner: PathRunner, stride: u32, scored: Vec<usize>) -> ReferenceSchedule {
+    /// The schedule for a replay of `frames` (`None`: not known, no fallback).
+    pub fn new(runner: PathRunner, stride: u32, frames: Option<Range<usize>>) -> ReferenceSchedule {
         ReferenceSchedule {
             runner,
             stride: stride.max(1),
-            scored,
+            fallback: fallback_frame(frames),
+            computed: 0,
         }
     }
 
     /// The reference layers of `frame` when it is a scored frame and holds the
     /// sampling's inputs, else `None`.
     pub fn reference(&mut self, frame: &Frame) -> Result<Option<Arc<ReferenceLayers>>, String> {
-        if !self.scored.contains(&frame.index) {
+        let scored = frame.index % SCORE_EVERY == SCORE_EVERY - 1;
+        if self.computed >= MAX_SCORED_FRAMES || !(scored || self.fallback == Some(frame.index)) {
             return Ok(None);
         }
         let Some(reference) = ReferenceLayers::compute(&self.runner, frame, self.stride) else {
             return Ok(None);
         };
+        self.computed += 1;
         Ok(Some(Arc::new(reference?)))
     }
 }
@@ -398,19 +393,19 @@ impl PathScorer {
 
 #[cfg(test)]
 mod tests {
-    use super::{scored_frames, two_sided_p};
+    use super::{fallback_frame, two_sided_p};
 
     #[test]
-    fn frames_14_and_29_are_scored_else_the_last() {
-        assert_eq!(scored_frames(Some(0..30)), [14, 29]);
-        assert_eq!(scored_frames(Some(0..100)), [14, 29]);
-        assert_eq!(scored_frames(Some(20..50)), [29, 44]);
-        assert_eq!(scored_frames(Some(0..15)), [14]);
-        // None of them in the replay: its last frame.
-        assert_eq!(scored_frames(Some(0..6)), [5]);
-        assert_eq!(scored_frames(Some(15..29)), [28]);
-        assert_eq!(scored_frames(Some(3..3)), [] as [usize; 0]);
-        assert_eq!(scored_frames(None), [14, 29]);
+    fn a_replay_without_frames_14_or_29_is_scored_on_its_last() {
+        for frames in [0..30, 0..15, 14..15, 20..50, 0..100] {
+            assert_eq!(fallback_frame(Some(frames.clone())), None, "{frames:?}");
+        }
+        assert_eq!(fallback_frame(Some(0..6)), Some(5));
+        assert_eq!(fallback_frame(Some(0..14)), Some(13));
+        assert_eq!(fallback_frame(Some(15..29)), Some(28));
+        assert_eq!(fallback_frame(Some(30..31)), Some(30));
+        assert_eq!(fallback_frame(Some(3..3)), None);
+        assert_eq!(fallback_frame(None), None);
     }
 
     #[test]

@@ -47,16 +47,7 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<Triangle>, ObjectError
             reason,
         }
     };
-    // The update keeps this compiling when features of tobj enabled elsewhere add fields.
-    #[allow(clippy::needless_update)]
-    let options = tobj::LoadOptions {
-        single_index: false,
-        triangulate: true,
-        ignore_points: true,
-        ignore_lines: true,
-        ..Default::default()
-    };
-    let (models, _materials) = tobj::load_obj_buf(&mut &bytes[..], &options, |_| {
+    let (models, _materials) = tobj::load_obj_buf(&mut &bytes[..], &load_options(), |_| {
         Err(tobj::LoadError::OpenFileFailed)
     })
     .map_err(|e| invalid(e.to_string(), Some(Problem::Load(e))))?;
@@ -77,6 +68,19 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<Triangle>, ObjectError
         });
     }
     Ok(triangles)
+}
+
+/// How relume has tobj read a file: polygons triangulated, points and lines dropped.
+pub(crate) fn load_options() -> tobj::LoadOptions {
+    // The update keeps this compiling when features of tobj enabled elsewhere add fields.
+    #[allow(clippy::needless_update)]
+    tobj::LoadOptions {
+        single_index: false,
+        triangulate: true,
+        ignore_points: true,
+        ignore_lines: true,
+        ..Default::default()
+    }
 }
 
 /// A line of the file for an error message: trimmed, and cut after 60 characters.
@@ -105,7 +109,7 @@ fn append_model(
     if let Some(p) = positions.iter().find(|p| !p.is_finite()) {
         return Err((
             format!("a vertex position is not finite: {p}"),
-            Some(Problem::NonFinitePosition),
+            Some(Problem::NonFinitePosition(p.to_array().map(f32::to_bits))),
         ));
     }
     // tobj checks the file's indices; these are of the mesh it made.
@@ -252,6 +256,12 @@ mod tests {
                 "the mesh `m.obj` is not a valid OBJ file: line 4 (`f 1 2 3{}...`): face parse error",
                 " 1".repeat(26)
             )
+        );
+        // The line of the vertex found, not an earlier one that no face uses.
+        let e = parse("v inf 0 0\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 nan 0\nf 2 3 5\n").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "the mesh `m.obj` is not a valid OBJ file: line 5 (`v 0 nan 0`): a vertex position is not finite: [0, NaN, 0]"
         );
         let e = parse_obj(b"v 0 0 0\n# caf\xe9\n", Path::new("m.obj")).unwrap_err();
         assert_eq!(

@@ -9,8 +9,9 @@ use std::str::FromStr;
 pub enum Problem {
     /// As `tobj::LoadError`, for the errors that come from one line.
     Load(tobj::LoadError),
-    /// A vertex position that parses but is not finite (relume's own check).
-    NonFinitePosition,
+    /// A vertex position that parses but is not finite (relume's own check): the bits
+    /// of the position found (x, y, z divided by w, as tobj stores them).
+    NonFinitePosition([u32; 3]),
 }
 
 /// The first line (1-based) with `problem`, and its text; `None` where no line has it
@@ -42,7 +43,10 @@ pub fn locate(text: &str, problem: Problem) -> Option<(usize, &str)> {
             }
             Some("f") | Some("l") => match face(words, &counts) {
                 Some(corners) => {
-                    pending.push((number, line, corners));
+                    // tobj drops faces of one or two corners (points, lines) unchecked.
+                    if corners.len() >= 3 {
+                        pending.push((number, line, corners));
+                    }
                     None
                 }
                 None => Some(Problem::Load(tobj::LoadError::FaceParseError)),
@@ -119,19 +123,22 @@ fn vertex_problem<'a>(mut words: impl Iterator<Item = &'a str>) -> Option<Proble
         return Some(Problem::Load(tobj::LoadError::PositionParseError));
     };
     let rest: Vec<&str> = words.collect();
+    // tobj divides by w where the line has one.
     let w = match rest[..] {
-        [] => 1.0,
+        [] | [_, _, _] => None,
         [w] => match f32::from_str(w) {
             Ok(0.0) => return Some(Problem::Load(tobj::LoadError::ScalingByZeroError)),
-            Ok(w) => w,
+            Ok(w) => Some(w),
             Err(_) => return Some(Problem::Load(tobj::LoadError::PositionParseError)),
         },
-        [_, _, _] => 1.0,
         _ => return Some(Problem::Load(tobj::LoadError::ColorParseError)),
     };
-    xyz.iter()
-        .any(|c| !(c / w).is_finite())
-        .then_some(Problem::NonFinitePosition)
+    let position = match w {
+        Some(w) => [xyz[0] / w, xyz[1] / w, xyz[2] / w],
+        None => [xyz[0], xyz[1], xyz[2]],
+    };
+    (!position.iter().all(|c| c.is_finite()))
+        .then(|| Problem::NonFinitePosition(position.map(f32::to_bits)))
 }
 
 /// The corners of an `f` (or `l`) line as 0-based (position, texcoord, normal) indices,
@@ -171,6 +178,10 @@ mod tests {
     use super::*;
     use tobj::LoadError;
 
+    fn non_finite(p: [f32; 3]) -> Problem {
+        Problem::NonFinitePosition(p.map(f32::to_bits))
+    }
+
     fn line_of(text: &str, problem: Problem) -> Option<usize> {
         locate(text, problem).map(|(n, _)| n)
     }
@@ -201,8 +212,8 @@ mod tests {
                 "f 1/2 2/1 3/1\n",
                 Problem::Load(LoadError::FaceTexCoordOutOfBounds),
             ),
-            ("v 0 nan 0\n", Problem::NonFinitePosition),
-            ("v 1e30 0 0 1e-30\n", Problem::NonFinitePosition),
+            ("v 0 nan 0\n", non_finite([0.0, f32::NAN, 0.0])),
+            ("v 1e30 0 0 1e-30\n", non_finite([f32::INFINITY, 0.0, 0.0])),
         ];
         for (bad, problem) in cases {
             let text = format!("{good}f 1 2 3\n{bad}f 1 2 3\n");
@@ -223,36 +234,46 @@ mod tests {
         assert_eq!(line_of(next_object, out_of_bounds), Some(3));
     }
 
-    /// The problem each case is located for is the one tobj reports for the file.
+    /// The problem each case is located for is the one tobj reports for the file, read
+    /// as relume reads it, and the line found is the one at fault.
     #[test]
     fn the_problems_are_the_ones_tobj_reports() {
-        let options = tobj::LoadOptions {
-            triangulate: true,
-            ..Default::default()
-        };
-        for (text, problem) in [
-            ("v 0 zero 0\n", LoadError::PositionParseError),
-            ("v 0 0 0 0\n", LoadError::ScalingByZeroError),
-            ("v 0 0 0 1 1\n", LoadError::ColorParseError),
-            ("vn 0 x 1\n", LoadError::NormalParseError),
-            ("vt 0\n", LoadError::TexcoordParseError),
-            ("usemtl \n", LoadError::MaterialParseError),
-            ("v 0 0 0\nf 1 x 1\n", LoadError::FaceParseError),
-            ("v 0 0 0\nf 1 1 7\n", LoadError::FaceVertexOutOfBounds),
+        let options = crate::objects::mesh::load_options();
+        for (text, problem, line) in [
+            ("v 0 zero 0\n", LoadError::PositionParseError, 1),
+            ("v 0 0 0 0\n", LoadError::ScalingByZeroError, 1),
+            ("v 0 0 0 1 1\n", LoadError::ColorParseError, 1),
+            ("vn 0 x 1\n", LoadError::NormalParseError, 1),
+            ("vt 0\n", LoadError::TexcoordParseError, 1),
+            ("usemtl \n", LoadError::MaterialParseError, 1),
+            ("v 0 0 0\nf 1 x 1\n", LoadError::FaceParseError, 2),
+            ("v 0 0 0\nf 1 1 7\n", LoadError::FaceVertexOutOfBounds, 2),
+            // Points and lines are dropped unchecked: the face after them is at fault.
+            (
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 9\nf 1 9\nf 1 2 3\nf 1 2 9\n",
+                LoadError::FaceVertexOutOfBounds,
+                7,
+            ),
             (
                 "v 0 0 0\nvn 0 0 1\nf 1//1 1//2 1//1\n",
                 LoadError::FaceNormalOutOfBounds,
+                3,
             ),
             (
                 "v 0 0 0\nvt 0 0\nf 1/1 1/2 1/1\n",
                 LoadError::FaceTexCoordOutOfBounds,
+                3,
             ),
         ] {
             let loaded = tobj::load_obj_buf(&mut text.as_bytes(), &options, |_| {
                 Err(LoadError::OpenFileFailed)
             });
             assert_eq!(loaded.err(), Some(problem), "{text:?}");
-            assert!(locate(text, Problem::Load(problem)).is_some(), "{text:?}");
+            assert_eq!(
+                line_of(text, Problem::Load(problem)),
+                Some(line),
+                "{text:?}"
+            );
         }
     }
 }

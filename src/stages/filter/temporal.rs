@@ -216,7 +216,9 @@ pub(super) fn consecutive_run(
 
 /// The positions of pixels x0 + l (lane l) of line `line` of the X set `previous`
 /// (blocks order): the two blocks they straddle, blended and rotated into place.
-/// Panics unless blocks x0.div_euclid(8) and the next one, line `line`, are in the set.
+/// Blocks x0.div_euclid(8) and the next one, and line `line`, must be in the set: a
+/// block outside its data panics (the loads are bounds-checked), a line beyond the
+/// padding would read the next plane's floats.
 #[inline(always)]
 pub(super) fn run_positions<V: Lanes>(previous: &LanePlanes, x0: i32, line: i32) -> [V; 3] {
     let (b, r) = (

@@ -42,11 +42,13 @@ impl<V: Lanes> PermutedLanes<V> {
     #[inline(always)]
     pub(super) fn fetch<const K: usize>(&self) -> Permuted<V, K> {
         assert_eq!(K, self.count);
+        let mut lines = [(0, V::splat(0.0)); K];
+        lines.copy_from_slice(&self.lines[..K]);
         Permuted {
             index: self.index,
             second: self.second,
             block_step: self.block_step,
-            lines: std::array::from_fn(|k| self.lines[k]),
+            lines,
         }
     }
 
@@ -190,7 +192,7 @@ fn permuted_lanes<V: Lanes>(
         })
     });
     let step = x_set.line_step() as isize;
-    let permuted = PermutedLanes {
+    let mut permuted = PermutedLanes {
         index: V::lane_indices(std::array::from_fn(|l| {
             found[l].map_or(0, |(x, _)| (x % LANES) as u32)
         })),
@@ -198,15 +200,17 @@ fn permuted_lanes<V: Lanes>(
             found[l].is_some_and(|(x, _)| x / LANES > b0)
         })),
         block_step: x_set.slot_step() as isize,
-        lines: std::array::from_fn(|k| {
-            let offset = (lines[k.min(count - 1)] as isize - lines[0] as isize) * step;
-            (
-                offset,
-                lane_mask(std::array::from_fn(|l| lane_line[l] == k)),
-            )
-        }),
+        lines: [(0, V::splat(0.0)); PERMUTED_LINES],
         count,
     };
+    // A loop, not a closure: closures do not inherit the kernel's target features.
+    for k in 0..PERMUTED_LINES {
+        let offset = (lines[k.min(count - 1)] as isize - lines[0] as isize) * step;
+        permuted.lines[k] = (
+            offset,
+            lane_mask(std::array::from_fn(|l| lane_line[l] == k)),
+        );
+    }
     Some((permuted, (b0 as isize, lines[0] as isize)))
 }
 
@@ -214,4 +218,70 @@ fn permuted_lanes<V: Lanes>(
 #[inline(always)]
 fn lane_mask<V: Lanes>(on: [bool; LANES]) -> V {
     V::from_array(on.map(|on| f32::from_bits(if on { u32::MAX } else { 0 })))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::hash;
+    use crate::simd::Portable;
+    use crate::stages::filter::gaussian::Fetch;
+    use crate::stages::filter::lane_planes::LaneLayout;
+
+    /// The permuted reads give, lane for lane and bit for bit, the floats the gathers
+    /// read, on every plane and tap, for lanes whose previous pixels lie in two
+    /// neighbouring blocks on one to three lines (the image's first and last blocks and
+    /// lines included); other lanes get no previous pixel.
+    #[test]
+    fn permuted_reads_give_the_gathered_floats() {
+        let (width, height, radius) = (64usize, 9usize, 2usize);
+        let mut set = LanePlanes::new(LaneLayout::blocks(5, width, height, radius));
+        for (i, v) in set.data_mut().iter_mut().enumerate() {
+            *v = f32::from_bits(0x3f80_0000 | (hash(&[7, i as u64]) as u32 & 0x7f_ffff));
+        }
+        let (data, s, step) = (set.data(), set.plane_stride(), set.line_step());
+        let taps = 2 * radius + 1;
+        let mut counts = [0usize; PERMUTED_LINES + 1];
+        for case in 0..3000u64 {
+            let h = |k: u64| hash(&[case, k]) as usize;
+            let b = h(0) % (width / LANES);
+            let lines: Vec<usize> = (1..=3).map(|k| h(k) % height).collect();
+            let found: [Option<(usize, usize)>; LANES] = std::array::from_fn(|l| {
+                let x = (b * LANES + h(10 + l as u64) % (2 * LANES)).min(width - 1);
+                (h(20 + l as u64) % 5 != 0).then(|| (x, lines[h(30 + l as u64) % 3]))
+            });
+            let Some((permuted, (b0, y0))) = permuted_lanes::<Portable>(&found, &set) else {
+                assert!(found.iter().all(Option::is_none), "{found:?}");
+                continue;
+            };
+            counts[permuted.count()] += 1;
+            let base = set.slot_index(b0, y0 - radius as isize);
+            let offsets: [i32; LANES] = std::array::from_fn(|l| {
+                let (x, y) = found[l].unwrap_or((0, radius));
+                set.pixel_index(x as isize, y as isize - radius as isize) as i32
+            });
+            for q in 0..5 {
+                for i in 0..taps {
+                    let at = q * s + i * step;
+                    // SAFETY: the windows lie inside the set (lines within `radius` of
+                    // the image, blocks b0 and b0 + 1 <= slots).
+                    let (got, expected) = unsafe {
+                        let p = data.as_ptr().add(base + at);
+                        let got = match permuted.count() {
+                            1 => permuted.fetch::<1>().fetch(p),
+                            2 => permuted.fetch::<2>().fetch(p),
+                            _ => permuted.fetch::<3>().fetch(p),
+                        };
+                        let gathered: Portable = Gathered(offsets).fetch(data.as_ptr().add(at));
+                        (got, gathered)
+                    };
+                    let (got, expected) = (got.to_array(), expected.to_array());
+                    for l in (0..LANES).filter(|&l| found[l].is_some()) {
+                        assert_eq!(got[l].to_bits(), expected[l].to_bits(), "{found:?}");
+                    }
+                }
+            }
+        }
+        assert!(counts[1..].iter().all(|&c| c > 100), "{counts:?}");
+    }
 }

@@ -3,7 +3,8 @@
 
 use super::*;
 use crate::simd::{LANES, Portable};
-use crate::stages::filter::planes::{X_PX, X_PY, X_PZ};
+use crate::stages::filter::lane_planes::{LaneLayout, LanePlanes};
+use crate::stages::filter::planes::{X_PLANES, X_PX, X_PY, X_PZ};
 use crate::stages::filter::temporal::{
     PreviousView, consecutive_run, find_previous_lanes, projected_pixel, run_positions,
 };
@@ -150,25 +151,39 @@ fn a_run_reads_eight_consecutive_pixels() {
     let mut filter = AxisAlignedFilter::new(params(true));
     let mut out = FilterOutputs::new(W, H);
     filter.filter(&scene.inputs(None), &mut out).unwrap();
-    let set = &filter.previous_x_set;
-    let at = |q: usize, x: i32, y: i32| {
-        let inside = x >= 0 && y >= 0 && x < W as i32 && y < H as i32;
-        // Outside the image: the set's zero block or padding lines.
-        if inside {
-            set.at(q, x as usize, y as usize)
-        } else {
-            0.0
+    // Also a set 64 wide, whose runs at the right edge reach the zero block past the
+    // last one (8 blocks of 8: no spare block inside the line).
+    let mut narrow = LanePlanes::new(LaneLayout::blocks(X_PLANES, 64, 5, 2));
+    for q in [X_PX, X_PY, X_PZ] {
+        for y in 0..5 {
+            for x in 0..64 {
+                let i = narrow.pixel_index(x, y) + q * narrow.plane_stride();
+                narrow.data_mut()[i] = (1000 * q as isize + 100 * y + x + 1) as f32;
+            }
         }
-    };
-    for y in [-1, 0, 1, H as i32 / 2, H as i32 - 1, H as i32] {
-        for x0 in -1..W as i32 - LANES as i32 + 2 {
-            let got = run_positions::<Portable>(set, x0, y);
-            for (c, q) in [X_PX, X_PY, X_PZ].into_iter().enumerate() {
-                let expected: [f32; LANES] = std::array::from_fn(|l| at(q, x0 + l as i32, y));
-                assert_eq!(
-                    got[c].to_array().map(f32::to_bits),
-                    expected.map(f32::to_bits)
-                );
+    }
+    for set in [&filter.previous_x_set, &narrow] {
+        let (w, h) = (set.width as i32, set.height as i32);
+        let at = |q: usize, x: i32, y: i32| {
+            // Outside the image: the set's zero blocks or padding lines.
+            let inside = x >= 0 && y >= 0 && x < w && y < h;
+            if inside {
+                set.at(q, x as usize, y as usize)
+            } else {
+                0.0
+            }
+        };
+        for y in [-1, 0, 1, h / 2, h - 1, h] {
+            for x0 in -1..w - LANES as i32 + 2 {
+                let got = run_positions::<Portable>(set, x0, y);
+                for (c, q) in [X_PX, X_PY, X_PZ].into_iter().enumerate() {
+                    let expected: [f32; LANES] = std::array::from_fn(|l| at(q, x0 + l as i32, y));
+                    assert_eq!(
+                        got[c].to_array().map(f32::to_bits),
+                        expected.map(f32::to_bits),
+                        "{w} wide, x0 {x0}, line {y}"
+                    );
+                }
             }
         }
     }

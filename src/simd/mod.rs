@@ -133,6 +133,11 @@ pub trait Lanes: Copy {
     /// Lane l of the result is lane `i & 7` of `self`, where i is lane l of `index` read
     /// as the bits of an integer ([`Lanes::lane_indices`] makes them).
     fn permute(self, index: Self) -> Self;
+    /// A mask for [`Lanes::select`]: all bits set in the lanes that are `on`.
+    #[inline(always)]
+    fn from_mask(on: [bool; LANES]) -> Self {
+        Self::from_array(on.map(mask))
+    }
     /// Eight lane indices for [`Lanes::permute`], each in its lane's bits.
     #[inline(always)]
     fn lane_indices(index: [u32; LANES]) -> Self {

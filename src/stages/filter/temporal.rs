@@ -119,7 +119,7 @@ pub(super) fn find_previous_lanes<V: Lanes>(
     let height = previous.height.min(cam.height as usize) as i32;
     let (w, h) = (s(width as f32), s(height as f32));
     let zero = s(0.0);
-    let active = V::from_array(active.map(|a| f32::from_bits(if a { u32::MAX } else { 0 })));
+    let active = V::from_mask(active);
     // In front of the camera (false for NaN) and on screen.
     let inside = active
         .and(cz.gt(zero))
@@ -230,9 +230,7 @@ pub(super) fn run_positions<V: Lanes>(previous: &LanePlanes, x0: i32, line: i32)
     let data = previous.data();
     // Lane m of the blend holds pixel 8 b + m (m >= r) or 8 (b + 1) + m (m < r); lane l
     // of the result is its lane (l + r) mod 8, pixel x0 + l.
-    let next = V::from_array(std::array::from_fn(|m| {
-        f32::from_bits(if m < r { u32::MAX } else { 0 })
-    }));
+    let next = V::from_mask(std::array::from_fn(|m| m < r));
     let (s, up) = (previous.plane_stride(), (LANES - r) % LANES);
     let (x, y, z) = (X_PX * s, X_PY * s, X_PZ * s);
     let px = V::select(

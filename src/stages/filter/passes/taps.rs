@@ -98,8 +98,14 @@ pub(super) fn temporal_taps<V: Lanes>(
         }
     }
     let limit = V::from_array(found.map(|f| if f.is_some() { EXP_CUTOFF } else { -1.0 }));
-    let (data, s, step) = (x_set.data(), x_set.plane_stride(), x_set.line_step());
-    let taps = 2 * radius + 1;
+    // The window of 2 R + 1 taps down the X set from index `first` of plane 0 (for
+    // gathered taps, the planes' start).
+    let window_from = |first: usize| Window {
+        planes: x_set.data()[first..].as_ptr(),
+        plane_stride: x_set.plane_stride(),
+        tap_step: x_set.line_step(),
+        taps: 2 * radius + 1,
+    };
     if let Some((dx, dy)) = common {
         // Pixels x0 + dx.. of lines y + dy - R..=y + dy + R: x0 + dx >= -7 (some lane's
         // x0 + l + dx is a pixel), so blocks -1..=slots, inside the set with its block
@@ -111,20 +117,14 @@ pub(super) fn temporal_taps<V: Lanes>(
             x.div_euclid(LANES as isize),
             x.rem_euclid(LANES as isize) as usize,
         );
-        let first = x_set.slot_index(b, y as isize + dy - radius as isize);
-        let window = Window {
-            planes: data[first..].as_ptr(),
-            plane_stride: s,
-            tap_step: step,
-            taps,
-        };
+        let window = window_from(x_set.slot_index(b, y as isize + dy - radius as isize));
         if r == 0 {
             return TemporalTaps::Contiguous(window, limit);
         }
         // Rotated lane s reads block b + 1 where s < r.
         let straddling = Straddling {
             second: x_set.slot_step() as isize,
-            mask: lane_mask(std::array::from_fn(|s| s < r)),
+            mask: V::from_mask(std::array::from_fn(|s| s < r)),
         };
         return TemporalTaps::Rotated(window, straddling, limit, r);
     }
@@ -133,13 +133,7 @@ pub(super) fn temporal_taps<V: Lanes>(
         // blocks b_0 and b_0 + 1 <= slots, inside the set with its block of zeros on
         // each side; every y'_k inside the image, so lines y'_k - R..=y'_k + R are
         // inside the set (`fits_lines`).
-        let first = x_set.slot_index(b0, y0 - radius as isize);
-        let window = Window {
-            planes: data[first..].as_ptr(),
-            plane_stride: s,
-            tap_step: step,
-            taps,
-        };
+        let window = window_from(x_set.slot_index(b0, y0 - radius as isize));
         return TemporalTaps::Permuted(window, permuted, limit);
     }
     // Gather, each lane from its previous pixel's window (a lane without one from its
@@ -148,13 +142,7 @@ pub(super) fn temporal_taps<V: Lanes>(
         let (x, y) = found[l].unwrap_or((x0 + l, y));
         x_set.pixel_index(x as isize, y as isize - radius as isize) as i32
     });
-    let window = Window {
-        planes: data.as_ptr(),
-        plane_stride: s,
-        tap_step: step,
-        taps,
-    };
-    TemporalTaps::Gathered(window, Gathered(first_tap), limit)
+    TemporalTaps::Gathered(window_from(0), Gathered(first_tap), limit)
 }
 
 /// [`PermutedLanes`] for lanes whose previous pixels (`found`) lie in two consecutive
@@ -196,7 +184,7 @@ fn permuted_lanes<V: Lanes>(
         index: V::lane_indices(std::array::from_fn(|l| {
             found[l].map_or(0, |(x, _)| (x % LANES) as u32)
         })),
-        second: lane_mask(std::array::from_fn(|l| {
+        second: V::from_mask(std::array::from_fn(|l| {
             found[l].is_some_and(|(x, _)| x / LANES > b0)
         })),
         block_step: x_set.slot_step() as isize,
@@ -208,16 +196,10 @@ fn permuted_lanes<V: Lanes>(
         let offset = (lines[k.min(count - 1)] as isize - lines[0] as isize) * step;
         permuted.lines[k] = (
             offset,
-            lane_mask(std::array::from_fn(|l| lane_line[l] == k)),
+            V::from_mask(std::array::from_fn(|l| lane_line[l] == k)),
         );
     }
     Some((permuted, (b0 as isize, lines[0] as isize)))
-}
-
-/// All bits set in the lanes that are `on`, none elsewhere (a mask for `select`).
-#[inline(always)]
-fn lane_mask<V: Lanes>(on: [bool; LANES]) -> V {
-    V::from_array(on.map(|on| f32::from_bits(if on { u32::MAX } else { 0 })))
 }
 
 #[cfg(test)]

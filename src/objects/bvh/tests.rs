@@ -117,8 +117,57 @@ fn bvh_hits_equal_brute_force_on_random_rays() {
         // Every third ray aims at the object, every third leaves its surface.
         eprintln!("{name}: {count} triangles, {hits} of 3000 rays hit");
         assert!(hits > 600, "{name}: only {hits} of 3000 rays hit");
-        assert!(s.bvh.depth() < STACK - 8, "{name}: depth {}", s.bvh.depth());
+        assert!(
+            s.bvh.depth() <= MAX_DEPTH,
+            "{name}: depth {}",
+            s.bvh.depth()
+        );
     }
+}
+
+#[test]
+fn axis_parallel_rays_on_face_planes_agree_with_brute_force() {
+    // Directions with zero components (infinite inverses) from origins on the planes
+    // of the triangles' faces and edges, of a box and of a grid of boxes.
+    let half = Vec3::new(0.15, 0.1, 0.2);
+    let mut triangles = shapes::cuboid(2.0 * half);
+    for k in 0..4 {
+        let shift = Vec3::new(0.3 * k as f32, 0.0, 0.45 * (k % 2) as f32);
+        triangles.extend(shapes::cuboid(2.0 * half).iter().map(|t| Triangle {
+            vertices: t.vertices.map(|v| v + shift),
+            ..*t
+        }));
+    }
+    let s = scene(triangles);
+    let coordinates = |axis: usize| {
+        let h = half[axis];
+        let mut c = vec![-1.0, -h, -0.5 * h, 0.0, 0.5 * h, h, 1.5];
+        c.extend((0..4).map(|k| 0.3 * k as f32 * (axis == 0) as i32 as f32 + h));
+        c
+    };
+    let (mut rays, mut hits) = (0, 0);
+    for dir in [
+        Vec3::X,
+        Vec3::NEG_X,
+        Vec3::Y,
+        Vec3::NEG_Y,
+        Vec3::Z,
+        Vec3::NEG_Z,
+    ] {
+        for &x in &coordinates(0) {
+            for &y in &coordinates(1) {
+                for &z in &coordinates(2) {
+                    let o = Vec3::new(x, y, z) - dir * 2.0;
+                    let slow = s.intersect_brute_force(o, dir, 0.0, f32::INFINITY);
+                    assert_eq!(s.intersect(o, dir, 0.0, f32::INFINITY), slow, "{o} {dir}");
+                    assert_eq!(s.occluded(o, dir, 0.0, 9.0), slow.is_some(), "{o} {dir}");
+                    rays += 1;
+                    hits += slow.is_some() as usize;
+                }
+            }
+        }
+    }
+    assert!(hits > rays / 4, "{hits} of {rays}");
 }
 
 #[test]

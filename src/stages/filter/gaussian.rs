@@ -324,3 +324,40 @@ pub unsafe fn accumulate<V: Lanes, F: Fetch<V>>(
     }
     *sums = acc;
 }
+
+/// [`accumulate`] for a window whose every tap has both layers' values of the kind
+/// (its two valid planes all 1, see `passes::FullWindows`): each weight is added to
+/// the two valid sums as it is, and the valid planes are not read. The same bits, since
+/// w * 1 + s rounded once is w + s rounded; two loads and two multiply-adds fewer per
+/// tap.
+///
+/// # Safety
+/// Every tap of `window` that `fetch` reads must lie inside its planes.
+#[inline(always)]
+pub unsafe fn accumulate_full<V: Lanes, F: Fetch<V>>(
+    fetch: &F,
+    window: &Window,
+    values: usize,
+    weights: &[V],
+    sums: &mut [V; VALUE_PLANES],
+) {
+    assert!(weights.len() >= window.taps);
+    // A local copy, as in `accumulate`.
+    let mut acc = *sums;
+    let stride = window.plane_stride;
+    let plane = |tap: *const f32, q: usize| tap.wrapping_add(q * stride);
+    // SAFETY (every fetch): the caller guarantees the window's taps are inside the planes.
+    unsafe {
+        let mut tap = window.planes;
+        for &w in &weights[..window.taps] {
+            for (q, sum) in acc[..6].iter_mut().enumerate() {
+                *sum = w.mul_add(fetch.fetch(plane(tap, values + q)), *sum);
+            }
+            acc[6] = acc[6].add(w);
+            acc[7] = acc[7].add(w);
+            // Wrapping: after the last tap the pointer may leave the planes unread.
+            tap = tap.wrapping_add(window.tap_step);
+        }
+    }
+    *sums = acc;
+}

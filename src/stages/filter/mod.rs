@@ -84,7 +84,7 @@ use crate::recording::{Intrinsics, Pose};
 use crate::simd::Kernel;
 use glam::{Affine3A, Vec3};
 use lane_planes::{LaneLayout, LanePlanes};
-use passes::Previous;
+use passes::{FullWindows, Previous};
 use planes::{BandwidthSettings, INPUT_PLANES, PrepareInputs, X_PLANES};
 use std::sync::Arc;
 use temporal::PreviousView;
@@ -279,6 +279,9 @@ pub struct AxisAlignedFilter {
     x_set: LanePlanes,
     /// The previous frame's X set (swapped with `x_set` after each frame).
     previous_x_set: LanePlanes,
+    /// The full windows of `x_set` and of `previous_x_set` (swapped with them).
+    full_windows: FullWindows,
+    previous_full_windows: FullWindows,
     previous_view: Option<PreviousView>,
     /// B_e of the last environment map, keyed by its `Arc`.
     environment_cache: Option<(Arc<EnvMap>, f32)>,
@@ -298,6 +301,8 @@ impl AxisAlignedFilter {
             input: LanePlanes::default(),
             x_set: LanePlanes::default(),
             previous_x_set: LanePlanes::default(),
+            full_windows: FullWindows::default(),
+            previous_full_windows: FullWindows::default(),
             previous_view: None,
             environment_cache: None,
         }
@@ -375,6 +380,7 @@ impl AxisAlignedFilter {
             self.input = LanePlanes::new(LaneLayout::segments(INPUT_PLANES, wu, hu, radius));
             self.x_set = LanePlanes::new(LaneLayout::blocks(X_PLANES, wu, hu, radius));
             self.previous_x_set = self.x_set.clone();
+            self.previous_full_windows = FullWindows::default();
             self.previous_view = None;
         }
         let settings = BandwidthSettings {
@@ -402,12 +408,21 @@ impl AxisAlignedFilter {
         let previous = match (&self.previous_view, self.params.temporal) {
             (Some(view), true) => Some(Previous {
                 x_set: &self.previous_x_set,
+                full_windows: &self.previous_full_windows,
                 view,
             }),
             _ => None,
         };
-        passes::y_pass(self.kernel, &self.x_set, previous, radius, &mut out.layers);
+        passes::y_pass(
+            self.kernel,
+            &self.x_set,
+            &mut self.full_windows,
+            previous,
+            radius,
+            &mut out.layers,
+        );
         std::mem::swap(&mut self.x_set, &mut self.previous_x_set);
+        std::mem::swap(&mut self.full_windows, &mut self.previous_full_windows);
         self.previous_view = match (self.params.temporal, input.view) {
             (true, Some((pose, camera))) => Some(PreviousView {
                 world_to_camera: Affine3A::from_mat4(pose.matrix().inverse().as_mat4()),

@@ -29,6 +29,8 @@ mod y;
 pub use x::x_pass;
 pub use y::y_pass;
 
+#[cfg(doc)]
+use super::gaussian::accumulate_full;
 use super::gaussian::{Bandwidths, Contiguous, EXP_CUTOFF, MAX_TAPS, Window, tap_weights};
 use super::lane_planes::LanePlanes;
 use super::temporal::PreviousView;
@@ -37,11 +39,48 @@ use crate::simd::Kernel;
 use crate::simd::{LANES, Lanes};
 
 /// The previous frame as the temporal taps read it: its X set (positions, bandwidths,
-/// and its X-filtered layers, E'_X of eq. 26) and its camera.
+/// and its X-filtered layers, E'_X of eq. 26), the full windows its Y pass found, and
+/// its camera.
 #[derive(Clone, Copy)]
 pub struct Previous<'a> {
     pub x_set: &'a LanePlanes,
+    pub full_windows: &'a FullWindows,
     pub view: &'a PreviousView,
+}
+
+/// Which Y windows of an X set are full: per block n and line y, bit k (0 direct, 1
+/// indirect) is set when every tap of the window of kind k there (lines y - R..=y + R
+/// of block n, all eight lanes) has both layers' values, so that its sums may skip the
+/// valid planes ([`accumulate_full`]: the same bits). The Y pass finds them as it walks
+/// each block down, for its own spatial taps; a frame later, the temporal taps whose
+/// window lies on one or two blocks of that set read them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FullWindows {
+    lines: usize,
+    /// Block n's bits at `n * lines..(n + 1) * lines`.
+    bits: Vec<u8>,
+}
+
+impl FullWindows {
+    /// Sized for `x_set` (a block per eight pixels of a line), every window marked not
+    /// full.
+    fn reset(&mut self, x_set: &LanePlanes) {
+        self.lines = x_set.height;
+        self.bits.clear();
+        self.bits
+            .resize(x_set.width.div_ceil(LANES) * x_set.height, 0);
+    }
+
+    /// The bits of the window at block `block`, line `line` (0 outside the set: the
+    /// zero blocks on each side, or before the first frame).
+    #[inline(always)]
+    fn get(&self, block: isize, line: isize) -> u8 {
+        if block < 0 || line < 0 || line as usize >= self.lines {
+            return 0;
+        }
+        let i = block as usize * self.lines + line as usize;
+        self.bits.get(i).copied().unwrap_or(0)
+    }
 }
 
 /// The forward pair weights of the last R + 1 groups along a pass's direction (slots
@@ -173,3 +212,6 @@ fn group_kinds<V: Lanes>(
     }
     (valid, kinds)
 }
+
+#[cfg(test)]
+mod tests;

@@ -13,13 +13,15 @@ pub(super) enum TemporalTaps<V> {
     /// No lane has a previous pixel.
     None,
     /// Every lane's previous pixel at the same offset from its target, a multiple of
-    /// 8: one window of aligned vectors, lane for lane.
-    Contiguous(Window, V),
+    /// 8: one window of aligned vectors, lane for lane. With the window's full kinds
+    /// (bits as in [`super::FullWindows`]).
+    Contiguous(Window, V, u8),
     /// Every lane's previous pixel at the same offset, 8 b + r from the block's start
     /// with 0 < r < 8: target lane l's source is lane (l + r) mod 8 of block b (l + r
     /// < 8) or b + 1. With the targets rotated up by r (positions, bandwidths, limits,
     /// sums), each lane reads its own lane of one of two windows ([`Straddling`]).
-    Rotated(Window, Straddling<V>, V, usize),
+    /// With the kinds full in both windows.
+    Rotated(Window, Straddling<V>, V, usize, u8),
     /// Different offsets, the previous pixels within two consecutive blocks and on at
     /// most [`PERMUTED_LINES`] lines: per line, two loads permuted ([`Permuted`]).
     Permuted(Window, PermutedLanes<V>, V),
@@ -117,16 +119,19 @@ pub(super) fn temporal_taps<V: Lanes>(
             x.div_euclid(LANES as isize),
             x.rem_euclid(LANES as isize) as usize,
         );
-        let window = window_from(x_set.slot_index(b, y as isize + dy - radius as isize));
+        let line = y as isize + dy;
+        let window = window_from(x_set.slot_index(b, line - radius as isize));
+        let full = previous.full_windows.get(b, line);
         if r == 0 {
-            return TemporalTaps::Contiguous(window, limit);
+            return TemporalTaps::Contiguous(window, limit, full);
         }
+        let full = full & previous.full_windows.get(b + 1, line);
         // Rotated lane s reads block b + 1 where s < r.
         let straddling = Straddling {
             second: x_set.slot_step() as isize,
             mask: V::from_mask(std::array::from_fn(|s| s < r)),
         };
-        return TemporalTaps::Rotated(window, straddling, limit, r);
+        return TemporalTaps::Rotated(window, straddling, limit, r, full);
     }
     if let Some((permuted, (b0, y0))) = permuted_lanes::<V>(&found, x_set) {
         // Lines y'_0 - R.. of block b_0, each lane's line and block an offset from there:

@@ -10,12 +10,12 @@
 use super::super::MAX_RADIUS;
 use super::super::gaussian::{
     Bandwidths, Contiguous, Fetch, MAX_TAPS, TapWeights, VALUE_PLANES, Window, accumulate,
-    tap_weights,
+    accumulate_full, tap_weights,
 };
 use super::super::lane_planes::{LanePlanes, Order};
 use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ};
 use super::taps::{TemporalTaps, temporal_taps};
-use super::{PairRing, Previous, group_kinds};
+use super::{FullWindows, PairRing, Previous, group_kinds};
 use crate::raster::Vec3Image;
 use crate::simd::{Kernel, LANES, Lanes, Portable};
 use glam::Vec3;
@@ -23,10 +23,13 @@ use rayon::prelude::*;
 
 /// The Y pass, eq. 22, with the temporal taps of eq. 26 when `previous` is given:
 /// filters the X set along image columns into the four output layers (E_R^dir,
-/// E_R^ind, E_RV^dir, E_RV^ind; NaN where the pixel has no value of that layer).
+/// E_R^ind, E_RV^dir, E_RV^ind; NaN where the pixel has no value of that layer), and
+/// finds the set's full windows into `full_windows` (for the next frame's temporal
+/// taps).
 pub fn y_pass(
     kernel: Kernel,
     x_set: &LanePlanes,
+    full_windows: &mut FullWindows,
     previous: Option<Previous>,
     radius: usize,
     out: &mut [Vec3Image; 4],
@@ -46,6 +49,7 @@ pub fn y_pass(
         // `ImagesOut` writes through raw pointers.
         assert_eq!(layer.data.len(), w * h);
     }
+    full_windows.reset(x_set);
     if w == 0 || h == 0 {
         return;
     }
@@ -55,13 +59,15 @@ pub fn y_pass(
         previous,
         radius,
     };
-    (0..w.div_ceil(LANES))
-        .into_par_iter()
-        .for_each(|n| match kernel {
+    full_windows
+        .bits
+        .par_chunks_mut(h)
+        .enumerate()
+        .for_each(|(n, full)| match kernel {
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and FMA.
-            Kernel::Avx2Fma => unsafe { y_block_avx2(&source, n, &out) },
-            _ => y_block::<Portable>(&source, n, &out),
+            Kernel::Avx2Fma => unsafe { y_block_avx2(&source, n, &out, full) },
+            _ => y_block::<Portable>(&source, n, &out, full),
         });
 }
 
@@ -132,21 +138,27 @@ impl<'a> ImagesOut<'a> {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn y_block_avx2(source: &YSource, n: usize, out: &ImagesOut) {
-    y_block::<crate::simd::Avx2>(source, n, out)
+fn y_block_avx2(source: &YSource, n: usize, out: &ImagesOut, full: &mut [u8]) {
+    y_block::<crate::simd::Avx2>(source, n, out, full)
 }
 
 /// The Y pass for block n, walked down the image: the pair weights of each line from
-/// -R on, then from line 0 on the line's group, stored into `out`.
+/// -R on, then from line 0 on the line's group, stored into `out`, and whether its
+/// windows are full into `full` (the block's bits of [`FullWindows`]).
 #[inline(always)]
-fn y_block<V: Lanes>(source: &YSource, n: usize, out: &ImagesOut) {
+fn y_block<V: Lanes>(source: &YSource, n: usize, out: &ImagesOut, full: &mut [u8]) {
     let (x_set, radius) = (source.x_set, source.radius);
     let (data, s) = (x_set.data(), x_set.plane_stride());
     let mut ring = PairRing::<V>::new(radius);
     let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
     let x0 = n * LANES;
     let pixels = LANES.min(out.width - x0);
-    for y in -(radius as isize)..x_set.height as isize {
+    let height = x_set.height as isize;
+    let r = radius as isize;
+    // Per kind, the last line up to y + R where some lane misses a value (the padding
+    // lines before line 0 and from the height on have none).
+    let mut last_gap = [-1isize; 2];
+    for y in -r..height {
         let c = x_set.slot_index(n as isize, y);
         ring.weigh(
             y,
@@ -155,11 +167,20 @@ fn y_block<V: Lanes>(source: &YSource, n: usize, out: &ImagesOut) {
             X_PX,
             [X_B2Y_DIR, X_B2_IND],
         );
+        let ahead = y + r;
+        for (k, first) in [X_DIR, X_IND].into_iter().enumerate() {
+            if ahead >= height || has_gap::<V>(data, x_set.slot_index(n as isize, ahead), s, first)
+            {
+                last_gap[k] = ahead;
+            }
+        }
         if y < 0 {
             continue;
         }
+        let full_kinds = [y - r > last_gap[0], y - r > last_gap[1]];
         let y = y as usize;
-        let group = y_group::<V>(source, n, y, &ring, &mut weights);
+        full[y] = full_kinds[0] as u8 | (full_kinds[1] as u8) << 1;
+        let group = y_group::<V>(source, n, y, &ring, &mut weights, full_kinds);
         for (k, kind) in group.iter().enumerate() {
             for layer in 0..2 {
                 let c = 3 * layer;
@@ -179,9 +200,19 @@ fn y_block<V: Lanes>(source: &YSource, n: usize, out: &ImagesOut) {
     }
 }
 
+/// Whether some lane of the X set at index `c` (plane stride `s`) misses a value of the
+/// kind whose value planes start at `first` (either valid plane below 1).
+#[inline(always)]
+fn has_gap<V: Lanes>(data: &[f32], c: usize, s: usize, first: usize) -> bool {
+    let valid_r = V::load_slice(data, c + (first + 6) * s);
+    let valid_rv = V::load_slice(data, c + (first + 7) * s);
+    valid_r.min(valid_rv).lt(V::splat(1.0)).any()
+}
+
 /// The Y pass for the group at block n of line y (pixels (8 n + l, y)): per kind, E_R
 /// rgb then E_RV rgb per lane (NaN where the target has no value of the layer). Lines
-/// y - R..=y must be in `ring`. `weights` is scratch.
+/// y - R..=y must be in `ring`; `full` says which kinds' spatial windows are full.
+/// `weights` is scratch.
 #[inline(always)]
 fn y_group<V: Lanes>(
     source: &YSource,
@@ -189,6 +220,7 @@ fn y_group<V: Lanes>(
     y: usize,
     ring: &PairRing<V>,
     weights: &mut TapWeights<V>,
+    full: [bool; 2],
 ) -> [[V; 6]; 2] {
     let (x_set, radius) = (source.x_set, source.radius);
     let (data, s) = (x_set.data(), x_set.plane_stride());
@@ -215,8 +247,15 @@ fn y_group<V: Lanes>(
     for (k, (values, _)) in kinds_planes.into_iter().enumerate() {
         if kinds[k].is_some() {
             ring.group_taps(y as isize, k, &mut weights[k]);
+            let sums = &mut sums[k];
             // SAFETY: lines y - R..=y + R lie inside the set (`fits_lines`).
-            unsafe { accumulate(&Contiguous, &spatial, values, &weights[k], &mut sums[k]) };
+            unsafe {
+                if full[k] {
+                    accumulate_full(&Contiguous, &spatial, values, &weights[k], sums)
+                } else {
+                    accumulate(&Contiguous, &spatial, values, &weights[k], sums)
+                }
+            }
         }
     }
     if let Some(previous) = source.previous {
@@ -229,10 +268,10 @@ fn y_group<V: Lanes>(
         // `temporal_taps`).
         unsafe {
             match temporal_taps::<V>(previous, position, &valid, n * LANES, y, radius) {
-                TemporalTaps::Contiguous(window, limit) => {
-                    group.add(&Contiguous, &window, limit, weights, &mut sums)
+                TemporalTaps::Contiguous(window, limit, full) => {
+                    group.add(&Contiguous, &window, limit, full, weights, &mut sums)
                 }
-                TemporalTaps::Rotated(window, straddling, limit, r) => {
+                TemporalTaps::Rotated(window, straddling, limit, r, full) => {
                     // Each target to the lane of its source (see `TemporalTaps`), and
                     // its sums back after.
                     let mut rotated = group;
@@ -243,16 +282,20 @@ fn y_group<V: Lanes>(
                         b.target = b.target.rotate_up(r);
                     }
                     rotate_sums(&mut sums, r);
-                    rotated.add(&straddling, &window, limit.rotate_up(r), weights, &mut sums);
+                    let limit = limit.rotate_up(r);
+                    rotated.add(&straddling, &window, limit, full, weights, &mut sums);
                     rotate_sums(&mut sums, LANES - r);
                 }
-                TemporalTaps::Permuted(window, permuted, limit) => match permuted.count() {
-                    1 => group.add(&permuted.fetch::<1>(), &window, limit, weights, &mut sums),
-                    2 => group.add(&permuted.fetch::<2>(), &window, limit, weights, &mut sums),
-                    _ => group.add(&permuted.fetch::<3>(), &window, limit, weights, &mut sums),
-                },
+                TemporalTaps::Permuted(window, permuted, limit) => {
+                    let (w, s) = (weights, &mut sums);
+                    match permuted.count() {
+                        1 => group.add(&permuted.fetch::<1>(), &window, limit, 0, w, s),
+                        2 => group.add(&permuted.fetch::<2>(), &window, limit, 0, w, s),
+                        _ => group.add(&permuted.fetch::<3>(), &window, limit, 0, w, s),
+                    }
+                }
                 TemporalTaps::Gathered(window, g, limit) => {
-                    group.add(&g, &window, limit, weights, &mut sums)
+                    group.add(&g, &window, limit, 0, weights, &mut sums)
                 }
                 TemporalTaps::None => {}
             }
@@ -293,7 +336,8 @@ struct GroupTaps<V> {
 }
 
 impl<V: Lanes> GroupTaps<V> {
-    /// Adds the weighted taps of `window` to each filtered kind's `sums`.
+    /// Adds the weighted taps of `window` to each filtered kind's `sums`; the kinds
+    /// whose bit is set in `full` are full in the window ([`FullWindows`]).
     ///
     /// # Safety
     /// Every tap of `window` that `fetch` reads must lie inside its planes.
@@ -303,6 +347,7 @@ impl<V: Lanes> GroupTaps<V> {
         fetch: &F,
         window: &Window,
         limit: V,
+        full: u8,
         weights: &mut TapWeights<V>,
         sums: &mut [[V; VALUE_PLANES]; 2],
     ) {
@@ -319,8 +364,14 @@ impl<V: Lanes> GroupTaps<V> {
                 [direct, indirect],
             );
             for k in 0..2 {
-                if self.kinds[k].is_some() {
-                    accumulate(fetch, window, self.first[k], &weights[k], &mut sums[k]);
+                if self.kinds[k].is_none() {
+                    continue;
+                }
+                let (first, weights, sums) = (self.first[k], &weights[k], &mut sums[k]);
+                if full & (1 << k) != 0 {
+                    accumulate_full(fetch, window, first, weights, sums);
+                } else {
+                    accumulate(fetch, window, first, weights, sums);
                 }
             }
         }

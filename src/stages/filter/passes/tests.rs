@@ -1,0 +1,135 @@
+//! Tests of the full windows: which windows the Y pass finds full, and that their sums
+//! are the bits of the general ones.
+
+use super::super::gaussian::{VALUE_PLANES, accumulate, accumulate_full};
+use super::super::lane_planes::LaneLayout;
+use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX};
+use super::*;
+use crate::raster::{Image, Vec3Image};
+use crate::rng::{hash, unit_f32};
+use crate::simd::{Kernel, Portable};
+use glam::Vec3;
+
+/// An X set of `width` x `height` with every value present except at `gaps` (pixel x,
+/// line, plane), positions on a plane 2 m away and random values.
+fn x_set(width: usize, height: usize, radius: usize, gaps: &[(usize, usize, usize)]) -> LanePlanes {
+    let mut set = LanePlanes::new(LaneLayout::blocks(X_PLANES, width, height, radius));
+    let s = set.plane_stride();
+    for line in 0..height {
+        for x in 0..width {
+            let i = set.pixel_index(x as isize, line as isize);
+            let data = set.data_mut();
+            data[i + X_PX * s] = 0.01 * x as f32;
+            data[i + (X_PX + 1) * s] = 0.01 * line as f32;
+            data[i + (X_PX + 2) * s] = 2.0;
+            data[i + X_B2Y_DIR * s] = 100.0;
+            data[i + X_B2_IND * s] = 50.0;
+            for first in [X_DIR, X_IND] {
+                for q in 0..6 {
+                    data[i + (first + q) * s] = unit_f32(hash(&[x as u64, line as u64, q as u64]));
+                }
+                data[i + (first + 6) * s] = 1.0;
+                data[i + (first + 7) * s] = 1.0;
+            }
+        }
+    }
+    for &(x, line, plane) in gaps {
+        let i = set.pixel_index(x as isize, line as isize);
+        set.data_mut()[i + plane * s] = 0.0;
+    }
+    set
+}
+
+/// The Y pass marks a window of a kind full exactly when all its taps, eight lanes by
+/// 2 R + 1 lines inside the image, have both valid planes 1: gaps in either layer of
+/// a kind empty that kind's windows around them, and the lines within R of the image's
+/// top and bottom (whose windows reach the padding) are never full.
+#[test]
+fn full_windows_are_the_windows_without_a_gap() {
+    let (width, height, radius) = (24, 30, 3);
+    let gaps = [(5, 10, X_DIR + 6), (17, 2, X_IND + 7), (23, 26, X_DIR + 7)];
+    let set = x_set(width, height, radius, &gaps);
+    let expected: Vec<u8> = (0..width / LANES)
+        .flat_map(|n| (0..height).map(move |y| (n, y)))
+        .map(|(n, y)| {
+            let mut bits = 0;
+            for (k, first) in [X_DIR, X_IND].into_iter().enumerate() {
+                let inside = y >= radius && y + radius < height;
+                let gap = gaps.iter().any(|&(x, line, plane)| {
+                    x / LANES == n
+                        && line.abs_diff(y) <= radius
+                        && plane >= first
+                        && plane < first + 8
+                });
+                if inside && !gap {
+                    bits |= 1 << k;
+                }
+            }
+            bits
+        })
+        .collect();
+    for kernel in [Kernel::Portable, Kernel::detect()] {
+        let mut out: [Vec3Image; 4] =
+            std::array::from_fn(|_| Image::filled(width as u32, height as u32, Vec3::ZERO));
+        let mut full = FullWindows::default();
+        y_pass(kernel, &set, &mut full, None, radius, &mut out);
+        assert_eq!(full.bits, expected, "{kernel:?}");
+    }
+    for k in 0..2 {
+        let count = expected.iter().filter(|&&b| b & (1 << k) != 0).count();
+        assert!(
+            count > 0 && count < expected.len(),
+            "kind {k}: {count} full"
+        );
+    }
+}
+
+/// Over windows whose valid planes are all 1, the full sums are the general sums bit
+/// for bit, from any starting sums, with either kernel's lanes.
+#[test]
+fn full_sums_are_the_bits_of_the_general_sums() {
+    let set = x_set(16, 12, 5, &[]);
+    let s = set.plane_stride();
+    for case in 0..200u64 {
+        let random = |k: u64| unit_f32(hash(&[case, k]));
+        let weights: Vec<Portable> = (0..MAX_TAPS as u64)
+            .map(|i| {
+                let w: [f32; LANES] = std::array::from_fn(|l| {
+                    // Some exact zeros and ones, as the cutoff and the target give.
+                    match hash(&[case, i, l as u64]) % 8 {
+                        0 => 0.0,
+                        1 => 1.0,
+                        _ => random(100 + i * 8 + l as u64),
+                    }
+                });
+                Portable::from_array(w)
+            })
+            .collect();
+        let start: [Portable; VALUE_PLANES] = std::array::from_fn(|q| {
+            Portable::splat(if case % 2 == 0 { 0.0 } else { random(q as u64) })
+        });
+        let line = (case % 3) as isize;
+        let window = Window {
+            planes: set.data()[set.slot_index((case % 2) as isize, line)..].as_ptr(),
+            plane_stride: s,
+            tap_step: set.line_step(),
+            taps: 2 * (case as usize % 5) + 1,
+        };
+        let first = if case % 4 < 2 { X_DIR } else { X_IND };
+        let (mut general, mut full) = (start, start);
+        // SAFETY: lines line..line + 9 <= 11 of blocks 0 and 1 lie inside the set, and
+        // inside the image: every valid plane read is 1.
+        unsafe {
+            accumulate(&Contiguous, &window, first, &weights, &mut general);
+            accumulate_full(&Contiguous, &window, first, &weights, &mut full);
+        }
+        for q in 0..VALUE_PLANES {
+            let (g, f) = (general[q].to_array(), full[q].to_array());
+            assert_eq!(
+                g.map(f32::to_bits),
+                f.map(f32::to_bits),
+                "case {case}, plane {q}"
+            );
+        }
+    }
+}

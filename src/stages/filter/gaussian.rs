@@ -305,24 +305,8 @@ pub unsafe fn accumulate<V: Lanes, F: Fetch<V>>(
     weights: &[V],
     sums: &mut [V; VALUE_PLANES],
 ) {
-    assert!(weights.len() >= window.taps);
-    // A local copy, so the sums stay in registers (stores through `sums` could alias the
-    // raw-pointer loads as far as the compiler knows).
-    let mut acc = *sums;
-    let stride = window.plane_stride;
-    let plane = |tap: *const f32, q: usize| tap.wrapping_add(q * stride);
-    // SAFETY (every fetch): the caller guarantees the window's taps are inside the planes.
-    unsafe {
-        let mut tap = window.planes;
-        for &w in &weights[..window.taps] {
-            for (q, sum) in acc.iter_mut().enumerate() {
-                *sum = w.mul_add(fetch.fetch(plane(tap, values + q)), *sum);
-            }
-            // Wrapping: after the last tap the pointer may leave the planes unread.
-            tap = tap.wrapping_add(window.tap_step);
-        }
-    }
-    *sums = acc;
+    // SAFETY: forwarded from the caller.
+    unsafe { sum_taps::<V, F, false>(fetch, window, values, weights, sums) }
 }
 
 /// [`accumulate`] for a window whose every tap has both layers' values of the kind
@@ -341,8 +325,27 @@ pub unsafe fn accumulate_full<V: Lanes, F: Fetch<V>>(
     weights: &[V],
     sums: &mut [V; VALUE_PLANES],
 ) {
+    // SAFETY: forwarded from the caller.
+    unsafe { sum_taps::<V, F, true>(fetch, window, values, weights, sums) }
+}
+
+/// [`accumulate`] (`FULL` false) or [`accumulate_full`] (`FULL` true).
+///
+/// # Safety
+/// Every tap of `window` that `fetch` reads must lie inside its planes.
+#[inline(always)]
+unsafe fn sum_taps<V: Lanes, F: Fetch<V>, const FULL: bool>(
+    fetch: &F,
+    window: &Window,
+    values: usize,
+    weights: &[V],
+    sums: &mut [V; VALUE_PLANES],
+) {
     assert!(weights.len() >= window.taps);
-    // A local copy, as in `accumulate`.
+    // The planes read: all, or the six rgb planes (the valid planes follow them).
+    let read = if FULL { 6 } else { VALUE_PLANES };
+    // A local copy, so the sums stay in registers (stores through `sums` could alias the
+    // raw-pointer loads as far as the compiler knows).
     let mut acc = *sums;
     let stride = window.plane_stride;
     let plane = |tap: *const f32, q: usize| tap.wrapping_add(q * stride);
@@ -350,11 +353,13 @@ pub unsafe fn accumulate_full<V: Lanes, F: Fetch<V>>(
     unsafe {
         let mut tap = window.planes;
         for &w in &weights[..window.taps] {
-            for (q, sum) in acc[..6].iter_mut().enumerate() {
+            for (q, sum) in acc[..read].iter_mut().enumerate() {
                 *sum = w.mul_add(fetch.fetch(plane(tap, values + q)), *sum);
             }
-            acc[6] = acc[6].add(w);
-            acc[7] = acc[7].add(w);
+            if FULL {
+                acc[6] = acc[6].add(w);
+                acc[7] = acc[7].add(w);
+            }
             // Wrapping: after the last tap the pointer may leave the planes unread.
             tap = tap.wrapping_add(window.tap_step);
         }

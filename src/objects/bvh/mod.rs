@@ -10,11 +10,10 @@
 //! cull, conservatively: node boxes are padded by a millionth of the scene's size, exits
 //! are widened by a few ulps so that rounding in the slab test never culls a triangle
 //! lying on a box face, and infinite inverse directions are clamped to the largest
-//! finite float, so that a ray along a box's face plane gives 0 there, not NaN (and
-//! counts as inside the slab). A box can then be culled wrongly only by a ray parallel
-//! to one of its faces whose distance to that face is nonzero but below t / 3.4e38 for
-//! an entry distance t: both within some 1e-25 of 0, which padded boxes around real
-//! geometry are not.
+//! finite float, so that no slab test gives NaN. A ray lying in a face plane of a box
+//! then enters or leaves it there (t = 0); padding keeps every triangle off that plane,
+//! so culling it is harmless. Direction components under about 3e-39 get an inverse
+//! that is too small, which can shorten a box only beyond t ~ 1e26.
 
 mod build;
 

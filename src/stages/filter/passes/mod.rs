@@ -71,8 +71,8 @@ impl FullWindows {
             .resize(x_set.width.div_ceil(LANES) * x_set.height, 0);
     }
 
-    /// The bits of the window at block `block`, line `line` (0 outside the set: the
-    /// zero blocks on each side, or before the first frame).
+    /// The bits of the window at block `block`, line `line` (0 outside the image's
+    /// blocks and lines, e.g. the zero blocks on each side, and before the first frame).
     #[inline(always)]
     fn get(&self, block: isize, line: isize) -> u8 {
         if block < 0 || line < 0 || line as usize >= self.lines {

@@ -46,15 +46,17 @@ fn x_set(width: usize, height: usize, radius: usize, gaps: &[(usize, usize, usiz
 /// top and bottom (whose windows reach the padding) are never full.
 #[test]
 fn full_windows_are_the_windows_without_a_gap() {
-    let (width, height, radius) = (24, 30, 3);
-    let gaps = [(5, 10, X_DIR + 6), (17, 2, X_IND + 7), (23, 26, X_DIR + 7)];
+    // Width 21: the last block's lanes 5..8 lie past the image, with no values, so its
+    // windows are never full.
+    let (width, height, radius) = (21, 30, 3);
+    let gaps = [(5, 10, X_DIR + 6), (12, 2, X_IND + 7), (15, 26, X_DIR + 7)];
     let set = x_set(width, height, radius, &gaps);
-    let expected: Vec<u8> = (0..width / LANES)
+    let expected: Vec<u8> = (0..width.div_ceil(LANES))
         .flat_map(|n| (0..height).map(move |y| (n, y)))
         .map(|(n, y)| {
             let mut bits = 0;
             for (k, first) in [X_DIR, X_IND].into_iter().enumerate() {
-                let inside = y >= radius && y + radius < height;
+                let inside = y >= radius && y + radius < height && (n + 1) * LANES <= width;
                 let gap = gaps.iter().any(|&(x, line, plane)| {
                     x / LANES == n
                         && line.abs_diff(y) <= radius
@@ -129,6 +131,89 @@ fn full_sums_are_the_bits_of_the_general_sums() {
                 g.map(f32::to_bits),
                 f.map(f32::to_bits),
                 "case {case}, plane {q}"
+            );
+        }
+    }
+}
+
+/// The Y pass with the previous frame's full windows gives the bits it gives without
+/// them (every window read the general way), for both kernels, under a still camera
+/// (contiguous temporal reads) and one moved by 3 pixels (rotated reads), with gaps in
+/// both sets and a partial last block.
+#[test]
+fn temporal_taps_over_full_windows_give_the_general_bits() {
+    use crate::pinhole::Pinhole;
+    use crate::recording::Intrinsics;
+    use glam::Affine3A;
+    let (width, height, radius) = (37, 40, 4);
+    let current = x_set(
+        width,
+        height,
+        radius,
+        &[(9, 20, X_DIR + 6), (30, 5, X_IND + 7)],
+    );
+    let previous = x_set(
+        width,
+        height,
+        radius,
+        &[(3, 12, X_IND + 6), (20, 33, X_DIR + 7)],
+    );
+    // Positions (0.01 x, 0.01 y, 2) project to pixel (x, y): f = 200, c = 0.
+    let intrinsics = Intrinsics {
+        width: width as u32,
+        height: height as u32,
+        fx: 200.0,
+        fy: 200.0,
+        cx: 0.0,
+        cy: 0.0,
+    };
+    let camera = Pinhole::new(&intrinsics, width as u32, height as u32);
+    let mut previous_full = FullWindows::default();
+    let mut scratch: [Vec3Image; 4] =
+        std::array::from_fn(|_| Image::filled(width as u32, height as u32, Vec3::ZERO));
+    y_pass(
+        Kernel::Portable,
+        &previous,
+        &mut previous_full,
+        None,
+        radius,
+        &mut scratch,
+    );
+    assert!(previous_full.bits.contains(&3));
+    for shift in [0.0, 0.03] {
+        let view = PreviousView {
+            world_to_camera: Affine3A::from_translation(glam::Vec3::new(shift, 0.0, 0.0)),
+            camera,
+        };
+        for kernel in [Kernel::Portable, Kernel::detect()] {
+            let run = |full_windows: &FullWindows| {
+                let mut out: [Vec3Image; 4] =
+                    std::array::from_fn(|_| Image::filled(width as u32, height as u32, Vec3::ZERO));
+                let previous = Previous {
+                    x_set: &previous,
+                    full_windows,
+                    view: &view,
+                };
+                y_pass(
+                    kernel,
+                    &current,
+                    &mut FullWindows::default(),
+                    Some(previous),
+                    radius,
+                    &mut out,
+                );
+                out.map(|layer| {
+                    layer
+                        .data
+                        .iter()
+                        .flat_map(|v| v.to_array().map(f32::to_bits))
+                        .collect::<Vec<u32>>()
+                })
+            };
+            assert_eq!(
+                run(&previous_full),
+                run(&FullWindows::default()),
+                "{kernel:?}, shift {shift}"
             );
         }
     }

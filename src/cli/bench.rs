@@ -1,7 +1,7 @@
 //! `relume bench`: per-stage medians and the end-to-end rate over repeated runs.
 
 use super::progress;
-use super::replay::{RunArgs, load, some_frame_replayed, stop_on_interrupt};
+use super::replay::{Pacing, RunArgs, load, some_frame_replayed, stop_on_interrupt};
 use anyhow::bail;
 use clap::Args;
 use relume::graph::{RunReport, Stats};
@@ -29,13 +29,17 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
     let loaded = load(&a.run)?;
     let stop = stop_on_interrupt();
     let scratch = std::env::temp_dir().join(format!("relume-bench-{}", std::process::id()));
-    let (seed, skip_corrupt) = (a.run.seed, a.run.skip_corrupt);
+    let pacing = if a.isolated {
+        Pacing::Lockstep
+    } else {
+        Pacing::Pipelined
+    };
     let result = (|| -> anyhow::Result<Vec<RunReport>> {
         let mut reports = Vec::new();
         let bar = progress::bar(a.repeat as u64 + 1, "bench");
         for i in 0..=a.repeat {
             let report = loaded
-                .run_once(&scratch, seed, skip_corrupt, a.isolated, &stop, &mut |_| {})
+                .run_once(&scratch, &a.run, pacing, &stop, &mut |_| {})
                 .map_err(|f| anyhow::Error::new(f.error))?;
             if i > 0 {
                 reports.push(report); // run 0 warms caches and page-ins

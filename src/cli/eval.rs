@@ -2,7 +2,7 @@
 //! truth (see `relume::eval` for every key).
 
 use super::progress;
-use super::replay::{RunArgs, load, stop_on_interrupt};
+use super::replay::{Pacing, RunArgs, load, stop_on_interrupt};
 use anyhow::bail;
 use clap::Parser;
 use relume::eval::{EvalOptions, Evaluator};
@@ -113,21 +113,14 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     let stop = stop_on_interrupt();
     let bar = progress::bar(loaded.frames.len() as u64, "evaluating");
     let mut truth_error = None;
-    let result = loaded.run_once(
-        &out_dir,
-        a.run.seed,
-        a.run.skip_corrupt,
-        false,
-        &stop,
-        &mut |f| {
-            bar.inc(1);
-            if truth_error.is_none()
-                && let Err(e) = evaluator.observe(&f)
-            {
-                truth_error = Some(e);
-            }
-        },
-    );
+    let result = loaded.run_once(&out_dir, &a.run, Pacing::Pipelined, &stop, &mut |f| {
+        bar.inc(1);
+        if truth_error.is_none()
+            && let Err(e) = evaluator.observe(&f)
+        {
+            truth_error = Some(e);
+        }
+    });
     bar.finish_and_clear();
     let _ = std::fs::remove_dir_all(&scratch);
     let path = loaded.replay.recording.path().display().to_string();

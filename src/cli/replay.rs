@@ -153,14 +153,13 @@ pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
 }
 
 impl Loaded {
-    /// Builds the stages and runs them once over the frames (`lockstep`: one frame at a
-    /// time, see [`RunOptions::lockstep`]).
+    /// Builds the stages (with `run_args`' seed) and runs them once over the frames, fed
+    /// as `pacing` says.
     pub(super) fn run_once(
         &self,
         out_dir: &Path,
-        seed: u64,
-        skip_corrupt: bool,
-        lockstep: bool,
+        run_args: &RunArgs,
+        pacing: Pacing,
         stop: &Arc<AtomicBool>,
         sink: &mut dyn FnMut(Frame),
     ) -> Result<RunReport, Box<RunFailure>> {
@@ -168,7 +167,7 @@ impl Loaded {
             &self.registry,
             self.replay.recording.header(),
             out_dir,
-            seed,
+            run_args.seed,
         ) {
             Ok(s) => s,
             Err((stage, source)) => {
@@ -185,12 +184,21 @@ impl Loaded {
         };
         let options = RunOptions {
             frames: self.frames.clone(),
-            skip_corrupt,
+            skip_corrupt: run_args.skip_corrupt,
             stop: stop.clone(),
-            lockstep,
+            lockstep: pacing == Pacing::Lockstep,
         };
         run(&self.pipeline, stages, &self.replay, &options, sink)
     }
+}
+
+/// How [`Loaded::run_once`] feeds frames to the pipeline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Pacing {
+    /// The stages work on different frames at once, as a replay does.
+    Pipelined,
+    /// One frame in the pipeline at a time ([`RunOptions::lockstep`]).
+    Lockstep,
 }
 
 /// A flag that the first Ctrl-C (or SIGTERM) sets; a second one exits (see
@@ -294,14 +302,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             }
         }
     };
-    let result = loaded.run_once(
-        &a.out,
-        a.run.seed,
-        a.run.skip_corrupt,
-        false,
-        &stop,
-        &mut sink,
-    );
+    let result = loaded.run_once(&a.out, &a.run, Pacing::Pipelined, &stop, &mut sink);
     bar.finish_and_clear();
     let (report, failure) = match result {
         Ok(r) => (r, None),

@@ -208,9 +208,11 @@ impl ReferenceLayers {
 pub fn fallback_frame(frames: Option<Range<usize>>) -> Option<usize> {
     let frames = frames?;
     let last = frames.end.checked_sub(1).filter(|&l| l >= frames.start)?;
-    // The first frame f >= start with f % SCORE_EVERY == SCORE_EVERY - 1.
-    let to_next = (SCORE_EVERY - 1 + SCORE_EVERY - frames.start % SCORE_EVERY) % SCORE_EVERY;
-    (frames.start + to_next > last).then_some(last)
+    // Any SCORE_EVERY consecutive frames hold one of them.
+    let has_scored = (frames.start..=last)
+        .take(SCORE_EVERY)
+        .any(|f| f % SCORE_EVERY == SCORE_EVERY - 1);
+    (!has_scored).then_some(last)
 }
 
 /// Which frames get a reference: every [`SCORE_EVERY`]-th (frames 14, 29, ...) whose

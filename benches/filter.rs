@@ -16,6 +16,8 @@
 //! - `filter.axis_aligned/spatial`: temporal off (E_RV == E_R off the sphere).
 //! - `pass/prepare`, `pass/x`, `pass/y_spatial`, `pass/y_temporal`: the passes alone
 //!   (where the time goes), with the kernel the CPU runs (AVX2 + FMA where it has them);
+//!   `pass/prepare_x`: the preparation and the X pass fused row by row, as the stage
+//!   runs them;
 //!   `pass/x_portable`: the X pass with the portable kernel (CPUs without them). The
 //!   temporal pass's previous frame is the same frame, so every pixel finds itself and
 //!   the temporal taps are read contiguously.
@@ -247,6 +249,18 @@ fn bench_filter(c: &mut Criterion) {
     });
     group.bench_function("pass/x_portable", |b| {
         b.iter(|| passes::x_pass(Kernel::Portable, &input, RADIUS, &mut x_set))
+    });
+    group.bench_function("pass/prepare_x", |b| {
+        b.iter(|| {
+            passes::prepare_x_pass(
+                kernel,
+                &prep,
+                settings,
+                RADIUS,
+                &mut x_set,
+                [&mut width_dir, &mut width_ind],
+            )
+        })
     });
     passes::x_pass(kernel, &input, RADIUS, &mut x_set);
     let mut out: [Vec3Image; 4] = std::array::from_fn(|_| Image::filled(W, H, Vec3::ZERO));

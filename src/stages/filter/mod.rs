@@ -49,7 +49,10 @@
 //! multiple of 8, two blended loads at any other common offset, two permuted loads per
 //! line where the offsets differ but the previous pixels lie in two neighbouring blocks
 //! and on at most three lines (most groups under a moving camera), and gathered per
-//! lane elsewhere (see `passes`). No tap
+//! lane elsewhere (see `passes`). Steps 1-2 and the X pass run row by row
+//! ([`passes::prepare_x_pass`]): a row's planes are prepared into a one-line set that
+//! stays in the cache and filtered from there, so the input planes of the whole image
+//! (38 MB at 640x480 and R = 15) are never written out and read back. No tap
 //! cutting: at R = 15 and 640x480 a weight falls below e^-14 inside the window only
 //! where B exceeds ~60 per metre (occluders nearer than ~8 cm), so a per-pixel radius
 //! bound would rarely help.
@@ -85,7 +88,7 @@ use crate::simd::Kernel;
 use glam::{Affine3A, Vec3};
 use lane_planes::{LaneLayout, LanePlanes};
 use passes::{FullWindows, Previous};
-use planes::{BandwidthSettings, INPUT_PLANES, PrepareInputs, X_PLANES};
+use planes::{BandwidthSettings, PrepareInputs, X_PLANES};
 use std::sync::Arc;
 use temporal::PreviousView;
 
@@ -274,8 +277,7 @@ impl FilterOutputs {
 pub struct AxisAlignedFilter {
     params: FilterParams,
     kernel: Kernel,
-    /// This frame's input planes and X set (the X pass's output).
-    input: LanePlanes,
+    /// This frame's X set (the X pass's output).
     x_set: LanePlanes,
     /// The previous frame's X set (swapped with `x_set` after each frame).
     previous_x_set: LanePlanes,
@@ -298,7 +300,6 @@ impl AxisAlignedFilter {
         AxisAlignedFilter {
             params,
             kernel,
-            input: LanePlanes::default(),
             x_set: LanePlanes::default(),
             previous_x_set: LanePlanes::default(),
             full_windows: FullWindows::default(),
@@ -375,9 +376,8 @@ impl AxisAlignedFilter {
         }
         let b_e = self.environment_bandwidth(input.environment)?;
         let (wu, hu) = (w as usize, h as usize);
-        if (self.input.width, self.input.height) != (wu, hu) {
+        if (self.x_set.width, self.x_set.height) != (wu, hu) {
             let radius = self.params.radius;
-            self.input = LanePlanes::new(LaneLayout::segments(INPUT_PLANES, wu, hu, radius));
             self.x_set = LanePlanes::new(LaneLayout::blocks(X_PLANES, wu, hu, radius));
             self.previous_x_set = self.x_set.clone();
             self.previous_full_windows = FullWindows::default();
@@ -395,16 +395,15 @@ impl AxisAlignedFilter {
             indirect_min_distance: input.indirect_min_distance,
             exponent: input.exponent,
         };
-        planes::prepare(
+        let radius = self.params.radius;
+        passes::prepare_x_pass(
             self.kernel,
             &prepare_inputs,
             settings,
-            &mut self.input,
-            &mut out.width_dir,
-            &mut out.width_ind,
+            radius,
+            &mut self.x_set,
+            [&mut out.width_dir, &mut out.width_ind],
         );
-        let radius = self.params.radius;
-        passes::x_pass(self.kernel, &self.input, radius, &mut self.x_set);
         let previous = match (&self.previous_view, self.params.temporal) {
             (Some(view), true) => Some(Previous {
                 x_set: &self.previous_x_set,

@@ -113,7 +113,9 @@ pub struct BandwidthSettings {
 /// X and Y sigmas; INFINITY where B = 0, NaN where there is no position). Eight pixels
 /// at a time (`prepare_lanes`, with `kernel`) where a row's X neighbours of all eight
 /// exist, one by one at the row's ends; the same bits either way. Each row is prepared
-/// in row-major order ([`row_scratch`]), then interleaved ([`fill_line`]).
+/// in row-major order ([`row_scratch`]), then interleaved ([`fill_line`]). The stage
+/// prepares one row at a time instead, each just before its X pass
+/// ([`super::passes::prepare_x_pass`], the same bits).
 pub fn prepare(
     kernel: Kernel,
     images: &PrepareInputs,
@@ -149,10 +151,9 @@ pub fn prepare(
                     Kernel::Avx2Fma => unsafe {
                         prepare_row_avx2(images, settings, &layout, &lanes, y, &mut out, line)
                     },
-                    _ => {
-                        prepare_row::<Portable>(images, settings, &layout, y, &mut out);
-                        fill_line::<Portable>(&lanes, out.row, |q| layout.in_row(q, 0), line);
-                    }
+                    _ => prepare_line::<Portable>(
+                        images, settings, &layout, &lanes, y, &mut out, line,
+                    ),
                 }
             },
         );
@@ -176,9 +177,23 @@ fn prepare_row_avx2(
     out: &mut RowOut,
     line: &mut [f32],
 ) {
-    use crate::simd::Avx2;
-    prepare_row::<Avx2>(images, settings, layout, y, out);
-    fill_line::<Avx2>(lanes, out.row, |q| layout.in_row(q, 0), line);
+    prepare_line::<crate::simd::Avx2>(images, settings, layout, lanes, y, out, line);
+}
+
+/// [`prepare`] for row `y` into `line`, a line of a set of `lanes`' layout: the row's
+/// planes into `out` (row-major, in `layout`), then interleaved into the line.
+#[inline(always)]
+pub(super) fn prepare_line<V: Lanes>(
+    images: &PrepareInputs,
+    settings: BandwidthSettings,
+    layout: &RowLayout,
+    lanes: &LaneLayout,
+    y: usize,
+    out: &mut RowOut,
+    line: &mut [f32],
+) {
+    prepare_row::<V>(images, settings, layout, y, out);
+    fill_line::<V>(lanes, out.row, |q| layout.in_row(q, 0), line);
 }
 
 /// [`prepare`] for row `y`: groups of eight pixels from x = 1 while pixel x + 8 is

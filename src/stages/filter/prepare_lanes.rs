@@ -244,7 +244,8 @@ fn neighbours<V: Lanes>(images: &PrepareInputs, j: usize) -> (Xyz<V>, Xyz<V>) {
 #[cfg(test)]
 mod tests {
     use super::super::lane_planes::{LaneLayout, LanePlanes, fill_line};
-    use super::super::planes::{INPUT_PLANES, prepare, prepare_pixel, row_scratch};
+    use super::super::passes::{prepare_x_pass, x_pass};
+    use super::super::planes::{INPUT_PLANES, X_PLANES, prepare, prepare_pixel, row_scratch};
     use super::*;
     use crate::raster::{Image, ScalarImage, Vec3Image};
     use crate::rng::{hash, unit_f32};
@@ -326,23 +327,31 @@ mod tests {
         }
     }
 
+    impl Images {
+        fn inputs(&self) -> PrepareInputs<'_> {
+            PrepareInputs {
+                layers: [
+                    &self.layers[0],
+                    &self.layers[1],
+                    &self.layers[2],
+                    &self.layers[3],
+                ],
+                world_position: &self.position,
+                world_normal: &self.normal,
+                direct_min_distance: &self.zd,
+                indirect_min_distance: &self.zi,
+                exponent: &self.exponent,
+            }
+        }
+    }
+
+    const SETTINGS: BandwidthSettings = BandwidthSettings { b_f: 1.0, b_e: 3.0 };
+
     /// The planes and filter widths of `prepare` with `kernel`, or pixel by pixel.
     fn prepared(images: &Images, kernel: Option<Kernel>) -> Vec<u32> {
         let (w, h) = (images.position.width, images.position.height);
-        let inputs = PrepareInputs {
-            layers: [
-                &images.layers[0],
-                &images.layers[1],
-                &images.layers[2],
-                &images.layers[3],
-            ],
-            world_position: &images.position,
-            world_normal: &images.normal,
-            direct_min_distance: &images.zd,
-            indirect_min_distance: &images.zi,
-            exponent: &images.exponent,
-        };
-        let settings = BandwidthSettings { b_f: 1.0, b_e: 3.0 };
+        let inputs = images.inputs();
+        let settings = SETTINGS;
         let lanes = LaneLayout::segments(INPUT_PLANES, w as usize, h as usize, 15);
         let mut planes = LanePlanes::new(lanes);
         let mut width_dir = Image::filled(w, h, 0.0);
@@ -404,6 +413,51 @@ mod tests {
                     prepared(&images, Some(kernel)) == expected,
                     "{kernel:?} differs from pixel by pixel at {w}x{h}"
                 );
+            }
+        }
+    }
+
+    /// The bits of the X set and the filter widths from `prepare` then `x_pass`
+    /// (`fused` false) or from `prepare_x_pass`.
+    fn x_set_bits(images: &Images, kernel: Kernel, radius: usize, fused: bool) -> Vec<u32> {
+        let (w, h) = (images.position.width, images.position.height);
+        let (wu, hu) = (w as usize, h as usize);
+        let inputs = images.inputs();
+        let mut x_set = LanePlanes::new(LaneLayout::blocks(X_PLANES, wu, hu, radius));
+        let mut width_dir = Image::filled(w, h, 0.0);
+        let mut width_ind = Image::filled(w, h, 0.0);
+        if fused {
+            let widths = [&mut width_dir, &mut width_ind];
+            prepare_x_pass(kernel, &inputs, SETTINGS, radius, &mut x_set, widths);
+        } else {
+            let mut input = LanePlanes::new(LaneLayout::segments(INPUT_PLANES, wu, hu, radius));
+            let (dir, ind) = (&mut width_dir, &mut width_ind);
+            prepare(kernel, &inputs, SETTINGS, &mut input, dir, ind);
+            x_pass(kernel, &input, radius, &mut x_set);
+        }
+        let floats = x_set
+            .data()
+            .iter()
+            .chain(&width_dir.data)
+            .chain(&width_ind.data);
+        floats.map(|v| v.to_bits()).collect()
+    }
+
+    /// The fused pass (one row prepared at a time into a one-line set) gives the X set
+    /// and filter widths of the two passes, bit for bit: heights that are and are not
+    /// whole bands of rows, widths around the groups of eight, both kernels, two radii.
+    #[test]
+    fn prepare_x_pass_gives_the_bits_of_prepare_then_x_pass() {
+        for (w, h) in [(37, 6), (1, 1), (9, 2), (18, 1), (40, 33), (64, 16)] {
+            let images = images(w, h);
+            for radius in [2, 15] {
+                for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+                    assert!(
+                        x_set_bits(&images, kernel, radius, true)
+                            == x_set_bits(&images, kernel, radius, false),
+                        "{kernel:?}, radius {radius}: the fused pass differs at {w}x{h}"
+                    );
+                }
             }
         }
     }

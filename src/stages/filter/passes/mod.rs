@@ -26,7 +26,7 @@ mod taps;
 mod x;
 mod y;
 
-pub use x::x_pass;
+pub use x::{prepare_x_pass, x_pass};
 pub use y::y_pass;
 
 #[cfg(doc)]

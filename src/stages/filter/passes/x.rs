@@ -1,15 +1,20 @@
 //! The X pass (paper 001 eq. 21): filters both kinds of the input planes along image
 //! rows into the X set. Each row is walked slot by slot, weighing each pair of slots
-//! once (see the module docs of `passes`).
+//! once (see the module docs of `passes`). The stage runs it fused with the preparation
+//! ([`prepare_x_pass`]); [`x_pass`] is the pass alone, over a whole input set (the
+//! reference the fused pass is tested against, and benched apart).
 
 use super::super::MAX_RADIUS;
 use super::super::gaussian::{Contiguous, MAX_TAPS, TapWeights, VALUE_PLANES, Window, accumulate};
 use super::super::lane_planes::{LaneLayout, LanePlanes, Order};
 use super::super::planes::{
-    B2_IND, B2X_DIR, B2Y_DIR, DIR, IND, INPUT_PLANES, PX, X_B2_IND, X_B2Y_DIR, X_DIR, X_IND,
-    X_PLANES, X_PX, X_PY, X_PZ,
+    B2_IND, B2X_DIR, B2Y_DIR, BandwidthSettings, DIR, IND, INPUT_PLANES, PX, PrepareInputs,
+    RowLayout, X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ, prepare_line,
+    row_scratch,
 };
+use super::super::prepare_lanes::RowOut;
 use super::{PairRing, group_kinds};
+use crate::raster::ScalarImage;
 use crate::simd::{Kernel, LANES, Lanes, Portable};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -46,6 +51,121 @@ pub fn x_pass(kernel: Kernel, input: &LanePlanes, radius: usize, output: &mut La
                 _ => x_band::<Portable>(input, radius, rows, &out),
             }
         });
+}
+
+/// The preparation ([`super::super::planes::prepare`]) and the X pass ([`x_pass`]) at
+/// once, row by row: each row is prepared into a one-line input set, which stays in
+/// the cache, and filtered from there into the X set `output`; the filter widths go
+/// to `width_dir` and `width_ind`. The same bits as the two passes one after the
+/// other, without writing the whole input set to memory and reading it back.
+pub fn prepare_x_pass(
+    kernel: Kernel,
+    images: &PrepareInputs,
+    settings: BandwidthSettings,
+    radius: usize,
+    output: &mut LanePlanes,
+    widths: [&mut ScalarImage; 2],
+) {
+    let (w, h) = (output.width, output.height);
+    assert!(output.planes() == X_PLANES && output.order() == Order::Blocks);
+    assert!(radius <= MAX_RADIUS, "radius {radius} over {MAX_RADIUS}");
+    let [width_dir, width_ind] = widths;
+    for image in [&*width_dir, &*width_ind] {
+        assert_eq!((image.width as usize, image.height as usize), (w, h));
+    }
+    if w == 0 || h == 0 {
+        return;
+    }
+    let kernel = kernel.available();
+    // The row scratch of the whole image's input set (its rows know the image height),
+    // and the layout of one of its lines.
+    let layout = row_scratch(&LaneLayout::segments(INPUT_PLANES, w, h, radius));
+    let line = LaneLayout::segments(INPUT_PLANES, w, 1, radius);
+    let band = ROW_BAND * w;
+    let out = SetOut::new(output);
+    width_dir
+        .data
+        .par_chunks_mut(band)
+        .zip(width_ind.data.par_chunks_mut(band))
+        .enumerate()
+        .for_each(|(b, (width_dir, width_ind))| {
+            let rows = b * ROW_BAND..b * ROW_BAND + width_dir.len() / w;
+            let mut input = LanePlanes::new(line);
+            let mut row = vec![0.0; layout.row_step()];
+            let mut scratch = RowOut {
+                row: &mut row,
+                width_dir,
+                width_ind,
+            };
+            let band = PreparedBand {
+                images,
+                settings,
+                layout: &layout,
+                radius,
+                rows,
+            };
+            match kernel {
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and FMA.
+                Kernel::Avx2Fma => unsafe {
+                    prepare_x_band_avx2(&band, &mut input, &mut scratch, &out)
+                },
+                _ => prepare_x_band::<Portable>(&band, &mut input, &mut scratch, &out),
+            }
+        });
+}
+
+/// What a task of [`prepare_x_pass`] prepares and filters: the images' rows `rows`.
+struct PreparedBand<'a> {
+    images: &'a PrepareInputs<'a>,
+    settings: BandwidthSettings,
+    layout: &'a RowLayout,
+    radius: usize,
+    rows: Range<usize>,
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn prepare_x_band_avx2(
+    band: &PreparedBand,
+    input: &mut LanePlanes,
+    scratch: &mut RowOut,
+    out: &SetOut,
+) {
+    prepare_x_band::<crate::simd::Avx2>(band, input, scratch, out)
+}
+
+/// [`prepare_x_pass`] for the band's rows, each prepared into the one-line set
+/// `input` through `scratch` (whose filter widths are the band's), then filtered.
+#[inline(always)]
+fn prepare_x_band<V: Lanes>(
+    band: &PreparedBand,
+    input: &mut LanePlanes,
+    scratch: &mut RowOut,
+    out: &SetOut,
+) {
+    let mut ring = PairRing::<V>::new(band.radius);
+    let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
+    let lanes = input.layout();
+    let w = lanes.width;
+    for (k, y) in band.rows.clone().enumerate() {
+        let mut row = RowOut {
+            row: &mut *scratch.row,
+            width_dir: &mut scratch.width_dir[k * w..(k + 1) * w],
+            width_ind: &mut scratch.width_ind[k * w..(k + 1) * w],
+        };
+        let (images, settings, layout) = (band.images, band.settings, band.layout);
+        prepare_line::<V>(
+            images,
+            settings,
+            layout,
+            &lanes,
+            y,
+            &mut row,
+            input.data_mut(),
+        );
+        x_row::<V>(input, band.radius, 0, y, &mut ring, &mut weights, out);
+    }
 }
 
 /// The X set, written by the X pass's tasks at once: each task writes the lines of its
@@ -98,18 +218,19 @@ fn x_band<V: Lanes>(input: &LanePlanes, radius: usize, rows: Range<usize>, out: 
     let mut ring = PairRing::<V>::new(radius);
     let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
     for y in rows {
-        x_row::<V>(input, radius, y, &mut ring, &mut weights, out);
+        x_row::<V>(input, radius, y, y, &mut ring, &mut weights, out);
     }
 }
 
-/// Row `y`, slot by slot: the pair weights of each slot from -R on into `ring`, and
-/// from slot 0 on each group's X-set planes. Every eight slots j0..j0 + 8 (S is a
-/// multiple of 8), their groups transposed are blocks (l S + j0) / 8 of line y of the
-/// X set.
+/// Row `y` of the image, line `line` of `input`, slot by slot: the pair weights of
+/// each slot from -R on into `ring`, and from slot 0 on each group's X-set planes.
+/// Every eight slots j0..j0 + 8 (S is a multiple of 8), their groups transposed are
+/// blocks (l S + j0) / 8 of line y of the X set.
 #[inline(always)]
 fn x_row<V: Lanes>(
     input: &LanePlanes,
     radius: usize,
+    line: usize,
     y: usize,
     ring: &mut PairRing<V>,
     weights: &mut TapWeights<V>,
@@ -119,7 +240,7 @@ fn x_row<V: Lanes>(
     let segment = input.slots();
     let (data, s) = (input.data(), input.plane_stride());
     for j in -(radius as isize)..segment as isize {
-        let c = input.slot_index(j, y as isize);
+        let c = input.slot_index(j, line as isize);
         let position = ring.weigh(j, data, (c, LANES, s), PX, [B2X_DIR, B2_IND]);
         if j >= 0 {
             let j = j as usize;

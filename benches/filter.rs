@@ -32,7 +32,7 @@ use relume::recording::{Intrinsics, Pose};
 use relume::rng::{hash, unit_f32};
 use relume::simd::Kernel;
 use relume::stages::filter::lane_planes::{LaneLayout, LanePlanes};
-use relume::stages::filter::passes::{self, FullWindows, Previous};
+use relume::stages::filter::passes::{self, Previous, XSet};
 use relume::stages::filter::planes::{
     self, BandwidthSettings, INPUT_PLANES, PrepareInputs, X_PLANES,
 };
@@ -243,7 +243,7 @@ fn bench_filter(c: &mut Criterion) {
     // bench is filtered out.
     prepare();
     group.bench_function("pass/prepare", |b| b.iter(&mut prepare));
-    let mut x_set = LanePlanes::new(LaneLayout::blocks(X_PLANES, w, h, RADIUS));
+    let mut x_set = XSet::new(LaneLayout::blocks(X_PLANES, w, h, RADIUS));
     group.bench_function("pass/x", |b| {
         b.iter(|| passes::x_pass(kernel, &input, RADIUS, &mut x_set))
     });
@@ -264,11 +264,10 @@ fn bench_filter(c: &mut Criterion) {
     });
     passes::x_pass(kernel, &input, RADIUS, &mut x_set);
     let mut out: [Vec3Image; 4] = std::array::from_fn(|_| Image::filled(W, H, Vec3::ZERO));
-    let mut full_windows = FullWindows::default();
     // Run once here too, for the full windows of the temporal pass below.
-    passes::y_pass(kernel, &x_set, &mut full_windows, None, RADIUS, &mut out);
+    passes::y_pass(kernel, &mut x_set, None, RADIUS, &mut out);
     group.bench_function("pass/y_spatial", |b| {
-        b.iter(|| passes::y_pass(kernel, &x_set, &mut full_windows, None, RADIUS, &mut out))
+        b.iter(|| passes::y_pass(kernel, &mut x_set, None, RADIUS, &mut out))
     });
     let view = PreviousView {
         world_to_camera: Affine3A::IDENTITY,
@@ -276,24 +275,12 @@ fn bench_filter(c: &mut Criterion) {
     };
     // The same set as the previous frame's, with the full windows its Y pass found.
     let previous_x_set = x_set.clone();
-    let previous_full_windows = full_windows.clone();
     let previous = Previous {
         x_set: &previous_x_set,
-        full_windows: &previous_full_windows,
         view: &view,
     };
     group.bench_function("pass/y_temporal", |b| {
-        b.iter(|| {
-            let previous = Some(previous);
-            passes::y_pass(
-                kernel,
-                &x_set,
-                &mut full_windows,
-                previous,
-                RADIUS,
-                &mut out,
-            )
-        })
+        b.iter(|| passes::y_pass(kernel, &mut x_set, Some(previous), RADIUS, &mut out))
     });
     let map = EnvMap::from_fn(512, 256, |d| {
         Vec3::splat(1.0 + (4.0 * d.x).sin().abs() + 10.0 * d.y.max(0.0).powi(8))

@@ -86,8 +86,8 @@ use crate::raster::{Image, ScalarImage, Vec3Image};
 use crate::recording::{Intrinsics, Pose};
 use crate::simd::Kernel;
 use glam::{Affine3A, Vec3};
-use lane_planes::{LaneLayout, LanePlanes};
-use passes::{FullWindows, Previous};
+use lane_planes::LaneLayout;
+use passes::{Previous, XSet};
 use planes::{BandwidthSettings, PrepareInputs, X_PLANES};
 use std::sync::Arc;
 use temporal::PreviousView;
@@ -278,12 +278,9 @@ pub struct AxisAlignedFilter {
     params: FilterParams,
     kernel: Kernel,
     /// This frame's X set (the X pass's output).
-    x_set: LanePlanes,
+    x_set: XSet,
     /// The previous frame's X set (swapped with `x_set` after each frame).
-    previous_x_set: LanePlanes,
-    /// The full windows of `x_set` and of `previous_x_set` (swapped with them).
-    full_windows: FullWindows,
-    previous_full_windows: FullWindows,
+    previous_x_set: XSet,
     previous_view: Option<PreviousView>,
     /// B_e of the last environment map, keyed by its `Arc`.
     environment_cache: Option<(Arc<EnvMap>, f32)>,
@@ -300,10 +297,8 @@ impl AxisAlignedFilter {
         AxisAlignedFilter {
             params,
             kernel,
-            x_set: LanePlanes::default(),
-            previous_x_set: LanePlanes::default(),
-            full_windows: FullWindows::default(),
-            previous_full_windows: FullWindows::default(),
+            x_set: XSet::default(),
+            previous_x_set: XSet::default(),
             previous_view: None,
             environment_cache: None,
         }
@@ -376,11 +371,11 @@ impl AxisAlignedFilter {
         }
         let b_e = self.environment_bandwidth(input.environment)?;
         let (wu, hu) = (w as usize, h as usize);
-        if (self.x_set.width, self.x_set.height) != (wu, hu) {
+        let planes = self.x_set.planes();
+        if (planes.width, planes.height) != (wu, hu) {
             let radius = self.params.radius;
-            self.x_set = LanePlanes::new(LaneLayout::blocks(X_PLANES, wu, hu, radius));
+            self.x_set = XSet::new(LaneLayout::blocks(X_PLANES, wu, hu, radius));
             self.previous_x_set = self.x_set.clone();
-            self.previous_full_windows = FullWindows::default();
             self.previous_view = None;
         }
         let settings = BandwidthSettings {
@@ -407,21 +402,18 @@ impl AxisAlignedFilter {
         let previous = match (&self.previous_view, self.params.temporal) {
             (Some(view), true) => Some(Previous {
                 x_set: &self.previous_x_set,
-                full_windows: &self.previous_full_windows,
                 view,
             }),
             _ => None,
         };
         passes::y_pass(
             self.kernel,
-            &self.x_set,
-            &mut self.full_windows,
+            &mut self.x_set,
             previous,
             radius,
             &mut out.layers,
         );
         std::mem::swap(&mut self.x_set, &mut self.previous_x_set);
-        std::mem::swap(&mut self.full_windows, &mut self.previous_full_windows);
         self.previous_view = match (self.params.temporal, input.view) {
             (true, Some((pose, camera))) => Some(PreviousView {
                 world_to_camera: Affine3A::from_mat4(pose.matrix().inverse().as_mat4()),

@@ -244,7 +244,7 @@ fn neighbours<V: Lanes>(images: &PrepareInputs, j: usize) -> (Xyz<V>, Xyz<V>) {
 #[cfg(test)]
 mod tests {
     use super::super::lane_planes::{LaneLayout, LanePlanes, fill_line};
-    use super::super::passes::{prepare_x_pass, x_pass};
+    use super::super::passes::{XSet, prepare_x_pass, x_pass};
     use super::super::planes::{INPUT_PLANES, X_PLANES, prepare, prepare_pixel, row_scratch};
     use super::*;
     use crate::raster::{Image, ScalarImage, Vec3Image};
@@ -423,7 +423,7 @@ mod tests {
         let (w, h) = (images.position.width, images.position.height);
         let (wu, hu) = (w as usize, h as usize);
         let inputs = images.inputs();
-        let mut x_set = LanePlanes::new(LaneLayout::blocks(X_PLANES, wu, hu, radius));
+        let mut x_set = XSet::new(LaneLayout::blocks(X_PLANES, wu, hu, radius));
         let mut width_dir = Image::filled(w, h, 0.0);
         let mut width_ind = Image::filled(w, h, 0.0);
         if fused {
@@ -436,6 +436,7 @@ mod tests {
             x_pass(kernel, &input, radius, &mut x_set);
         }
         let floats = x_set
+            .planes()
             .data()
             .iter()
             .chain(&width_dir.data)

@@ -255,7 +255,7 @@ fn temporal_reuse_finds_the_same_pixel_and_lowers_the_variance() {
         for x in 0..W as usize {
             let p = first.position.data[y * W as usize + x];
             assert_eq!(
-                find_previous(p, &previous_view, &filter.previous_x_set),
+                find_previous(p, &previous_view, filter.previous_x_set.planes()),
                 Some((x, y))
             );
         }

@@ -32,28 +32,70 @@ pub use y::y_pass;
 #[cfg(doc)]
 use super::gaussian::accumulate_full;
 use super::gaussian::{Bandwidths, Contiguous, EXP_CUTOFF, MAX_TAPS, Window, tap_weights};
-use super::lane_planes::LanePlanes;
+use super::lane_planes::{LaneLayout, LanePlanes};
 use super::temporal::PreviousView;
 #[cfg(doc)]
 use crate::simd::Kernel;
 use crate::simd::{LANES, Lanes};
 
 /// The previous frame as the temporal taps read it: its X set (positions, bandwidths,
-/// and its X-filtered layers, E'_X of eq. 26), the full windows its Y pass found, and
-/// its camera.
+/// and its X-filtered layers, E'_X of eq. 26, with the full windows its Y pass found)
+/// and its camera.
 #[derive(Clone, Copy)]
 pub struct Previous<'a> {
-    pub x_set: &'a LanePlanes,
-    pub full_windows: &'a FullWindows,
+    pub x_set: &'a XSet,
     pub view: &'a PreviousView,
+}
+
+/// The X set (the X pass's output, the Y pass's input: [`super::planes::X_PLANES`]
+/// lane planes in blocks order) with the full windows the Y pass found in it, kept
+/// together so that a frame's temporal taps read the windows of the planes they read.
+/// Writing the planes ([`XSet::planes_mut`]) forgets the windows; the Y pass finds
+/// them again.
+#[derive(Clone, Debug, Default)]
+pub struct XSet {
+    planes: LanePlanes,
+    full_windows: FullWindows,
+}
+
+impl XSet {
+    /// Planes of `layout` (zeros), with no window known to be full.
+    pub fn new(layout: LaneLayout) -> XSet {
+        XSet::from_planes(LanePlanes::new(layout))
+    }
+
+    /// `planes`, with no window known to be full.
+    pub fn from_planes(planes: LanePlanes) -> XSet {
+        XSet {
+            planes,
+            full_windows: FullWindows::default(),
+        }
+    }
+
+    /// The planes.
+    pub fn planes(&self) -> &LanePlanes {
+        &self.planes
+    }
+
+    /// The planes, for writing: forgets which windows are full.
+    pub fn planes_mut(&mut self) -> &mut LanePlanes {
+        self.full_windows.forget();
+        &mut self.planes
+    }
+
+    /// The full windows found by the last Y pass over these planes (none before it).
+    pub fn full_windows(&self) -> &FullWindows {
+        &self.full_windows
+    }
 }
 
 /// Which Y windows of an X set are full: per block n and line y, bit k (0 direct, 1
 /// indirect) is set when every tap of the window of kind k there (lines y - R..=y + R
 /// of block n, all eight lanes) has both layers' values, so that its sums may skip the
 /// valid planes ([`accumulate_full`]: the same bits). The Y pass finds them as it walks
-/// each block down, for its own spatial taps; a frame later, the temporal taps whose
-/// window lies on one or two blocks of that set read them.
+/// each block down, for its own spatial taps, and keeps them with the set ([`XSet`]);
+/// a frame later, the temporal taps whose window lies on one or two blocks of that set
+/// read them.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FullWindows {
     lines: usize,
@@ -69,6 +111,12 @@ impl FullWindows {
         self.bits.clear();
         self.bits
             .resize(x_set.width.div_ceil(LANES) * x_set.height, 0);
+    }
+
+    /// No window marked full (the allocation kept for the next [`FullWindows::reset`]).
+    fn forget(&mut self) {
+        self.lines = 0;
+        self.bits.clear();
     }
 
     /// The bits of the window at block `block`, line `line` (0 outside the image's

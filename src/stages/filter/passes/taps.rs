@@ -78,7 +78,7 @@ pub(super) fn temporal_taps<V: Lanes>(
         valid[1][0].to_array(),
         valid[1][1].to_array(),
     ];
-    let x_set = previous.x_set;
+    let x_set = previous.x_set.planes();
     let active: [bool; LANES] =
         std::array::from_fn(|l| x0 + l < x_set.width && valid.iter().any(|a| a[l] > 0.0));
     let found = find_previous_lanes(position, active, previous.view, x_set);
@@ -121,11 +121,11 @@ pub(super) fn temporal_taps<V: Lanes>(
         );
         let line = y as isize + dy;
         let window = window_from(x_set.slot_index(b, line - radius as isize));
-        let full = previous.full_windows.get(b, line);
+        let full = previous.x_set.full_windows().get(b, line);
         if r == 0 {
             return TemporalTaps::Contiguous(window, limit, full);
         }
-        let full = full & previous.full_windows.get(b + 1, line);
+        let full = full & previous.x_set.full_windows().get(b + 1, line);
         // Rotated lane s reads block b + 1 where s < r.
         let straddling = Straddling {
             second: x_set.slot_step() as isize,

@@ -12,7 +12,7 @@ use glam::Vec3;
 
 /// An X set of `width` x `height` with every value present except at `gaps` (pixel x,
 /// line, plane), positions on a plane 2 m away and random values.
-fn x_set(width: usize, height: usize, radius: usize, gaps: &[(usize, usize, usize)]) -> LanePlanes {
+fn x_set(width: usize, height: usize, radius: usize, gaps: &[(usize, usize, usize)]) -> XSet {
     let mut set = LanePlanes::new(LaneLayout::blocks(X_PLANES, width, height, radius));
     let s = set.plane_stride();
     for line in 0..height {
@@ -37,7 +37,7 @@ fn x_set(width: usize, height: usize, radius: usize, gaps: &[(usize, usize, usiz
         let i = set.pixel_index(x as isize, line as isize);
         set.data_mut()[i + plane * s] = 0.0;
     }
-    set
+    XSet::from_planes(set)
 }
 
 /// The Y pass marks a window of a kind full exactly when all its taps, eight lanes by
@@ -73,9 +73,12 @@ fn full_windows_are_the_windows_without_a_gap() {
     for kernel in [Kernel::Portable, Kernel::detect()] {
         let mut out: [Vec3Image; 4] =
             std::array::from_fn(|_| Image::filled(width as u32, height as u32, Vec3::ZERO));
-        let mut full = FullWindows::default();
-        y_pass(kernel, &set, &mut full, None, radius, &mut out);
-        assert_eq!(full.bits, expected, "{kernel:?}");
+        let mut set = set.clone();
+        y_pass(kernel, &mut set, None, radius, &mut out);
+        assert_eq!(set.full_windows().bits, expected, "{kernel:?}");
+        // Writing the planes forgets the windows.
+        set.planes_mut();
+        assert_eq!(set.full_windows(), &FullWindows::default());
     }
     for k in 0..2 {
         let count = expected.iter().filter(|&&b| b & (1 << k) != 0).count();
@@ -91,6 +94,7 @@ fn full_windows_are_the_windows_without_a_gap() {
 #[test]
 fn full_sums_are_the_bits_of_the_general_sums() {
     let set = x_set(16, 12, 5, &[]);
+    let set = set.planes();
     let s = set.plane_stride();
     for case in 0..200u64 {
         let random = |k: u64| unit_f32(hash(&[case, k]));
@@ -168,40 +172,28 @@ fn temporal_taps_over_full_windows_give_the_general_bits() {
         cy: 0.0,
     };
     let camera = Pinhole::new(&intrinsics, width as u32, height as u32);
-    let mut previous_full = FullWindows::default();
+    let mut previous = previous;
     let mut scratch: [Vec3Image; 4] =
         std::array::from_fn(|_| Image::filled(width as u32, height as u32, Vec3::ZERO));
-    y_pass(
-        Kernel::Portable,
-        &previous,
-        &mut previous_full,
-        None,
-        radius,
-        &mut scratch,
-    );
-    assert!(previous_full.bits.contains(&3));
+    y_pass(Kernel::Portable, &mut previous, None, radius, &mut scratch);
+    assert!(previous.full_windows().bits.contains(&3));
+    // The same planes with no window known to be full.
+    let previous_general = XSet::from_planes(previous.planes().clone());
     for shift in [0.0, 0.03] {
         let view = PreviousView {
             world_to_camera: Affine3A::from_translation(glam::Vec3::new(shift, 0.0, 0.0)),
             camera,
         };
         for kernel in [Kernel::Portable, Kernel::detect()] {
-            let run = |full_windows: &FullWindows| {
+            let run = |previous: &XSet| {
                 let mut out: [Vec3Image; 4] =
                     std::array::from_fn(|_| Image::filled(width as u32, height as u32, Vec3::ZERO));
                 let previous = Previous {
-                    x_set: &previous,
-                    full_windows,
+                    x_set: previous,
                     view: &view,
                 };
-                y_pass(
-                    kernel,
-                    &current,
-                    &mut FullWindows::default(),
-                    Some(previous),
-                    radius,
-                    &mut out,
-                );
+                let mut current = current.clone();
+                y_pass(kernel, &mut current, Some(previous), radius, &mut out);
                 out.map(|layer| {
                     layer
                         .data
@@ -211,8 +203,8 @@ fn temporal_taps_over_full_windows_give_the_general_bits() {
                 })
             };
             assert_eq!(
-                run(&previous_full),
-                run(&FullWindows::default()),
+                run(&previous),
+                run(&previous_general),
                 "{kernel:?}, shift {shift}"
             );
         }

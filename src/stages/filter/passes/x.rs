@@ -13,7 +13,7 @@ use super::super::planes::{
     row_scratch,
 };
 use super::super::prepare_lanes::RowOut;
-use super::{PairRing, group_kinds};
+use super::{PairRing, XSet, group_kinds};
 use crate::raster::ScalarImage;
 use crate::simd::{Kernel, LANES, Lanes, Portable};
 use rayon::prelude::*;
@@ -25,7 +25,8 @@ const ROW_BAND: usize = 16;
 /// The X pass, eq. 21: filters both kinds of `input` (segments order) along image rows
 /// into the X set `output` (blocks order; 0 with valid 0 where a layer has no value),
 /// with the positions and the bandwidths the Y pass needs.
-pub fn x_pass(kernel: Kernel, input: &LanePlanes, radius: usize, output: &mut LanePlanes) {
+pub fn x_pass(kernel: Kernel, input: &LanePlanes, radius: usize, output: &mut XSet) {
+    let output = output.planes_mut();
     assert!(input.planes() == INPUT_PLANES && output.planes() == X_PLANES);
     assert_eq!(
         (input.order(), output.order()),
@@ -63,9 +64,10 @@ pub fn prepare_x_pass(
     images: &PrepareInputs,
     settings: BandwidthSettings,
     radius: usize,
-    output: &mut LanePlanes,
+    output: &mut XSet,
     widths: [&mut ScalarImage; 2],
 ) {
+    let output = output.planes_mut();
     let (w, h) = (output.width, output.height);
     assert!(output.planes() == X_PLANES && output.order() == Order::Blocks);
     assert!(radius <= MAX_RADIUS, "radius {radius} over {MAX_RADIUS}");

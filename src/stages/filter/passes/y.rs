@@ -15,7 +15,7 @@ use super::super::gaussian::{
 use super::super::lane_planes::{LanePlanes, Order};
 use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ};
 use super::taps::{TemporalTaps, temporal_taps};
-use super::{FullWindows, PairRing, Previous, group_kinds};
+use super::{PairRing, Previous, XSet, group_kinds};
 use crate::raster::Vec3Image;
 use crate::simd::{Kernel, LANES, Lanes, Portable};
 use glam::Vec3;
@@ -24,23 +24,26 @@ use rayon::prelude::*;
 /// The Y pass, eq. 22, with the temporal taps of eq. 26 when `previous` is given:
 /// filters the X set along image columns into the four output layers (E_R^dir,
 /// E_R^ind, E_RV^dir, E_RV^ind; NaN where the pixel has no value of that layer), and
-/// finds the set's full windows into `full_windows` (for the next frame's temporal
-/// taps).
+/// finds the set's full windows, which it keeps (for the next frame's temporal taps).
 pub fn y_pass(
     kernel: Kernel,
-    x_set: &LanePlanes,
-    full_windows: &mut FullWindows,
+    x_set: &mut XSet,
     previous: Option<Previous>,
     radius: usize,
     out: &mut [Vec3Image; 4],
 ) {
+    let XSet {
+        planes: x_set,
+        full_windows,
+    } = x_set;
+    let x_set = &*x_set;
     let (w, h) = (x_set.width, x_set.height);
     assert!(x_set.planes() == X_PLANES && x_set.fits_lines(radius));
     assert!(radius <= MAX_RADIUS, "radius {radius} over {MAX_RADIUS}");
     // Gather offsets are i32.
     assert!(x_set.floats() <= i32::MAX as usize);
     if let Some(p) = previous {
-        assert_eq!(p.x_set.layout(), x_set.layout());
+        assert_eq!(p.x_set.planes().layout(), x_set.layout());
     }
     let kernel = kernel.available();
     assert_eq!(x_set.order(), Order::Blocks);

@@ -198,7 +198,7 @@ fn the_temporal_taps_match_eq_26_evaluated_directly() {
             .position
             .data
             .iter()
-            .map(|&p| find_previous(p, &view, &filter.previous_x_set))
+            .map(|&p| find_previous(p, &view, filter.previous_x_set.planes()))
             .collect();
         filter
             .filter(&second.inputs(Some((Pose::IDENTITY, camera()))), &mut out)

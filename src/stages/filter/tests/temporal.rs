@@ -19,11 +19,19 @@ fn a_point_behind_or_beside_the_previous_camera_has_no_match() {
         .unwrap();
     let view = filter.previous_view.unwrap();
     assert_eq!(
-        find_previous(Vec3::new(0.0, 0.0, -1.0), &view, &filter.previous_x_set),
+        find_previous(
+            Vec3::new(0.0, 0.0, -1.0),
+            &view,
+            filter.previous_x_set.planes()
+        ),
         None
     );
     assert_eq!(
-        find_previous(Vec3::new(50.0, 0.0, 2.0), &view, &filter.previous_x_set),
+        find_previous(
+            Vec3::new(50.0, 0.0, 2.0),
+            &view,
+            filter.previous_x_set.planes()
+        ),
         None
     );
 }
@@ -162,7 +170,7 @@ fn a_run_reads_eight_consecutive_pixels() {
             }
         }
     }
-    for set in [&filter.previous_x_set, &narrow] {
+    for set in [filter.previous_x_set.planes(), &narrow] {
         let (w, h) = (set.width as i32, set.height as i32);
         let at = |q: usize, x: i32, y: i32| {
             // Outside the image: the set's zero blocks or padding lines.
@@ -202,10 +210,10 @@ fn find_previous_in_lanes_gives_the_scalar_answers() {
         .filter(&scene.inputs(Some((turned, camera()))), &mut out)
         .unwrap();
     let view = filter.previous_view.unwrap();
-    check_find_previous_lanes::<Portable>("Portable", &view, &filter.previous_x_set);
+    check_find_previous_lanes::<Portable>("Portable", &view, filter.previous_x_set.planes());
     #[cfg(target_arch = "x86_64")]
     if lanes::Kernel::detect() == lanes::Kernel::Avx2Fma {
         // SAFETY: the CPU has AVX2 and FMA.
-        unsafe { check_find_previous_lanes_avx2(&view, &filter.previous_x_set) };
+        unsafe { check_find_previous_lanes_avx2(&view, filter.previous_x_set.planes()) };
     }
 }

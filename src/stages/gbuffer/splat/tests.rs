@@ -146,3 +146,53 @@ fn empty_cloud_and_samples_behind_the_camera_leave_no_data() {
     assert!(out.coverage.data.iter().all(|&c| c == COVERAGE_NONE));
     assert!(out.depth.data.iter().all(|&d| d == 0.0));
 }
+
+/// Occlusion culling drops a sample whose centre lies more than the margin behind the
+/// nearest centre of the 3x3 pixels around its own centre pixel, and only such samples:
+/// a sample beside a nearer one is culled (its pixel stays uncovered, since the nearer
+/// sample's footprint does not reach it), one two pixels away is not, nor one within
+/// the margin, nor one exactly the margin behind; an infinite margin culls nothing.
+#[test]
+fn occlusion_culling_drops_samples_behind_a_nearer_centre_only() {
+    let cam = camera();
+    // Footprints of 0.75 px (the minimum): each sample covers its centre pixel alone.
+    // `apart` is two rows below the others: outside both their 3x3 neighbourhoods.
+    let (front, beside, apart) = ((40, 60), (41, 60), (40, 62));
+    let cloud_with = |beside_z: f32| {
+        let mut cloud = EnvCloud::default();
+        for (tag, ((x, y), z)) in [(front, 1.0), (beside, beside_z), (apart, 2.0)]
+            .into_iter()
+            .enumerate()
+        {
+            cloud
+                .positions
+                .push(cam.back_project(x as f32, y as f32, z));
+            cloud.colors.push(Vec3::splat(tag as f32));
+            cloud.normals.push(Vec3::Z);
+        }
+        cloud
+    };
+    let params = |margin: f32| SplatParams {
+        radius: 0.001,
+        max_radius_px: 64.0,
+        occlusion_margin: margin,
+    };
+    let drawn = |out: &GBuffer, (x, y): (usize, usize)| {
+        let i = y * 160 + x;
+        (out.coverage.data[i] == COVERAGE_SPLAT).then(|| out.color.data[i].x)
+    };
+    for (beside_z, margin, beside_drawn) in [
+        (2.0, 0.1, false),
+        (2.0, 1.0, true),
+        (2.0, f32::INFINITY, true),
+        (1.05, 0.1, true),
+    ] {
+        let out = splat_all(&cloud_with(beside_z), &Pose::IDENTITY, &params(margin));
+        let case = format!("beside at z = {beside_z}, margin {margin}");
+        assert_eq!(drawn(&out, front), Some(0.0), "{case}");
+        assert_eq!(drawn(&out, beside), beside_drawn.then_some(1.0), "{case}");
+        assert_eq!(drawn(&out, apart), Some(2.0), "{case}");
+        let covered = out.coverage.data.iter().filter(|&&c| c == COVERAGE_SPLAT);
+        assert_eq!(covered.count(), 2 + beside_drawn as usize, "{case}");
+    }
+}

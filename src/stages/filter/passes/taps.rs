@@ -29,13 +29,11 @@ pub(super) enum TemporalTaps<V> {
     Gathered(Window, Gathered, V),
 }
 
-/// A [`Permuted`] fetch with its number of lines chosen at run time.
+/// A [`Permuted`] fetch with its number of lines chosen at run time: the fetch sized
+/// for the most lines, of which the first `count` are used.
 #[derive(Clone, Copy)]
 pub(super) struct PermutedLanes<V> {
-    index: V,
-    second: V,
-    block_step: isize,
-    lines: [(isize, V); PERMUTED_LINES],
+    most: Permuted<V, PERMUTED_LINES>,
     count: usize,
 }
 
@@ -45,11 +43,17 @@ impl<V: Lanes> PermutedLanes<V> {
     pub(super) fn fetch<const K: usize>(&self) -> Permuted<V, K> {
         assert_eq!(K, self.count);
         let mut lines = [(0, V::splat(0.0)); K];
-        lines.copy_from_slice(&self.lines[..K]);
+        lines.copy_from_slice(&self.most.lines[..K]);
+        let Permuted {
+            index,
+            second,
+            block_step,
+            ..
+        } = self.most;
         Permuted {
-            index: self.index,
-            second: self.second,
-            block_step: self.block_step,
+            index,
+            second,
+            block_step,
             lines,
         }
     }
@@ -185,7 +189,7 @@ fn permuted_lanes<V: Lanes>(
         })
     });
     let step = x_set.line_step() as isize;
-    let mut permuted = PermutedLanes {
+    let mut most = Permuted {
         index: V::lane_indices(std::array::from_fn(|l| {
             found[l].map_or(0, |(x, _)| (x % LANES) as u32)
         })),
@@ -194,16 +198,16 @@ fn permuted_lanes<V: Lanes>(
         })),
         block_step: x_set.slot_step() as isize,
         lines: [(0, V::splat(0.0)); PERMUTED_LINES],
-        count,
     };
     // A loop, not a closure: closures do not inherit the kernel's target features.
     for k in 0..PERMUTED_LINES {
         let offset = (lines[k.min(count - 1)] as isize - lines[0] as isize) * step;
-        permuted.lines[k] = (
+        most.lines[k] = (
             offset,
             V::from_mask(std::array::from_fn(|l| lane_line[l] == k)),
         );
     }
+    let permuted = PermutedLanes { most, count };
     Some((permuted, (b0 as isize, lines[0] as isize)))
 }
 

@@ -156,6 +156,27 @@ impl GBuffer {
             && n == self.width() as usize * self.height() as usize
     }
 
+    /// The four images cut into bands of `rows` image rows (the last band may be
+    /// shorter), top to bottom, for writing in parallel.
+    pub(crate) fn par_bands_mut(
+        &mut self,
+        rows: usize,
+    ) -> impl IndexedParallelIterator<Item = GBufferRows<'_>> {
+        let len = (rows * self.width() as usize).max(1);
+        self.color
+            .data
+            .par_chunks_mut(len)
+            .zip(self.depth.data.par_chunks_mut(len))
+            .zip(self.normals.data.par_chunks_mut(len))
+            .zip(self.coverage.data.par_chunks_mut(len))
+            .map(|(((color, depth), normals), coverage)| GBufferRows {
+                color,
+                depth,
+                normals,
+                coverage,
+            })
+    }
+
     /// Per pixel: depth, color, normal bits and coverage (for bit-exact tests).
     #[cfg(test)]
     pub(crate) fn bits(&self) -> Vec<[u32; 8]> {
@@ -174,6 +195,33 @@ impl GBuffer {
                 ]
             })
             .collect()
+    }
+}
+
+/// Some whole rows of a G-buffer's four images, pixel for pixel
+/// ([`GBuffer::par_bands_mut`]).
+pub(crate) struct GBufferRows<'a> {
+    pub color: &'a mut [Vec3],
+    pub depth: &'a mut [f32],
+    pub normals: &'a mut [Vec3],
+    pub coverage: &'a mut [u8],
+}
+
+impl GBufferRows<'_> {
+    /// The rows one by one, each `width` pixels.
+    pub fn rows(&mut self, width: usize) -> impl Iterator<Item = GBufferRows<'_>> {
+        let width = width.max(1);
+        self.color
+            .chunks_mut(width)
+            .zip(self.depth.chunks_mut(width))
+            .zip(self.normals.chunks_mut(width))
+            .zip(self.coverage.chunks_mut(width))
+            .map(|(((color, depth), normals), coverage)| GBufferRows {
+                color,
+                depth,
+                normals,
+                coverage,
+            })
     }
 }
 

@@ -234,30 +234,23 @@ fn push(coarse: &Level, fine: &mut Level) {
 /// Fills the holes of the G-buffer from level 1.
 fn push_into_gbuffer(coarse: &Level, camera: &Pinhole, g: &mut GBuffer) {
     let w = g.width() as usize;
-    g.color
-        .data
-        .par_chunks_mut(w)
-        .zip(g.depth.data.par_chunks_mut(w))
-        .zip(g.normals.data.par_chunks_mut(w))
-        .zip(g.coverage.data.par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(y, (((color, depth), normals), coverage))| {
-            for x in 0..w {
-                if depth_is_valid(depth[x]) {
-                    continue;
-                }
-                let t = interpolate(coarse, x, y).mean(0.0);
-                if !t.is_valid() {
-                    continue;
-                }
-                let n = t.normal.normalize_or_zero();
-                let facing = n.dot(camera.ray(x as f32, y as f32)) > 0.0;
-                depth[x] = t.depth;
-                color[x] = t.color;
-                normals[x] = if facing { -n } else { n };
-                coverage[x] = COVERAGE_FILLED;
+    g.par_bands_mut(1).enumerate().for_each(|(y, row)| {
+        for x in 0..w {
+            if depth_is_valid(row.depth[x]) {
+                continue;
             }
-        });
+            let t = interpolate(coarse, x, y).mean(0.0);
+            if !t.is_valid() {
+                continue;
+            }
+            let n = t.normal.normalize_or_zero();
+            let facing = n.dot(camera.ray(x as f32, y as f32)) > 0.0;
+            row.depth[x] = t.depth;
+            row.color[x] = t.color;
+            row.normals[x] = if facing { -n } else { n };
+            row.coverage[x] = COVERAGE_FILLED;
+        }
+    });
 }
 
 #[cfg(test)]

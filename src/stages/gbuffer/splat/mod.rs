@@ -331,15 +331,10 @@ fn draw_bands(cloud: &EnvCloud, raster: &Raster, buffer: &mut SplatBuffer, out: 
     buffer.keys.resize(w * h, EMPTY_KEY);
     let bins = &buffer.bins[..];
     let band_len = BAND_ROWS * w;
-    out.color
-        .data
-        .par_chunks_mut(band_len)
-        .zip(out.depth.data.par_chunks_mut(band_len))
-        .zip(out.normals.data.par_chunks_mut(band_len))
-        .zip(out.coverage.data.par_chunks_mut(band_len))
+    out.par_bands_mut(BAND_ROWS)
         .zip(buffer.keys.par_chunks_mut(band_len))
         .enumerate()
-        .for_each(|(band, ((((color, depth), normals), coverage), keys))| {
+        .for_each(|(band, (mut pixels, keys))| {
             keys.fill(EMPTY_KEY);
             let y0 = band * BAND_ROWS;
             let y1 = y0 + keys.len() / w - 1;
@@ -349,28 +344,23 @@ fn draw_bands(cloud: &EnvCloud, raster: &Raster, buffer: &mut SplatBuffer, out: 
                     draw(f, w, (y0, y1), keys);
                 }
             }
-            let rows = color
-                .chunks_mut(w)
-                .zip(depth.chunks_mut(w))
-                .zip(normals.chunks_mut(w))
-                .zip(coverage.chunks_mut(w))
-                .zip(keys.chunks(w));
-            for (y, ((((color, depth), normals), coverage), keys)) in (y0..).zip(rows) {
+            let rows = pixels.rows(w).zip(keys.chunks(w));
+            for (y, (row, keys)) in (y0..).zip(rows) {
                 for (x, key) in keys.iter().enumerate() {
                     if *key == EMPTY_KEY {
-                        color[x] = Vec3::NAN;
-                        depth[x] = 0.0;
-                        normals[x] = Vec3::ZERO;
-                        coverage[x] = COVERAGE_NONE;
+                        row.color[x] = Vec3::NAN;
+                        row.depth[x] = 0.0;
+                        row.normals[x] = Vec3::ZERO;
+                        row.coverage[x] = COVERAGE_NONE;
                         continue;
                     }
                     let i = (key & 0xffff_ffff) as usize;
                     let n = (rotation * cloud.normals[i]).normalize_or_zero();
                     let ray = camera.ray(x as f32, y as f32);
-                    color[x] = cloud.colors[i];
-                    depth[x] = 1.0 / f32::from_bits(!((key >> 32) as u32));
-                    normals[x] = if n.dot(ray) > 0.0 { -n } else { n };
-                    coverage[x] = COVERAGE_SPLAT;
+                    row.color[x] = cloud.colors[i];
+                    row.depth[x] = 1.0 / f32::from_bits(!((key >> 32) as u32));
+                    row.normals[x] = if n.dot(ray) > 0.0 { -n } else { n };
+                    row.coverage[x] = COVERAGE_SPLAT;
                 }
             }
         });

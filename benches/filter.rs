@@ -14,10 +14,11 @@
 //!   the reprojection changes): pixels find their previous pixels at varying offsets, and
 //!   lane groups whose offsets differ read their temporal taps by gathers.
 //! - `filter.axis_aligned/spatial`: temporal off (E_RV == E_R off the sphere).
-//! - `pass/prepare`, `pass/x`, `pass/y_spatial`, `pass/y_temporal`: the passes alone
-//!   (where the time goes), with the kernel the CPU runs (AVX2 + FMA where it has them);
-//!   `pass/prepare_x`: the preparation and the X pass fused row by row, as the stage
-//!   runs them;
+//! - `pass/prepare_x`, `pass/y_spatial`, `pass/y_temporal`: the passes the stage runs,
+//!   alone (where the time goes), with the kernel the CPU runs (AVX2 + FMA where it has
+//!   them): the preparation fused with the X pass row by row, then the Y pass;
+//!   `pass/prepare` and `pass/x`: the preparation and the X pass each over the whole
+//!   image (the reference form of the fused pass);
 //!   `pass/x_portable`: the X pass with the portable kernel (CPUs without them). The
 //!   temporal pass's previous frame is the same frame, so every pixel finds itself and
 //!   the temporal taps are read contiguously.

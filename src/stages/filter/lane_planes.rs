@@ -293,7 +293,8 @@ impl LanePlanes {
 }
 
 /// Fills one line of lane planes in segments order, `line` (a chunk of
-/// [`LanePlanes::bands_mut`]), from the same planes in row-major order: plane q's
+/// [`LanePlanes::bands_mut`], or the whole of a one-line set), from the same planes in
+/// row-major order: plane q's
 /// pixel x at `row[first(q) + x]`. It reads x = -halo..8 S + halo + 7, which must be
 /// zeros off 0..width (at least up to 8 S + halo: the halos and the lanes past the
 /// width). Eight slots at a time: the eight

@@ -446,10 +446,19 @@ mod tests {
 
     /// The fused pass (one row prepared at a time into a one-line set) gives the X set
     /// and filter widths of the two passes, bit for bit: heights that are and are not
-    /// whole bands of rows, widths around the groups of eight, both kernels, two radii.
+    /// whole bands of rows (16), widths around the groups of eight, both kernels (on a
+    /// CPU without AVX2 + FMA, `Avx2Fma` runs the portable kernel), two radii.
     #[test]
     fn prepare_x_pass_gives_the_bits_of_prepare_then_x_pass() {
-        for (w, h) in [(37, 6), (1, 1), (9, 2), (18, 1), (40, 33), (64, 16)] {
+        for (w, h) in [
+            (37, 6),
+            (1, 1),
+            (5, 17),
+            (9, 2),
+            (18, 1),
+            (40, 33),
+            (64, 16),
+        ] {
             let images = images(w, h);
             for radius in [2, 15] {
                 for kernel in [Kernel::Portable, Kernel::Avx2Fma] {

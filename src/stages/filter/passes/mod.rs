@@ -1,6 +1,8 @@
 //! The separable filter's passes (paper 001 Sec. 7): the X pass (eq. 21, [`x_pass`])
 //! from the input planes into the X set, and the Y pass (eq. 22, [`y_pass`]) with the
 //! temporal taps of the previous frame (eq. 26) from the X set into the output images.
+//! The stage runs the X pass fused with the preparation of its input planes, a row at
+//! a time ([`prepare_x_pass`]); [`x_pass`] over a whole input set is the reference.
 //!
 //! Both sets are lane-interleaved ([`super::lane_planes`]), and both passes work on
 //! groups of eight targets, one per lane: the X pass on pixels (l S + j, y) of the input
@@ -120,7 +122,8 @@ impl FullWindows {
     }
 
     /// The bits of the window at block `block`, line `line` (0 outside the image's
-    /// blocks and lines, e.g. the zero blocks on each side, and before the first frame).
+    /// blocks and lines, e.g. the zero blocks on each side, before the first frame, and
+    /// after the planes were rewritten: [`XSet::planes_mut`]).
     #[inline(always)]
     fn get(&self, block: isize, line: isize) -> u8 {
         if block < 0 || line < 0 || line as usize >= self.lines {

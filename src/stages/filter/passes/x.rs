@@ -55,8 +55,9 @@ pub fn x_pass(kernel: Kernel, input: &LanePlanes, radius: usize, output: &mut XS
 }
 
 /// The preparation ([`super::super::planes::prepare`]) and the X pass ([`x_pass`]) at
-/// once, row by row: each row is prepared into a one-line input set, which stays in
-/// the cache, and filtered from there into the X set `output`; the filter widths go
+/// once, row by row: each row is prepared into a one-line input set (about 80 KB at
+/// 640 pixels wide and R = 15, which stays in the core's L2 cache) and filtered from
+/// there into the X set `output`; the filter widths go
 /// to `width_dir` and `width_ind`. The same bits as the two passes one after the
 /// other, without writing the whole input set to memory and reading it back.
 pub fn prepare_x_pass(
@@ -83,6 +84,8 @@ pub fn prepare_x_pass(
     // and the layout of one of its lines.
     let layout = row_scratch(&LaneLayout::segments(INPUT_PLANES, w, h, radius));
     let line = LaneLayout::segments(INPUT_PLANES, w, 1, radius);
+    // The line's groups transposed are blocks of the X set (`x_row`).
+    assert_eq!(output.slots(), line.slots());
     let band = ROW_BAND * w;
     let out = SetOut::new(output);
     width_dir

@@ -24,7 +24,8 @@ pub(super) enum TemporalTaps<V> {
     Rotated(Window, Straddling<V>, V, usize, u8),
     /// Different offsets, the previous pixels within two consecutive blocks and on at
     /// most [`PERMUTED_LINES`] lines: per line, two loads permuted ([`Permuted`]).
-    Permuted(Window, PermutedLanes<V>, V),
+    /// With the kinds full in every window the lanes read (both blocks, every line).
+    Permuted(Window, PermutedLanes<V>, V, u8),
     /// Other offsets: gathered lane by lane.
     Gathered(Window, Gathered, V),
 }
@@ -137,13 +138,19 @@ pub(super) fn temporal_taps<V: Lanes>(
         };
         return TemporalTaps::Rotated(window, straddling, limit, r, full);
     }
-    if let Some((permuted, (b0, y0))) = permuted_lanes::<V>(&found, x_set) {
+    if let Some((permuted, [b0, b1], lines)) = permuted_lanes::<V>(&found, x_set) {
         // Lines y'_0 - R.. of block b_0, each lane's line and block an offset from there:
         // blocks b_0 and b_0 + 1 <= slots, inside the set with its block of zeros on
         // each side; every y'_k inside the image, so lines y'_k - R..=y'_k + R are
         // inside the set (`fits_lines`).
-        let window = window_from(x_set.slot_index(b0, y0 - radius as isize));
-        return TemporalTaps::Permuted(window, permuted, limit);
+        let window = window_from(x_set.slot_index(b0, lines[0] as isize - radius as isize));
+        let mut full = 0b11;
+        for &line in &lines[..permuted.count()] {
+            for b in b0..=b1 {
+                full &= previous.x_set.full_windows().get(b, line as isize);
+            }
+        }
+        return TemporalTaps::Permuted(window, permuted, limit, full);
     }
     // Gather, each lane from its previous pixel's window (a lane without one from its
     // own pixel's, with no weight).
@@ -155,14 +162,14 @@ pub(super) fn temporal_taps<V: Lanes>(
 }
 
 /// [`PermutedLanes`] for lanes whose previous pixels (`found`) lie in two consecutive
-/// blocks and on at most [`PERMUTED_LINES`] lines, with the first block and line;
-/// `None` otherwise. Lanes without a previous pixel read lane 0 of the first line
-/// (with no weight).
+/// blocks and on at most [`PERMUTED_LINES`] lines, with the first and last block and
+/// the lines (in increasing order, the first `count`); `None` otherwise. Lanes without
+/// a previous pixel read lane 0 of the first line of the first block (with no weight).
 #[inline(always)]
 fn permuted_lanes<V: Lanes>(
     found: &[Option<(usize, usize)>; LANES],
     x_set: &LanePlanes,
-) -> Option<(PermutedLanes<V>, (isize, isize))> {
+) -> Option<(PermutedLanes<V>, [isize; 2], [usize; PERMUTED_LINES])> {
     let blocks = found.iter().flatten().map(|&(x, _)| x / LANES);
     let (b0, b1) = (blocks.clone().min()?, blocks.max()?);
     if b1 > b0 + 1 {
@@ -208,7 +215,7 @@ fn permuted_lanes<V: Lanes>(
         );
     }
     let permuted = PermutedLanes { most, count };
-    Some((permuted, (b0 as isize, lines[0] as isize)))
+    Some((permuted, [b0 as isize, b1 as isize], lines))
 }
 
 #[cfg(test)]
@@ -241,12 +248,12 @@ mod tests {
                 let x = (b * LANES + h(10 + l as u64) % (2 * LANES)).min(width - 1);
                 (h(20 + l as u64) % 5 != 0).then(|| (x, lines[h(30 + l as u64) % 3]))
             });
-            let Some((permuted, (b0, y0))) = permuted_lanes::<Portable>(&found, &set) else {
+            let Some((permuted, [b0, _], lines)) = permuted_lanes::<Portable>(&found, &set) else {
                 assert!(found.iter().all(Option::is_none), "{found:?}");
                 continue;
             };
             counts[permuted.count()] += 1;
-            let base = set.slot_index(b0, y0 - radius as isize);
+            let base = set.slot_index(b0, lines[0] as isize - radius as isize);
             let offsets: [i32; LANES] = std::array::from_fn(|l| {
                 let (x, y) = found[l].unwrap_or((0, radius));
                 set.pixel_index(x as isize, y as isize - radius as isize) as i32

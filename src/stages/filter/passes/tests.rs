@@ -142,8 +142,9 @@ fn full_sums_are_the_bits_of_the_general_sums() {
 
 /// The Y pass with the previous frame's full windows gives the bits it gives without
 /// them (every window read the general way), for both kernels, under a still camera
-/// (contiguous temporal reads) and one moved by 3 pixels (rotated reads), with gaps in
-/// both sets and a partial last block.
+/// (contiguous temporal reads), one moved by 3 pixels (rotated reads) and one rolled
+/// two ways (permuted reads over two lines, of one block or two), with gaps in both
+/// sets and a partial last block.
 #[test]
 fn temporal_taps_over_full_windows_give_the_general_bits() {
     use crate::pinhole::Pinhole;
@@ -160,7 +161,16 @@ fn temporal_taps_over_full_windows_give_the_general_bits() {
         width,
         height,
         radius,
-        &[(3, 12, X_IND + 6), (20, 33, X_DIR + 7)],
+        // Read by permuted groups of the camera rolled by 0.12: (26, 14) in the second
+        // block (3) of those at pixels 24.. of lines 12-16, whose first block (2) is
+        // full there; (21, 26) in the window of the second line (22) but not the first
+        // of the group at pixels 16.. of line 20.
+        &[
+            (3, 12, X_IND + 6),
+            (20, 33, X_DIR + 7),
+            (26, 14, X_DIR + 6),
+            (21, 26, X_IND + 6),
+        ],
     );
     // Positions (0.01 x, 0.01 y, 2) project to pixel (x, y): f = 200, c = 0.
     let intrinsics = Intrinsics {
@@ -179,9 +189,18 @@ fn temporal_taps_over_full_windows_give_the_general_bits() {
     assert!(previous.full_windows().bits.contains(&3));
     // The same planes with no window known to be full.
     let previous_general = XSet::from_planes(previous.planes().clone());
-    for shift in [0.0, 0.03] {
+    let moves = [
+        ("still", Affine3A::IDENTITY),
+        (
+            "3 px sideways",
+            Affine3A::from_translation(glam::Vec3::new(0.03, 0.0, 0.0)),
+        ),
+        ("rolled", Affine3A::from_rotation_z(0.05)),
+        ("rolled more", Affine3A::from_rotation_z(0.12)),
+    ];
+    for (shift, world_to_camera) in moves {
         let view = PreviousView {
-            world_to_camera: Affine3A::from_translation(glam::Vec3::new(shift, 0.0, 0.0)),
+            world_to_camera,
             camera,
         };
         for kernel in [Kernel::Portable, Kernel::detect()] {

@@ -289,12 +289,12 @@ fn y_group<V: Lanes>(
                     rotated.add(&straddling, &window, limit, full, weights, &mut sums);
                     rotate_sums(&mut sums, LANES - r);
                 }
-                TemporalTaps::Permuted(window, permuted, limit) => {
+                TemporalTaps::Permuted(window, permuted, limit, full) => {
                     let (w, s) = (weights, &mut sums);
                     match permuted.count() {
-                        1 => group.add(&permuted.fetch::<1>(), &window, limit, 0, w, s),
-                        2 => group.add(&permuted.fetch::<2>(), &window, limit, 0, w, s),
-                        _ => group.add(&permuted.fetch::<3>(), &window, limit, 0, w, s),
+                        1 => group.add(&permuted.fetch::<1>(), &window, limit, full, w, s),
+                        2 => group.add(&permuted.fetch::<2>(), &window, limit, full, w, s),
+                        _ => group.add(&permuted.fetch::<3>(), &window, limit, full, w, s),
                     }
                 }
                 TemporalTaps::Gathered(window, g, limit) => {

@@ -112,10 +112,37 @@ unsafe fn store(v: &mut [i32; LANES], x: __m256i) {
     unsafe { _mm256_storeu_si256(v.as_mut_ptr() as *mut __m256i, x) }
 }
 
-/// `values[i]` for the lanes in `active` (0 elsewhere).
+/// The pairs `(values[i], values[i + 1])` of the lanes in `active` (0 elsewhere), as
+/// two vectors in the lanes' order: eight 64-bit gathers of four lanes each load half
+/// the elements of two 32-bit gathers, and on this march's CPUs a gather costs about
+/// its element count.
 #[inline(always)]
-unsafe fn gather(values: *const f32, i: __m256i, active: __m256) -> __m256 {
-    unsafe { _mm256_mask_i32gather_ps::<4>(_mm256_setzero_ps(), values, i, active) }
+unsafe fn gather_pairs(values: *const f32, i: __m256i, active: __m256i) -> (__m256, __m256) {
+    unsafe {
+        let pairs = values as *const f64;
+        let half = |i: __m128i, active: __m128i| {
+            let mask = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(active));
+            _mm256_castpd_ps(_mm256_mask_i32gather_pd::<4>(
+                _mm256_setzero_pd(),
+                pairs,
+                i,
+                mask,
+            ))
+        };
+        let low = half(_mm256_castsi256_si128(i), _mm256_castsi256_si128(active));
+        let high = half(
+            _mm256_extracti128_si256::<1>(i),
+            _mm256_extracti128_si256::<1>(active),
+        );
+        // [v0 w0 v1 w1 v2 w2 v3 w3] and [v4 w4 .. v7 w7]: the first of each pair in
+        // lanes 0 1 4 5 | 2 3 6 7, then back in order.
+        let first = _mm256_shuffle_ps::<0b10_00_10_00>(low, high);
+        let second = _mm256_shuffle_ps::<0b11_01_11_01>(low, high);
+        let order = |v: __m256| {
+            _mm256_castpd_ps(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)))
+        };
+        (order(first), order(second))
+    }
 }
 
 /// The entries of a 16-entry table (two halves) at per-lane indices 0..16.
@@ -223,12 +250,15 @@ unsafe fn step(p: &mut Packet, pyramid: &Pyramid) -> u32 {
             _mm256_add_epi32(origin, _mm256_mullo_epi32(y1, row)),
             _mm256_sllv_epi32(x1, shift),
         );
-        let active_f = _mm256_castsi256_ps(active);
+        // Each texel's min with the value after it: its max above level 0, where
+        // the texel's one value is both.
         let values = pyramid.values;
-        let (min0, min1) = (gather(values, i0, active_f), gather(values, i1, active_f));
+        let (min0, next0) = gather_pairs(values, i0, active);
+        let (min1, next1) = gather_pairs(values, i1, active);
+        let at_level0 = _mm256_cmpeq_epi32(level, _mm256_setzero_si256());
         let (max0, max1) = (
-            gather(values, _mm256_add_epi32(i0, shift), active_f),
-            gather(values, _mm256_add_epi32(i1, shift), active_f),
+            _mm256_blendv_ps(next0, min0, _mm256_castsi256_ps(at_level0)),
+            _mm256_blendv_ps(next1, min1, _mm256_castsi256_ps(at_level0)),
         );
         let zmin = _mm256_min_ps(min0, min1);
         let zmax = _mm256_max_ps(max0, max1);
@@ -243,7 +273,6 @@ unsafe fn step(p: &mut Packet, pyramid: &Pyramid) -> u32 {
                 one_f,
             ),
         ));
-        let at_level0 = _mm256_cmpeq_epi32(level, _mm256_setzero_si256());
         let hit = _mm256_and_si256(_mm256_andnot_si256(skip, at_level0), active);
         let miss = _mm256_and_si256(_mm256_and_si256(skip, _mm256_cmpeq_epi32(ae, last)), active);
         let ended = _mm256_or_si256(hit, miss);
@@ -267,9 +296,11 @@ unsafe fn step(p: &mut Packet, pyramid: &Pyramid) -> u32 {
         let (found, found_a) = (load(&p.found), load(&p.found_a));
         store(&mut p.found, _mm256_blendv_epi8(found, hit, ended));
         store(&mut p.found_a, _mm256_blendv_epi8(found_a, a, ended));
-        let found_inv = _mm256_loadu_ps(p.found_inv.as_ptr());
-        let found_inv = _mm256_blendv_ps(found_inv, inv_a, _mm256_castsi256_ps(ended));
-        _mm256_storeu_ps(p.found_inv.as_mut_ptr(), found_inv);
+        // Blended as integers: the compiler turns a float blend into a masked store,
+        // which is microcoded and slow on AMD's CPUs.
+        let found_inv = _mm256_loadu_si256(p.found_inv.as_ptr() as *const __m256i);
+        let found_inv = _mm256_blendv_epi8(found_inv, _mm256_castps_si256(inv_a), ended);
+        _mm256_storeu_si256(p.found_inv.as_mut_ptr() as *mut __m256i, found_inv);
         store(&mut p.active, _mm256_andnot_si256(ended, active));
         let ended_bits = _mm256_movemask_ps(_mm256_castsi256_ps(ended)) as u32;
         p.live &= !ended_bits;
@@ -293,7 +324,8 @@ pub(super) unsafe fn march(
     // SAFETY (the intrinsics): the CPU has AVX2. The gathers read only marching
     // lanes (masked), whose texels lie in the pyramid as in the scalar march:
     // their samples lie in the image (`setup` clips them), and the tables hold the
-    // levels' own offsets.
+    // levels' own offsets. The value after a texel is stored too: its max above
+    // level 0, the next texel or the border's at level 0.
     unsafe {
         let pyramid = Pyramid {
             values: tracer.pyramid.values().as_ptr(),

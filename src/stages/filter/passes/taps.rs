@@ -24,7 +24,8 @@ pub(super) enum TemporalTaps<V> {
     Rotated(Window, Straddling<V>, V, usize, u8),
     /// Different offsets, the previous pixels within two consecutive blocks and on at
     /// most [`PERMUTED_LINES`] lines: per line, two loads permuted ([`Permuted`]).
-    /// With the kinds full in every window the lanes read (both blocks, every line).
+    /// With the kinds full in every window the lanes read (block b0, and b0 + 1 where
+    /// a lane reads it; every line).
     Permuted(Window, PermutedLanes<V>, V, u8),
     /// Other offsets: gathered lane by lane.
     Gathered(Window, Gathered, V),
@@ -248,11 +249,21 @@ mod tests {
                 let x = (b * LANES + h(10 + l as u64) % (2 * LANES)).min(width - 1);
                 (h(20 + l as u64) % 5 != 0).then(|| (x, lines[h(30 + l as u64) % 3]))
             });
-            let Some((permuted, [b0, _], lines)) = permuted_lanes::<Portable>(&found, &set) else {
+            let Some((permuted, [b0, b1], lines)) = permuted_lanes::<Portable>(&found, &set) else {
                 assert!(found.iter().all(Option::is_none), "{found:?}");
                 continue;
             };
             counts[permuted.count()] += 1;
+            // The blocks and lines read, which say where the windows must be full.
+            let blocks = found.iter().flatten().map(|&(x, _)| (x / LANES) as isize);
+            assert_eq!(
+                [b0, b1],
+                [blocks.clone().min().unwrap(), blocks.max().unwrap()]
+            );
+            let mut expected_lines: Vec<usize> = found.iter().flatten().map(|&(_, y)| y).collect();
+            expected_lines.sort_unstable();
+            expected_lines.dedup();
+            assert_eq!(lines[..permuted.count()], expected_lines[..], "{found:?}");
             let base = set.slot_index(b0, lines[0] as isize - radius as isize);
             let offsets: [i32; LANES] = std::array::from_fn(|l| {
                 let (x, y) = found[l].unwrap_or((0, radius));

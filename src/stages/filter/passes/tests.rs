@@ -228,4 +228,31 @@ fn temporal_taps_over_full_windows_give_the_general_bits() {
             );
         }
     }
+    // The rolled-more groups that the gaps are placed for read their taps permuted,
+    // from windows full in one kind only: the sums above went both ways.
+    let view = PreviousView {
+        world_to_camera: Affine3A::from_rotation_z(0.12),
+        camera,
+    };
+    let previous = Previous {
+        x_set: &previous,
+        view: &view,
+    };
+    let valid = [[Portable::splat(1.0); 2]; 2];
+    for (x0, y, expected_full) in [(16, 20, 0b01), (24, 14, 0b10)] {
+        let position = [
+            Portable::from_array(std::array::from_fn(|l| 0.01 * (x0 + l) as f32)),
+            Portable::splat(0.01 * y as f32),
+            Portable::splat(2.0),
+        ];
+        let taps = super::taps::temporal_taps(previous, position, &valid, x0, y, radius);
+        let full = match taps {
+            super::taps::TemporalTaps::Permuted(_, permuted, _, full) => {
+                assert_eq!(permuted.count(), 2, "group ({x0}, {y})");
+                full
+            }
+            _ => panic!("group ({x0}, {y}) does not read permuted"),
+        };
+        assert_eq!(full, expected_full, "group ({x0}, {y})");
+    }
 }

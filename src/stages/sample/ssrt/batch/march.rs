@@ -113,9 +113,9 @@ unsafe fn store(v: &mut [i32; LANES], x: __m256i) {
 }
 
 /// The pairs `(values[i], values[i + 1])` of the lanes in `active` (0 elsewhere), as
-/// two vectors in the lanes' order: eight 64-bit gathers of four lanes each load half
-/// the elements of two 32-bit gathers, and on this march's CPUs a gather costs about
-/// its element count.
+/// two vectors in the lanes' order: two 64-bit gathers of four lanes each load half
+/// the elements of the two 32-bit gathers they replace, and on AMD's Zen 4 a gather
+/// costs about its element count.
 #[inline(always)]
 unsafe fn gather_pairs(values: *const f32, i: __m256i, active: __m256i) -> (__m256, __m256) {
     unsafe {
@@ -324,8 +324,9 @@ pub(super) unsafe fn march(
     // SAFETY (the intrinsics): the CPU has AVX2. The gathers read only marching
     // lanes (masked), whose texels lie in the pyramid as in the scalar march:
     // their samples lie in the image (`setup` clips them), and the tables hold the
-    // levels' own offsets. The value after a texel is stored too: its max above
-    // level 0, the next texel or the border's at level 0.
+    // levels' own offsets. The value after a texel is stored too: above level 0 it
+    // is the texel's max; at level 0 the march visits only the image's texels
+    // (x <= width - 1), so it is the next texel or the right border's.
     unsafe {
         let pyramid = Pyramid {
             values: tracer.pyramid.values().as_ptr(),

@@ -257,7 +257,8 @@ impl LevelTables {
             top: levels.len() as i32 - 1,
         };
         for (l, level) in levels.iter().enumerate() {
-            // The lanes shift x and offset the max by min(level, 1).
+            // The lanes shift x by min(level, 1) and read a texel's max as the value
+            // after its min above level 0 (at level 0 its one value is both).
             let pair = (l > 0) as u32;
             if level.shift != pair || level.max_offset != pair as usize {
                 return None;

@@ -11,6 +11,8 @@
 //!   scheme off and on. The pipeline's objects cover about 5 % of the frame.
 //! - `sample.path/tenth`: the same as `plain` with the objects scaled up to cover about
 //!   a tenth of the frame (the budget case; the bench prints the share).
+//! - `sample.path/no_objects`: the same with no virtual object: the real scene's
+//!   estimates alone, the floor under every case with objects.
 //! - `ssrt/one_by_one`, `ssrt/batch_Portable`, `ssrt/batch_Avx2Fma`: the screen-space
 //!   tracer alone on one thread, 16 cosine rays from every 16th pixel, traced ray by ray
 //!   and as one batch with each kernel the CPU has.
@@ -111,6 +113,14 @@ fn bench_sampling(c: &mut Criterion) {
             coverage(&out.mask) * 100.0
         );
         group.bench_function("sample.path/tenth", |b| {
+            b.iter(|| sample_path(&inputs, &params, &mut out).unwrap())
+        });
+        let no_objects = VirtualScene::default();
+        let inputs = PathInputs {
+            objects: &no_objects,
+            ..inputs
+        };
+        group.bench_function("sample.path/no_objects", |b| {
             b.iter(|| sample_path(&inputs, &params, &mut out).unwrap())
         });
     }

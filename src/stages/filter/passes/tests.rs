@@ -189,6 +189,8 @@ fn temporal_taps_over_full_windows_give_the_general_bits() {
     assert!(previous.full_windows().bits.contains(&3));
     // The same planes with no window known to be full.
     let previous_general = XSet::from_planes(previous.planes().clone());
+    // The move the gaps of `previous` are placed for.
+    let rolled_more = Affine3A::from_rotation_z(0.12);
     let moves = [
         ("still", Affine3A::IDENTITY),
         (
@@ -196,7 +198,7 @@ fn temporal_taps_over_full_windows_give_the_general_bits() {
             Affine3A::from_translation(glam::Vec3::new(0.03, 0.0, 0.0)),
         ),
         ("rolled", Affine3A::from_rotation_z(0.05)),
-        ("rolled more", Affine3A::from_rotation_z(0.12)),
+        ("rolled more", rolled_more),
     ];
     for (shift, world_to_camera) in moves {
         let view = PreviousView {
@@ -231,7 +233,7 @@ fn temporal_taps_over_full_windows_give_the_general_bits() {
     // The rolled-more groups that the gaps are placed for read their taps permuted,
     // from windows full in one kind only: the sums above went both ways.
     let view = PreviousView {
-        world_to_camera: Affine3A::from_rotation_z(0.12),
+        world_to_camera: rolled_more,
         camera,
     };
     let previous = Previous {

@@ -115,34 +115,46 @@ unsafe fn store(v: &mut [i32; LANES], x: __m256i) {
 /// The pairs `(values[i], values[i + 1])` of the lanes in `active` (0 elsewhere), as
 /// two vectors in the lanes' order: two 64-bit gathers of four lanes each load half
 /// the elements of the two 32-bit gathers they replace, and on AMD's Zen 4 a gather
-/// costs about its element count.
+/// costs about its element count. (Functions, not closures: closures do not inherit
+/// the caller's target features.)
 #[inline(always)]
 unsafe fn gather_pairs(values: *const f32, i: __m256i, active: __m256i) -> (__m256, __m256) {
     unsafe {
-        let pairs = values as *const f64;
-        let half = |i: __m128i, active: __m128i| {
-            let mask = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(active));
-            _mm256_castpd_ps(_mm256_mask_i32gather_pd::<4>(
-                _mm256_setzero_pd(),
-                pairs,
-                i,
-                mask,
-            ))
-        };
-        let low = half(_mm256_castsi256_si128(i), _mm256_castsi256_si128(active));
-        let high = half(
-            _mm256_extracti128_si256::<1>(i),
+        let (i_low, i_high) = (_mm256_castsi256_si128(i), _mm256_extracti128_si256::<1>(i));
+        let (active_low, active_high) = (
+            _mm256_castsi256_si128(active),
             _mm256_extracti128_si256::<1>(active),
         );
+        let low = gather_four_pairs(values, i_low, active_low);
+        let high = gather_four_pairs(values, i_high, active_high);
         // [v0 w0 v1 w1 v2 w2 v3 w3] and [v4 w4 .. v7 w7]: the first of each pair in
         // lanes 0 1 4 5 | 2 3 6 7, then back in order.
         let first = _mm256_shuffle_ps::<0b10_00_10_00>(low, high);
         let second = _mm256_shuffle_ps::<0b11_01_11_01>(low, high);
-        let order = |v: __m256| {
-            _mm256_castpd_ps(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v)))
-        };
-        (order(first), order(second))
+        (in_lane_order(first), in_lane_order(second))
     }
+}
+
+/// The pairs at four float indices `i` (as 64-bit elements) of the lanes in `active`
+/// (0 elsewhere).
+#[inline(always)]
+unsafe fn gather_four_pairs(values: *const f32, i: __m128i, active: __m128i) -> __m256 {
+    unsafe {
+        let mask = _mm256_castsi256_pd(_mm256_cvtepi32_epi64(active));
+        _mm256_castpd_ps(_mm256_mask_i32gather_pd::<4>(
+            _mm256_setzero_pd(),
+            values as *const f64,
+            i,
+            mask,
+        ))
+    }
+}
+
+/// `v` holding the values of lanes 0 1 4 5 2 3 6 7, in that order, put back in lane
+/// order (its 64-bit halves 0, 2, 1, 3).
+#[inline(always)]
+unsafe fn in_lane_order(v: __m256) -> __m256 {
+    unsafe { _mm256_castpd_ps(_mm256_permute4x64_pd::<0b11_01_10_00>(_mm256_castps_pd(v))) }
 }
 
 /// The entries of a 16-entry table (two halves) at per-lane indices 0..16.
@@ -256,9 +268,10 @@ unsafe fn step(p: &mut Packet, pyramid: &Pyramid) -> u32 {
         let (min0, next0) = gather_pairs(values, i0, active);
         let (min1, next1) = gather_pairs(values, i1, active);
         let at_level0 = _mm256_cmpeq_epi32(level, _mm256_setzero_si256());
+        let level0_f = _mm256_castsi256_ps(at_level0);
         let (max0, max1) = (
-            _mm256_blendv_ps(next0, min0, _mm256_castsi256_ps(at_level0)),
-            _mm256_blendv_ps(next1, min1, _mm256_castsi256_ps(at_level0)),
+            _mm256_blendv_ps(next0, min0, level0_f),
+            _mm256_blendv_ps(next1, min1, level0_f),
         );
         let zmin = _mm256_min_ps(min0, min1);
         let zmax = _mm256_max_ps(max0, max1);

@@ -33,7 +33,7 @@ pub use y::y_pass;
 
 #[cfg(doc)]
 use super::gaussian::accumulate_full;
-use super::gaussian::{Bandwidths, Contiguous, EXP_CUTOFF, MAX_TAPS, Window, tap_weights};
+use super::gaussian::{Bandwidths, Contiguous, EXP_CUTOFF, Window, tap_weights};
 use super::lane_planes::{LaneLayout, LanePlanes};
 use super::temporal::PreviousView;
 #[cfg(doc)]
@@ -134,10 +134,14 @@ impl FullWindows {
     }
 }
 
-/// The forward pair weights of the last R + 1 groups along a pass's direction (slots
-/// j of a row in the X pass, lines y of a slot in the Y pass): for group j (ring row
-/// (j + R) mod (R + 1)) and kind, the weights of pairs (j, j + k), k = 0..=R (k = 0:
-/// the targets with themselves). See the module docs.
+/// The pair weights of the groups along a pass's direction (slots j of a row in the X
+/// pass, lines y of a slot in the Y pass), as each group's taps: for group j and kind,
+/// tap i = -R..=R at entry R + i of its row, the weight of pair (j, j + i). The walk
+/// weighs group j's forward pairs (j, j + k), k = 0..=R (k = 0: the targets with
+/// themselves) into entries R + k of its row and, as tap -k of group j + k, into entry
+/// R - k of that group's row; so when the walk reaches target j, after weighing it,
+/// its row is complete. Rows j..=j + R are live at once: R + 1 rows, row j at
+/// (j + R) mod (R + 1). See the module docs.
 struct PairRing<V> {
     radius: usize,
     weights: Vec<V>,
@@ -147,24 +151,25 @@ impl<V: Lanes> PairRing<V> {
     fn new(radius: usize) -> PairRing<V> {
         PairRing {
             radius,
-            weights: vec![V::splat(0.0); (radius + 1) * 2 * (radius + 1)],
+            weights: vec![V::splat(0.0); (radius + 1) * 2 * (2 * radius + 1)],
         }
     }
 
-    /// Index of kind `kind`'s pair (j, j) in the ring (j >= -R).
+    /// Index of kind `kind`'s tap -R of group j in the ring (j >= -R).
     #[inline(always)]
     fn first(&self, j: isize, kind: usize) -> usize {
-        let taps = self.radius + 1;
-        let row = (j + self.radius as isize) as usize % taps;
+        let taps = 2 * self.radius + 1;
+        let row = (j + self.radius as isize) as usize % (self.radius + 1);
         (2 * row + kind) * taps
     }
 
-    /// Both kinds' weights of group j, for writing.
+    /// Both kinds' forward pair weights of group j (its taps 0..=R), for writing.
     #[inline(always)]
-    fn row_mut(&mut self, j: isize) -> [&mut [V]; 2] {
-        let (first, taps) = (self.first(j, 0), self.radius + 1);
+    fn forward_mut(&mut self, j: isize) -> [&mut [V]; 2] {
+        let (r, taps) = (self.radius, 2 * self.radius + 1);
+        let first = self.first(j, 0);
         let (direct, indirect) = self.weights[first..first + 2 * taps].split_at_mut(taps);
-        [direct, indirect]
+        [&mut direct[r..], &mut indirect[r..]]
     }
 
     /// Weighs group j's pairs (j, j + k), k = 0..=R, both kinds: the eight targets at
@@ -215,22 +220,27 @@ impl<V: Lanes> PairRing<V> {
                 targets,
                 both,
                 limit,
-                self.row_mut(j),
+                self.forward_mut(j),
             )
         };
+        // Pair (j, j + k) is also tap -k of group j + k.
+        let r = self.radius;
+        for kind in 0..2 {
+            let forward = self.first(j, kind) + r;
+            for k in 1..=r {
+                let backward = self.first(j + k as isize, kind) + r - k;
+                self.weights[backward] = self.weights[forward + k];
+            }
+        }
         targets
     }
 
-    /// Group j's weights of `kind` for its taps i = -R..=R into `taps[0..2 R + 1]`:
-    /// tap -k from group j - k's pair k, taps 0..=R from group j's pairs.
+    /// Group j's weights of `kind` for its taps i = -R..=R, tap -R first. Groups
+    /// j - R..=j must have been weighed, and none after j + R since.
     #[inline(always)]
-    fn group_taps(&self, j: isize, kind: usize, taps: &mut [V; MAX_TAPS]) {
-        let r = self.radius;
-        for k in 1..=r {
-            taps[r - k] = self.weights[self.first(j - k as isize, kind) + k];
-        }
+    fn taps(&self, j: isize, kind: usize) -> &[V] {
         let first = self.first(j, kind);
-        taps[r..=2 * r].copy_from_slice(&self.weights[first..=first + r]);
+        &self.weights[first..first + 2 * self.radius + 1]
     }
 }
 

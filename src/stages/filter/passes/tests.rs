@@ -1,7 +1,7 @@
 //! Tests of the full windows: which windows the Y pass finds full, and that their sums
 //! are the bits of the general ones.
 
-use super::super::gaussian::{VALUE_PLANES, accumulate, accumulate_full};
+use super::super::gaussian::{MAX_TAPS, VALUE_PLANES, accumulate, accumulate_full};
 use super::super::lane_planes::LaneLayout;
 use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX};
 use super::*;

@@ -5,7 +5,7 @@
 //! reference the fused pass is tested against, and benched apart).
 
 use super::super::MAX_RADIUS;
-use super::super::gaussian::{Contiguous, MAX_TAPS, TapWeights, VALUE_PLANES, Window, accumulate};
+use super::super::gaussian::{Contiguous, VALUE_PLANES, Window, accumulate};
 use super::super::lane_planes::{LaneLayout, LanePlanes, Order};
 use super::super::planes::{
     B2_IND, B2X_DIR, B2Y_DIR, BandwidthSettings, DIR, IND, INPUT_PLANES, PX, PrepareInputs,
@@ -150,7 +150,6 @@ fn prepare_x_band<V: Lanes>(
     out: &SetOut,
 ) {
     let mut ring = PairRing::<V>::new(band.radius);
-    let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
     let lanes = input.layout();
     let w = lanes.width;
     for (k, y) in band.rows.clone().enumerate() {
@@ -169,7 +168,7 @@ fn prepare_x_band<V: Lanes>(
             &mut row,
             input.data_mut(),
         );
-        x_row::<V>(input, band.radius, 0, y, &mut ring, &mut weights, out);
+        x_row::<V>(input, band.radius, 0, y, &mut ring, out);
     }
 }
 
@@ -221,9 +220,8 @@ fn x_band_avx2(input: &LanePlanes, radius: usize, rows: Range<usize>, out: &SetO
 #[inline(always)]
 fn x_band<V: Lanes>(input: &LanePlanes, radius: usize, rows: Range<usize>, out: &SetOut) {
     let mut ring = PairRing::<V>::new(radius);
-    let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
     for y in rows {
-        x_row::<V>(input, radius, y, y, &mut ring, &mut weights, out);
+        x_row::<V>(input, radius, y, y, &mut ring, out);
     }
 }
 
@@ -238,7 +236,6 @@ fn x_row<V: Lanes>(
     line: usize,
     y: usize,
     ring: &mut PairRing<V>,
-    weights: &mut TapWeights<V>,
     out: &SetOut,
 ) {
     let mut groups = [[V::splat(0.0); X_PLANES]; LANES];
@@ -249,7 +246,7 @@ fn x_row<V: Lanes>(
         let position = ring.weigh(j, data, (c, LANES, s), PX, [B2X_DIR, B2_IND]);
         if j >= 0 {
             let j = j as usize;
-            groups[j % LANES] = x_group(input, radius, c, position, ring, j as isize, weights);
+            groups[j % LANES] = x_group(input, radius, c, position, ring, j as isize);
             if j % LANES == LANES - 1 {
                 let j0 = j + 1 - LANES;
                 for q in 0..X_PLANES {
@@ -270,7 +267,7 @@ fn x_row<V: Lanes>(
 
 /// The X pass for the group at `c` (slot j of a row): the X set's planes, each a
 /// vector over the lanes (0 with valid 0 where a layer has no value). Slots j - R..=j
-/// must be in `ring`. `weights` is scratch.
+/// must be in `ring`.
 #[inline(always)]
 fn x_group<V: Lanes>(
     input: &LanePlanes,
@@ -279,7 +276,6 @@ fn x_group<V: Lanes>(
     position: [V; 3],
     ring: &PairRing<V>,
     j: isize,
-    weights: &mut TapWeights<V>,
 ) -> [V; X_PLANES] {
     let (data, s) = (input.data(), input.plane_stride());
     let mut out = [V::splat(0.0); X_PLANES];
@@ -302,10 +298,9 @@ fn x_group<V: Lanes>(
             out[first + 7] = valid[k][1];
             continue;
         }
-        ring.group_taps(j, k, &mut weights[k]);
         let mut sums = [V::splat(0.0); VALUE_PLANES];
         // SAFETY: the taps |i| <= radius of the slot lie inside the line (`fits_radius`).
-        unsafe { accumulate(&Contiguous, &window, values, &weights[k], &mut sums) };
+        unsafe { accumulate(&Contiguous, &window, values, ring.taps(j, k), &mut sums) };
         for (layer, &ok) in valid[k].iter().enumerate() {
             for c in 0..3 {
                 // A missing value (NaN) is stored as 0 with valid 0.

@@ -215,7 +215,7 @@ fn has_gap<V: Lanes>(data: &[f32], c: usize, s: usize, first: usize) -> bool {
 /// The Y pass for the group at block n of line y (pixels (8 n + l, y)): per kind, E_R
 /// rgb then E_RV rgb per lane (NaN where the target has no value of the layer). Lines
 /// y - R..=y must be in `ring`; `full` says which kinds' spatial windows are full.
-/// `weights` is scratch.
+/// `weights` is scratch for the temporal taps.
 #[inline(always)]
 fn y_group<V: Lanes>(
     source: &YSource,
@@ -249,14 +249,14 @@ fn y_group<V: Lanes>(
     };
     for (k, (values, _)) in kinds_planes.into_iter().enumerate() {
         if kinds[k].is_some() {
-            ring.group_taps(y as isize, k, &mut weights[k]);
+            let taps = ring.taps(y as isize, k);
             let sums = &mut sums[k];
             // SAFETY: lines y - R..=y + R lie inside the set (`fits_lines`).
             unsafe {
                 if full[k] {
-                    accumulate_full(&Contiguous, &spatial, values, &weights[k], sums)
+                    accumulate_full(&Contiguous, &spatial, values, taps, sums)
                 } else {
-                    accumulate(&Contiguous, &spatial, values, &weights[k], sums)
+                    accumulate(&Contiguous, &spatial, values, taps, sums)
                 }
             }
         }

@@ -236,7 +236,8 @@ impl<V: Lanes> PairRing<V> {
     }
 
     /// Group j's weights of `kind` for its taps i = -R..=R, tap -R first. Groups
-    /// j - R..=j must have been weighed, and none after j + R since.
+    /// j - R..=j must have been weighed and no later one yet: weighing group j + 1
+    /// starts reusing row j's place, for group j + R + 1.
     #[inline(always)]
     fn taps(&self, j: isize, kind: usize) -> &[V] {
         let first = self.first(j, kind);

@@ -1,9 +1,13 @@
 //! Per-frame cost of every stage of `pipelines/mixed-reality.toml` (the default
 //! pipeline) at 640x480 on the synthetic recording, with the state (fused depth, cloud,
 //! the filter's previous frame) built up over the preceding frames: `stage/<name>` is
-//! that stage's `process` on a copy of the frame as it arrives there. The sum of the
-//! medians bounds the pipeline's frame time from above on one core; `relume bench`
-//! measures the pipelined throughput.
+//! that stage's `process` on copies of the last two frames as they arrive there, in
+//! turn. Each run thus meets a frame other than the one the stage saw last, as in a
+//! replay (one step forward, one back): the filter's temporal taps reproject a frame
+//! that moved, as they do on real frames. (Re-running one frame would reproject it onto
+//! itself, every lane at offset 0, the cheapest case.) The sum of the medians bounds
+//! the pipeline's frame time from above on one core; `relume bench` measures the
+//! pipelined throughput.
 //!
 //! `RELUME_BENCH_PIPELINE=FILE cargo bench --bench mixed_reality` measures another
 //! pipeline.
@@ -22,12 +26,19 @@ fn bench_mixed_reality(c: &mut Criterion) {
         pipeline,
         mut stages,
         arriving,
+        arriving_before,
         _dir,
         ..
     } = common::warm_up("mixed-reality.toml", WARM_FRAMES + 1);
     let mut group = c.benchmark_group("mixed_reality_640x480");
     group.sample_size(10);
-    common::bench_each_stage(&mut group, &pipeline, &mut stages, &arriving);
+    common::bench_each_stage(
+        &mut group,
+        &pipeline,
+        &mut stages,
+        &arriving,
+        &arriving_before,
+    );
     group.finish();
 }
 

@@ -46,11 +46,12 @@ fn bench_sampling(c: &mut Criterion) {
         arriving,
         done,
         _dir,
+        ..
     } = common::warm_up("mixed-reality-sampling.toml", WARM_FRAMES + 1);
 
     let mut group = c.benchmark_group("sampling_640x480");
     group.sample_size(10);
-    common::bench_each_stage(&mut group, &pipeline, &mut stages, &arriving);
+    common::bench_each_stage(&mut group, &pipeline, &mut stages, &arriving, &[]);
 
     // The sampling math alone, both schemes.
     if let Some(spec) = pipeline.stages.iter().find(|s| s.kind == "sample.path") {

@@ -19,6 +19,8 @@ pub struct WarmedUp {
     pub stages: Vec<Box<dyn Stage>>,
     /// The last frame as each stage received it (index = stage).
     pub arriving: Vec<Frame>,
+    /// The frame before it as each stage received it (empty after one frame).
+    pub arriving_before: Vec<Frame>,
     /// The last frame after every stage.
     pub done: Frame,
     /// Keeps the recording and the stages' output directory alive.
@@ -54,13 +56,14 @@ pub fn warm_up(default_pipeline: &str, frames: usize) -> WarmedUp {
         .unwrap();
     let mut previous: BTreeMap<String, Arc<Product>> = BTreeMap::new();
     let mut arriving = Vec::new();
+    let mut arriving_before = Vec::new();
     let mut done = None;
     for n in 0..frames {
         let mut frame = replay.read(n).unwrap();
         for (name, product) in &previous {
             frame.insert_shared(&format!("{name}@prev"), product.clone());
         }
-        arriving.clear();
+        arriving_before = std::mem::take(&mut arriving);
         for stage in stages.iter_mut() {
             arriving.push(frame.clone());
             stage.process(&mut frame).unwrap();
@@ -77,23 +80,31 @@ pub fn warm_up(default_pipeline: &str, frames: usize) -> WarmedUp {
         header,
         stages,
         arriving,
+        arriving_before,
         done: done.expect("at least one frame"),
         _dir: dir,
     }
 }
 
-/// `stage/<name>`: every stage's `process` on a copy of the frame as it arrived there.
+/// `stage/<name>`: every stage's `process` on a copy of the frame as it arrived there;
+/// with frames in `before` (the frame before, as it arrived at each stage), on the two
+/// frames in turn, so that a stage keeping state from frame to frame (a previous frame,
+/// a warm start) always meets a frame other than the one it saw last, as in a replay.
 pub fn bench_each_stage(
     group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
     pipeline: &Pipeline,
     stages: &mut [Box<dyn Stage>],
     arriving: &[Frame],
+    before: &[Frame],
 ) {
     for (i, stage) in stages.iter_mut().enumerate() {
         let spec = &pipeline.stages[i];
+        let frames: Vec<&Frame> = std::iter::once(&arriving[i]).chain(before.get(i)).collect();
+        let mut turn = 0;
         group.bench_function(format!("stage/{}", spec.name), |b| {
             b.iter(|| {
-                let mut frame: Frame = arriving[i].clone();
+                turn = (turn + 1) % frames.len();
+                let mut frame: Frame = frames[turn].clone();
                 stage.process(&mut frame).unwrap();
                 frame
             })

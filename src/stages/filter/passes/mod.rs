@@ -223,13 +223,19 @@ impl<V: Lanes> PairRing<V> {
                 self.forward_mut(j),
             )
         };
-        // Pair (j, j + k) is also tap -k of group j + k.
-        let r = self.radius;
+        // Pair (j, j + k) is also tap -k of group j + k. Rows follow each other in the
+        // ring, so group j + k's row is found by stepping, not by a division per k.
+        let (r, taps) = (self.radius, 2 * self.radius + 1);
+        let (row_step, ring) = (2 * taps, (r + 1) * 2 * taps);
         for kind in 0..2 {
             let forward = self.first(j, kind) + r;
+            let mut row = self.first(j, kind);
             for k in 1..=r {
-                let backward = self.first(j + k as isize, kind) + r - k;
-                self.weights[backward] = self.weights[forward + k];
+                row += row_step;
+                if row >= ring {
+                    row -= ring;
+                }
+                self.weights[row + r - k] = self.weights[forward + k];
             }
         }
         targets

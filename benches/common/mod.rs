@@ -100,6 +100,8 @@ pub fn bench_each_stage(
     for (i, stage) in stages.iter_mut().enumerate() {
         let spec = &pipeline.stages[i];
         let frames: Vec<&Frame> = std::iter::once(&arriving[i]).chain(before.get(i)).collect();
+        // The stage saw `arriving` last (in `warm_up`), so the first run takes the
+        // frame before.
         let mut turn = 0;
         group.bench_function(format!("stage/{}", spec.name), |b| {
             b.iter(|| {

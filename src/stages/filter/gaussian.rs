@@ -29,7 +29,7 @@ const C4: f32 = 0.009_582_807;
 
 /// 1.5 * 2^23: adding it rounds a float of magnitude < 2^22 to an integer, which then
 /// sits in the low mantissa bits.
-const ROUNDING_MAGIC: f32 = 12_582_912.0;
+pub const ROUNDING_MAGIC: f32 = 12_582_912.0;
 
 /// e^-a for a >= 0, branch-free and without float-to-int conversion, for the Gaussian
 /// weights of eq. 23.

@@ -81,10 +81,48 @@ pub fn projected_pixel(p: Vec3, view: &PreviousView, previous: &LanePlanes) -> O
     (u >= 0.0 && v >= 0.0 && u < w && v < h).then_some((u as i32, v as i32))
 }
 
+/// The previous pixels of eight points, one per lane ([`find_previous_lanes`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct PreviousLanes<V> {
+    /// Per lane, where its previous pixel lies in the search window around its
+    /// projected pixel: index (dy + R) (2 R + 1) + dx + R for the pixel (u + dx, v + dy)
+    /// ([`window_offset`]), R = [`SEARCH_RADIUS`]; below 0 for a lane with none.
+    pub best: V,
+    /// Per lane, its projected pixel (u, v), the centre of its search window; (0, 0)
+    /// for a lane that is not active or projects off the image.
+    pub centre: ([i32; LANES], [i32; LANES]),
+    /// When lane l projected onto pixel (u0 + l, v0) for every l, (u0, v0)
+    /// ([`consecutive_run`]).
+    pub run: Option<(i32, i32)>,
+}
+
+impl<V: Lanes> PreviousLanes<V> {
+    /// Per lane, its previous pixel (x', y'), or `None`.
+    #[inline(always)]
+    pub fn pixels(&self) -> [Option<(usize, usize)>; LANES] {
+        let best = self.best.to_array();
+        let (ui, vi) = self.centre;
+        std::array::from_fn(|l| {
+            (best[l] >= 0.0).then(|| {
+                let (dx, dy) = window_offset(best[l] as i32);
+                ((ui[l] + dx) as usize, (vi[l] + dy) as usize)
+            })
+        })
+    }
+}
+
+/// The offset (dx, dy) from the projected pixel of the search window's pixel `k`
+/// ([`PreviousLanes::best`]).
+#[inline(always)]
+pub(super) fn window_offset(k: i32) -> (i32, i32) {
+    let side = 2 * SEARCH_RADIUS + 1;
+    (k % side - SEARCH_RADIUS, k / side - SEARCH_RADIUS)
+}
+
 /// [`find_previous`] for eight points at once, one per lane, with the same answers bit
 /// for bit (the same operations in the same order: glam's `transform_point3` and
-/// `length_squared` use no fused multiply-adds, and neither does this). Lanes that are
-/// not `active` get `None`.
+/// `length_squared` use no fused multiply-adds, and neither does this). Lanes not in
+/// the mask `active` get none.
 ///
 /// The window's positions are read per lane by gathers, or, where the eight points
 /// project onto consecutive pixels of one line (most groups: the Y pass's targets are
@@ -96,10 +134,10 @@ pub fn projected_pixel(p: Vec3, view: &PreviousView, previous: &LanePlanes) -> O
 #[inline(always)]
 pub(super) fn find_previous_lanes<V: Lanes>(
     p: [V; 3],
-    active: [bool; LANES],
+    active: V,
     view: &PreviousView,
     previous: &LanePlanes,
-) -> [Option<(usize, usize)>; LANES] {
+) -> PreviousLanes<V> {
     assert!(previous.planes() > X_PZ && previous.floats() <= i32::MAX as usize);
     let s = V::splat;
     let [px, py, pz] = p;
@@ -119,7 +157,11 @@ pub(super) fn find_previous_lanes<V: Lanes>(
     let height = previous.height.min(cam.height as usize) as i32;
     let (w, h) = (s(width as f32), s(height as f32));
     let zero = s(0.0);
-    let active = V::from_mask(active);
+    let none = PreviousLanes {
+        best: s(-1.0),
+        centre: ([0; LANES], [0; LANES]),
+        run: None,
+    };
     // In front of the camera (false for NaN) and on screen.
     let inside = active
         .and(cz.gt(zero))
@@ -128,7 +170,7 @@ pub(super) fn find_previous_lanes<V: Lanes>(
         .and(u.lt(w))
         .and(v.lt(h));
     if !inside.any() {
-        return [None; LANES];
+        return none;
     }
     // u, v >= 0 where inside: truncation is the floor. Other lanes look at pixel (0, 0),
     // masked out.
@@ -183,15 +225,11 @@ pub(super) fn find_previous_lanes<V: Lanes>(
             k += 1;
         }
     }
-    let best = best.to_array();
-    let side = 2 * SEARCH_RADIUS + 1;
-    std::array::from_fn(|l| {
-        (best[l] >= 0.0).then(|| {
-            let k = best[l] as i32;
-            let (dx, dy) = (k % side - SEARCH_RADIUS, k / side - SEARCH_RADIUS);
-            ((ui[l] + dx) as usize, (vi[l] + dy) as usize)
-        })
-    })
+    PreviousLanes {
+        best,
+        centre: (ui, vi),
+        run,
+    }
 }
 
 /// When the eight lanes all project inside the image onto consecutive pixels of one

@@ -2,9 +2,11 @@
 //! the previous frame's X set around each lane's previous pixel, and the cheapest way
 //! to read it for the lanes' offsets ([`TemporalTaps`]).
 
-use super::super::gaussian::{EXP_CUTOFF, Gathered, PERMUTED_LINES, Permuted, Straddling, Window};
+use super::super::gaussian::{
+    EXP_CUTOFF, Gathered, PERMUTED_LINES, Permuted, ROUNDING_MAGIC, Straddling, Window,
+};
 use super::super::lane_planes::LanePlanes;
-use super::super::temporal::find_previous_lanes;
+use super::super::temporal::{PreviousLanes, SEARCH_RADIUS, find_previous_lanes, window_offset};
 use super::Previous;
 use crate::simd::{LANES, Lanes};
 
@@ -78,34 +80,23 @@ pub(super) fn temporal_taps<V: Lanes>(
     y: usize,
     radius: usize,
 ) -> TemporalTaps<V> {
-    let valid = [
-        valid[0][0].to_array(),
-        valid[0][1].to_array(),
-        valid[1][0].to_array(),
-        valid[1][1].to_array(),
-    ];
     let x_set = previous.x_set.planes();
-    let active: [bool; LANES] =
-        std::array::from_fn(|l| x0 + l < x_set.width && valid.iter().any(|a| a[l] > 0.0));
-    let found = find_previous_lanes(position, active, previous.view, x_set);
-    if found.iter().all(Option::is_none) {
+    let zero = V::splat(0.0);
+    // Lanes inside the image with a value of some layer.
+    let lane_x = V::from_array(std::array::from_fn(|l| (x0 + l) as f32));
+    let mut active = zero;
+    // A loop, not a closure: closures do not inherit the kernel's target features.
+    for v in valid.iter().flatten() {
+        active = active.or(v.gt(zero));
+    }
+    let active = active.and(lane_x.lt(V::splat(x_set.width as f32)));
+    let lanes = find_previous_lanes(position, active, previous.view, x_set);
+    let has_previous = lanes.best.ge(zero);
+    if !has_previous.any() {
         return TemporalTaps::None;
     }
-    // The lanes' common offset (dx, dy), if they have one.
-    let mut common = None;
-    for (l, f) in found.iter().enumerate() {
-        let Some((xp, yp)) = *f else { continue };
-        let offset = (xp as isize - (x0 + l) as isize, yp as isize - y as isize);
-        match common {
-            None => common = Some(offset),
-            Some(c) if c == offset => {}
-            Some(_) => {
-                common = None;
-                break;
-            }
-        }
-    }
-    let limit = V::from_array(found.map(|f| if f.is_some() { EXP_CUTOFF } else { -1.0 }));
+    let limit = V::select(has_previous, V::splat(EXP_CUTOFF), V::splat(-1.0));
+    let common = common_offset(&lanes, x0, y);
     // The window of 2 R + 1 taps down the X set from index `first` of plane 0 (for
     // gathered taps, the planes' start).
     let window_from = |first: usize| Window {
@@ -139,7 +130,11 @@ pub(super) fn temporal_taps<V: Lanes>(
         };
         return TemporalTaps::Rotated(window, straddling, limit, r, full);
     }
-    if let Some((permuted, [b0, b1], lines)) = permuted_lanes::<V>(&found, x_set) {
+    let permuted = match lanes.run {
+        Some(run) => permuted_run(lanes.best, run, x_set),
+        None => permuted_lanes(&lanes.pixels(), x_set),
+    };
+    if let Some((permuted, [b0, b1], lines)) = permuted {
         // Lines y'_0 - R.. of block b_0, each lane's line and block an offset from there:
         // blocks b_0 and b_0 + 1 <= slots, inside the set with its block of zeros on
         // each side; every y'_k inside the image, so lines y'_k - R..=y'_k + R are
@@ -155,11 +150,47 @@ pub(super) fn temporal_taps<V: Lanes>(
     }
     // Gather, each lane from its previous pixel's window (a lane without one from its
     // own pixel's, with no weight).
+    let found = lanes.pixels();
     let first_tap: [i32; LANES] = std::array::from_fn(|l| {
         let (x, y) = found[l].unwrap_or((x0 + l, y));
         x_set.pixel_index(x as isize, y as isize - radius as isize) as i32
     });
     TemporalTaps::Gathered(window_from(0), Gathered(first_tap), limit)
+}
+
+/// The offset (x' - x, y' - y) from every lane's pixel (x0 + l, y) to its previous
+/// pixel (x', y'), if all the lanes that have one share it.
+#[inline(always)]
+fn common_offset<V: Lanes>(
+    lanes: &PreviousLanes<V>,
+    x0: usize,
+    y: usize,
+) -> Option<(isize, isize)> {
+    let mut best = lanes.best.to_array().into_iter().filter(|&k| k >= 0.0);
+    if let Some((u0, v0)) = lanes.run {
+        // Lane l's previous pixel is (u0 + l + dx, v0 + dy) for its window index: the
+        // offset is common if the index is.
+        let k = best.next()?;
+        if best.any(|other| other != k) {
+            return None;
+        }
+        let (dx, dy) = window_offset(k as i32);
+        return Some((
+            (u0 + dx) as isize - x0 as isize,
+            (v0 + dy) as isize - y as isize,
+        ));
+    }
+    let mut common = None;
+    for (l, f) in lanes.pixels().iter().enumerate() {
+        let Some((xp, yp)) = *f else { continue };
+        let offset = (xp as isize - (x0 + l) as isize, yp as isize - y as isize);
+        match common {
+            None => common = Some(offset),
+            Some(c) if c == offset => {}
+            Some(_) => return None,
+        }
+    }
+    common
 }
 
 /// [`PermutedLanes`] for lanes whose previous pixels (`found`) lie in two consecutive
@@ -214,6 +245,76 @@ fn permuted_lanes<V: Lanes>(
             offset,
             V::from_mask(std::array::from_fn(|l| lane_line[l] == k)),
         );
+    }
+    let permuted = PermutedLanes { most, count };
+    Some((permuted, [b0 as isize, b1 as isize], lines))
+}
+
+/// [`permuted_lanes`] for lanes that projected onto a run of pixels (`run`, see
+/// [`PreviousLanes`]), from their window indices `best`: lane l's previous pixel is
+/// (u0 + l + dx, v0 + dy), so its block, its lane in the block and its line come from
+/// arithmetic on the indices, for all lanes at once. The same result as
+/// [`permuted_lanes`] on the lanes' pixels, but for the lanes without a previous pixel,
+/// which read some lane of the same blocks and lines. On replayed frames
+/// `permuted_lanes` took some 60-100 more rdtsc ticks a group (of about 550 for
+/// finding the pixels and choosing the read): its loops branch on each lane's block
+/// and line.
+#[inline(always)]
+fn permuted_run<V: Lanes>(
+    best: V,
+    (u0, v0): (i32, i32),
+    x_set: &LanePlanes,
+) -> Option<(PermutedLanes<V>, [isize; 2], [usize; PERMUTED_LINES])> {
+    // The window is 3 x 3: index k = 3 (dy + 1) + dx + 1.
+    const _: () = assert!(SEARCH_RADIUS == 1);
+    let s = V::splat;
+    let found = best.ge(s(0.0));
+    // Row dy + 1 = trunc((k + 0.5) / 3) and column dx + 1, exact for k in 0..9.
+    let row = best.add(s(0.5)).mul(s(1.0 / 3.0)).trunc();
+    let column = best.sub(row.mul(s(3.0)));
+    // x' = u0 + l + dx: small integers, exact.
+    let lane = V::from_array(std::array::from_fn(|l| l as f32));
+    let x = s((u0 - 1) as f32).add(lane).add(column);
+    // x' >= 0 where found: truncation is the floor.
+    let block = x.mul(s(1.0 / LANES as f32)).trunc();
+    let b0 = V::select(found, block, s(f32::INFINITY))
+        .to_array()
+        .into_iter()
+        .fold(f32::INFINITY, f32::min);
+    let b1 = V::select(found, block, s(f32::NEG_INFINITY))
+        .to_array()
+        .into_iter()
+        .fold(f32::NEG_INFINITY, f32::max);
+    if b1 > b0 + 1.0 {
+        return None;
+    }
+    // The lines v0 + dy that some lane reads, in increasing order, and their lanes.
+    let mut lines = [0usize; PERMUTED_LINES];
+    let mut masks = [s(0.0); PERMUTED_LINES];
+    let mut count = 0;
+    for r in 0..3 {
+        let on = found
+            .and(row.ge(s(r as f32)))
+            .and(row.lt(s(r as f32 + 1.0)));
+        if on.any() {
+            // A lane's line is inside the image.
+            lines[count] = (v0 - 1 + r) as usize;
+            masks[count] = on;
+            count += 1;
+        }
+    }
+    let mut most = Permuted {
+        // x' + 1.5 2^23 holds x' in its low mantissa bits (x' >= -1 in every lane):
+        // the low three, x' mod 8, are its lane in its block.
+        index: x.add(s(ROUNDING_MAGIC)),
+        second: found.and(block.gt(s(b0))),
+        block_step: x_set.slot_step() as isize,
+        lines: [(0, s(0.0)); PERMUTED_LINES],
+    };
+    for k in 0..PERMUTED_LINES {
+        let line = lines[k.min(count - 1)];
+        let offset = (line as isize - lines[0] as isize) * x_set.line_step() as isize;
+        most.lines[k] = (offset, masks[k]);
     }
     let permuted = PermutedLanes { most, count };
     Some((permuted, [b0 as isize, b1 as isize], lines))
@@ -292,5 +393,83 @@ mod tests {
             }
         }
         assert!(counts[1..].iter().all(|&c| c > 100), "{counts:?}");
+    }
+
+    /// For lanes that projected onto a run of pixels, [`permuted_run`] gives what
+    /// [`permuted_lanes`] gives on their pixels: the same blocks and lines, and for the
+    /// lanes with a previous pixel the same floats on every plane and tap (the first
+    /// and last blocks and lines of the image included). Runs whose lanes span three
+    /// blocks are left to the gathers by both.
+    #[test]
+    fn run_lanes_permute_as_their_pixels_do() {
+        let (width, height, radius) = (64usize, 9usize, 2usize);
+        let mut set = LanePlanes::new(LaneLayout::blocks(5, width, height, radius));
+        for (i, v) in set.data_mut().iter_mut().enumerate() {
+            *v = f32::from_bits(0x3f80_0000 | (hash(&[8, i as u64]) as u32 & 0x7f_ffff));
+        }
+        let (s, step) = (set.plane_stride(), set.line_step());
+        let mut counts = [0usize; PERMUTED_LINES + 2];
+        for case in 0..3000u64 {
+            let h = |k: u64| hash(&[case, k]) as usize;
+            let (u0, v0) = ((h(0) % (width - LANES + 1)) as i32, (h(1) % height) as i32);
+            // Window indices whose pixels lie in the image; a fifth of the lanes none.
+            let best: [f32; LANES] = std::array::from_fn(|l| {
+                let (dx, dy) = window_offset((h(10 + l as u64) % 9) as i32);
+                let (x, y) = (u0 + l as i32 + dx, v0 + dy);
+                let inside = x >= 0 && y >= 0 && x < width as i32 && y < height as i32;
+                if inside && h(20 + l as u64) % 5 != 0 {
+                    ((dy + 1) * 3 + dx + 1) as f32
+                } else {
+                    -1.0
+                }
+            });
+            let lanes = PreviousLanes {
+                best: Portable::from_array(best),
+                centre: (std::array::from_fn(|l| u0 + l as i32), [v0; LANES]),
+                run: Some((u0, v0)),
+            };
+            let found = lanes.pixels();
+            if found.iter().all(Option::is_none) {
+                continue;
+            }
+            let expected = permuted_lanes::<Portable>(&found, &set);
+            let got = permuted_run(lanes.best, (u0, v0), &set);
+            let (Some(expected), Some(got)) = (expected, got) else {
+                assert!(expected.is_none() && got.is_none(), "{found:?}");
+                counts[PERMUTED_LINES + 1] += 1;
+                continue;
+            };
+            let count = got.0.count();
+            counts[count] += 1;
+            assert_eq!(count, expected.0.count(), "{found:?}");
+            assert_eq!((got.1, &got.2[..count]), (expected.1, &expected.2[..count]));
+            let base = set.slot_index(got.1[0], got.2[0] as isize - radius as isize);
+            for q in 0..5 {
+                for i in 0..2 * radius + 1 {
+                    // SAFETY: the windows lie inside the set (lines within `radius` of
+                    // the image, blocks b0 and b0 + 1 <= slots).
+                    let read = |permuted: &PermutedLanes<Portable>| unsafe {
+                        let p = set.data().as_ptr().add(base + q * s + i * step);
+                        match count {
+                            1 => permuted.fetch::<1>().fetch(p),
+                            2 => permuted.fetch::<2>().fetch(p),
+                            _ => permuted.fetch::<3>().fetch(p),
+                        }
+                        .to_array()
+                    };
+                    let (a, b) = (read(&got.0), read(&expected.0));
+                    for l in (0..LANES).filter(|&l| found[l].is_some()) {
+                        assert_eq!(a[l].to_bits(), b[l].to_bits(), "{found:?}");
+                    }
+                }
+            }
+        }
+        // Lines 1, 2, 3, and three blocks (rarer: u0 a block's first pixel, lane 0
+        // back one pixel and lane 7 on one).
+        assert!(
+            counts[1..=PERMUTED_LINES].iter().all(|&c| c > 50),
+            "{counts:?}"
+        );
+        assert!(counts[PERMUTED_LINES + 1] > 10, "{counts:?}");
     }
 }

@@ -125,7 +125,7 @@ fn check_find_previous_lanes<V: Lanes>(name: &str, view: &PreviousView, previous
         let in_runs = (runs_start..runs_end).contains(&(LANES * g));
         let active: [bool; LANES] =
             std::array::from_fn(|l| l < group.len() && (in_runs || (g + l) % 7 != 3));
-        let got = find_previous_lanes(p, active, view, previous);
+        let got = find_previous_lanes(p, V::from_mask(active), view, previous).pixels();
         for l in 0..LANES {
             let expected = active[l]
                 .then(|| find_previous(lane(l), view, previous))

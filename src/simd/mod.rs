@@ -159,6 +159,7 @@ pub fn dot3<V: Lanes>(a: [V; 3], b: [V; 3]) -> V {
 }
 
 /// The portable lanes.
+#[repr(transparent)]
 #[derive(Clone, Copy, Debug)]
 pub struct Portable([f32; LANES]);
 

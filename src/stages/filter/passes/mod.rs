@@ -24,6 +24,7 @@
 //! same bits. The lane operations are never called from closures: closures do not
 //! inherit `#[target_feature]`, and their lane operations would not be inlined.
 
+mod blended;
 mod taps;
 mod x;
 mod y;

@@ -21,9 +21,16 @@ pub(super) enum TemporalTaps<V> {
     /// Every lane's previous pixel at the same offset, 8 b + r from the block's start
     /// with 0 < r < 8: target lane l's source is lane (l + r) mod 8 of block b (l + r
     /// < 8) or b + 1. With the targets rotated up by r (positions, bandwidths, limits,
-    /// sums), each lane reads its own lane of one of two windows ([`Straddling`]).
-    /// With the kinds full in both windows.
-    Rotated(Window, Straddling<V>, V, usize, u8),
+    /// sums), each lane reads its own lane of one of two windows ([`Straddling`]), the
+    /// lines from `first_line` on. With the kinds full in both windows.
+    Rotated {
+        straddling: Straddling<V>,
+        limit: V,
+        block: isize,
+        rotation: usize,
+        first_line: isize,
+        full: u8,
+    },
     /// Different offsets, the previous pixels within two consecutive blocks and on at
     /// most [`PERMUTED_LINES`] lines: per line, two loads permuted ([`Permuted`]).
     /// With the kinds full in every window the lanes read (block b0, and b0 + 1 where
@@ -128,7 +135,14 @@ pub(super) fn temporal_taps<V: Lanes>(
             second: x_set.slot_step() as isize,
             mask: V::from_mask(std::array::from_fn(|s| s < r)),
         };
-        return TemporalTaps::Rotated(window, straddling, limit, r, full);
+        return TemporalTaps::Rotated {
+            straddling,
+            limit,
+            block: b,
+            rotation: r,
+            first_line: line - radius as isize,
+            full,
+        };
     }
     let permuted = match lanes.run {
         Some(run) => permuted_run(lanes.best, run, x_set),

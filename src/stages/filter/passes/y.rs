@@ -14,6 +14,7 @@ use super::super::gaussian::{
 };
 use super::super::lane_planes::{LanePlanes, Order};
 use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ};
+use super::blended::BlendedLines;
 use super::taps::{TemporalTaps, temporal_taps};
 use super::{PairRing, Previous, XSet, group_kinds};
 use crate::raster::Vec3Image;
@@ -153,6 +154,7 @@ fn y_block<V: Lanes>(source: &YSource, n: usize, out: &ImagesOut, full: &mut [u8
     let (x_set, radius) = (source.x_set, source.radius);
     let (data, s) = (x_set.data(), x_set.plane_stride());
     let mut ring = PairRing::<V>::new(radius);
+    let mut blended = BlendedLines::<V>::new(radius);
     let mut weights = [[V::splat(0.0); MAX_TAPS]; 2];
     let x0 = n * LANES;
     let pixels = LANES.min(out.width - x0);
@@ -183,7 +185,7 @@ fn y_block<V: Lanes>(source: &YSource, n: usize, out: &ImagesOut, full: &mut [u8
         let full_kinds = [y - r > last_gap[0], y - r > last_gap[1]];
         let y = y as usize;
         full[y] = full_kinds[0] as u8 | (full_kinds[1] as u8) << 1;
-        let group = y_group::<V>(source, n, y, &ring, &mut weights, full_kinds);
+        let group = y_group::<V>(source, n, y, &ring, &mut blended, &mut weights, full_kinds);
         for (k, kind) in group.iter().enumerate() {
             for layer in 0..2 {
                 let c = 3 * layer;
@@ -215,13 +217,15 @@ fn has_gap<V: Lanes>(data: &[f32], c: usize, s: usize, first: usize) -> bool {
 /// The Y pass for the group at block n of line y (pixels (8 n + l, y)): per kind, E_R
 /// rgb then E_RV rgb per lane (NaN where the target has no value of the layer). Lines
 /// y - R..=y must be in `ring`; `full` says which kinds' spatial windows are full.
-/// `weights` is scratch for the temporal taps.
+/// `blended` keeps the rotated temporal taps' lines from group to group; `weights` is
+/// scratch for the temporal taps.
 #[inline(always)]
 fn y_group<V: Lanes>(
     source: &YSource,
     n: usize,
     y: usize,
     ring: &PairRing<V>,
+    blended: &mut BlendedLines<V>,
     weights: &mut TapWeights<V>,
     full: [bool; 2],
 ) -> [[V; 6]; 2] {
@@ -272,9 +276,22 @@ fn y_group<V: Lanes>(
         unsafe {
             match temporal_taps::<V>(previous, position, &valid, n * LANES, y, radius) {
                 TemporalTaps::Contiguous(window, limit, full) => {
-                    group.add(&Contiguous, &window, limit, full, weights, &mut sums)
+                    group.add(&Contiguous, &[window], limit, full, weights, &mut sums)
                 }
-                TemporalTaps::Rotated(window, straddling, limit, r, full) => {
+                TemporalTaps::Rotated {
+                    straddling,
+                    limit,
+                    block,
+                    rotation: r,
+                    first_line,
+                    full,
+                } => {
+                    let windows = blended.windows(
+                        previous.x_set.planes(),
+                        &straddling,
+                        (block, r),
+                        first_line,
+                    );
                     // Each target to the lane of its source (see `TemporalTaps`), and
                     // its sums back after.
                     let mut rotated = group;
@@ -286,19 +303,19 @@ fn y_group<V: Lanes>(
                     }
                     rotate_sums(&mut sums, r);
                     let limit = limit.rotate_up(r);
-                    rotated.add(&straddling, &window, limit, full, weights, &mut sums);
+                    rotated.add(&Contiguous, &windows, limit, full, weights, &mut sums);
                     rotate_sums(&mut sums, LANES - r);
                 }
                 TemporalTaps::Permuted(window, permuted, limit, full) => {
                     let (w, s) = (weights, &mut sums);
                     match permuted.count() {
-                        1 => group.add(&permuted.fetch::<1>(), &window, limit, full, w, s),
-                        2 => group.add(&permuted.fetch::<2>(), &window, limit, full, w, s),
-                        _ => group.add(&permuted.fetch::<3>(), &window, limit, full, w, s),
+                        1 => group.add(&permuted.fetch::<1>(), &[window], limit, full, w, s),
+                        2 => group.add(&permuted.fetch::<2>(), &[window], limit, full, w, s),
+                        _ => group.add(&permuted.fetch::<3>(), &[window], limit, full, w, s),
                     }
                 }
                 TemporalTaps::Gathered(window, g, limit) => {
-                    group.add(&g, &window, limit, 0, weights, &mut sums)
+                    group.add(&g, &[window], limit, 0, weights, &mut sums)
                 }
                 TemporalTaps::None => {}
             }
@@ -339,42 +356,52 @@ struct GroupTaps<V> {
 }
 
 impl<V: Lanes> GroupTaps<V> {
-    /// Adds the weighted taps of `window` to each filtered kind's `sums`; the kinds
-    /// whose bit is set in `full` are full in the window ([`FullWindows`]).
+    /// Adds the weighted taps of `windows` (taps of one window in pieces, in order) to
+    /// each filtered kind's `sums`; the kinds whose bit is set in `full` are full in
+    /// the window ([`FullWindows`]).
     ///
     /// # Safety
-    /// Every tap of `window` that `fetch` reads must lie inside its planes.
+    /// Every tap of `windows` that `fetch` reads must lie inside its planes.
     #[inline(always)]
     unsafe fn add<F: Fetch<V>>(
         &self,
         fetch: &F,
-        window: &Window,
+        windows: &[Window],
         limit: V,
         full: u8,
         weights: &mut TapWeights<V>,
         sums: &mut [[V; VALUE_PLANES]; 2],
     ) {
-        let [direct, indirect] = weights;
-        // SAFETY: forwarded from the caller.
+        // SAFETY (all calls): forwarded from the caller.
         unsafe {
-            tap_weights(
-                fetch,
-                window,
-                X_PX,
-                self.position,
-                self.kinds,
-                limit,
-                [direct, indirect],
-            );
+            let mut first_tap = 0;
+            for window in windows {
+                let [direct, indirect] = weights;
+                tap_weights(
+                    fetch,
+                    window,
+                    X_PX,
+                    self.position,
+                    self.kinds,
+                    limit,
+                    [&mut direct[first_tap..], &mut indirect[first_tap..]],
+                );
+                first_tap += window.taps;
+            }
             for k in 0..2 {
                 if self.kinds[k].is_none() {
                     continue;
                 }
-                let (first, weights, sums) = (self.first[k], &weights[k], &mut sums[k]);
-                if full & (1 << k) != 0 {
-                    accumulate_full(fetch, window, first, weights, sums);
-                } else {
-                    accumulate(fetch, window, first, weights, sums);
+                let (first, sums) = (self.first[k], &mut sums[k]);
+                let mut first_tap = 0;
+                for window in windows {
+                    let weights = &weights[k][first_tap..];
+                    if full & (1 << k) != 0 {
+                        accumulate_full(fetch, window, first, weights, sums);
+                    } else {
+                        accumulate(fetch, window, first, weights, sums);
+                    }
+                    first_tap += window.taps;
                 }
             }
         }

@@ -182,11 +182,11 @@ pub(super) fn find_previous_lanes<V: Lanes>(
     let run = consecutive_run(&ui, &vi, inside.to_array(), previous);
     let data = previous.data().as_ptr();
     let stride = previous.plane_stride();
-    // Gathered pixels' indices, computed in floats (see below).
-    assert!(previous.order() == Order::Blocks && previous.floats() < 1 << 24);
+    // For the gathered pixels' indices (see below).
+    assert!(previous.order() == Order::Blocks);
     let (origin, slot_step) = (
-        previous.pixel_index(0, 0) as f32,
-        previous.slot_step() as f32,
+        previous.pixel_index(0, 0) as i32,
+        previous.slot_step() as i32,
     );
     let mut best_d2 = s(MISSING_DISTANCE2);
     // Index of the best window pixel so far, -1 for none.
@@ -203,17 +203,19 @@ pub(super) fn find_previous_lanes<V: Lanes>(
             let [qx, qy, qz] = match run {
                 Some((u0, v0)) => run_positions(previous, u0 + dx, v0 + dy),
                 None => {
-                    // Lanes outside read pixel (0, 0). Blocks order: pixel (x, y) is at
-                    // block x / 8, line y, lane x mod 8 from pixel (0, 0); in floats,
-                    // exact below 2^24 (asserted), then converted. Lane by lane in
-                    // integers this cost some 300 rdtsc ticks a group.
+                    // Lanes outside read pixel (0, 0). Blocks order: pixel (x, y) is
+                    // block x / 8, then line y, lane x mod 8 in the block, from pixel
+                    // (0, 0). The block and the index in it in floats (small integers,
+                    // exact), the sum in integers, which hold any set's index. Lane by
+                    // lane with bounds checks this cost some 300 rdtsc ticks a group.
                     let (x, y) = (V::select(ok, x, zero), V::select(ok, y, zero));
                     let block = x.mul(s(1.0 / LANES as f32)).trunc();
-                    let index = s(origin)
-                        .add(block.mul(s(slot_step)))
-                        .add(y.mul(s(LANES as f32)))
+                    let in_block = y
+                        .mul(s(LANES as f32))
                         .add(x.sub(block.mul(s(LANES as f32))));
-                    let offset = index.trunc_to_i32();
+                    let (block, in_block) = (block.trunc_to_i32(), in_block.trunc_to_i32());
+                    let offset: [i32; LANES] =
+                        std::array::from_fn(|l| origin + block[l] * slot_step + in_block[l]);
                     // SAFETY: every offset is a pixel of plane 0; the position planes
                     // are inside the set.
                     unsafe {

@@ -318,8 +318,9 @@ fn permuted_run<V: Lanes>(
         }
     }
     let mut most = Permuted {
-        // x' + 1.5 2^23 holds x' in its low mantissa bits (x' >= -1 in every lane):
-        // the low three, x' mod 8, are its lane in its block.
+        // x + 1.5 2^23 holds x in its low mantissa bits (two's complement where x is
+        // negative, as it may be in a lane without a previous pixel): the low three,
+        // x' mod 8, are the lane of x' in its block.
         index: x.add(s(ROUNDING_MAGIC)),
         second: found.and(block.gt(s(b0))),
         block_step: x_set.slot_step() as isize,

@@ -49,6 +49,31 @@ pub(super) struct PermutedLanes<V> {
 }
 
 impl<V: Lanes> PermutedLanes<V> {
+    /// The fetch for lanes whose float lies at lane `index` ([`Lanes::lane_indices`])
+    /// of block b0, or b0 + 1 where `second` is set, on the first `count` of `lines`
+    /// (increasing), lane masks `masks` (of the same lines) in `x_set`.
+    #[inline(always)]
+    fn new(
+        (index, second): (V, V),
+        lines: &[usize; PERMUTED_LINES],
+        masks: [V; PERMUTED_LINES],
+        count: usize,
+        x_set: &LanePlanes,
+    ) -> PermutedLanes<V> {
+        let step = x_set.line_step() as isize;
+        let mut most = Permuted {
+            index,
+            second,
+            block_step: x_set.slot_step() as isize,
+            lines: [(0, V::splat(0.0)); PERMUTED_LINES],
+        };
+        for k in 0..PERMUTED_LINES {
+            let offset = (lines[k.min(count - 1)] as isize - lines[0] as isize) * step;
+            most.lines[k] = (offset, masks[k]);
+        }
+        PermutedLanes { most, count }
+    }
+
     /// The fetch for `K` lines (`K` must be the count).
     #[inline(always)]
     pub(super) fn fetch<const K: usize>(&self) -> Permuted<V, K> {
@@ -124,9 +149,9 @@ pub(super) fn temporal_taps<V: Lanes>(
             x.rem_euclid(LANES as isize) as usize,
         );
         let line = y as isize + dy;
-        let window = window_from(x_set.slot_index(b, line - radius as isize));
         let full = previous.x_set.full_windows().get(b, line);
         if r == 0 {
+            let window = window_from(x_set.slot_index(b, line - radius as isize));
             return TemporalTaps::Contiguous(window, limit, full);
         }
         let full = full & previous.x_set.full_windows().get(b + 1, line);
@@ -241,26 +266,18 @@ fn permuted_lanes<V: Lanes>(
                 .unwrap_or(0)
         })
     });
-    let step = x_set.line_step() as isize;
-    let mut most = Permuted {
-        index: V::lane_indices(std::array::from_fn(|l| {
-            found[l].map_or(0, |(x, _)| (x % LANES) as u32)
-        })),
-        second: V::from_mask(std::array::from_fn(|l| {
-            found[l].is_some_and(|(x, _)| x / LANES > b0)
-        })),
-        block_step: x_set.slot_step() as isize,
-        lines: [(0, V::splat(0.0)); PERMUTED_LINES],
-    };
+    let index = V::lane_indices(std::array::from_fn(|l| {
+        found[l].map_or(0, |(x, _)| (x % LANES) as u32)
+    }));
+    let second = V::from_mask(std::array::from_fn(|l| {
+        found[l].is_some_and(|(x, _)| x / LANES > b0)
+    }));
+    let mut masks = [V::splat(0.0); PERMUTED_LINES];
     // A loop, not a closure: closures do not inherit the kernel's target features.
-    for k in 0..PERMUTED_LINES {
-        let offset = (lines[k.min(count - 1)] as isize - lines[0] as isize) * step;
-        most.lines[k] = (
-            offset,
-            V::from_mask(std::array::from_fn(|l| lane_line[l] == k)),
-        );
+    for (k, mask) in masks.iter_mut().enumerate() {
+        *mask = V::from_mask(std::array::from_fn(|l| lane_line[l] == k));
     }
-    let permuted = PermutedLanes { most, count };
+    let permuted = PermutedLanes::new((index, second), &lines, masks, count, x_set);
     Some((permuted, [b0 as isize, b1 as isize], lines))
 }
 
@@ -317,21 +334,12 @@ fn permuted_run<V: Lanes>(
             count += 1;
         }
     }
-    let mut most = Permuted {
-        // x + 1.5 2^23 holds x in its low mantissa bits (two's complement where x is
-        // negative, as it may be in a lane without a previous pixel): the low three,
-        // x' mod 8, are the lane of x' in its block.
-        index: x.add(s(ROUNDING_MAGIC)),
-        second: found.and(block.gt(s(b0))),
-        block_step: x_set.slot_step() as isize,
-        lines: [(0, s(0.0)); PERMUTED_LINES],
-    };
-    for k in 0..PERMUTED_LINES {
-        let line = lines[k.min(count - 1)];
-        let offset = (line as isize - lines[0] as isize) * x_set.line_step() as isize;
-        most.lines[k] = (offset, masks[k]);
-    }
-    let permuted = PermutedLanes { most, count };
+    // x + 1.5 2^23 holds x in its low mantissa bits (two's complement where x is
+    // negative, as it may be in a lane without a previous pixel): the low three,
+    // x' mod 8, are the lane of x' in its block.
+    let index = x.add(s(ROUNDING_MAGIC));
+    let second = found.and(block.gt(s(b0)));
+    let permuted = PermutedLanes::new((index, second), &lines, masks, count, x_set);
     Some((permuted, [b0 as isize, b1 as isize], lines))
 }
 

@@ -139,6 +139,8 @@ pub(super) fn find_previous_lanes<V: Lanes>(
     previous: &LanePlanes,
 ) -> PreviousLanes<V> {
     assert!(previous.planes() > X_PZ && previous.floats() <= i32::MAX as usize);
+    // Runs and gathered indices are read in blocks order.
+    assert!(previous.order() == Order::Blocks);
     let s = V::splat;
     let [px, py, pz] = p;
     let (m, t) = (
@@ -157,11 +159,6 @@ pub(super) fn find_previous_lanes<V: Lanes>(
     let height = previous.height.min(cam.height as usize) as i32;
     let (w, h) = (s(width as f32), s(height as f32));
     let zero = s(0.0);
-    let none = PreviousLanes {
-        best: s(-1.0),
-        centre: ([0; LANES], [0; LANES]),
-        run: None,
-    };
     // In front of the camera (false for NaN) and on screen.
     let inside = active
         .and(cz.gt(zero))
@@ -170,7 +167,11 @@ pub(super) fn find_previous_lanes<V: Lanes>(
         .and(u.lt(w))
         .and(v.lt(h));
     if !inside.any() {
-        return none;
+        return PreviousLanes {
+            best: s(-1.0),
+            centre: ([0; LANES], [0; LANES]),
+            run: None,
+        };
     }
     // u, v >= 0 where inside: truncation is the floor. Other lanes look at pixel (0, 0),
     // masked out.
@@ -183,7 +184,6 @@ pub(super) fn find_previous_lanes<V: Lanes>(
     let data = previous.data().as_ptr();
     let stride = previous.plane_stride();
     // For the gathered pixels' indices (see below).
-    assert!(previous.order() == Order::Blocks);
     let (origin, slot_step) = (
         previous.pixel_index(0, 0) as i32,
         previous.slot_step() as i32,
@@ -246,7 +246,7 @@ pub(super) fn find_previous_lanes<V: Lanes>(
 /// line, (u0 + l, v0) for lane l, that line's first pixel (u0, v0): then each pixel of
 /// the search window is a run of eight consecutive pixels, read by two aligned loads
 /// per plane ([`run_positions`]) instead of a gather. `None` otherwise, or where the
-/// window's lines or blocks would leave the set.
+/// window's lines would leave the set. `previous` must be in blocks order.
 #[inline(always)]
 pub(super) fn consecutive_run(
     ui: &[i32; LANES],
@@ -259,7 +259,8 @@ pub(super) fn consecutive_run(
     // Lines v0 - 1..=v0 + 1 and pixels u0 - 1..u0 + 9 (blocks -1..=slots) are in the
     // set: u0 >= 0 and u0 + 7 < width <= 8 slots since the lanes are inside.
     let lines = previous.fits_lines(SEARCH_RADIUS as usize);
-    (run && lines && previous.order() == Order::Blocks).then_some((u0, v0))
+    debug_assert!(previous.order() == Order::Blocks);
+    (run && lines).then_some((u0, v0))
 }
 
 /// The positions of pixels x0 + l (lane l) of line `line` of the X set `previous`

@@ -5,7 +5,6 @@ use super::super::gaussian::{Fetch, Straddling, Window};
 use super::super::lane_planes::LanePlanes;
 use super::super::planes::X_PLANES;
 use crate::simd::{LANES, Lanes};
-use std::ops::Range;
 
 /// The lines of the previous X set that a rotated read ([`super::taps::TemporalTaps`])
 /// takes, each line's two blocks b and b + 1 blended into one vector per plane as
@@ -21,15 +20,15 @@ use std::ops::Range;
 pub(super) struct BlendedLines<V> {
     /// Per slot (line t at slot t mod 2 R + 1), [`X_PLANES`] vectors.
     lines: Vec<V>,
-    /// The blocks, rotation and lines the ring holds.
+    /// The blocks, rotation and first line of the 2 R + 1 lines the ring holds.
     held: Option<Held>,
 }
 
-#[derive(Clone, PartialEq, Debug)]
+#[derive(Clone, Copy, PartialEq, Debug)]
 struct Held {
     block: isize,
     rotation: usize,
-    lines: Range<isize>,
+    first: isize,
 }
 
 impl<V: Lanes> BlendedLines<V> {
@@ -67,14 +66,14 @@ impl<V: Lanes> BlendedLines<V> {
         let slots = self.slots();
         let wanted = first..first + slots as isize;
         // The lines already blended, if the ring holds these blocks and rotation.
-        let kept = match &self.held {
+        let kept = match self.held {
             Some(held) if held.block == block && held.rotation == rotation => {
-                held.lines.start.max(wanted.start)..held.lines.end.min(wanted.end)
+                held.first.max(first)..held.first.min(first) + slots as isize
             }
             _ => 0..0,
         };
         let (data, plane_stride) = (x_set.data().as_ptr(), x_set.plane_stride());
-        for line in wanted.clone().filter(|line| !kept.contains(line)) {
+        for line in wanted.filter(|line| !kept.contains(line)) {
             let slot = line.rem_euclid(slots as isize) as usize;
             let source = x_set.slot_index(block, line);
             for q in 0..X_PLANES {
@@ -86,7 +85,7 @@ impl<V: Lanes> BlendedLines<V> {
         self.held = Some(Held {
             block,
             rotation,
-            lines: wanted,
+            first,
         });
         let start = first.rem_euclid(slots as isize) as usize;
         let ring = self.lines.as_ptr().cast::<f32>();

@@ -6,7 +6,9 @@ use super::super::gaussian::{
     EXP_CUTOFF, Gathered, PERMUTED_LINES, Permuted, ROUNDING_MAGIC, Straddling, Window,
 };
 use super::super::lane_planes::LanePlanes;
-use super::super::temporal::{PreviousLanes, SEARCH_RADIUS, find_previous_lanes, window_offset};
+#[cfg(any(test, doc))]
+use super::super::temporal::PreviousLanes;
+use super::super::temporal::{SEARCH_RADIUS, find_previous_lanes, window_offset};
 use super::Previous;
 use crate::simd::{LANES, Lanes};
 
@@ -128,7 +130,12 @@ pub(super) fn temporal_taps<V: Lanes>(
         return TemporalTaps::None;
     }
     let limit = V::select(has_previous, V::splat(EXP_CUTOFF), V::splat(-1.0));
-    let common = common_offset(&lanes, x0, y);
+    // Scattered lanes' pixels, decoded once; a run's are read from its indices.
+    let projected = match lanes.run {
+        Some(run) => Projected::Run(run),
+        None => Projected::Scattered(lanes.pixels()),
+    };
+    let common = common_offset(lanes.best, &projected, x0, y);
     // The window of 2 R + 1 taps down the X set from index `first` of plane 0 (for
     // gathered taps, the planes' start).
     let window_from = |first: usize| Window {
@@ -169,9 +176,9 @@ pub(super) fn temporal_taps<V: Lanes>(
             full,
         };
     }
-    let permuted = match lanes.run {
-        Some(run) => permuted_run(lanes.best, run, x_set),
-        None => permuted_lanes(&lanes.pixels(), x_set),
+    let permuted = match &projected {
+        Projected::Run(run) => permuted_run(lanes.best, *run, x_set),
+        Projected::Scattered(found) => permuted_lanes(found, x_set),
     };
     if let Some((permuted, [b0, b1], lines)) = permuted {
         // Lines y'_0 - R.. of block b_0, each lane's line and block an offset from there:
@@ -189,7 +196,10 @@ pub(super) fn temporal_taps<V: Lanes>(
     }
     // Gather, each lane from its previous pixel's window (a lane without one from its
     // own pixel's, with no weight).
-    let found = lanes.pixels();
+    let found = match projected {
+        Projected::Run(_) => lanes.pixels(),
+        Projected::Scattered(found) => found,
+    };
     let first_tap: [i32; LANES] = std::array::from_fn(|l| {
         let (x, y) = found[l].unwrap_or((x0 + l, y));
         x_set.pixel_index(x as isize, y as isize - radius as isize) as i32
@@ -197,30 +207,43 @@ pub(super) fn temporal_taps<V: Lanes>(
     TemporalTaps::Gathered(window_from(0), Gathered(first_tap), limit)
 }
 
+/// Where a group's lanes projected into the previous frame ([`PreviousLanes`]).
+enum Projected {
+    /// Onto the run of pixels (u0 + l, v0).
+    Run((i32, i32)),
+    /// Elsewhere: each lane's previous pixel.
+    Scattered([Option<(usize, usize)>; LANES]),
+}
+
 /// The offset (x' - x, y' - y) from every lane's pixel (x0 + l, y) to its previous
-/// pixel (x', y'), if all the lanes that have one share it.
+/// pixel (x', y'), if all the lanes that have one share it; `best` are the lanes'
+/// window indices ([`PreviousLanes::best`]).
 #[inline(always)]
 fn common_offset<V: Lanes>(
-    lanes: &PreviousLanes<V>,
+    best: V,
+    projected: &Projected,
     x0: usize,
     y: usize,
 ) -> Option<(isize, isize)> {
-    let mut best = lanes.best.to_array().into_iter().filter(|&k| k >= 0.0);
-    if let Some((u0, v0)) = lanes.run {
-        // Lane l's previous pixel is (u0 + l + dx, v0 + dy) for its window index: the
-        // offset is common if the index is.
-        let k = best.next()?;
-        if best.any(|other| other != k) {
-            return None;
+    let found = match *projected {
+        Projected::Run((u0, v0)) => {
+            // Lane l's previous pixel is (u0 + l + dx, v0 + dy) for its window index:
+            // the offset is common if the index is.
+            let mut best = best.to_array().into_iter().filter(|&k| k >= 0.0);
+            let k = best.next()?;
+            if best.any(|other| other != k) {
+                return None;
+            }
+            let (dx, dy) = window_offset(k as i32);
+            return Some((
+                (u0 + dx) as isize - x0 as isize,
+                (v0 + dy) as isize - y as isize,
+            ));
         }
-        let (dx, dy) = window_offset(k as i32);
-        return Some((
-            (u0 + dx) as isize - x0 as isize,
-            (v0 + dy) as isize - y as isize,
-        ));
-    }
+        Projected::Scattered(ref found) => found,
+    };
     let mut common = None;
-    for (l, f) in lanes.pixels().iter().enumerate() {
+    for (l, f) in found.iter().enumerate() {
         let Some((xp, yp)) = *f else { continue };
         let offset = (xp as isize - (x0 + l) as isize, yp as isize - y as isize);
         match common {

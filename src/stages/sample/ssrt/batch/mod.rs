@@ -89,7 +89,9 @@ impl Pending {
         self.ray.len()
     }
 
-    /// Pending ray `i`: its origin, direction and length.
+    /// Pending ray `i`: its origin, direction and length. (Inlined: the lanes' setup
+    /// reads every ray through it.)
+    #[inline(always)]
     fn get(&self, i: usize) -> (RayOrigin, Vec3, f32) {
         let origin = RayOrigin {
             point: Vec3::new(self.ox[i], self.oy[i], self.oz[i]),

@@ -2,11 +2,13 @@
 //! collapsed into four-wide nodes ([`WideNode`]).
 //!
 //! The binary tree is built top-down (16 centroid bins per axis, leaves of at most 8
-//! triangles, the median below a depth so that ranges keep halving) and flattened in
-//! depth-first order. Collapsing opens, from each binary interior node, the largest of
-//! its descendants until the node has four children (or only leaves are left), and
-//! makes them one wide node; the children stay in the binary order.
+//! triangles, costed by the packs of four that hold them, the median below a depth so
+//! that ranges keep halving) and flattened in depth-first order. Collapsing opens, from
+//! each binary interior node, the largest of its descendants until the node has four
+//! children (or only leaves are left), and makes them one wide node; the children stay
+//! in the binary order. Each leaf's triangles then go into packs of four.
 
+use super::leaf::TrianglePack;
 use super::{Bvh, MAX_DEPTH, WideNode};
 use crate::objects::{Aabb, Triangle};
 use glam::{Vec3, Vec4};
@@ -19,8 +21,16 @@ const MAX_LEAF: usize = 8;
 /// so no leaf lies deeper than `SAH_DEPTH + 32` (`MAX_DEPTH`).
 const SAH_DEPTH: usize = 32;
 const _: () = assert!(SAH_DEPTH + 32 <= MAX_DEPTH);
-/// Relative cost of a node visit against a triangle test in the SAH.
+/// Relative cost of a node visit against a leaf pack's test (four triangles at once) in
+/// the SAH.
 const TRAVERSAL_COST: f32 = 1.0;
+/// Triangles per leaf pack ([`TrianglePack`]).
+const PACK: usize = 4;
+
+/// The packs holding `triangles` triangles: what a leaf of them costs in the SAH.
+fn packs(triangles: usize) -> f32 {
+    triangles.div_ceil(PACK) as f32
+}
 
 /// A node of the binary tree, in depth-first order (the first child follows its parent).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -76,14 +86,6 @@ pub(super) fn build(triangles: &[Triangle]) -> Bvh {
         pad,
     };
     b.build(0, triangles.len(), 0);
-    let edges = b
-        .order
-        .iter()
-        .map(|&i| {
-            let v = &triangles[i as usize].vertices;
-            [v[0], v[1] - v[0], v[2] - v[0]]
-        })
-        .collect();
     let mut nodes = Vec::with_capacity(b.nodes.len() / 2 + 1);
     let root = &b.nodes[0];
     let depth = if root.count > 0 {
@@ -93,10 +95,31 @@ pub(super) fn build(triangles: &[Triangle]) -> Bvh {
     } else {
         collapse(&b.nodes, 0, &mut nodes)
     };
+    // Each leaf's triangles, in leaf order, four to a pack; the leaf child then
+    // indexes its first pack.
+    let mut packs = Vec::with_capacity(triangles.len() / 2 + 1);
+    for node in &mut nodes {
+        for k in 0..4 {
+            let count = node.count[k] as usize;
+            if node.live & (1 << k) == 0 || count == 0 {
+                continue;
+            }
+            let first = node.index[k] as usize;
+            node.index[k] = packs.len() as u32;
+            let leaf: Vec<([Vec3; 3], u32)> = b.order[first..first + count]
+                .iter()
+                .map(|&i| {
+                    let v = &triangles[i as usize].vertices;
+                    ([v[0], v[1] - v[0], v[2] - v[0]], i)
+                })
+                .collect();
+            packs.extend(leaf.chunks(4).map(TrianglePack::new));
+        }
+    }
     Bvh {
         nodes,
-        edges,
-        ids: b.order,
+        packs,
+        triangle_count: triangles.len(),
         bounds: scene,
         depth,
     }
@@ -107,20 +130,19 @@ impl WideNode {
     /// interior nodes get their wide index filled in by [`collapse`].
     fn new(children: &[Node]) -> WideNode {
         assert!((1..=4).contains(&children.len()));
-        let mut min = [Vec4::ZERO; 3];
-        let mut max = [Vec4::ZERO; 3];
+        let mut planes = [[Vec4::ZERO; 3]; 2];
         let mut index = [0; 4];
         let mut count = [0; 4];
         for (k, child) in children.iter().enumerate() {
-            for axis in 0..3 {
-                min[axis][k] = child.min[axis];
-                max[axis][k] = child.max[axis];
+            for (side, corner) in [child.min, child.max].into_iter().enumerate() {
+                for (axis, plane) in planes[side].iter_mut().enumerate() {
+                    plane[k] = corner[axis];
+                }
             }
             (index[k], count[k]) = (child.offset, child.count);
         }
         WideNode {
-            min,
-            max,
+            planes,
             index,
             count,
             live: (1 << children.len()) - 1,
@@ -182,7 +204,7 @@ impl Builder<'_> {
             count: (end - start) as u32,
         });
         let count = end - start;
-        if count <= 2 {
+        if count <= PACK {
             return index as u32;
         }
         let sah = if depth < SAH_DEPTH {
@@ -238,7 +260,7 @@ impl Builder<'_> {
             let mut acc = (Aabb::EMPTY, 0u32);
             for k in (1..BINS).rev() {
                 grow_by(&mut acc, &bins[k]);
-                right_cost[k] = half_area(&acc.0) * acc.1 as f32;
+                right_cost[k] = half_area(&acc.0) * packs(acc.1 as usize);
             }
             let mut left = (Aabb::EMPTY, 0u32);
             for k in 1..BINS {
@@ -247,7 +269,7 @@ impl Builder<'_> {
                 if left.1 == 0 || right_count == 0 {
                     continue;
                 }
-                let cost = half_area(&left.0) * left.1 as f32 + right_cost[k];
+                let cost = half_area(&left.0) * packs(left.1 as usize) + right_cost[k];
                 if best.is_none_or(|(c, _, _)| cost < c) {
                     best = Some((cost, axis, k));
                 }
@@ -256,7 +278,7 @@ impl Builder<'_> {
         let (cost, axis, split_bin) = best?;
         let area = half_area(bounds);
         let split_cost = TRAVERSAL_COST + if area > 0.0 { cost / area } else { 0.0 };
-        if split_cost >= (end - start) as f32 && end - start <= MAX_LEAF {
+        if split_cost >= packs(end - start) && end - start <= MAX_LEAF {
             return Some(None);
         }
         let (lo, ext) = (centroids.min[axis], extent[axis]);

@@ -4,9 +4,10 @@
 //! traversal is iterative with a fixed stack: nearest hit (hit children visited
 //! near-first) and any-hit for shadow rays.
 //!
-//! Triangles are intersected by [`ray_triangle_edges`] on edges stored in leaf order,
-//! the same arithmetic as [`super::ray_triangle`], so a BVH hit equals the brute-force hit
-//! bit for bit; ties in t go to the smaller triangle index in both. The box tests only
+//! A leaf's triangles are stored four to a [`leaf::TrianglePack`] and intersected four at
+//! a time, each lane with the arithmetic of [`super::ray_triangle_edges`] (that of
+//! [`super::ray_triangle`]), so a BVH hit equals the brute-force hit bit for bit; ties in
+//! t go to the smaller triangle index in both. The box tests only
 //! cull, conservatively: node boxes are padded by a millionth of the scene's size, exits
 //! are widened by a few ulps so that rounding in the slab test never culls a triangle
 //! lying on a box face, and infinite inverse directions are clamped to the largest
@@ -16,9 +17,11 @@
 //! that is too small, which can shorten a box only beyond t ~ 1e26.
 
 mod build;
+mod leaf;
 
-use super::{Aabb, Triangle, ray_triangle_edges};
+use super::{Aabb, Triangle};
 use glam::{Vec3, Vec4};
+use leaf::{PackRay, TrianglePack};
 
 /// Deepest wide node below the root (the binary tree's bound, which collapsing can only
 /// lower).
@@ -34,12 +37,11 @@ const INVERSE_LIMIT: f32 = f32::MAX;
 /// Four children's boxes, one lane each (structure of arrays), and what they are.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct WideNode {
-    /// Per axis (x, y, z), the children's padded box minima.
-    min: [Vec4; 3],
-    /// Per axis, the children's padded box maxima.
-    max: [Vec4; 3],
-    /// Per child: the wide node's index (interior), or its first slot in `edges` and
-    /// `ids` (leaf).
+    /// The children's padded boxes: `planes[0][axis]` their minima along axis x, y or
+    /// z, `planes[1][axis]` their maxima.
+    planes: [[Vec4; 3]; 2],
+    /// Per child: the wide node's index (interior), or its first pack in `packs`
+    /// (leaf).
     index: [u32; 4],
     /// Per child: 0 for an interior node, else the leaf's triangles.
     count: [u32; 4],
@@ -53,10 +55,10 @@ struct WideNode {
 pub struct Bvh {
     /// Wide nodes, the root first.
     nodes: Vec<WideNode>,
-    /// Per leaf slot: v0, e1 = v1 - v0, e2 = v2 - v0 of the triangle.
-    edges: Vec<[Vec3; 3]>,
-    /// Per leaf slot: the triangle's index in the scene.
-    ids: Vec<u32>,
+    /// The leaves' triangles, four to a pack (a leaf of n triangles has n / 4 packs,
+    /// rounded up).
+    packs: Vec<TrianglePack>,
+    triangle_count: usize,
     /// The exact bounds of all vertices (node boxes are padded).
     bounds: Aabb,
     depth: usize,
@@ -66,7 +68,7 @@ impl std::fmt::Debug for Bvh {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Bvh")
             .field("nodes", &self.nodes.len())
-            .field("triangles", &self.ids.len())
+            .field("triangles", &self.triangle_count)
             .field("depth", &self.depth)
             .finish()
     }
@@ -89,7 +91,7 @@ impl Bvh {
 
     /// True when the hierarchy was built over `triangle_count` triangles.
     pub fn is_built_for(&self, triangle_count: usize) -> bool {
-        !self.nodes.is_empty() && self.ids.len() == triangle_count
+        !self.nodes.is_empty() && self.triangle_count == triangle_count
     }
 
     /// The bounds of the triangles it was built over ([`Aabb::EMPTY`] when not built).
@@ -124,6 +126,7 @@ impl Bvh {
             return None;
         }
         let ray = SlabRay::new(origin, dir);
+        let lanes = PackRay::new(origin, dir);
         let mut best_t = t_max;
         let mut best: Option<(u32, f32, f32)> = None;
         let mut stack = Stack::new();
@@ -148,16 +151,19 @@ impl Bvh {
                 }
             } else {
                 let first = at.index as usize;
-                for slot in first..first + at.count as usize {
-                    let [v0, e1, e2] = self.edges[slot];
-                    let Some((t, u, v)) = ray_triangle_edges(origin, dir, v0, e1, e2) else {
-                        continue;
-                    };
-                    let id = self.ids[slot];
-                    let closer = t < best_t || (t == best_t && best.is_some_and(|b| id < b.0));
-                    if t > t_min && closer {
-                        best_t = t;
-                        best = Some((id, u, v));
+                for pack in &self.packs[first..first + (at.count as usize).div_ceil(4)] {
+                    let found = pack.intersect(&lanes);
+                    let mut hits = found.hits & found.t.cmpgt(Vec4::splat(t_min)).bitmask();
+                    // In lane order, as the scalar loop over the leaf's triangles.
+                    while hits != 0 {
+                        let k = hits.trailing_zeros() as usize;
+                        hits &= hits - 1;
+                        let (t, id) = (found.t[k], pack.ids[k]);
+                        let closer = t < best_t || (t == best_t && best.is_some_and(|b| id < b.0));
+                        if closer {
+                            best_t = t;
+                            best = Some((id, found.u[k], found.v[k]));
+                        }
                     }
                 }
             }
@@ -180,6 +186,7 @@ impl Bvh {
             return false;
         }
         let ray = SlabRay::new(origin, dir);
+        let lanes = PackRay::new(origin, dir);
         let mut stack = Stack::new();
         stack.push(Visit::default());
         while let Some(at) = stack.pop() {
@@ -198,12 +205,10 @@ impl Bvh {
                 continue;
             }
             let first = at.index as usize;
-            for slot in first..first + at.count as usize {
-                let [v0, e1, e2] = self.edges[slot];
-                if let Some((t, _, _)) = ray_triangle_edges(origin, dir, v0, e1, e2)
-                    && t > t_min
-                    && t < t_max
-                {
+            for pack in &self.packs[first..first + (at.count as usize).div_ceil(4)] {
+                let found = pack.intersect(&lanes);
+                let within = found.t.cmpgt(Vec4::splat(t_min)) & found.t.cmplt(Vec4::splat(t_max));
+                if found.hits & within.bitmask() != 0 {
                     return true;
                 }
             }
@@ -274,10 +279,12 @@ impl Stack {
 }
 
 /// A ray as the slab test of four boxes reads it: origin and clamped inverse direction,
-/// each coordinate in all four lanes.
+/// each coordinate in all four lanes, and per axis the side of a box (0 its minimum, 1
+/// its maximum) where the ray enters it.
 struct SlabRay {
     origin: [Vec4; 3],
     inverse: [Vec4; 3],
+    entry_side: [usize; 3],
 }
 
 impl SlabRay {
@@ -288,20 +295,23 @@ impl SlabRay {
         SlabRay {
             origin: [0, 1, 2].map(|a| Vec4::splat(origin[a])),
             inverse: [0, 1, 2].map(|a| Vec4::splat(inverse[a])),
+            entry_side: [0, 1, 2].map(|a| inverse[a].is_sign_negative() as usize),
         }
     }
 
     /// Where the ray enters each child's box within [t_min, t_max], and the bits of the
-    /// live children it meets there.
+    /// live children it meets there. The entry plane's distance is the smaller of the
+    /// two planes' (rounding keeps their order), so no min or max is needed per axis.
     #[inline(always)]
     fn hits(&self, node: &WideNode, t_min: f32, t_max: f32) -> (Vec4, u32) {
         let mut near = Vec4::splat(t_min);
         let mut exit = Vec4::INFINITY;
         for axis in 0..3 {
-            let t0 = (node.min[axis] - self.origin[axis]) * self.inverse[axis];
-            let t1 = (node.max[axis] - self.origin[axis]) * self.inverse[axis];
-            near = near.max(t0.min(t1));
-            exit = exit.min(t0.max(t1));
+            let side = self.entry_side[axis];
+            let entry = node.planes[side][axis];
+            let leave = node.planes[1 - side][axis];
+            near = near.max((entry - self.origin[axis]) * self.inverse[axis]);
+            exit = exit.min((leave - self.origin[axis]) * self.inverse[axis]);
         }
         let far = (exit * EXIT_WIDENING).max(exit).min(Vec4::splat(t_max));
         (near, near.cmple(far).bitmask() & node.live)

@@ -4,7 +4,7 @@
 
 use super::bounds::{Cone, Objects, object_pixel_bounds};
 use super::sampling::{Basis, PixelRng, Stream, StreamId, strata_bounds, stratum_index};
-use super::span::{DirectRay, IndirectRay, RealSamples};
+use super::span::{DirectRay, Drawn, IndirectRay, RealSamples};
 use super::{PathInputs, PathParams};
 use crate::light::LightSample;
 use crate::objects::VirtualHit;
@@ -162,26 +162,26 @@ impl<'a> Kernel<'a> {
         }
     }
 
-    /// All estimates of pixel (x, y), whose real point `real` (see
-    /// [`Kernel::real_point`]) had its samples drawn into `samples`, with their
-    /// screen-space rays traced into `hits` (see [`super::span`]).
+    /// All estimates of pixel (x, y) from what was drawn there (see [`Drawn`]), with
+    /// all its screen-space rays traced into `hits` (see [`super::span`]).
     pub(super) fn shade_pixel(
         &self,
         x: u32,
         y: u32,
-        real: Option<&RealPoint>,
-        samples: &RealSamples,
+        drawn: &Drawn,
         hits: &[Option<RealHit>],
     ) -> PixelResult {
+        let Drawn {
+            real,
+            real_samples: samples,
+            primaries,
+            virtual_samples,
+        } = drawn;
+        let real = *real;
         let inputs = self.inputs;
         let params = self.params;
         let p = y as usize * inputs.depth.width as usize + x as usize;
         let rng = PixelRng::new(params.seed, inputs.frame, p as u64);
-        let z = inputs.depth.data[p];
-        let may_see_objects = {
-            let [x0, y0, x1, y1] = self.object_pixels;
-            (x0..=x1).contains(&(x as i64)) && (y0..=y1).contains(&(y as i64))
-        };
         let mut acc = Acc {
             r_dir: Vec3::ZERO,
             r_ind: Vec3::ZERO,
@@ -197,21 +197,16 @@ impl<'a> Kernel<'a> {
         };
         let (mut virtual_count, mut albedo, mut exponent) = (0u32, Vec3::ZERO, 0.0f32);
         let (mut surfaces, mut position, mut normal) = (0u32, Vec3::ZERO, Vec3::ZERO);
-        let primary_stream = rng.stream(StreamId::Primary);
-        let direct_stream = rng.stream(StreamId::Direct);
-        let indirect_stream = rng.stream(StreamId::Indirect);
         let bounce_stream = rng.stream(StreamId::Bounce);
         let real_samples = |j: u32, with_rv: bool, acc: &mut Acc| {
             if let Some(rp) = real {
                 self.real_samples(rp, samples, hits, j, &bounce_stream, with_rv, acc);
             }
         };
-        for j in 0..params.primary {
-            let virtual_hit = if may_see_objects {
-                self.primary_hit(&primary_stream, j, x, y, z)
-            } else {
-                None
-            };
+        let (direct_n, indirect_n) = (params.direct as usize, params.indirect as usize);
+        let (mut virtual_direct, mut virtual_indirect) =
+            (virtual_samples.direct, virtual_samples.indirect);
+        for (j, virtual_hit) in (0..params.primary).zip(primaries.iter()) {
             match virtual_hit {
                 None => {
                     if let Some(rp) = real {
@@ -230,12 +225,15 @@ impl<'a> Kernel<'a> {
                     normal += hit.normal;
                     acc.touched = true;
                     real_samples(j, false, &mut acc);
+                    let (direct, rest) = virtual_direct.split_at(direct_n);
+                    let (indirect, rest_indirect) = virtual_indirect.split_at(indirect_n);
+                    (virtual_direct, virtual_indirect) = (rest, rest_indirect);
                     self.virtual_samples(
-                        &hit,
-                        -view,
-                        j,
-                        &direct_stream,
-                        &indirect_stream,
+                        hit,
+                        -*view,
+                        direct,
+                        indirect,
+                        hits,
                         &bounce_stream,
                         &mut acc,
                     );
@@ -345,7 +343,7 @@ impl<'a> Kernel<'a> {
 
     /// The virtual hit of primary ray j (jittered inside the pixel) when it is nearer
     /// than the pixel's real surface, with the ray's world direction.
-    fn primary_hit(
+    pub(super) fn primary_hit(
         &self,
         stream: &Stream,
         j: u32,

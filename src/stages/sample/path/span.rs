@@ -6,7 +6,9 @@
 
 use super::kernel::{Kernel, RealPoint};
 use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
+use super::virtual_paths::{VirtualDirect, VirtualIndirect};
 use super::{PathOutputs, PathParams, PixelResult};
+use crate::objects::VirtualHit;
 use crate::stages::sample::ssrt::{ScreenTracer, TraceBatch};
 use glam::Vec3;
 
@@ -39,12 +41,35 @@ pub(super) struct RealSamples<'a> {
     pub(super) indirect: &'a [IndirectRay],
 }
 
+/// The samples drawn at one pixel's virtual primaries, in primary order: `direct`
+/// per direct sample of each virtual primary, `indirect` per indirect sample.
+pub(super) struct VirtualSamples<'a> {
+    pub(super) direct: &'a [VirtualDirect],
+    pub(super) indirect: &'a [VirtualIndirect],
+}
+
+/// What was drawn at one pixel before its span's rays were traced: its real point, if
+/// any, with its samples; per primary its virtual hit and view direction, if any; and
+/// the samples of those virtual hits.
+pub(super) struct Drawn<'a> {
+    pub(super) real: Option<&'a RealPoint>,
+    pub(super) real_samples: RealSamples<'a>,
+    pub(super) primaries: &'a [Option<(VirtualHit, Vec3)>],
+    pub(super) virtual_samples: VirtualSamples<'a>,
+}
+
 /// A span's samples and rays; reused from span to span.
 pub(super) struct Span<'t> {
     batch: TraceBatch<'t>,
     real: Vec<Option<RealPoint>>,
     direct: Vec<Option<DirectRay>>,
     indirect: Vec<IndirectRay>,
+    /// Per pixel, per primary: its virtual hit and view direction, if any.
+    primaries: Vec<Option<(VirtualHit, Vec3)>>,
+    /// Per pixel: how many virtual primaries it has.
+    virtual_count: Vec<u32>,
+    virtual_direct: Vec<VirtualDirect>,
+    virtual_indirect: Vec<VirtualIndirect>,
 }
 
 impl<'t> Span<'t> {
@@ -57,6 +82,10 @@ impl<'t> Span<'t> {
             real: Vec::with_capacity(SPAN_PIXELS),
             direct: Vec::with_capacity(direct),
             indirect: Vec::with_capacity(indirect),
+            primaries: Vec::with_capacity(SPAN_PIXELS * params.primary as usize),
+            virtual_count: Vec::with_capacity(SPAN_PIXELS),
+            virtual_direct: Vec::new(),
+            virtual_indirect: Vec::new(),
         }
     }
 }
@@ -75,13 +104,20 @@ impl Kernel<'_> {
         span.real.clear();
         span.direct.clear();
         span.indirect.clear();
+        span.primaries.clear();
+        span.virtual_count.clear();
+        span.virtual_direct.clear();
+        span.virtual_indirect.clear();
         for &x in xs {
             let p = y as usize * inputs.depth.width as usize + x as usize;
-            let real = self.real_point(x, y, inputs.depth.data[p], inputs.normals.data[p]);
+            let rng = PixelRng::new(self.params.seed, inputs.frame, p as u64);
+            let z = inputs.depth.data[p];
+            let real = self.real_point(x, y, z, inputs.normals.data[p]);
             if let Some(rp) = &real {
-                self.draw_real_samples(rp, p, span);
+                self.draw_real_samples(rp, &rng, span);
             }
             span.real.push(real);
+            self.draw_primaries(x, y, z, &rng, span);
         }
         span.batch.trace(self.lanes);
         let params = self.params;
@@ -89,8 +125,14 @@ impl Kernel<'_> {
             (params.primary * params.direct) as usize,
             (params.primary * params.indirect) as usize,
         );
+        let primary_n = params.primary as usize;
         let (mut direct, mut indirect) = (&span.direct[..], &span.indirect[..]);
-        for (&x, real) in xs.iter().zip(&span.real) {
+        let (mut virtual_direct, mut virtual_indirect) =
+            (&span.virtual_direct[..], &span.virtual_indirect[..]);
+        let pixels = xs.iter().zip(&span.real).zip(&span.virtual_count);
+        for (((&x, real), &virtual_count), primaries) in
+            pixels.zip(span.primaries.chunks(primary_n))
+        {
             let samples = match real {
                 Some(_) => {
                     let samples = RealSamples {
@@ -105,16 +147,64 @@ impl Kernel<'_> {
                     indirect: &[],
                 },
             };
-            let result = self.shade_pixel(x, y, real.as_ref(), &samples, span.batch.hits());
+            let (pixel_direct, rest) =
+                virtual_direct.split_at(virtual_count as usize * params.direct as usize);
+            let (pixel_indirect, rest_indirect) =
+                virtual_indirect.split_at(virtual_count as usize * params.indirect as usize);
+            (virtual_direct, virtual_indirect) = (rest, rest_indirect);
+            let drawn = Drawn {
+                real: real.as_ref(),
+                real_samples: samples,
+                primaries,
+                virtual_samples: VirtualSamples {
+                    direct: pixel_direct,
+                    indirect: pixel_indirect,
+                },
+            };
+            let result = self.shade_pixel(x, y, &drawn, span.batch.hits());
             emit(x, &result);
         }
     }
 
-    /// Draws the direct and indirect samples of real point `rp` (pixel index `p`) for
-    /// every primary, queueing their screen-space rays.
-    fn draw_real_samples(&self, rp: &RealPoint, p: usize, span: &mut Span<'_>) {
+    /// Finds which primaries of pixel (x, y) (depth `z`) meet the objects, and draws
+    /// the samples of their virtual hits, queueing their screen-space rays.
+    fn draw_primaries(&self, x: u32, y: u32, z: f32, rng: &PixelRng, span: &mut Span<'_>) {
+        let [x0, y0, x1, y1] = self.object_pixels;
+        let may_see_objects = (x0..=x1).contains(&(x as i64)) && (y0..=y1).contains(&(y as i64));
+        let (primary_stream, direct_stream, indirect_stream) = (
+            rng.stream(StreamId::Primary),
+            rng.stream(StreamId::Direct),
+            rng.stream(StreamId::Indirect),
+        );
+        let mut virtual_count = 0;
+        for j in 0..self.params.primary {
+            let hit = if may_see_objects {
+                self.primary_hit(&primary_stream, j, x, y, z)
+            } else {
+                None
+            };
+            if let Some((hit, view)) = &hit {
+                virtual_count += 1;
+                self.draw_virtual_samples(
+                    hit,
+                    -*view,
+                    j,
+                    &direct_stream,
+                    &indirect_stream,
+                    &mut span.batch,
+                    &mut span.virtual_direct,
+                    &mut span.virtual_indirect,
+                );
+            }
+            span.primaries.push(hit);
+        }
+        span.virtual_count.push(virtual_count);
+    }
+
+    /// Draws the direct and indirect samples of real point `rp` (from its pixel's
+    /// streams `rng`) for every primary, queueing their screen-space rays.
+    fn draw_real_samples(&self, rp: &RealPoint, rng: &PixelRng, span: &mut Span<'_>) {
         let params = self.params;
-        let rng = PixelRng::new(params.seed, self.inputs.frame, p as u64);
         let (direct_stream, indirect_stream) =
             (rng.stream(StreamId::Direct), rng.stream(StreamId::Indirect));
         let t_max = params.max_distance;

@@ -418,6 +418,44 @@ fn virtual_pixels_are_shaded_at_the_object_surface() {
 }
 
 #[test]
+fn the_floor_blocks_the_sky_and_lights_a_sphere_where_it_faces_down() {
+    // The sphere of the floor tests, 0.3 m above the floor: below its equator the floor
+    // (within max_distance, found by the screen-space march) fills part of each surface
+    // point's hemisphere. What it takes from the sky's direct light, E_RV^dir / (pi SKY),
+    // it gives back as the floor's indirect light, E_RV^ind / (pi WALL): both estimate
+    // the same cosine-weighted share of the hemisphere, so the two sum to 1.
+    let scene = floor_scene();
+    let table = uniform_table(4096);
+    let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, Material::DIFFUSE_GRAY);
+    let (mut sky, mut floor, mut n) = (glam::DVec3::ZERO, glam::DVec3::ZERO, 0);
+    for seed in 0..8 {
+        let params = PathParams {
+            seed,
+            ..Default::default()
+        };
+        let out = run(&scene, &objects, &table, &params);
+        for i in 0..out.mask.data.len() {
+            if out.mask.data[i] == 0.0 && out.world_normal.data[i].y < -0.2 {
+                sky += (out.e_rv_dir.data[i] / (PI * SKY)).as_dvec3();
+                floor += (out.e_rv_ind.data[i] / (PI * WALL)).as_dvec3();
+                n += 1;
+            }
+        }
+    }
+    let (sky, floor) = ((sky / n as f64).as_vec3(), (floor / n as f64).as_vec3());
+    println!("{n} pixel-runs facing down: sky {sky}, floor {floor}");
+    assert!(n > 100, "{n}");
+    assert!(
+        floor.min_element() > 0.1,
+        "the floor lights the sphere: {floor}"
+    );
+    assert!(
+        (sky + floor - Vec3::ONE).abs().max_element() < 0.05,
+        "sky {sky} + floor {floor}"
+    );
+}
+
+#[test]
 fn object_aware_sampling_is_unbiased_and_lowers_the_variance() {
     let scene = floor_scene();
     let table = uniform_table(4096);

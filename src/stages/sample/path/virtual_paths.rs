@@ -8,58 +8,119 @@ use super::sampling::{
     Basis, PixelRng, Stream, StreamId, below, cosine_hemisphere, phong_lobe, phong_weight,
 };
 use crate::objects::VirtualHit;
+use crate::stages::sample::ssrt::{RealHit, TraceBatch};
 use glam::{Vec3, Vec3A};
 use std::f32::consts::{FRAC_1_PI, PI};
 
+/// A direct sample at a virtual primary, as drawn before the span's rays are traced.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum VirtualDirect {
+    /// No light: the table is empty, or the sample lies below the surface or has no
+    /// density.
+    Unlit,
+    /// Table sample `sample` at cosine `cos` to the normal, blocked by a virtual surface
+    /// at distance `t`.
+    Blocked { sample: usize, cos: f32, t: f32 },
+    /// Table sample `sample` at cosine `cos`, whose screen-space ray is `ray` in the
+    /// span's batch.
+    Open { sample: usize, cos: f32, ray: usize },
+}
+
+/// An indirect sample at a virtual primary: its world direction and weight, and its
+/// screen-space ray in the span's batch (none where the weight is 0: the direction
+/// lies below the surface, and the sample brings nothing).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct VirtualIndirect {
+    pub(super) dir: Vec3,
+    pub(super) weight: f32,
+    pub(super) ray: Option<usize>,
+}
+
+/// Where a virtual primary's rays leave its surface (raised off it), and the mirror
+/// direction of its view.
+struct Surface {
+    origin: Vec3,
+    mirror: Vec3,
+    glossy: bool,
+}
+
+impl Surface {
+    fn new(hit: &VirtualHit, to_viewer: Vec3) -> Surface {
+        let n = hit.normal;
+        Surface {
+            origin: hit.position + n * SURFACE_OFFSET,
+            mirror: 2.0 * n.dot(to_viewer) * n - to_viewer,
+            glossy: hit.material.is_glossy(),
+        }
+    }
+}
+
 impl Kernel<'_> {
-    /// E_RV samples of primary j at a virtual hit seen from direction `to_viewer`.
+    /// Draws the E_RV samples of primary j at a virtual hit seen from direction
+    /// `to_viewer`: direct samples are tested against the objects here, and the
+    /// screen-space rays of the open ones and of the indirect samples are queued in
+    /// `batch`. [`Kernel::virtual_samples`] then estimates from them.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn virtual_samples(
+    pub(super) fn draw_virtual_samples(
         &self,
         hit: &VirtualHit,
         to_viewer: Vec3,
         j: u32,
         direct_stream: &Stream,
         indirect_stream: &Stream,
-        bounce_stream: &Stream,
-        acc: &mut Acc,
+        batch: &mut TraceBatch<'_>,
+        direct: &mut Vec<VirtualDirect>,
+        indirect: &mut Vec<VirtualIndirect>,
     ) {
         let params = self.params;
+        let surface = Surface::new(hit, to_viewer);
         let n = hit.normal;
-        let material = hit.material;
-        let glossy = material.is_glossy();
-        let mirror = 2.0 * n.dot(to_viewer) * n - to_viewer;
-        let origin = hit.position + n * SURFACE_OFFSET;
+        let t_max = params.max_distance;
+        let objects = self.objects.as_ref();
         for k in 0..params.direct {
             let s = j * params.direct + k;
-            let mut c = Vec3::ZERO;
-            if let Some((_, ls)) = self.direct_sample(direct_stream, s) {
-                let cos = n.dot(ls.direction);
-                if cos > 0.0 && ls.pdf > 0.0 {
-                    match self.occluder_distance(origin, ls.direction) {
-                        Some(t) => self.record_occluder(acc, ls.radiance, t, cos),
-                        None => {
-                            let lobe = if glossy {
-                                phong_weight(mirror.dot(ls.direction), material.exponent)
-                            } else {
-                                1.0
-                            };
-                            c = ls.radiance * (cos / ls.pdf * lobe);
+            let drawn = match self.direct_sample(direct_stream, s) {
+                Some((sample, ls)) => {
+                    let cos = n.dot(ls.direction);
+                    if cos > 0.0 && ls.pdf > 0.0 {
+                        match objects
+                            .and_then(|o| o.hit(surface.origin, ls.direction, f32::INFINITY))
+                        {
+                            Some(blocker) => VirtualDirect::Blocked {
+                                sample,
+                                cos,
+                                t: blocker.t,
+                            },
+                            None => {
+                                let (origin, dir) =
+                                    self.tracer.camera_ray(surface.origin, ls.direction);
+                                VirtualDirect::Open {
+                                    sample,
+                                    cos,
+                                    ray: batch.push(origin.as_ref(), dir, t_max),
+                                }
+                            }
                         }
+                    } else {
+                        VirtualDirect::Unlit
                     }
                 }
-            }
-            acc.rv_dir += c;
+                None => VirtualDirect::Unlit,
+            };
+            direct.push(drawn);
         }
-        acc.rv_dir_n += params.direct;
-        let basis = Basis::new(if glossy { mirror.normalize_or(n) } else { n });
+        let basis = Basis::new(if surface.glossy {
+            surface.mirror.normalize_or(n)
+        } else {
+            n
+        });
         for k in 0..params.indirect {
             let s = j * params.indirect + k;
             let (u1, u2) = indirect_stream.pair(s as u64);
-            let (dir, weight) = if glossy {
-                let dir = basis.to_world(phong_lobe(u1, u2, material.exponent));
+            let (dir, weight) = if surface.glossy {
+                let dir = basis.to_world(phong_lobe(u1, u2, hit.material.exponent));
                 let cos = n.dot(dir);
-                let e = material.exponent;
+                let e = hit.material.exponent;
                 (
                     dir,
                     if cos > 0.0 {
@@ -71,12 +132,65 @@ impl Kernel<'_> {
             } else {
                 (basis.to_world(cosine_hemisphere(u1, u2)), 1.0)
             };
-            if weight > 0.0 {
-                let l = self.incoming(origin, dir, bounce_stream, acc);
-                acc.rv_ind += l * weight;
+            let ray = (weight > 0.0).then(|| {
+                let (origin, dir_camera) = self.tracer.camera_ray(surface.origin, dir);
+                batch.push(origin.as_ref(), dir_camera, t_max)
+            });
+            indirect.push(VirtualIndirect { dir, weight, ray });
+        }
+    }
+
+    /// E_RV samples of primary j at a virtual hit seen from direction `to_viewer`,
+    /// from its samples drawn by [`Kernel::draw_virtual_samples`] and their rays'
+    /// `hits`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn virtual_samples(
+        &self,
+        hit: &VirtualHit,
+        to_viewer: Vec3,
+        direct: &[VirtualDirect],
+        indirect: &[VirtualIndirect],
+        hits: &[Option<RealHit>],
+        bounce_stream: &Stream,
+        acc: &mut Acc,
+    ) {
+        let surface = Surface::new(hit, to_viewer);
+        let table = &self.inputs.table.samples;
+        for drawn in direct {
+            let mut c = Vec3::ZERO;
+            match *drawn {
+                VirtualDirect::Unlit => {}
+                VirtualDirect::Blocked { sample, cos, t } => {
+                    self.record_occluder(acc, table[sample].radiance, t, cos);
+                }
+                VirtualDirect::Open { sample, cos, ray } => {
+                    let ls = &table[sample];
+                    match hits[ray] {
+                        Some(real) => self.record_occluder(acc, ls.radiance, real.t, cos),
+                        None => {
+                            let lobe = if surface.glossy {
+                                phong_weight(
+                                    surface.mirror.dot(ls.direction),
+                                    hit.material.exponent,
+                                )
+                            } else {
+                                1.0
+                            };
+                            c = ls.radiance * (cos / ls.pdf * lobe);
+                        }
+                    }
+                }
+            }
+            acc.rv_dir += c;
+        }
+        acc.rv_dir_n += self.params.direct;
+        for sample in indirect {
+            if let Some(ray) = sample.ray {
+                let l = self.incoming(surface.origin, sample.dir, hits[ray], bounce_stream, acc);
+                acc.rv_ind += l * sample.weight;
             }
         }
-        acc.rv_ind_n += params.indirect;
+        acc.rv_ind_n += self.params.indirect;
     }
 
     /// The distance to the nearest virtual or real occluder along a ray leaving a
@@ -92,19 +206,20 @@ impl Kernel<'_> {
     }
 
     /// Radiance arriving at a virtual surface from `dir`: the nearer of the object
-    /// (its outgoing radiance) and the real surface (its camera radiance); 0 when the
-    /// ray escapes (the environment is counted by direct light).
+    /// (its outgoing radiance) and the real surface `real` that the ray's screen-space
+    /// march found (its camera radiance); 0 when the ray escapes (the environment is
+    /// counted by direct light).
     pub(super) fn incoming(
         &self,
         origin: Vec3,
         dir: Vec3,
+        real: Option<RealHit>,
         bounce_stream: &Stream,
         acc: &mut Acc,
     ) -> Vec3 {
         let Some(objects) = self.objects.as_ref() else {
             return Vec3::ZERO;
         };
-        let real = self.tracer.trace(origin, dir, self.params.max_distance);
         let t_real = real.map_or(f32::INFINITY, |h| h.t);
         if let Some(hit) = objects.hit(origin, dir, t_real) {
             acc.indirect_min = acc.indirect_min.min(hit.t);

@@ -289,6 +289,17 @@ impl<'a> ScreenTracer<'a> {
         )
     }
 
+    /// A world-space ray as [`ScreenTracer::trace`] traces it: its projected origin
+    /// (`None` where no ray from there finds anything) and its camera-space direction,
+    /// to queue in a [`TraceBatch`].
+    #[inline]
+    pub fn camera_ray(&self, origin: Vec3, dir: Vec3) -> (Option<RayOrigin>, Vec3) {
+        (
+            self.origin(self.world_to_camera.transform_point3(origin)),
+            self.world_to_camera.transform_vector3(dir),
+        )
+    }
+
     /// [`ScreenTracer::trace`] for a ray already in camera space (`dir` unit).
     #[inline]
     pub fn trace_camera(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<RealHit> {

@@ -13,6 +13,8 @@
 //!   a tenth of the frame (the budget case; the bench prints the share).
 //! - `sample.path/no_objects`: the same with no virtual object: the real scene's
 //!   estimates alone, the floor under every case with objects.
+//! - `objects/nearest`: the BVH alone, on one thread: the frame's object queries of
+//!   `sample.path/tenth`, as its primary, real and virtual surfaces ask them.
 //! - `ssrt/one_by_one`, `ssrt/batch_Portable`, `ssrt/batch_Avx2Fma`: the screen-space
 //!   tracer alone on one thread, 16 cosine rays from every 16th pixel, traced ray by ray
 //!   and as one batch with each kernel the CPU has.
@@ -116,6 +118,7 @@ fn bench_sampling(c: &mut Criterion) {
         group.bench_function("sample.path/tenth", |b| {
             b.iter(|| sample_path(&inputs, &params, &mut out).unwrap())
         });
+        bench_object_queries(&mut group, &scaled, &inputs, &out);
         let no_objects = VirtualScene::default();
         let inputs = PathInputs {
             objects: &no_objects,
@@ -194,6 +197,63 @@ fn scaled_objects(objects: &VirtualScene, factor: f32) -> VirtualScene {
         })
         .collect();
     VirtualScene::new(triangles, objects.materials.clone())
+}
+
+/// `objects/nearest`: the nearest-hit queries of sample.path/tenth's frame on one
+/// thread, rebuilt from its outputs: from every 3rd pixel of every 3rd row, 8
+/// cosine-distributed rays about the pixel's normal, leaving the virtual surface where
+/// a primary saw an object and the real one elsewhere, plus the pixel's view ray. As in
+/// sample.path, only the rays that meet the objects' bounding box query the BVH.
+fn bench_object_queries(
+    group: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>,
+    objects: &VirtualScene,
+    inputs: &PathInputs,
+    out: &PathOutputs,
+) {
+    let camera_position = glam::Vec3::from(inputs.camera_to_world.translation);
+    let bounds = objects.bounds();
+    let mut rays = Vec::new();
+    let mut rng = relume::rng::Counter::new(&[7, 0x0b1]);
+    let (w, h) = (out.mask.width as usize, out.mask.height as usize);
+    for y in (0..h).step_by(3) {
+        for x in (0..w).step_by(3) {
+            let i = y * w + x;
+            let (p, n) = (out.world_position.data[i], out.world_normal.data[i]);
+            if !p.is_finite() || n == glam::Vec3::ZERO {
+                continue;
+            }
+            rays.push((camera_position, (p - camera_position).normalize()));
+            let origin = p + n * 1e-4;
+            let basis = |d: glam::Vec3| {
+                let t = n.any_orthonormal_vector();
+                t * d.x + n.cross(t) * d.y + n * d.z
+            };
+            for _ in 0..8 {
+                let (u1, u2) = (rng.next_f32(), rng.next_f32());
+                let r = u1.sqrt();
+                let phi = std::f32::consts::TAU * u2;
+                let local = glam::Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u1).sqrt());
+                rays.push((origin, basis(local)));
+            }
+        }
+    }
+    rays.retain(|(o, d)| bounds.ray_span(*o, d.recip(), 0.0, f32::INFINITY).is_some());
+    let hits = rays
+        .iter()
+        .filter(|(o, d)| objects.intersect(*o, *d, 0.0, f32::INFINITY).is_some())
+        .count();
+    eprintln!(
+        "objects/nearest: {} rays meet the box, {hits} hit an object",
+        rays.len()
+    );
+    group.bench_function("objects/nearest", |b| {
+        b.iter(|| {
+            rays.iter()
+                .filter_map(|(o, d)| objects.intersect(*o, *d, 0.0, f32::INFINITY))
+                .map(|hit| hit.t)
+                .sum::<f32>()
+        })
+    });
 }
 
 /// The screen-space tracer alone, on one thread: from every 4th pixel of every 4th row

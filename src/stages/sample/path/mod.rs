@@ -79,11 +79,12 @@
 //! traced). Measured on the bench frame at 640x480: 23 marched rays per pixel, 13.9
 //! iterations of the hierarchical march per ray (2 of them at level 0) where the
 //! sample-by-sample march would test 132 pixels. Pixels are therefore estimated a span
-//! of a row at a time: the real points' direct and indirect samples are drawn first,
-//! then all their rays are marched together, eight per AVX2 vector where the CPU has it
-//! (see `span` and [`crate::stages::sample::ssrt::TraceBatch`]; the same hits as ray by
-//! ray). The few rays that start on virtual surfaces or are object-aware candidates are
-//! traced one at a time. The virtual objects cost a cone test per ray, then a box test
+//! of a row at a time: the real points' direct and indirect samples, and those of the
+//! virtual primaries' hits, are drawn first, then all their rays are marched together,
+//! eight per AVX2 vector where the CPU has it (see `span` and
+//! [`crate::stages::sample::ssrt::TraceBatch`]; the same hits as ray by ray). The few
+//! rays that depend on another ray's hit (the shadow ray of an object that an indirect
+//! ray met) or are object-aware candidates are traced one at a time. The virtual objects cost a cone test per ray, then a box test
 //! and the BVH only for rays inside the cone of their bounding sphere.
 
 mod bounds;

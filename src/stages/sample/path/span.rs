@@ -1,6 +1,7 @@
 //! Pixels are estimated a span of a row at a time: first every real point's samples are
-//! drawn and their screen-space rays queued, then the rays are traced in one
-//! [`TraceBatch`] (eight at a time with AVX2), then each pixel is estimated from its
+//! drawn, each pixel's primaries meet the objects or not, and the virtual hits' samples
+//! are drawn, with all their screen-space rays queued; then the rays are traced in one
+//! [`TraceBatch`] (eight at a time with AVX2); then each pixel is estimated from its
 //! samples and their hits. The rays, the hits and therefore the estimates are those of
 //! tracing each ray in turn. Results go to [`RowOut`], one row of every output.
 
@@ -68,6 +69,7 @@ pub(super) struct Span<'t> {
     primaries: Vec<Option<(VirtualHit, Vec3)>>,
     /// Per pixel: how many virtual primaries it has.
     virtual_count: Vec<u32>,
+    /// The samples of the virtual primaries, pixel after pixel, primary after primary.
     virtual_direct: Vec<VirtualDirect>,
     virtual_indirect: Vec<VirtualIndirect>,
 }

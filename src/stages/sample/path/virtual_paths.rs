@@ -140,9 +140,9 @@ impl Kernel<'_> {
         }
     }
 
-    /// E_RV samples of primary j at a virtual hit seen from direction `to_viewer`,
-    /// from its samples drawn by [`Kernel::draw_virtual_samples`] and their rays'
-    /// `hits`.
+    /// The E_RV samples of a virtual primary's hit seen from direction `to_viewer`,
+    /// from its `direct` and `indirect` samples drawn by
+    /// [`Kernel::draw_virtual_samples`] and their rays' `hits`.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn virtual_samples(
         &self,

@@ -6,9 +6,10 @@
 //! that ranges keep halving) and flattened in depth-first order. Collapsing opens, from
 //! each binary interior node, the largest of its descendants until the node has four
 //! children (or only leaves are left), and makes them one wide node; the children stay
-//! in the binary order. Each leaf's triangles then go into packs of four.
+//! in the binary order. Each leaf's triangles then go into packs of four. Triangles with
+//! a NaN coordinate, which no ray meets, stay out of the tree.
 
-use super::leaf::TrianglePack;
+use super::leaf::{PACK, TrianglePack};
 use super::{Bvh, MAX_DEPTH, WideNode};
 use crate::objects::{Aabb, Triangle};
 use glam::{Vec3, Vec4};
@@ -24,9 +25,6 @@ const _: () = assert!(SAH_DEPTH + 32 <= MAX_DEPTH);
 /// Relative cost of a node visit against a leaf pack's test (four triangles at once) in
 /// the SAH.
 const TRAVERSAL_COST: f32 = 1.0;
-/// Triangles per leaf pack ([`TrianglePack`]).
-const PACK: usize = 4;
-
 /// The packs holding `triangles` triangles: what a leaf of them costs in the SAH.
 fn packs(triangles: usize) -> f32 {
     triangles.div_ceil(PACK) as f32
@@ -67,12 +65,20 @@ pub(super) fn build(triangles: &[Triangle]) -> Bvh {
         })
         .collect();
     let centroids: Vec<Vec3> = boxes.iter().map(Aabb::center).collect();
-    let mut scene = Aabb::EMPTY;
-    for b in &boxes {
-        scene.grow(b.min);
-        scene.grow(b.max);
+    // A triangle with a NaN coordinate meets no ray (its test is NaN throughout), and its
+    // NaN centroid would scramble the binning: it stays out of the tree.
+    let order: Vec<u32> = (0..triangles.len() as u32)
+        .filter(|&i| !triangles[i as usize].vertices.iter().any(|v| v.is_nan()))
+        .collect();
+    if order.is_empty() {
+        return Bvh::default();
     }
-    // Non-finite vertices would make every box non-finite: pad by a finite amount.
+    let mut scene = Aabb::EMPTY;
+    for &i in &order {
+        scene.grow(boxes[i as usize].min);
+        scene.grow(boxes[i as usize].max);
+    }
+    // Infinite vertices would make every box infinite: pad by a finite amount.
     let size = (scene.max - scene.min)
         .max(scene.min.abs())
         .max(scene.max.abs())
@@ -81,11 +87,11 @@ pub(super) fn build(triangles: &[Triangle]) -> Bvh {
     let mut b = Builder {
         boxes: &boxes,
         centroids: &centroids,
-        order: (0..triangles.len() as u32).collect(),
-        nodes: Vec::with_capacity(triangles.len() / 2 + 1),
+        nodes: Vec::with_capacity(order.len() / 2 + 1),
+        order,
         pad,
     };
-    b.build(0, triangles.len(), 0);
+    b.build(0, b.order.len(), 0);
     let mut nodes = Vec::with_capacity(b.nodes.len() / 2 + 1);
     let root = &b.nodes[0];
     let depth = if root.count > 0 {
@@ -113,7 +119,7 @@ pub(super) fn build(triangles: &[Triangle]) -> Bvh {
                     ([v[0], v[1] - v[0], v[2] - v[0]], i)
                 })
                 .collect();
-            packs.extend(leaf.chunks(4).map(TrianglePack::new));
+            packs.extend(leaf.chunks(PACK).map(TrianglePack::new));
         }
     }
     Bvh {

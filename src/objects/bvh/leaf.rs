@@ -10,6 +10,9 @@
 
 use glam::{Vec3, Vec4};
 
+/// Triangles per pack: the lanes of a [`Vec4`].
+pub(super) const PACK: usize = 4;
+
 /// Four triangles, one per lane: v0, e1 = v1 - v0 and e2 = v2 - v0 per axis, and the
 /// triangles' indices in the scene. Unused lanes hold a degenerate triangle (all zero),
 /// which no ray meets.
@@ -65,7 +68,7 @@ fn dot(a: &[Vec4; 3], b: &[Vec4; 3]) -> Vec4 {
 impl TrianglePack {
     /// Packs up to four triangles given as (v0, e1, e2) with their scene indices.
     pub(super) fn new(triangles: &[([Vec3; 3], u32)]) -> TrianglePack {
-        assert!((1..=4).contains(&triangles.len()));
+        assert!((1..=PACK).contains(&triangles.len()));
         let mut pack = TrianglePack {
             v0: [Vec4::ZERO; 3],
             e1: [Vec4::ZERO; 3],

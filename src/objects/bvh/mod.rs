@@ -7,11 +7,11 @@
 //! A leaf's triangles are stored four to a [`leaf::TrianglePack`] and intersected four at
 //! a time, each lane with the arithmetic of [`super::ray_triangle_edges`] (that of
 //! [`super::ray_triangle`]), so a BVH hit equals the brute-force hit bit for bit; ties in
-//! t go to the smaller triangle index in both. The box tests only
-//! cull, conservatively: node boxes are padded by a millionth of the scene's size, exits
-//! are widened by a few ulps so that rounding in the slab test never culls a triangle
-//! lying on a box face, and infinite inverse directions are clamped to the largest
-//! finite float, so that no slab test gives NaN. A ray lying in a face plane of a box
+//! t go to the smaller triangle index in both. The box tests only cull, conservatively:
+//! node boxes are padded by a millionth of the scene's size, exits are widened by a few
+//! ulps so that rounding in the slab test never culls a triangle lying on a box face,
+//! and infinite inverse directions are clamped to the largest finite float, so that no
+//! slab test gives NaN. A ray lying in a face plane of a box
 //! then enters or leaves it there (t = 0); padding keeps every triangle off that plane,
 //! so culling it is harmless. Direction components under about 3e-39 get an inverse
 //! that is too small, which can shorten a box only beyond t ~ 1e26.
@@ -21,7 +21,7 @@ mod leaf;
 
 use super::{Aabb, Triangle};
 use glam::{Vec3, Vec4};
-use leaf::{PackRay, TrianglePack};
+use leaf::{PACK, PackRay, TrianglePack};
 
 /// Deepest wide node below the root (the binary tree's bound, which collapsing can only
 /// lower).
@@ -59,7 +59,8 @@ pub struct Bvh {
     /// rounded up).
     packs: Vec<TrianglePack>,
     triangle_count: usize,
-    /// The exact bounds of all vertices (node boxes are padded).
+    /// The exact bounds of the vertices of the triangles in the tree (node boxes are
+    /// padded).
     bounds: Aabb,
     depth: usize,
 }
@@ -151,7 +152,7 @@ impl Bvh {
                 }
             } else {
                 let first = at.index as usize;
-                for pack in &self.packs[first..first + (at.count as usize).div_ceil(4)] {
+                for pack in &self.packs[first..first + (at.count as usize).div_ceil(PACK)] {
                     let found = pack.intersect(&lanes);
                     let mut hits = found.hits & found.t.cmpgt(Vec4::splat(t_min)).bitmask();
                     // In lane order, as the scalar loop over the leaf's triangles.
@@ -205,7 +206,7 @@ impl Bvh {
                 continue;
             }
             let first = at.index as usize;
-            for pack in &self.packs[first..first + (at.count as usize).div_ceil(4)] {
+            for pack in &self.packs[first..first + (at.count as usize).div_ceil(PACK)] {
                 let found = pack.intersect(&lanes);
                 let within = found.t.cmpgt(Vec4::splat(t_min)) & found.t.cmplt(Vec4::splat(t_max));
                 if found.hits & within.bitmask() != 0 {
@@ -301,7 +302,9 @@ impl SlabRay {
 
     /// Where the ray enters each child's box within [t_min, t_max], and the bits of the
     /// live children it meets there. The entry plane's distance is the smaller of the
-    /// two planes' (rounding keeps their order), so no min or max is needed per axis.
+    /// two planes' (rounding keeps their order, and every box has its minimum at most
+    /// its maximum: triangles with NaN coordinates stay out of the tree), so no min or
+    /// max is needed per axis.
     #[inline(always)]
     fn hits(&self, node: &WideNode, t_min: f32, t_max: f32) -> (Vec4, u32) {
         let mut near = Vec4::splat(t_min);

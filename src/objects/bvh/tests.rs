@@ -297,3 +297,44 @@ fn the_build_is_deterministic_and_queries_are_the_same_on_any_thread_count() {
     let hits = one.iter().filter(|h| h.0 != u32::MAX).count();
     assert!(hits > 100, "{hits}");
 }
+
+#[test]
+fn triangles_without_finite_coordinates_change_no_hit() {
+    // Triangles with a NaN coordinate in every vertex (all three, or x alone) can meet
+    // no ray. Their NaN centroids once scrambled the build, so that rays missed nearer
+    // hits among the rest; they now stay out of the tree, and the rest is found as
+    // brute force finds it.
+    let soup = soup(3, 300);
+    let cube = scene(soup.clone()).bounds();
+    let mut triangles = soup;
+    for corner in [Vec3::NAN, Vec3::new(f32::NAN, 0.5, 0.5)] {
+        for k in 0..8 {
+            let v = corner + Vec3::Y * (k as f32 * 0.1);
+            triangles.push(Triangle {
+                vertices: [v, v + Vec3::X * 0.2, v + Vec3::Z * 0.2],
+                normals: [Vec3::Y; 3],
+                material: 0,
+            });
+        }
+    }
+    let s = scene(triangles);
+    let mut rng = Counter::new(&[5, 0xf1]);
+    let mut hits = 0;
+    for k in 0..3000 {
+        let origin = point_in(&mut rng, &cube, 1.0);
+        let dir = if k % 2 == 0 {
+            (point_in(&mut rng, &cube, 0.0) - origin).normalize()
+        } else {
+            unit_vector(&mut rng)
+        };
+        let slow = s.intersect_brute_force(origin, dir, 0.0, f32::INFINITY);
+        assert_eq!(
+            s.intersect(origin, dir, 0.0, f32::INFINITY),
+            slow,
+            "ray {k}"
+        );
+        assert_eq!(s.occluded(origin, dir, 0.0, f32::INFINITY), slow.is_some());
+        hits += slow.is_some() as usize;
+    }
+    assert!(hits > 300, "only {hits} of 3000 rays hit");
+}

@@ -4,10 +4,10 @@
 //! traversal is iterative with a fixed stack: nearest hit (hit children visited
 //! near-first) and any-hit for shadow rays.
 //!
-//! A leaf's triangles are stored four to a [`leaf::TrianglePack`] and intersected four at
-//! a time, each lane with the arithmetic of [`super::ray_triangle_edges`] (that of
-//! [`super::ray_triangle`]), so a BVH hit equals the brute-force hit bit for bit; ties in
-//! t go to the smaller triangle index in both. The box tests only cull, conservatively:
+//! A leaf's triangles are stored four to a pack (`leaf.rs`) and intersected four at a
+//! time, each lane with the arithmetic of [`super::ray_triangle_edges`] (that of
+//! [`super::ray_triangle`]), so a BVH hit equals the brute-force hit bit for bit; ties
+//! in t go to the smaller triangle index in both. The box tests only cull, conservatively:
 //! node boxes are padded by a millionth of the scene's size, exits are widened by a few
 //! ulps so that rounding in the slab test never culls a triangle lying on a box face,
 //! and infinite inverse directions are clamped to the largest finite float, so that no

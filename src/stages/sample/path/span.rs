@@ -67,8 +67,6 @@ pub(super) struct Span<'t> {
     indirect: Vec<IndirectRay>,
     /// Per pixel, per primary: its virtual hit and view direction, if any.
     primaries: Vec<Option<(VirtualHit, Vec3)>>,
-    /// Per pixel: how many virtual primaries it has.
-    virtual_count: Vec<u32>,
     /// The samples of the virtual primaries, pixel after pixel, primary after primary.
     virtual_direct: Vec<VirtualDirect>,
     virtual_indirect: Vec<VirtualIndirect>,
@@ -85,7 +83,6 @@ impl<'t> Span<'t> {
             direct: Vec::with_capacity(direct),
             indirect: Vec::with_capacity(indirect),
             primaries: Vec::with_capacity(SPAN_PIXELS * params.primary as usize),
-            virtual_count: Vec::with_capacity(SPAN_PIXELS),
             virtual_direct: Vec::new(),
             virtual_indirect: Vec::new(),
         }
@@ -107,7 +104,6 @@ impl Kernel<'_> {
         span.direct.clear();
         span.indirect.clear();
         span.primaries.clear();
-        span.virtual_count.clear();
         span.virtual_direct.clear();
         span.virtual_indirect.clear();
         for &x in xs {
@@ -131,10 +127,8 @@ impl Kernel<'_> {
         let (mut direct, mut indirect) = (&span.direct[..], &span.indirect[..]);
         let (mut virtual_direct, mut virtual_indirect) =
             (&span.virtual_direct[..], &span.virtual_indirect[..]);
-        let pixels = xs.iter().zip(&span.real).zip(&span.virtual_count);
-        for (((&x, real), &virtual_count), primaries) in
-            pixels.zip(span.primaries.chunks(primary_n))
-        {
+        let pixels = xs.iter().zip(&span.real);
+        for ((&x, real), primaries) in pixels.zip(span.primaries.chunks(primary_n)) {
             let samples = match real {
                 Some(_) => {
                     let samples = RealSamples {
@@ -149,10 +143,11 @@ impl Kernel<'_> {
                     indirect: &[],
                 },
             };
+            let virtual_count = primaries.iter().flatten().count();
             let (pixel_direct, rest) =
-                virtual_direct.split_at(virtual_count as usize * params.direct as usize);
+                virtual_direct.split_at(virtual_count * params.direct as usize);
             let (pixel_indirect, rest_indirect) =
-                virtual_indirect.split_at(virtual_count as usize * params.indirect as usize);
+                virtual_indirect.split_at(virtual_count * params.indirect as usize);
             (virtual_direct, virtual_indirect) = (rest, rest_indirect);
             let drawn = Drawn {
                 real: real.as_ref(),
@@ -173,20 +168,19 @@ impl Kernel<'_> {
     fn draw_primaries(&self, x: u32, y: u32, z: f32, rng: &PixelRng, span: &mut Span<'_>) {
         let [x0, y0, x1, y1] = self.object_pixels;
         let may_see_objects = (x0..=x1).contains(&(x as i64)) && (y0..=y1).contains(&(y as i64));
+        if !may_see_objects {
+            let real_only = (0..self.params.primary).map(|_| None);
+            span.primaries.extend(real_only);
+            return;
+        }
         let (primary_stream, direct_stream, indirect_stream) = (
             rng.stream(StreamId::Primary),
             rng.stream(StreamId::Direct),
             rng.stream(StreamId::Indirect),
         );
-        let mut virtual_count = 0;
         for j in 0..self.params.primary {
-            let hit = if may_see_objects {
-                self.primary_hit(&primary_stream, j, x, y, z)
-            } else {
-                None
-            };
+            let hit = self.primary_hit(&primary_stream, j, x, y, z);
             if let Some((hit, view)) = &hit {
-                virtual_count += 1;
                 self.draw_virtual_samples(
                     hit,
                     -*view,
@@ -200,7 +194,6 @@ impl Kernel<'_> {
             }
             span.primaries.push(hit);
         }
-        span.virtual_count.push(virtual_count);
     }
 
     /// Draws the direct and indirect samples of real point `rp` (from its pixel's

@@ -33,6 +33,7 @@ use glam::Affine3A;
 use relume::light::{ImpostorBuilder, ImpostorParams, LightTable, ValBuilder, ValParams};
 use relume::objects::{Triangle, VirtualScene};
 use relume::pinhole::Pinhole;
+use relume::stages::sample::path::sampling::{Basis, cosine_hemisphere};
 use relume::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
 
 /// Frames replayed before the measured one.
@@ -224,16 +225,10 @@ fn bench_object_queries(
             }
             rays.push((camera_position, (p - camera_position).normalize()));
             let origin = p + n * 1e-4;
-            let basis = |d: glam::Vec3| {
-                let t = n.any_orthonormal_vector();
-                t * d.x + n.cross(t) * d.y + n * d.z
-            };
+            let basis = Basis::new(n.normalize());
             for _ in 0..8 {
-                let (u1, u2) = (rng.next_f32(), rng.next_f32());
-                let r = u1.sqrt();
-                let phi = std::f32::consts::TAU * u2;
-                let local = glam::Vec3::new(r * phi.cos(), r * phi.sin(), (1.0 - u1).sqrt());
-                rays.push((origin, basis(local)));
+                let local = cosine_hemisphere(rng.next_f32(), rng.next_f32());
+                rays.push((origin, basis.to_world(local)));
             }
         }
     }

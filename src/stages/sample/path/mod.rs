@@ -578,6 +578,8 @@ impl Stage for PathStage {
 }
 
 #[cfg(test)]
+mod determinism_tests;
+#[cfg(test)]
 mod stage_tests;
 #[cfg(test)]
 mod tests;

@@ -229,8 +229,8 @@ impl<V: Lanes> PairRing<V> {
         let (r, taps) = (self.radius, 2 * self.radius + 1);
         let (row_step, ring) = (2 * taps, (r + 1) * 2 * taps);
         for kind in 0..2 {
-            let forward = self.first(j, kind) + r;
             let mut row = self.first(j, kind);
+            let forward = row + r;
             for k in 1..=r {
                 row += row_step;
                 if row >= ring {

@@ -31,20 +31,22 @@ fn floor_and_wall_scene(wall_z: f32) -> Scene {
     scene
 }
 
+/// The tests' sphere, light gray, with Phong `exponent` (0: diffuse).
+fn gray_sphere(exponent: f32) -> VirtualScene {
+    let material = Material {
+        albedo: Vec3::splat(0.6),
+        exponent,
+    };
+    sphere(SPHERE_CENTER, SPHERE_RADIUS, material)
+}
+
 #[test]
 fn the_lane_march_gives_the_bits_of_the_scalar_march() {
     // The portable kernel marches each ray in turn (`ScreenTracer`'s scalar march);
     // AVX2 marches eight at a time.
     let scene = floor_and_wall_scene(1.6);
     let table = uniform_table(1024);
-    let objects = sphere(
-        SPHERE_CENTER,
-        SPHERE_RADIUS,
-        Material {
-            albedo: Vec3::splat(0.6),
-            exponent: 0.0,
-        },
-    );
+    let objects = gray_sphere(0.0);
     // Every 5th pixel: rows of 20 pixels, one span shorter than SPAN_PIXELS.
     for (object_aware, pixel_stride) in [(false, 1), (true, 1), (false, 5)] {
         let params = PathParams {
@@ -81,14 +83,7 @@ fn the_lane_march_gives_the_bits_of_the_scalar_march() {
 fn outputs_are_identical_for_one_and_three_threads() {
     let scene = floor_scene();
     let table = uniform_table(1024);
-    let objects = sphere(
-        SPHERE_CENTER,
-        SPHERE_RADIUS,
-        Material {
-            albedo: Vec3::splat(0.6),
-            exponent: 8.0,
-        },
-    );
+    let objects = gray_sphere(8.0);
     for object_aware in [false, true] {
         let params = PathParams {
             object_aware,

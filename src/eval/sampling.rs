@@ -37,7 +37,7 @@ pub const SCORE_EVERY: usize = 15;
 /// stage with the sample.path scorer, 32 without it).
 pub const MAX_SCORED_FRAMES: usize = 2;
 /// Independent reference runs, each with 64 + 64 samples per primary sample.
-const REFERENCE_RUNS: u64 = 4;
+pub const REFERENCE_RUNS: u64 = 4;
 const REFERENCE_SAMPLES: u32 = 64;
 /// Further runs of the stage's own configuration for the bias test.
 const BIAS_RUNS: u64 = 8;

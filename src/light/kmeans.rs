@@ -1,5 +1,5 @@
 //! k-means on position and normal, the clustering step of the virtual area lights
-//! (paper 004 Sec. 4.3, following Dong et al. [9]): samples of the direct light are
+//! (paper 004 Sec. 4.3, following Dong et al. \[9\]): samples of the direct light are
 //! grouped by the distance |p - p'|^2 + w |n - n'|^2, with centres warm-started from the
 //! previous frame so that lights keep their place (and index) under static or slowly
 //! changing light.

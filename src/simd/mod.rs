@@ -8,7 +8,7 @@
 //! callers do not use.)
 //!
 //! Use: a generic `#[inline(always)]` function over [`Lanes`], called through a
-//! `#[target_feature(enable = "avx2,fma")]` wrapper with [`Avx2`] when [`Kernel::detect`]
+//! `#[target_feature(enable = "avx2,fma")]` wrapper with `Avx2` when [`Kernel::detect`]
 //! says so, else with [`Portable`]. Never call lane operations from closures inside
 //! such functions: closures do not inherit `#[target_feature]`, and the intrinsics in
 //! them would stay function calls (10-30x slower).

@@ -22,7 +22,7 @@
 //! | `filter.axis_aligned` | [`filter`] | axis-aligned world-space Gaussian of the four irradiance layers, bandwidths of eqs. 17-18, temporal reuse (paper 001 Secs. 6-7) |
 //! | `composite.differential` | [`composite`] | the finished frame by the differential composite, back in the camera's colors (paper 001 eq. 2, paper 000 Sec. 6.6) |
 //! | `material.estimate` | [`material`] | diffuse reflectance of real surfaces, rho = pi L / E_R (paper 000 eq. 5) |
-//! | `write` | [`write`] | saves chosen products per frame as PNG or EXR |
+//! | `write` | [`mod@write`] | saves chosen products per frame as PNG or EXR |
 //! | `debug.noop`, `debug.sleep`, `debug.fail` | [`debug`] | runtime overhead, back-pressure and failure handling |
 
 pub mod cloud;

@@ -1,5 +1,5 @@
 //! A bounding volume hierarchy over a scene's triangles: built by the binned
-//! surface-area heuristic and collapsed into four-wide nodes ([`build`]), whose four
+//! surface-area heuristic and collapsed into four-wide nodes (module `build`), whose four
 //! child boxes a ray tests at once in 4-lane vectors ([`Vec4`]: SSE on x86-64). The
 //! traversal is iterative with a fixed stack: nearest hit (hit children visited
 //! near-first) and any-hit for shadow rays.

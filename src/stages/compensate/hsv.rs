@@ -22,7 +22,7 @@
 
 use glam::{Vec2, Vec3};
 
-/// Gamma assumed for the camera's 8-bit values (paper 000 Sec. 4.1, after [45]).
+/// Gamma assumed for the camera's 8-bit values (paper 000 Sec. 4.1, after \[45\]).
 pub const DEFAULT_INPUT_GAMMA: f32 = 2.2;
 
 /// The camera's 8-bit levels mapped to linear values in [0, 1] by a 256-entry table,

@@ -207,7 +207,7 @@ pub struct Bandwidths<V> {
 }
 
 /// The Gaussian weight of eq. 23 of each tap of `window` for the eight targets at
-/// `target` (world positions), for each kind that is `Some`: weights[k][i] =
+/// `target` (world positions), for each kind that is `Some`: `weights[k][i]` =
 /// exp(-2 Bbar^2 |p - p_i|^2), Bbar^2 = (B^2(target) + B^2(source)) / 2, the taps'
 /// positions read from the three planes from `position` on. The squared distance is
 /// computed once for both kinds. Lanes whose `limit` is below 0 get weight 0.

@@ -113,7 +113,7 @@ pub struct BandwidthSettings {
 /// X and Y sigmas; INFINITY where B = 0, NaN where there is no position). Eight pixels
 /// at a time (`prepare_lanes`, with `kernel`) where a row's X neighbours of all eight
 /// exist, one by one at the row's ends; the same bits either way. Each row is prepared
-/// in row-major order ([`row_scratch`]), then interleaved ([`fill_line`]). The stage
+/// in row-major order (`row_scratch`), then interleaved ([`fill_line`]). The stage
 /// prepares one row at a time instead, each just before its X pass
 /// ([`super::passes::prepare_x_pass`], the same bits).
 pub fn prepare(

@@ -26,7 +26,7 @@ pub struct PreviousView {
 /// row order). `previous` is the previous frame's X set.
 /// `None` when `p` is behind the previous camera or projects off-screen, or
 /// when no pixel of the window has a position. The filter runs its lane form,
-/// [`find_previous_lanes`]; this is the reference the tests hold it to.
+/// `find_previous_lanes`; this is the reference the tests hold it to.
 #[inline]
 pub fn find_previous(
     p: Vec3,

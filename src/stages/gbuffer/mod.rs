@@ -1,8 +1,8 @@
 //! `gbuffer.splat` (paper 000 Sec. 3, "G-Buffer as AR basis", and Fig. 2): the
 //! environment-sample cloud rendered into the current view, the reference image of
 //! `color.compensate` (Sec. 4) and the real geometry for AR rendering. The cloud is
-//! splatted with a depth test ([`splat`]), then holes are filled by push-pull
-//! ([`push_pull`]).
+//! splatted with a depth test ([`splat()`]), then holes are filled by push-pull
+//! ([`push_pull()`]).
 //!
 //! The `cloud` input defaults to `cloud@prev`, the cloud as it stood after the previous
 //! frame; on the first frame it is absent and every output is empty.

@@ -1,5 +1,5 @@
 //! Hole filling of the splatted G-buffer by push-pull (paper 000 Sec. 3, after
-//! Marroquim et al. [31] and Gortler et al.'s pull-push): depth, color and normal together.
+//! Marroquim et al. \[31\] and Gortler et al.'s pull-push): depth, color and normal together.
 //!
 //! - Pull: each texel of level k + 1 is the weighted mean of its valid 2x2 children of
 //!   level k, a child's weight being the number of valid level-0 pixels below it (so a

@@ -16,7 +16,7 @@
 //! summed squared bandwidths do not change, bit for bit, when the two swap (each
 //! difference only changes sign). So each pass walks its direction group by group and
 //! weighs each pair of groups (j, j + k), k = 0..=R, once, when the walk reaches j
-//! ([`PairRing`]): that weight is tap +k of group j and tap -k of group j + k, both in
+//! (`PairRing`): that weight is tap +k of group j and tap -k of group j + k, both in
 //! the same lanes. A pass costs R + 1 `exp` per pixel and kind instead of 2 R + 1. The
 //! temporal taps pair the current frame with the previous one and are weighed per tap.
 //!

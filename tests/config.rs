@@ -393,6 +393,23 @@ fn mesh_paths_resolve_against_the_pipeline_directory() {
 }
 
 #[test]
+fn file_parameters_resolve_against_the_pipeline_directory_as_meshes_do() {
+    let path_of = |text: &str| {
+        let p = load(&format!(
+            "{DECODE}[[stage]]\nkind = \"light.envmap\"\n{text}"
+        ))
+        .unwrap();
+        let stage = p.stages.iter().find(|s| s.kind == "light.envmap").unwrap();
+        stage.params.str("path").to_string()
+    };
+    let relative = "params = { source = \"file\", path = \"maps/probe.exr\" }\n";
+    assert_eq!(path_of(relative), "pipelines/maps/probe.exr");
+    let absolute = "params = { source = \"file\", path = \"/data/probe.exr\" }\n";
+    assert_eq!(path_of(absolute), "/data/probe.exr");
+    assert_eq!(path_of(""), "", "no path: nothing to resolve");
+}
+
+#[test]
 fn object_errors_are_located_and_explained() {
     let object = |body: &str| error(&format!("{DECODE}[[object]]\nname = \"ball\"\n{body}"));
     let e = object("shape = \"sphere\"\nradus = 0.2\n");

@@ -23,6 +23,7 @@
 
 use super::params::a;
 use std::ops::Range;
+use std::path::{Path, PathBuf};
 
 /// The text of a config and where it came from.
 #[derive(Clone, Debug)]
@@ -33,6 +34,17 @@ pub struct SourceFile {
 }
 
 impl SourceFile {
+    /// The directory that relative file names in the config resolve against: the
+    /// config file's, or the current directory for built-in configs (named `<...>`).
+    pub fn base_dir(&self) -> PathBuf {
+        if self.name.starts_with('<') {
+            return PathBuf::new();
+        }
+        Path::new(&self.name)
+            .parent()
+            .map_or(PathBuf::new(), Path::to_path_buf)
+    }
+
     /// 1-based line and column of byte offset `at`.
     pub fn line_col(&self, at: usize) -> (usize, usize) {
         let at = at.min(self.text.len());

@@ -24,6 +24,9 @@ pub struct ParamSpec {
     pub max: Option<f64>,
     /// Allowed values for strings and string lists (empty: any).
     pub choices: &'static [&'static str],
+    /// A string that names a file: a relative value resolves against the pipeline
+    /// file's directory when the config is loaded, as mesh paths do.
+    pub is_file_path: bool,
     pub doc: &'static str,
 }
 
@@ -36,6 +39,7 @@ impl ParamSpec {
             min: None,
             max: None,
             choices: &[],
+            is_file_path: false,
             doc,
         }
     }
@@ -52,6 +56,15 @@ impl ParamSpec {
     /// The same parameter restricted to `choices`.
     pub const fn choices(self, choices: &'static [&'static str]) -> ParamSpec {
         ParamSpec { choices, ..self }
+    }
+
+    /// The same string parameter naming a file, relative to the pipeline file's
+    /// directory ([`SourceFile::base_dir`](crate::graph::config::SourceFile::base_dir)).
+    pub const fn file_path(self) -> ParamSpec {
+        ParamSpec {
+            is_file_path: true,
+            ..self
+        }
     }
 
     /// The TOML type name of the parameter.

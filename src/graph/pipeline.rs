@@ -475,7 +475,12 @@ fn check_value(
         }
         (ParamDefault::Str(_), RawValue::Str(s)) => {
             choice(s, &value.span)?;
-            ParamValue::Str(s.clone())
+            if spec.is_file_path && !s.is_empty() {
+                let resolved = src.base_dir().join(s);
+                ParamValue::Str(resolved.to_string_lossy().into_owned())
+            } else {
+                ParamValue::Str(s.clone())
+            }
         }
         (ParamDefault::StrList(_), RawValue::Array(items)) => {
             let mut out = Vec::new();

@@ -8,7 +8,6 @@ use crate::graph::config::{ConfigError, Located, ObjectDecl, RawValue, SourceFil
 use crate::graph::params::{a, did_you_mean};
 use glam::{Vec2, Vec3};
 use std::ops::Range;
-use std::path::{Path, PathBuf};
 
 /// The type and bounds of an object key.
 #[derive(Clone, Copy)]
@@ -114,7 +113,7 @@ enum Value {
 /// Checks the `[[object]]` tables of the config `src` and builds the scene (empty when
 /// there are none). Mesh paths resolve against the directory of `src.name`.
 pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<VirtualScene, ConfigError> {
-    let base = base_dir(&src.name);
+    let base = src.base_dir();
     let mut names: Vec<(String, usize)> = Vec::new();
     let mut triangles = Vec::new();
     let mut materials = Vec::new();
@@ -304,17 +303,6 @@ pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<VirtualScene, C
         materials.push(spec.material);
     }
     Ok(VirtualScene::new(triangles, materials))
-}
-
-/// The directory that relative mesh paths resolve against: the config file's, or the
-/// current directory for built-in configs (named `<...>`).
-fn base_dir(config_name: &str) -> PathBuf {
-    if config_name.starts_with('<') {
-        return PathBuf::new();
-    }
-    Path::new(config_name)
-        .parent()
-        .map_or(PathBuf::new(), Path::to_path_buf)
 }
 
 /// Checks one value against its key's type and bounds.

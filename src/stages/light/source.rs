@@ -25,8 +25,9 @@ const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
         "path",
         ParamDefault::Str(""),
-        "OpenEXR or Radiance .hdr lat-long map for source = \"file\" (relative to the working directory); row 0 = zenith, column c at phi = (c + 0.5) / W 2 pi from +x towards +z",
-    ),
+        "OpenEXR or Radiance .hdr lat-long map for source = \"file\" (relative to the pipeline file's directory); row 0 = zenith, column c at phi = (c + 0.5) / W 2 pi from +x towards +z",
+    )
+    .file_path(),
     ParamSpec::new(
         "attachment",
         ParamDefault::Str("environment"),
@@ -82,6 +83,14 @@ fn load(ctx: &BuildContext) -> Result<Arc<EnvMap>, StageError> {
                 .map_err(|e| StageError::Failed(e.to_string()))?;
             loaded.map.center = super::impostor::object_center(ctx).unwrap_or_default();
             loaded
+        }
+        _ if !p.str("path").is_empty() => {
+            // Lighting from the attachment while the config names a file would be a
+            // silent surprise.
+            return Err(StageError::Failed(format!(
+                "`path` = {:?} is only read with source = \"file\" (the source is \"attachment\"); add source = \"file\" or remove `path`",
+                p.str("path")
+            )));
         }
         _ => environment_from_header(ctx.header, p.str("attachment"))
             .map_err(|e| StageError::Failed(e.to_string()))?,
@@ -207,6 +216,17 @@ mod tests {
             .unwrap()
             .to_string();
         assert!(message.starts_with("/nonexistent/probe.exr: "), "{message}");
+    }
+
+    #[test]
+    fn a_path_without_source_file_is_an_error_not_the_attachment() {
+        let path = ("path", ParamValue::Str("probe.exr".into()));
+        let message = build(&header(true), &[path]).err().unwrap().to_string();
+        assert_eq!(
+            message,
+            "`path` = \"probe.exr\" is only read with source = \"file\" (the source is \
+             \"attachment\"); add source = \"file\" or remove `path`"
+        );
     }
 
     #[test]

@@ -67,6 +67,17 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<Triangle>, ObjectError
             path: path.to_path_buf(),
         });
     }
+    // Rays never hit a triangle without an area: such a mesh would be an invisible
+    // object.
+    if triangles
+        .iter()
+        .all(|t| tri_normal(&t.vertices) == Vec3::ZERO)
+    {
+        return Err(ObjectError::MeshDegenerate {
+            path: path.to_path_buf(),
+            count: triangles.len(),
+        });
+    }
     Ok(triangles)
 }
 
@@ -238,6 +249,24 @@ mod tests {
         );
         let e = parse("# only points and lines\nv 0 0 0\nv 1 0 0\nl 1 2\np 1\n").unwrap_err();
         assert_eq!(e.to_string(), "the mesh `m.obj` has no triangles");
+        let degenerate = [
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 1 1\nf 2 2 3\n",
+            "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n",
+            "v 0 0 0\nv 1e-30 0 0\nv 0 1e-30 0\nf 1 2 3\n",
+        ];
+        for (text, count) in degenerate.into_iter().zip([2, 1, 1]) {
+            let e = parse(text).unwrap_err();
+            assert_eq!(
+                e.to_string(),
+                format!(
+                    "the mesh `m.obj` has no triangle with an area: all {count} have repeated or collinear corners"
+                ),
+                "{text}"
+            );
+        }
+        // One triangle with an area is enough; the degenerate ones are kept, unhit.
+        let tris = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 1 1\nf 1 2 3\n").unwrap();
+        assert_eq!(tris.len(), 2);
         let e = parse("v 0 nan 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap_err();
         assert_eq!(
             e.to_string(),

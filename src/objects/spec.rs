@@ -218,6 +218,11 @@ pub enum ObjectError {
     MeshInvalid { path: PathBuf, reason: String },
     #[error("the mesh `{}` has no triangles", path.display())]
     MeshEmpty { path: PathBuf },
+    #[error(
+        "the mesh `{}` has no triangle with an area: all {count} have repeated or collinear corners",
+        path.display()
+    )]
+    MeshDegenerate { path: PathBuf, count: usize },
     #[error("object `{object}`: {message}")]
     InvalidSpec { object: String, message: String },
 }

@@ -61,6 +61,10 @@ pub const INFO: StageInfo = StageInfo {
     },
 };
 
+/// The brightest radiance a map may hold after `scale`, per channel. The sun is about
+/// 2e7 W/(sr m^2); far beyond that, sums and squares of the estimates would overflow f32.
+pub const MAX_RADIANCE: f32 = 1e12;
+
 /// Loads, scales and turns the map the stage's parameters ask for; errors name the stage
 /// and the file or attachment.
 fn load(ctx: &BuildContext) -> Result<Arc<EnvMap>, StageError> {
@@ -104,6 +108,20 @@ fn load(ctx: &BuildContext) -> Result<Arc<EnvMap>, StageError> {
     let scale = p.float("scale") as f32;
     if scale != 1.0 {
         map.scale_radiance(scale);
+    }
+    // Texels are finite and non-negative here (the loaders zero the others), so an
+    // overflow of the scaling shows as inf, above the limit.
+    let brightest = map
+        .radiance
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.max_element().total_cmp(&b.1.max_element()));
+    if let Some((i, c)) = brightest.filter(|(_, c)| c.max_element() > MAX_RADIANCE) {
+        let (x, y) = (i % map.width as usize, i / map.width as usize);
+        return Err(StageError::Failed(format!(
+            "the map's radiance reaches {:.3e} at texel ({x}, {y}) after `scale`; relume accepts up to {MAX_RADIANCE:e}: lower `scale`",
+            c.max_element()
+        )));
     }
     map.rotate_about_y(p.float("rotation_deg"));
     Ok(Arc::new(map))
@@ -216,6 +234,19 @@ mod tests {
             .unwrap()
             .to_string();
         assert!(message.starts_with("/nonexistent/probe.exr: "), "{message}");
+    }
+
+    #[test]
+    fn radiance_beyond_the_limit_is_an_error_naming_the_texel() {
+        // The attachment holds (i, 1, 2) at texel i of an 8 x 4 map: 31 at (7, 3).
+        let scale = ("scale", ParamValue::Float(1e11));
+        let message = build(&header(true), &[scale]).err().unwrap().to_string();
+        assert_eq!(
+            message,
+            "the map's radiance reaches 3.100e12 at texel (7, 3) after `scale`; relume accepts up to 1e12: lower `scale`"
+        );
+        let scale = ("scale", ParamValue::Float(1e10));
+        assert!(build(&header(true), &[scale]).is_ok());
     }
 
     #[test]

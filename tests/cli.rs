@@ -143,6 +143,8 @@ fn validate_and_stages_explain_pipelines() {
         "debug.sleep",
         "debug.fail",
         "max_depth_jump = 0.1",
+        // Ports by role, with the default product where it is named otherwise.
+        "reads: depth = refined_depth, normals, pose, radiance = compensated, light_table",
     ] {
         assert!(list.contains(kind), "stages lacks {kind}");
     }

@@ -28,16 +28,17 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
         let params: Vec<serde_json::Value> = info.params.iter().map(|p| serde_json::json!({ "name": p.name, "type": p.type_name(), "default": p.default_value().to_string(), "min": p.min, "max": p.max, "choices": p.choices, "doc": p.doc })).collect();
         if !a.json {
             outln!("{}\n    {}", info.kind, info.summary)?;
+            // Each port by its role, which configs bind (`inputs = { depth = "..." }`),
+            // with its default product where that has another name.
             let show = |ports: &[relume::graph::Port]| {
                 if ports.is_empty() {
-                    "-".to_string()
-                } else {
-                    ports
-                        .iter()
-                        .map(|p| p.default_product.clone())
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                    return "-".to_string();
                 }
+                let port = |p: &relume::graph::Port| match p.role == p.default_product {
+                    true => p.role.clone(),
+                    false => format!("{} = {}", p.role, p.default_product),
+                };
+                ports.iter().map(port).collect::<Vec<_>>().join(", ")
             };
             outln!(
                 "    reads: {}   writes: {}",

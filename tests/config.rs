@@ -124,6 +124,27 @@ fn wrong_types_ranges_and_choices_are_located() {
     );
     // A float parameter accepts an integer.
     load(&format!("{head}params = {{ max_depth_jump = 1 }}\n")).unwrap();
+
+    // A string with a form of its own is checked at load time too, not first at run.
+    let impostor = "[[stage]]\nkind = \"light.impostor\"\n";
+    let e = error(&format!("{impostor}params = {{ center = \"1,2\" }}\n"));
+    assert_eq!((e.line, e.column), (3, 21));
+    assert_eq!(
+        e.message,
+        "center = \"1,2\" is not three comma-separated finite numbers x,y,z"
+    );
+    let e = error(&format!(
+        "{impostor}params = {{ center = \"1e30, 0, 0\" }}\n"
+    ));
+    assert_eq!(
+        e.message,
+        "center = \"1e30, 0, 0\" lies more than 10000 m from the origin along an axis"
+    );
+    // A good centre passes; what is left is the stage's unfed input.
+    let e = error(&format!(
+        "{impostor}params = {{ center = \" 1, 2.5 ,-3\" }}\n"
+    ));
+    assert!(e.message.contains("no upstream stage produces it"), "{e}");
 }
 
 #[test]

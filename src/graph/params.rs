@@ -14,6 +14,9 @@ pub enum ParamDefault {
     StrList(&'static [&'static str]),
 }
 
+/// A check of a string parameter's form: `Err` says what is wrong with the value.
+pub type StrCheck = fn(&str) -> Result<(), String>;
+
 /// The declaration of one parameter of a stage kind.
 #[derive(Clone, Copy, Debug)]
 pub struct ParamSpec {
@@ -27,6 +30,9 @@ pub struct ParamSpec {
     /// A string that names a file: a relative value resolves against the pipeline
     /// file's directory when the config is loaded, as mesh paths do.
     pub is_file_path: bool,
+    /// A check of a string's form beyond its choices (e.g. "x,y,z"), run when the
+    /// config is loaded; the error says what is wrong with the value.
+    pub check: Option<StrCheck>,
     pub doc: &'static str,
 }
 
@@ -40,6 +46,7 @@ impl ParamSpec {
             max: None,
             choices: &[],
             is_file_path: false,
+            check: None,
             doc,
         }
     }
@@ -56,6 +63,14 @@ impl ParamSpec {
     /// The same parameter restricted to `choices`.
     pub const fn choices(self, choices: &'static [&'static str]) -> ParamSpec {
         ParamSpec { choices, ..self }
+    }
+
+    /// The same string parameter with its form checked by `check` at load time.
+    pub const fn checked(self, check: StrCheck) -> ParamSpec {
+        ParamSpec {
+            check: Some(check),
+            ..self
+        }
     }
 
     /// The same string parameter naming a file, relative to the pipeline file's

@@ -475,6 +475,11 @@ fn check_value(
         }
         (ParamDefault::Str(_), RawValue::Str(s)) => {
             choice(s, &value.span)?;
+            if let Some(check) = spec.check {
+                check(s).map_err(|message| {
+                    src.error(value.span.clone(), message, Some(spec.doc.to_string()))
+                })?;
+            }
             if spec.is_file_path && !s.is_empty() {
                 let resolved = src.base_dir().join(s);
                 ParamValue::Str(resolved.to_string_lossy().into_owned())

@@ -24,7 +24,11 @@ const PARAMS: &[ParamSpec] = &[
         "center",
         ParamDefault::Str(""),
         "world position \"x,y,z\" (metres) the impostor is seen from; empty: the virtual objects' bounding-box centre, else the recording's ground-truth object position",
-    ),
+    )
+    .checked(|text| match text.trim() {
+        "" => Ok(()),
+        text => parse_center(text).map(|_| ()),
+    }),
     ParamSpec::new(
         "face_size",
         ParamDefault::Int(64),
@@ -110,7 +114,10 @@ pub(crate) fn object_center(ctx: &BuildContext) -> Option<Vec3> {
         .map(|t| DVec3::from_array(t.object_position).as_vec3())
 }
 
-/// Parses "x,y,z" (finite numbers, spaces allowed).
+/// The largest coordinate of a centre, in metres: as far as objects may be placed.
+const MAX_CENTER_COORDINATE: f32 = 1e4;
+
+/// Parses "x,y,z" (finite numbers within [`MAX_CENTER_COORDINATE`], spaces allowed).
 fn parse_center(text: &str) -> Result<Vec3, String> {
     let values: Vec<f32> = text
         .split(',')
@@ -120,7 +127,14 @@ fn parse_center(text: &str) -> Result<Vec3, String> {
             format!("center = {text:?} is not three comma-separated numbers x,y,z ({e})")
         })?;
     match values.as_slice() {
-        &[x, y, z] if values.iter().all(|v| v.is_finite()) => Ok(Vec3::new(x, y, z)),
+        &[x, y, z] if values.iter().all(|v| v.is_finite()) => {
+            match values.iter().all(|v| v.abs() <= MAX_CENTER_COORDINATE) {
+                true => Ok(Vec3::new(x, y, z)),
+                false => Err(format!(
+                    "center = {text:?} lies more than {MAX_CENTER_COORDINATE} m from the origin along an axis"
+                )),
+            }
+        }
         _ => Err(format!(
             "center = {text:?} is not three comma-separated finite numbers x,y,z"
         )),
@@ -214,10 +228,10 @@ mod tests {
             "no centre for the distance impostor: set `center = \"x,y,z\"`, add a virtual \
              object, or use a recording with ground truth"
         );
-        for bad in ["1,2", "1,2,x", "1,2,inf"] {
+        for bad in ["1,2", "1,2,x", "1,2,inf", "1e30,0,0"] {
             let message = build(&header, &none, bad).err().unwrap().to_string();
             assert!(
-                message.contains(bad) && message.contains("x,y,z"),
+                message.contains(bad) && (message.contains("x,y,z") || message.contains("1e30")),
                 "{message}"
             );
         }

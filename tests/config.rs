@@ -162,8 +162,30 @@ fn inputs_must_be_produced_upstream() {
     );
     assert_eq!(
         e.hint.as_deref(),
+        Some("`points` is produced later, by stage `depth.to_points`: move that stage up")
+    );
+    // Only an input the stage can do without may read the previous frame: the first
+    // frame has none.
+    let e = error(
+        "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"depth.to_points\"\n[[stage]]\nkind = \"normals.cross\"\ninputs = { points = \"points@prev\" }\n",
+    );
+    assert_eq!((e.line, e.column), (7, 21));
+    assert_eq!(
+        e.message,
+        "stage `normals.cross` cannot read `points@prev` as its `points` input: it needs that input at every frame, and the first frame has no previous one"
+    );
+    assert_eq!(
+        e.hint.as_deref(),
+        Some("read `points` from this frame, produced upstream")
+    );
+    // gbuffer.splat does without its cloud, so the hint offers the previous frame's.
+    let e = error(
+        "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"gbuffer.splat\"\ninputs = { cloud = \"cloud\" }\n[[stage]]\nkind = \"depth.to_points\"\n[[stage]]\nkind = \"normals.plane_fit\"\n[[stage]]\nkind = \"cloud.samples\"\ninputs = { depth = \"refined_depth\" }\n",
+    );
+    assert_eq!(
+        e.hint.as_deref(),
         Some(
-            "`points` is produced later, by stage `depth.to_points`: move that stage up, or read `points@prev` for its previous-frame value"
+            "`cloud` is produced later, by stage `cloud.samples`: move that stage up, or read `cloud@prev` for its previous-frame value"
         )
     );
 

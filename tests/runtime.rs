@@ -88,11 +88,8 @@ const COPY_INFO: StageInfo = StageInfo {
         "delay",
     )],
     ports: |_| Ports {
-        inputs: vec![relume::graph::Port::new(
-            "input",
-            "input",
-            &[ProductKind::Depth],
-        )],
+        // Without the input (the first frame under `@prev`) the copy is -1.
+        inputs: vec![relume::graph::Port::new("input", "input", &[ProductKind::Depth]).optional()],
         outputs: vec![relume::graph::Port::new(
             "output",
             "output",

@@ -23,20 +23,27 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
     for info in registry.kinds() {
         let ports = (info.ports)(&Params::defaults(info.params));
         let port_list = |ports: &[relume::graph::Port]| {
-            ports.iter().map(|p| serde_json::json!({ "role": p.role, "default": p.default_product, "kinds": p.kinds.iter().map(|k| k.name()).collect::<Vec<_>>() })).collect::<Vec<_>>()
+            ports.iter().map(|p| serde_json::json!({ "role": p.role, "default": p.default_product, "kinds": p.kinds.iter().map(|k| k.name()).collect::<Vec<_>>(), "optional": p.optional })).collect::<Vec<_>>()
         };
         let params: Vec<serde_json::Value> = info.params.iter().map(|p| serde_json::json!({ "name": p.name, "type": p.type_name(), "default": p.default_value().to_string(), "min": p.min, "max": p.max, "choices": p.choices, "doc": p.doc })).collect();
         if !a.json {
             outln!("{}\n    {}", info.kind, info.summary)?;
             // Each port by its role, which configs bind (`inputs = { depth = "..." }`),
-            // with its default product where that has another name.
+            // with its default product where that has another name; "(optional)" marks
+            // the inputs that may read the previous frame.
             let show = |ports: &[relume::graph::Port]| {
                 if ports.is_empty() {
                     return "-".to_string();
                 }
-                let port = |p: &relume::graph::Port| match p.role == p.default_product {
-                    true => p.role.clone(),
-                    false => format!("{} = {}", p.role, p.default_product),
+                let port = |p: &relume::graph::Port| {
+                    let mut shown = match p.role == p.default_product {
+                        true => p.role.clone(),
+                        false => format!("{} = {}", p.role, p.default_product),
+                    };
+                    if p.optional {
+                        shown.push_str(" (optional)");
+                    }
+                    shown
                 };
                 ports.iter().map(port).collect::<Vec<_>>().join(", ")
             };

@@ -13,7 +13,9 @@
 //! name = "normals"              # optional; defaults to the kind
 //! kind = "normals.cross"
 //! params = { step = 1 }         # checked against the kind's declaration
-//! inputs = { points = "points" }   # role = product; "name@prev" reads the previous frame's
+//! inputs = { points = "points" }   # role = product; "name@prev" reads the previous
+//!                                  # frame's value (optional inputs only: the first
+//!                                  # frame has none)
 //! outputs = { normals = "normals" }
 //!
 //! [[object]]                    # virtual objects, see `crate::objects`

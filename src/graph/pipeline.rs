@@ -216,7 +216,7 @@ impl Pipeline {
                         &available[i],
                         &producers,
                         stage,
-                        &port.role,
+                        port,
                         product,
                         previous,
                     ));
@@ -226,6 +226,16 @@ impl Pipeline {
                     return Err(src.error(span, format!("stage `{}` reads `{product}` as its `{}` input, but `{product}` is {}; it needs {}", stage.name, port.role, a(kind.name()), expected.iter().map(|k| a(k)).collect::<Vec<_>>().join(" or ")), None));
                 }
                 if previous {
+                    if !port.optional {
+                        return Err(src.error(
+                            span,
+                            format!(
+                                "stage `{}` cannot read `{bound}` as its `{}` input: it needs that input at every frame, and the first frame has no previous one",
+                                stage.name, port.role
+                            ),
+                            Some(format!("read `{product}` from this frame, produced upstream")),
+                        ));
+                    }
                     if producer == usize::MAX {
                         return Err(src.error(span, format!("`{product}` comes from the source and has no previous-frame value to feed back"), None));
                     }
@@ -301,13 +311,18 @@ fn missing_product(
     upstream: &BTreeMap<String, (usize, ProductKind)>,
     all: &BTreeMap<String, (usize, ProductKind)>,
     stage: &ResolvedStage,
-    role: &str,
+    port: &super::stage::Port,
     product: &str,
     previous: bool,
 ) -> ConfigError {
+    let (role, optional) = (&port.role, port.optional);
     let hint = match all.get(product) {
-        Some(&(p, _)) if !previous => format!(
+        Some(&(p, _)) if !previous && optional => format!(
             "`{product}` is produced later, by stage `{}`: move that stage up, or read `{product}{PREVIOUS_SUFFIX}` for its previous-frame value",
+            stages[p].name
+        ),
+        Some(&(p, _)) if !previous => format!(
+            "`{product}` is produced later, by stage `{}`: move that stage up",
             stages[p].name
         ),
         _ => {

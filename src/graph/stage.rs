@@ -50,6 +50,9 @@ pub struct Port {
     pub default_product: String,
     /// Accepted kinds (inputs) or the one produced kind (outputs).
     pub kinds: &'static [ProductKind],
+    /// An input the stage can run without. Only such an input may read the previous
+    /// frame (`product@prev`): the first frame of a run has none.
+    pub optional: bool,
 }
 
 impl Port {
@@ -58,6 +61,15 @@ impl Port {
             role: role.to_string(),
             default_product: default_product.to_string(),
             kinds,
+            optional: false,
+        }
+    }
+
+    /// The same input, which the stage can run without (see [`Port::optional`]).
+    pub fn optional(self) -> Port {
+        Port {
+            optional: true,
+            ..self
         }
     }
 }

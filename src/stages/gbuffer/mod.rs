@@ -67,7 +67,7 @@ pub const INFO: StageInfo = StageInfo {
     params: PARAMS,
     ports: |_| Ports {
         inputs: vec![
-            Port::new("cloud", "cloud@prev", &[ProductKind::Cloud]),
+            Port::new("cloud", "cloud@prev", &[ProductKind::Cloud]).optional(),
             Port::new("pose", "pose", &[ProductKind::Pose]),
         ],
         outputs: vec![

@@ -11,8 +11,8 @@
 //! distances infinite.
 
 use crate::graph::{
-    BuildContext, EnvCloud, Frame, ParamDefault, ParamSpec, Product, ProductKind, Stage,
-    StageError, StageInfo,
+    BuildContext, EnvCloud, Frame, ParamDefault, ParamSpec, Port, Ports, Product, ProductKind,
+    Stage, StageError, StageInfo,
 };
 use crate::light::EnvMap;
 use crate::light::impostor::{ImpostorBuilder, ImpostorParams};
@@ -69,11 +69,14 @@ pub const INFO: StageInfo = StageInfo {
     kind: "light.impostor",
     summary: "a distance impostor: the environment-sample cloud splatted into a cube map of radiance and distance around the object (paper 000 Sec. 6.1)",
     params: PARAMS,
-    ports: |_| {
-        super::super::fixed_ports(
-            &[("cloud", &[ProductKind::Cloud])],
-            &[("environment", &[ProductKind::Environment])],
-        )
+    ports: |_| Ports {
+        // Without a cloud (the first frame under `cloud@prev`) the map is empty.
+        inputs: vec![Port::new("cloud", "cloud", &[ProductKind::Cloud]).optional()],
+        outputs: vec![Port::new(
+            "environment",
+            "environment",
+            &[ProductKind::Environment],
+        )],
     },
     build: |ctx| {
         let p = ctx.params;

@@ -27,6 +27,11 @@ pub fn locate(text: &str, problem: Problem) -> Option<(usize, &str)> {
         let rejected = match words.next() {
             Some("v") => {
                 counts.positions += 1;
+                // tobj keeps the colours of the lines with r g b after x y z.
+                let values: Vec<&str> = words.clone().collect();
+                if values.len() == 6 && floats(values[3..].iter().copied(), 3).is_some() {
+                    counts.colors += 1;
+                }
                 vertex_problem(words)
             }
             Some("vt") => {
@@ -90,6 +95,11 @@ fn out_of_bounds<'a>(
         Problem::Load(tobj::LoadError::FaceNormalOutOfBounds) if counts.normals > 0 => {
             (2, counts.normals)
         }
+        // Once any vertex has a colour, every vertex a face uses needs one: a face's
+        // position index is its colour index.
+        Problem::Load(tobj::LoadError::FaceColorOutOfBounds) if counts.colors > 0 => {
+            (0, counts.colors)
+        }
         _ => return None,
     };
     faces
@@ -104,6 +114,8 @@ struct Counts {
     positions: usize,
     texcoords: usize,
     normals: usize,
+    /// `v` lines with a colour.
+    colors: usize,
 }
 
 /// The first `n` words as floats, if there are `n` and they all parse.
@@ -263,6 +275,18 @@ mod tests {
                 "v 0 0 0\nvt 0 0\nf 1/1 1/2 1/1\n",
                 LoadError::FaceTexCoordOutOfBounds,
                 3,
+            ),
+            // Colours on some vertices only: the first face using one without is at
+            // fault.
+            (
+                "v 0 0 0 1 1 1\nv 1 0 0\nv 0 1 0\nf 1 1 1\nf 1 2 3\n",
+                LoadError::FaceColorOutOfBounds,
+                5,
+            ),
+            (
+                "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1 1 1 1\nf 1 2 3\n",
+                LoadError::FaceColorOutOfBounds,
+                5,
             ),
         ] {
             let loaded = tobj::load_obj_buf(&mut text.as_bytes(), &options, |_| {

@@ -114,10 +114,12 @@ impl DepthScorer {
     }
 
     pub fn report(&self) -> Value {
+        // null, not 0, where nothing was compared (a single frame, or no overlap):
+        // 0 would read as a perfect score.
         let warp = |s: &WarpSums| {
             (
-                (s.squared / s.overlap.max(1) as f64).sqrt(),
-                s.overlap as f64 / s.target_valid.max(1) as f64,
+                (s.overlap > 0).then(|| (s.squared / s.overlap as f64).sqrt()),
+                (s.target_valid > 0).then(|| s.overlap as f64 / s.target_valid as f64),
             )
         };
         let (raw_rmse, raw_overlap) = warp(&self.warp_raw);
@@ -167,6 +169,7 @@ pub fn forward_warp(source: &DepthImage, from: &Pose, to: &Pose, camera: &Pinhol
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::graph::Product;
     use glam::{DQuat, DVec3};
 
     #[test]
@@ -181,5 +184,34 @@ mod tests {
         assert!((2.0..3.0).contains(&shift));
         assert_eq!(*warped.at(10, 10), 2.0);
         assert_eq!(*warped.at(63, 10), 0.0, "uncovered on the right");
+    }
+
+    #[test]
+    fn warp_scores_are_null_until_two_frames_are_compared() {
+        let mut scorer = DepthScorer::new(
+            "depth".into(),
+            "fused".into(),
+            "pose".into(),
+            Intrinsics::PRIMESENSE,
+        );
+        let frame = |index: usize| {
+            let mut f = Frame::new(index, 0);
+            f.insert("depth", Product::Depth(DepthImage::filled(64, 48, 2.0)));
+            f.insert("fused", Product::Depth(DepthImage::filled(64, 48, 2.0)));
+            f.insert("pose", Product::Pose(Pose::IDENTITY));
+            f
+        };
+        scorer.observe(&frame(0), None);
+        let report = scorer.report();
+        for key in ["warp_rmse_raw_m", "warp_overlap_raw", "warp_rmse_fused_m"] {
+            assert_eq!(report[key], Value::Null, "{key} after one frame");
+        }
+        scorer.observe(&frame(1), None);
+        let report = scorer.report();
+        assert_eq!(
+            report["warp_rmse_raw_m"], 0.0,
+            "a still wall warps onto itself"
+        );
+        assert_eq!(report["warp_overlap_raw"], 1.0);
     }
 }

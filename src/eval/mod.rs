@@ -4,7 +4,7 @@
 //! | stage kind | keys | needs ground truth |
 //! |---|---|---|
 //! | `depth.fuse` | `rmse_raw_m`, `rmse_fused_m`, `holes_raw`, `holes_fused` | yes |
-//! | `depth.fuse` | `warp_rmse_raw_m`, `warp_rmse_fused_m`, `warp_overlap_raw`, `warp_overlap_fused` (frame t-1 forward-warped into frame t against raw depth t) | no |
+//! | `depth.fuse` | `warp_rmse_raw_m`, `warp_rmse_fused_m`, `warp_overlap_raw`, `warp_overlap_fused` (frame t-1 forward-warped into frame t against raw depth t; null where no two consecutive frames were compared) | no |
 //! | `normals.*` | `mean_angle_deg`, `median_angle_deg`, `valid_fraction` | yes |
 //! | `color.compensate` | `transform_rel_error_median` (relative Frobenius error of c_t against `M_0 M_t^-1`), `gain_transform_rel_error_median` (the same for A_t), `image_rel_error_median`, `gain_image_rel_error_median` (relative RMS error of the compensated image, and of A_t applied instead, against the true reference image) | yes |
 //! | `color.compensate` | `frames`, `approximate_frames`, `pairs_kept_median` | no |

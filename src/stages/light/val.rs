@@ -58,13 +58,20 @@ pub const INFO: StageInfo = StageInfo {
     },
     build: |ctx| {
         let p = ctx.params;
+        let (lights, samples) = (p.int("lights"), p.int("samples"));
+        if samples < lights {
+            // k-means cannot make more clusters than it has samples.
+            return Err(StageError::Failed(format!(
+                "samples = {samples} is fewer than lights = {lights}: each light is a cluster of samples"
+            )));
+        }
         Ok(Box::new(Val {
             direct: ctx.input("direct_light"),
             indirect: ctx.input("indirect_light"),
             lights: ctx.output("lights"),
             builder: ValBuilder::new(ValParams {
-                lights: p.int("lights") as usize,
-                samples: p.int("samples") as usize,
+                lights: lights as usize,
+                samples: samples as usize,
                 iterations: p.int("iterations") as u32,
                 normal_weight: p.float("normal_weight") as f32,
                 distant_radius: p.float("distant_radius") as f32,
@@ -107,7 +114,7 @@ impl Stage for Val {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::graph::{BuildContext, Params};
+    use crate::graph::{BuildContext, ParamValue, Params};
     use crate::light::split::split_direct_indirect;
     use crate::light::val::val_center_drift;
     use crate::recording::{Header, Intrinsics};
@@ -115,8 +122,11 @@ mod tests {
     use std::collections::BTreeMap;
 
     fn stage() -> Box<dyn Stage> {
+        build(Params::defaults(PARAMS)).unwrap()
+    }
+
+    fn build(params: Params) -> Result<Box<dyn Stage>, StageError> {
         let header = Header::new("t", Intrinsics::PRIMESENSE, 0.001);
-        let params = Params::defaults(PARAMS);
         let ctx = BuildContext {
             stage_name: "val",
             params: &params,
@@ -127,7 +137,21 @@ mod tests {
             seed: 3,
             objects: &Default::default(),
         };
-        (INFO.build)(&ctx).unwrap()
+        (INFO.build)(&ctx)
+    }
+
+    #[test]
+    fn fewer_samples_than_lights_is_an_error() {
+        let mut params = Params::defaults(PARAMS);
+        params.set("lights", ParamValue::Int(64));
+        params.set("samples", ParamValue::Int(16));
+        let message = build(params.clone()).err().unwrap().to_string();
+        assert_eq!(
+            message,
+            "samples = 16 is fewer than lights = 64: each light is a cluster of samples"
+        );
+        params.set("samples", ParamValue::Int(64));
+        assert!(build(params).is_ok());
     }
 
     fn frame(env: &EnvMap) -> Frame {

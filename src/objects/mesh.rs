@@ -69,16 +69,23 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<Triangle>, ObjectError
     }
     // Rays never hit a triangle without an area: such a mesh would be an invisible
     // object.
-    if triangles
-        .iter()
-        .all(|t| tri_normal(&t.vertices) == Vec3::ZERO)
-    {
+    if !triangles.iter().any(|t| has_area(&t.vertices)) {
         return Err(ObjectError::MeshDegenerate {
             path: path.to_path_buf(),
             count: triangles.len(),
         });
     }
     Ok(triangles)
+}
+
+/// False where the corners repeat or lie on a line, at any size: the edges are scaled
+/// to unit length in f64 first, so that neither huge nor tiny coordinates over- or
+/// underflow the test.
+fn has_area(v: &[Vec3; 3]) -> bool {
+    let [a, b, c] = v.map(|p| p.as_dvec3());
+    let (e1, e2) = (b - a, c - a);
+    let size = e1.abs().max(e2.abs()).max_element();
+    size > 0.0 && (e1 / size).cross(e2 / size) != glam::DVec3::ZERO
 }
 
 /// How relume has tobj read a file: polygons triangulated, points and lines dropped.
@@ -252,7 +259,7 @@ mod tests {
         let degenerate = [
             "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 1 1\nf 2 2 3\n",
             "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n",
-            "v 0 0 0\nv 1e-30 0 0\nv 0 1e-30 0\nf 1 2 3\n",
+            "v 0 0 0\nv 1e30 0 0\nv 2e30 0 0\nf 1 2 3\n",
         ];
         for (text, count) in degenerate.into_iter().zip([2, 1, 1]) {
             let e = parse(text).unwrap_err();
@@ -267,6 +274,14 @@ mod tests {
         // One triangle with an area is enough; the degenerate ones are kept, unhit.
         let tris = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 1 1\nf 1 2 3\n").unwrap();
         assert_eq!(tris.len(), 2);
+        // Size alone does not make a triangle degenerate (whether it fits the world is
+        // checked once it is placed).
+        for text in [
+            "v 0 0 0\nv 1e-30 0 0\nv 0 1e-30 0\nf 1 2 3\n",
+            "v 1e30 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+        ] {
+            assert_eq!(parse(text).unwrap().len(), 1, "{text}");
+        }
         let e = parse("v 0 nan 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap_err();
         assert_eq!(
             e.to_string(),

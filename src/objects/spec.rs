@@ -171,14 +171,30 @@ impl ObjectSpec {
         };
         let linear = self.linear();
         let normal_matrix = linear.inverse().transpose();
-        Ok(local
+        let world: Vec<Triangle> = local
             .into_iter()
             .map(|t| Triangle {
                 vertices: t.vertices.map(|v| linear * v + self.translation),
                 normals: t.normals.map(|n| (normal_matrix * n).normalize_or_zero()),
                 material,
             })
-            .collect())
+            .collect();
+        let far = world
+            .iter()
+            .flat_map(|t| t.vertices)
+            .find(|v| v.abs().max_element() > MAX_WORLD_COORDINATE);
+        if let Some(v) = far {
+            // Huge coordinates in exponent form, the others as they are.
+            let shown = v.to_array().map(|c| match c.abs() < 1e6 {
+                true => c.to_string(),
+                false => format!("{c:e}"),
+            });
+            return Err(invalid(format!(
+                "a vertex lies at [{}] m, more than {MAX_WORLD_COORDINATE:e} m from the origin along an axis: check the mesh's units and `scale`",
+                shown.join(", ")
+            )));
+        }
+        Ok(world)
     }
 
     /// Checks the placement and the material.
@@ -226,6 +242,12 @@ pub enum ObjectError {
     #[error("object `{object}`: {message}")]
     InvalidSpec { object: String, message: String },
 }
+
+/// The farthest a vertex may lie from the world origin along an axis, in metres: ten
+/// times the farthest translation. Recordings are of rooms; a vertex beyond this is a
+/// mesh in the wrong units or a stray value, and would stretch the objects' bounds,
+/// which centre the light, far from the scene.
+pub const MAX_WORLD_COORDINATE: f32 = 1e5;
 
 impl VirtualScene {
     /// The scene of `specs` in world space: object k uses material k; BVH built.
@@ -345,5 +367,24 @@ mod tests {
         .unwrap_err();
         assert!(matches!(e, ObjectError::MeshUnreadable { .. }), "{e}");
         assert!(VirtualScene::from_specs(&[]).unwrap().is_empty());
+    }
+
+    #[test]
+    fn vertices_beyond_the_world_limit_are_an_error() {
+        let mut far = ObjectSpec::new(
+            "far",
+            Shape::Box {
+                size: Vec3::splat(30.0),
+            },
+        );
+        far.scale = 1e4;
+        let e = VirtualScene::from_specs(&[far.clone()]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "object `far`: a vertex lies at [150000, -150000, -150000] m, more than 1e5 m \
+             from the origin along an axis: check the mesh's units and `scale`"
+        );
+        far.scale = 1e3;
+        assert!(VirtualScene::from_specs(&[far]).is_ok());
     }
 }

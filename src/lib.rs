@@ -9,8 +9,10 @@
 //! - [`light`]: environment maps, importance-sample tables, area lights and SH9.
 //! - [`objects`]: virtual objects (meshes, primitives, materials) and ray queries.
 //! - [`raster`] and [`rng`]: the image buffer type and counter-based random numbers.
+//! - [`files`]: reading the files a user names, regular files only.
 
 pub mod eval;
+pub mod files;
 pub mod graph;
 pub mod light;
 pub mod objects;

@@ -62,7 +62,7 @@ impl Pipeline {
     /// Loads and checks the pipeline file at `path`.
     pub fn load(path: &Path, registry: &Registry) -> Result<Pipeline, ConfigError> {
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| {
+        let text = crate::files::read_regular_to_string(path).map_err(|e| {
             ConfigError::whole_file(&name, format!("cannot read the pipeline: {e}"))
         })?;
         Pipeline::parse(&SourceFile { name, text }, registry)

@@ -14,7 +14,7 @@ use std::path::Path;
 /// Errors name the file, what is wrong (unreadable, not OBJ, bad indices, non-finite
 /// positions, no triangles) and, where one line is at fault, the line.
 pub fn load_obj(path: &Path) -> Result<Vec<Triangle>, ObjectError> {
-    let bytes = std::fs::read(path).map_err(|source| ObjectError::MeshUnreadable {
+    let bytes = crate::files::read_regular(path).map_err(|source| ObjectError::MeshUnreadable {
         path: path.to_path_buf(),
         source,
     })?;

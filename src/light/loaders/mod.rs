@@ -64,7 +64,7 @@ pub fn load_envmap(path: impl AsRef<Path>) -> Result<EnvMap, LightError> {
 /// [`load_envmap`] with the count of texels set to 0.
 pub fn load_envmap_counted(path: impl AsRef<Path>) -> Result<LoadedEnvMap, LightError> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|source| LightError::Io {
+    let bytes = crate::files::read_regular(path).map_err(|source| LightError::Io {
         path: path.to_path_buf(),
         source,
     })?;

@@ -173,7 +173,7 @@ pub(crate) fn read_depth(path: &Path, store: StoreMode) -> Result<EncodedImage, 
 }
 
 fn read_image(path: &Path) -> Result<(EncodedImage, u16), ImportError> {
-    let bytes = std::fs::read(path).map_err(|source| ImportError::Io {
+    let bytes = crate::files::read_regular(path).map_err(|source| ImportError::Io {
         path: path.to_path_buf(),
         source,
     })?;

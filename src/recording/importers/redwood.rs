@@ -70,7 +70,7 @@ fn list_images(dir: &Path, extensions: &[&str]) -> Result<Vec<PathBuf>, ImportEr
 /// Reads a Redwood `.log` trajectory: 5-line records of `i j k` and a row-major 4x4
 /// camera-to-world matrix.
 pub fn read_trajectory(path: &Path) -> Result<Vec<Pose>, ImportError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ImportError::Io {
+    let text = crate::files::read_regular_to_string(path).map_err(|source| ImportError::Io {
         path: path.to_path_buf(),
         source,
     })?;

@@ -30,7 +30,7 @@ struct ListLine {
 /// Reads a TUM listing, skipping blank lines and `#` comments; checks each line has
 /// `fields` fields after the stamp.
 fn read_listing(path: &Path, fields: usize, what: &str) -> Result<Vec<ListLine>, ImportError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ImportError::Io {
+    let text = crate::files::read_regular_to_string(path).map_err(|source| ImportError::Io {
         path: path.to_path_buf(),
         source,
     })?;

@@ -12,7 +12,8 @@ use std::path::Path;
 
 /// Loads the OBJ file at `path` as triangles in its own coordinates (material 0).
 /// Errors name the file, what is wrong (unreadable, not OBJ, bad indices, non-finite
-/// positions, no triangles) and, where one line is at fault, the line.
+/// positions, no triangles or none with an area) and, where one line is at fault, the
+/// line.
 pub fn load_obj(path: &Path) -> Result<Vec<Triangle>, ObjectError> {
     let bytes = crate::files::read_regular(path).map_err(|source| ObjectError::MeshUnreadable {
         path: path.to_path_buf(),

@@ -333,6 +333,50 @@ fn replay_copes_with_extreme_stamps() {
     }
 }
 
+/// A pose record that is intact (its CRC holds) but not a rigid transform is an error
+/// naming the record, so that --verify counts it and --skip-corrupt skips it.
+#[test]
+fn poses_that_are_not_rigid_are_refused_when_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("poses.relume");
+    let bad = |translation: [f64; 3], rotation: [f64; 4]| {
+        Record::Pose(PoseRecord {
+            stamp_ns: FRAME_STAMPS[0],
+            pose: Pose {
+                translation,
+                rotation,
+            },
+        })
+    };
+    let recs = vec![
+        bad([0.0; 3], [0.0, 0.0, 0.0, 2.0]),
+        bad([0.0; 3], [0.0; 4]),
+        bad([f64::NAN, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]),
+        bad([0.0; 3], [0.0, f64::INFINITY, 0.0, 1.0]),
+        pose(1),
+    ];
+    write_recording(&path, &header(), &recs);
+    let rec = Recording::open(&path).unwrap();
+    let reason = |i: usize| match rec.read_record(i) {
+        Err(RecordingError::Decode { record, reason, .. }) => {
+            assert_eq!(record, i);
+            reason
+        }
+        other => panic!("record {i}: {other:?}"),
+    };
+    assert_eq!(
+        reason(0),
+        "the pose's rotation quaternion has length 2.0000, expected 1"
+    );
+    assert_eq!(
+        reason(1),
+        "the pose's rotation quaternion has length 0.0000, expected 1"
+    );
+    assert!(reason(2).starts_with("the pose holds a non-finite value"));
+    assert!(reason(3).starts_with("the pose holds a non-finite value"));
+    assert_eq!(rec.read_record(4).unwrap(), pose(1));
+}
+
 /// Writes the seed corpus of the fuzz target (`fuzz/seeds/reader`): a complete
 /// recording, the same without its footer, and one with a corrupt record (no `.relume`
 /// extension: git ignores those). Run with

@@ -114,7 +114,21 @@ impl Recording {
         Ok(match entry.kind {
             StreamKind::Color => Record::Color(self.decode::<ColorRecord>(&payload, i, what, at)?),
             StreamKind::Depth => Record::Depth(self.decode::<DepthRecord>(&payload, i, what, at)?),
-            StreamKind::Pose => Record::Pose(self.decode::<PoseRecord>(&payload, i, what, at)?),
+            StreamKind::Pose => {
+                let record = self.decode::<PoseRecord>(&payload, i, what, at)?;
+                // The CRC says the bytes are as written, not that a writer wrote a pose.
+                record
+                    .pose
+                    .check()
+                    .map_err(|reason| RecordingError::Decode {
+                        path: self.path.clone(),
+                        record: i,
+                        kind: what,
+                        offset: at,
+                        reason,
+                    })?;
+                Record::Pose(record)
+            }
             StreamKind::Truth => {
                 Record::Truth(Box::new(self.decode::<TruthRecord>(&payload, i, what, at)?))
             }

@@ -212,6 +212,29 @@ impl Pose {
         DVec3::from_array(self.translation)
     }
 
+    /// `Err` saying why this is not a rigid transform: a non-finite value, or a rotation
+    /// whose quaternion is not of unit length (within 1e-3; writers store it normalised).
+    pub fn check(&self) -> Result<(), String> {
+        if !self
+            .translation
+            .iter()
+            .chain(&self.rotation)
+            .all(|v| v.is_finite())
+        {
+            return Err(format!(
+                "the pose holds a non-finite value (translation {:?}, rotation {:?})",
+                self.translation, self.rotation
+            ));
+        }
+        let length = self.rotation().length();
+        if (length - 1.0).abs() > 1e-3 {
+            return Err(format!(
+                "the pose's rotation quaternion has length {length:.4}, expected 1"
+            ));
+        }
+        Ok(())
+    }
+
     pub fn rotation(&self) -> DQuat {
         DQuat::from_array(self.rotation)
     }

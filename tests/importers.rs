@@ -263,6 +263,25 @@ fn redwood_errors_name_file_and_line() {
     assert!(e.contains("holds 2 images but"), "{e}");
     let e = redwood_error(IDENTITY_RECORD, |dir| std::fs::remove_dir_all(dir).unwrap());
     assert!(e.ends_with("/rw: no such directory"), "{e}");
+    // Rates whose stamps k / fps would collapse to one nanosecond or overflow.
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("rw");
+    write_redwood(&dir, 2, IDENTITY_RECORD);
+    for fps in [1e10, 1e-12, 0.0, f64::NAN] {
+        let options = RedwoodOptions {
+            fps,
+            ..RedwoodOptions::default()
+        };
+        let e = redwood::import(&dir, &tmp.path().join("r.relume"), &options, &mut |_, _| {})
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: --fps must be a number from 0.001 to 1e6 (stamps are k / fps in nanoseconds), got {fps}",
+                dir.display()
+            )
+        );
+    }
     let tmp = tempfile::tempdir().unwrap();
     let missing = tmp.path().join("tum");
     let e = tum::import(

@@ -341,6 +341,10 @@ fn bad_settings_are_errors_and_write_nothing() {
             ..small(64, 48, 1)
         },
         SynthConfig {
+            fps: 1e10,
+            ..small(64, 48, 1)
+        },
+        SynthConfig {
             exposure_range: (1.0, 0.5),
             ..small(64, 48, 1)
         },

@@ -17,3 +17,7 @@ pub use reader::Recording;
 pub use replay::{FrameRecords, Replay, ReplayOptions};
 pub use types::*;
 pub use writer::RecordingWriter;
+
+/// The frame rates that stamping frame k at k / fps accepts: from one frame in 1000 s
+/// to a million frames a second, so that stamps stay distinct in nanoseconds.
+pub const FPS_RANGE: std::ops::RangeInclusive<f64> = 0.001..=1e6;

@@ -183,10 +183,13 @@ pub fn import(
     options: &RedwoodOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ImportSummary, ImportError> {
-    if !(options.fps.is_finite() && options.fps > 0.0) {
+    if !crate::recording::FPS_RANGE.contains(&options.fps) {
         return Err(file_error(
             dir,
-            format!("--fps must be positive, got {}", options.fps),
+            format!(
+                "--fps must be a number from 0.001 to 1e6 (stamps are k / fps in nanoseconds), got {}",
+                options.fps
+            ),
         ));
     }
     check_dataset_dir(dir)?;

@@ -130,9 +130,9 @@ impl SynthConfig {
                 codec::MAX_PIXELS
             ));
         }
-        if !(self.fps.is_finite() && self.fps >= 0.001) {
+        if !crate::recording::FPS_RANGE.contains(&self.fps) {
             return Err(format!(
-                "fps must be a number of at least 0.001, not {}",
+                "fps must be a number from 0.001 to 1e6, not {}",
                 self.fps
             ));
         }

@@ -421,7 +421,8 @@ fn output_options_that_cannot_work_fail_before_the_run() {
         assert_eq!(stderr(&o), expected, "{options:?}");
         assert_eq!(stdout(&o), "", "{options:?}: nothing ran");
     }
-    // A write stage's `dir` stays under --out.
+    // A write stage's `dir` stays under --out, and it writes something: both are
+    // checked when the pipeline loads, before anything runs.
     for dir in ["../escape", "/tmp/escape"] {
         let pipeline = format!(
             "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"write\"\nparams = {{ dir = {dir:?}, products = [\"color\"] }}\n"
@@ -429,13 +430,31 @@ fn output_options_that_cannot_work_fail_before_the_run() {
         std::fs::write(d.join("w.toml"), pipeline).unwrap();
         let o = run_in(d, &["replay", "small.relume", "-p", "w.toml"]);
         assert_eq!(o.status.code(), Some(1));
+        let first_line = stderr(&o).lines().next().unwrap_or_default().to_string();
         assert_eq!(
-            stderr(&o),
+            first_line,
             format!(
-                "error: replay of small.relume stopped: w.toml:3: stage `write` could not be \
-                 set up: dir = {dir:?} must be a folder under the output directory (--out): \
-                 no absolute path, no `..`\n"
+                "error: w.toml:5:18: dir = {dir:?} must be a folder under the output directory \
+                 (--out): no absolute path, no `..`"
             )
+        );
+        assert_eq!(stdout(&o), "", "nothing ran");
+    }
+    for list in ["products = []", "formats = []"] {
+        let pipeline = format!(
+            "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"write\"\nparams = {{ {list} }}\n"
+        );
+        std::fs::write(d.join("w.toml"), pipeline).unwrap();
+        let o = run_in(d, &["validate", "w.toml"]);
+        assert_eq!(o.status.code(), Some(1), "{list}");
+        let name = list.split(' ').next().unwrap();
+        assert!(
+            stderr(&o).starts_with(&format!(
+                "error: w.toml:5:{}: parameter `{name}` is empty: name at least one\n",
+                10 + list.len()
+            )),
+            "{}",
+            stderr(&o)
         );
     }
     let o = run_in(

@@ -532,6 +532,14 @@ fn check_value(
                     }
                 }
             }
+            // A list names what to do; an empty one would make its stage do nothing.
+            if out.is_empty() {
+                return Err(src.error(
+                    value.span.clone(),
+                    format!("parameter `{}` is empty: name at least one", spec.name),
+                    Some(format!("{}; default {}", spec.doc, spec.default_value())),
+                ));
+            }
             ParamValue::StrList(out)
         }
         _ => return Err(wrong_type()),

@@ -44,9 +44,27 @@ const PARAMS: &[ParamSpec] = &[
         "dir",
         ParamDefault::Str(""),
         "sub-directory of the output directory (--out) to write into",
-    ),
+    )
+    .checked(check_dir),
     ParamSpec::new("every", ParamDefault::Int(1), "write every n-th frame only").range(1.0, 1e9),
 ];
+
+/// `dir` is a folder under --out: an absolute path or `..` would write elsewhere.
+fn check_dir(dir: &str) -> Result<(), String> {
+    let inside = Path::new(dir).components().all(|c| {
+        matches!(
+            c,
+            std::path::Component::Normal(_) | std::path::Component::CurDir
+        )
+    });
+    match inside {
+        true => Ok(()),
+        false => Err(format!(
+            "dir = {dir:?} must be a folder under the output directory (--out): no absolute \
+             path, no `..`"
+        )),
+    }
+}
 
 pub const INFO: StageInfo = StageInfo {
     kind: "write",
@@ -55,21 +73,8 @@ pub const INFO: StageInfo = StageInfo {
     ports,
     build: |ctx| {
         let p = ctx.params;
-        // `dir` is a folder under --out: an absolute path or `..` would write elsewhere.
-        let sub = Path::new(p.str("dir"));
-        if sub.components().any(|c| {
-            !matches!(
-                c,
-                std::path::Component::Normal(_) | std::path::Component::CurDir
-            )
-        }) {
-            return Err(StageError::Failed(format!(
-                "dir = {:?} must be a folder under the output directory (--out): no absolute \
-                 path, no `..`",
-                p.str("dir")
-            )));
-        }
-        let dir = ctx.out_dir.join(sub);
+        check_dir(p.str("dir")).map_err(StageError::Failed)?;
+        let dir = ctx.out_dir.join(p.str("dir"));
         let products: Vec<(String, PathBuf)> = p
             .str_list("products")
             .iter()

@@ -43,7 +43,8 @@ pub struct ReplayArgs {
     /// Directory that `write` stages save into.
     #[arg(short, long, default_value = "out")]
     out: PathBuf,
-    /// Write per-frame timings of every stage (.csv, or .json).
+    /// Write per-frame timings of every stage (FILE.csv or FILE.json: the extension picks
+    /// the format).
     #[arg(long, value_name = "FILE")]
     timings: Option<PathBuf>,
     /// Write a Chrome trace (open it in Perfetto or chrome://tracing).
@@ -58,7 +59,7 @@ pub struct ReplayArgs {
     /// pipeline. `relume stages` says what each stage produces.
     #[arg(long, value_delimiter = ',', value_name = "PRODUCTS")]
     save: Vec<String>,
-    /// File formats for --save: png (for viewing), exr (f32 values), or both.
+    /// File formats for --save: png (for viewing), exr (f32 values), or both (png,exr).
     #[arg(long, value_delimiter = ',', default_value = "png", value_parser = ["png", "exr"])]
     save_format: Vec<String>,
     /// After the run, save the last frame's environment-sample cloud as a binary PLY
@@ -229,6 +230,25 @@ fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
 
 /// An error when a comma-separated option names an entry twice (two writers would race
 /// for one file).
+/// An error before the run when --save names a product no stage of `pipeline` makes.
+fn check_saved_products(pipeline: &Pipeline, names: &[String]) -> anyhow::Result<()> {
+    let made: Vec<&str> = pipeline
+        .stages
+        .iter()
+        .flat_map(|s| s.outputs.values().map(String::as_str))
+        .collect();
+    for name in names.iter().filter(|n| *n != "all") {
+        if !made.contains(&name.as_str()) {
+            bail!(
+                "--save: pipeline `{}` makes no product `{name}`; it makes: {}",
+                pipeline.name,
+                made.join(", ")
+            );
+        }
+    }
+    Ok(())
+}
+
 fn check_no_repeats(option: &str, names: &[String]) -> anyhow::Result<()> {
     for (i, name) in names.iter().enumerate() {
         if names[..i].contains(name) {
@@ -242,16 +262,31 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
     // The options first: loading may render the built-in recording.
     check_no_repeats("--save", &a.save)?;
     check_no_repeats("--save-format", &a.save_format)?;
-    for (option, path) in [
-        ("--timings", &a.timings),
-        ("--trace", &a.trace),
-        ("--export-cloud", &a.export_cloud),
-    ] {
-        if let Some(path) = path {
-            check_output_file(option, path)?;
+    let outputs = [
+        ("--timings", &a.timings, &["csv", "json"][..]),
+        ("--trace", &a.trace, &["json"][..]),
+        ("--export-cloud", &a.export_cloud, &["ply"][..]),
+    ];
+    for (i, (option, path, extensions)) in outputs.iter().enumerate() {
+        let Some(path) = path else { continue };
+        check_output_file(option, path)?;
+        let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+        if !extensions.iter().any(|e| e.eq_ignore_ascii_case(extension)) {
+            bail!(
+                "{option} {}: the file name must end in .{}",
+                path.display(),
+                extensions.join(" or .")
+            );
+        }
+        if let Some((other, _, _)) = outputs[..i]
+            .iter()
+            .find(|(_, p, _)| p.as_ref() == Some(path))
+        {
+            bail!("{other} and {option} name the same file {}", path.display());
         }
     }
     let loaded = load(&a.run)?;
+    check_saved_products(&loaded.pipeline, &a.save)?;
     if a.export_cloud.is_some()
         && !loaded
             .pipeline

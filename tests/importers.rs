@@ -167,15 +167,21 @@ fn tum_errors_name_file_and_line() {
         e,
         "groundtruth.txt:4: expected `timestamp tx ty tz qx qy qz qw` (8 fields), found 7 field(s): \"1305031102.0 1 2 3 0 0 0\""
     );
-    let e = tum_error(|d| edit_line(&d.join("groundtruth.txt"), 5, "1305031102.0 1 2 3 0 0 0 2"));
+    let e = tum_error(|d| edit_line(&d.join("groundtruth.txt"), 5, "1305031101.5 1 2 3 0 0 0 2"));
     assert_eq!(
         e,
         "groundtruth.txt:5: quaternion qx qy qz qw has length 2.0000, expected 1"
     );
-    let e = tum_error(|d| edit_line(&d.join("rgb.txt"), 4, "1305031102.066667 rgb/missing.png"));
+    let e = tum_error(|d| edit_line(&d.join("rgb.txt"), 4, "1305031102.050000 rgb/missing.png"));
     assert!(
         e.starts_with("rgb.txt:4: image ") && e.ends_with("rgb/missing.png does not exist"),
         "{e}"
+    );
+    // Two lines at one stamp (the test's stamps start at T0 on line 3 of rgb.txt).
+    let e = tum_error(|d| edit_line(&d.join("rgb.txt"), 4, &format!("{T0:.6} rgb/1.png")));
+    assert_eq!(
+        e,
+        "rgb.txt:4: the same timestamp as line 3: each line needs a stamp of its own"
     );
     let e = tum_error(|d| edit_line(&d.join("depth.txt"), 1, "12:00 depth/0.png"));
     assert_eq!(
@@ -248,6 +254,10 @@ fn redwood_errors_name_file_and_line() {
         (
             format!("0 0 x\n{IDENTITY_RECORD}"),
             "trajectory.log:1: expected three integers starting a pose record, found \"0 0 x\"",
+        ),
+        (
+            format!("0 0 1\n{IDENTITY_RECORD}0 0 1\n{IDENTITY_RECORD}"),
+            "trajectory.log:6: record 1 is for frame 0: records must list frames 0, 1, 2, ... in order, one each",
         ),
         (
             "0 0 1\n2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n".to_string(),

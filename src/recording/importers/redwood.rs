@@ -68,7 +68,8 @@ fn list_images(dir: &Path, extensions: &[&str]) -> Result<Vec<PathBuf>, ImportEr
 }
 
 /// Reads a Redwood `.log` trajectory: 5-line records of `i j k` and a row-major 4x4
-/// camera-to-world matrix.
+/// camera-to-world matrix. Record k is frame k's pose, so its `i` must be k: poses are
+/// paired with the images by their place in the file.
 pub fn read_trajectory(path: &Path) -> Result<Vec<Pose>, ImportError> {
     let text = crate::files::read_regular_to_string(path).map_err(|source| ImportError::Io {
         path: path.to_path_buf(),
@@ -92,7 +93,7 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<Pose>, ImportError> {
         ));
     }
     let mut poses = Vec::with_capacity(lines.len() / 5);
-    for record in lines.chunks_exact(5) {
+    for (k, record) in lines.chunks_exact(5).enumerate() {
         let (line, ids) = record[0];
         let ints: Vec<&str> = ids.split_whitespace().collect();
         if ints.len() != 3 || ints.iter().any(|v| v.parse::<i64>().is_err()) {
@@ -100,6 +101,16 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<Pose>, ImportError> {
                 path,
                 line,
                 format!("expected three integers starting a pose record, found {ids:?}"),
+            ));
+        }
+        if ints[0].parse::<i64>() != Ok(k as i64) {
+            return Err(line_error(
+                path,
+                line,
+                format!(
+                    "record {k} is for frame {}: records must list frames 0, 1, 2, ... in order, one each",
+                    ints[0]
+                ),
             ));
         }
         let mut rows = [DVec4::ZERO; 4];

@@ -28,7 +28,8 @@ struct ListLine {
 }
 
 /// Reads a TUM listing, skipping blank lines and `#` comments; checks each line has
-/// `fields` fields after the stamp.
+/// `fields` fields after the stamp, and that no two lines share a stamp (replay could
+/// not tell their images or poses apart). Lines may come in any order.
 fn read_listing(path: &Path, fields: usize, what: &str) -> Result<Vec<ListLine>, ImportError> {
     let text = crate::files::read_regular_to_string(path).map_err(|source| ImportError::Io {
         path: path.to_path_buf(),
@@ -68,6 +69,16 @@ fn read_listing(path: &Path, fields: usize, what: &str) -> Result<Vec<ListLine>,
             stamp_ns,
             fields: parts[1..].iter().map(|s| s.to_string()).collect(),
         });
+    }
+    let mut by_stamp: Vec<(i64, usize)> = out.iter().map(|l| (l.stamp_ns, l.line)).collect();
+    by_stamp.sort_unstable();
+    if let Some(pair) = by_stamp.windows(2).find(|w| w[0].0 == w[1].0) {
+        let (first, second) = (pair[0].1, pair[1].1);
+        return Err(line_error(
+            path,
+            second,
+            format!("the same timestamp as line {first}: each line needs a stamp of its own"),
+        ));
     }
     Ok(out)
 }

@@ -477,6 +477,32 @@ fn output_options_that_cannot_work_fail_before_the_run() {
 }
 
 #[test]
+fn a_frame_range_past_the_end_is_cut_with_a_note() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 2);
+    std::fs::write(d.join("p.toml"), "[[stage]]\nkind = \"decode\"\n").unwrap();
+    let run = |frames: &str| {
+        let o = run_in(
+            d,
+            &["replay", "small.relume", "-p", "p.toml", "--frames", frames],
+        );
+        assert_eq!(o.status.code(), Some(0), "{frames}");
+        assert!(
+            stdout(&o).contains("1 frames in"),
+            "{frames}: {}",
+            stdout(&o)
+        );
+        stderr(&o)
+    };
+    assert_eq!(
+        run("1..100"),
+        "note: --frames ends at 100 but small.relume has 2 frames: replaying 1..2\n"
+    );
+    assert_eq!(run("1.."), "", "an open end is the last frame");
+}
+
+#[test]
 fn an_interrupted_synth_leaves_no_partial_file() {
     for signal in ["-INT", "-TERM"] {
         let tmp = tempfile::tempdir().unwrap();

@@ -144,6 +144,17 @@ pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
             replay.len()
         );
     }
+    // An open end (`A..`) means the last frame; an explicit one past it is worth a word.
+    if frames.end != usize::MAX && frames.end > replay.len() {
+        eprintln!(
+            "note: --frames ends at {} but {} has {} frames: replaying {}..{}",
+            frames.end,
+            path.display(),
+            replay.len(),
+            frames.start,
+            replay.len()
+        );
+    }
     let frames = frames.start..frames.end.min(replay.len());
     Ok(Loaded {
         replay,

@@ -82,7 +82,12 @@ fn every_cut_point_recovers_exactly_the_complete_records() {
                             "cut {cut}: {what}"
                         )
                     }
-                    None => assert_eq!(what, "the index footer is missing", "cut {cut}"),
+                    None => assert_eq!(
+                        what,
+                        "the index footer is missing (the file was cut short, or has bytes \
+                         appended)",
+                        "cut {cut}"
+                    ),
                 }
             }
             other => panic!("cut {cut}: {other:?}"),

@@ -210,21 +210,30 @@ impl Recording {
 
     /// Reads the index footer through the trailer; any problem is reported, not fatal.
     fn read_footer(&self, body_start: u64) -> Result<Vec<IndexEntry>, RecordingError> {
-        let no_footer = |reason: String| self.truncated(self.file_len, reason);
+        let no_footer = || {
+            self.truncated(
+                self.file_len,
+                "the index footer is missing (the file was cut short, or has bytes appended)"
+                    .into(),
+            )
+        };
         if self.file_len < body_start + TRAILER_LEN {
-            return Err(no_footer("the index footer is missing".into()));
+            return Err(no_footer());
         }
         let trailer_at = self.file_len - TRAILER_LEN;
         let mut t = [0u8; TRAILER_LEN as usize];
         self.read_exact_at(&mut t, trailer_at)?;
         if t[8..] != TRAILER_MAGIC {
-            return Err(no_footer("the index footer is missing".into()));
+            return Err(no_footer());
         }
         let footer_at = u64::from_le_bytes(t[..8].try_into().expect("8 bytes"));
         if footer_at < body_start || footer_at > trailer_at.saturating_sub(FRAME_HEADER_LEN) {
             return Err(self.corrupt(
                 trailer_at,
-                format!("the trailer points outside the file (byte {footer_at})"),
+                format!(
+                    "the trailer points to byte {footer_at}, outside the records (bytes {body_start} to {})",
+                    trailer_at.saturating_sub(FRAME_HEADER_LEN)
+                ),
             ));
         }
         let (frame, payload) = self.read_frame_at(footer_at, "the index footer")?;

@@ -177,6 +177,8 @@ fn tum_errors_name_file_and_line() {
         e.starts_with("rgb.txt:4: image ") && e.ends_with("rgb/missing.png does not exist"),
         "{e}"
     );
+    let e = tum_error(|d| edit_line(&d.join("rgb.txt"), 4, "1305031102.050000 rgb"));
+    assert_eq!(e, "rgb.txt:4: image rgb is a folder, not an image");
     // Two lines at one stamp (the test's stamps start at T0 on line 3 of rgb.txt).
     let e = tum_error(|d| edit_line(&d.join("rgb.txt"), 4, &format!("{T0:.6} rgb/1.png")));
     assert_eq!(

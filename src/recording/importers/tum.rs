@@ -151,15 +151,17 @@ pub fn import(
         .collect::<Result<Vec<_>, ImportError>>()?;
     let image_path = |list: &Path, l: &ListLine| -> Result<PathBuf, ImportError> {
         let path = dir.join(&l.fields[0]);
-        if path.is_file() {
-            Ok(path)
-        } else {
-            Err(line_error(
-                list,
-                l.line,
-                format!("image {} does not exist", path.display()),
-            ))
-        }
+        let problem = match std::fs::metadata(&path) {
+            Ok(m) if m.is_file() => return Ok(path),
+            Ok(m) if m.is_dir() => "is a folder, not an image",
+            Ok(_) => "is not a regular file",
+            Err(_) => "does not exist",
+        };
+        Err(line_error(
+            list,
+            l.line,
+            format!("image {} {problem}", path.display()),
+        ))
     };
     // The first image of each stream fixes the sensor size for the header.
     let first_color = read_color(&image_path(&rgb_list, &colors[0])?, options.store)?;

@@ -158,6 +158,37 @@ fn a_flipped_payload_bit_is_a_checksum_error_naming_the_record() {
     }
 }
 
+/// A frame header whose stamp differs from the index's, with the checksum made to fit
+/// (as a buggy writer could leave it), is a corrupt record, not a silent reorder.
+#[test]
+fn a_stamp_that_disagrees_with_the_index_is_a_corrupt_record() {
+    let s = Sample::new();
+    let e = s.index[0];
+    let mut bytes = s.bytes.clone();
+    let at = e.offset as usize;
+    let stamp = e.stamp_ns + 5;
+    bytes[at + 12..at + 20].copy_from_slice(&stamp.to_le_bytes());
+    let end = at + FRAME_HEADER_LEN as usize + e.len as usize;
+    let crc = crc32fast::hash(&bytes[at + 8..end]);
+    bytes[at + 4..at + 8].copy_from_slice(&crc.to_le_bytes());
+    let path = s.variant("restamped.relume", &bytes);
+    let rec = Recording::open(&path).unwrap();
+    match rec.read_record(0) {
+        Err(RecordingError::Corrupt { offset, reason, .. }) => {
+            assert_eq!(offset, e.offset);
+            assert_eq!(
+                reason,
+                format!(
+                    "record 0 is stamped {stamp} ns in its frame header but {} ns in the index",
+                    e.stamp_ns
+                )
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(rec.read_record(1).unwrap(), s.records[1]);
+}
+
 #[test]
 fn a_corrupt_header_fails_to_open() {
     let s = Sample::new();

@@ -110,8 +110,18 @@ impl Recording {
             ));
         }
         self.check_crc(&frame, &payload, i, what, entry.offset)?;
+        // The checksum holds, so the stamps are as written; a writer wrote them equal.
+        if frame.stamp_ns != entry.stamp_ns {
+            return Err(self.corrupt(
+                entry.offset,
+                format!(
+                    "record {i} is stamped {} ns in its frame header but {} ns in the index",
+                    frame.stamp_ns, entry.stamp_ns
+                ),
+            ));
+        }
         let at = entry.offset;
-        Ok(match entry.kind {
+        let record = match entry.kind {
             StreamKind::Color => Record::Color(self.decode::<ColorRecord>(&payload, i, what, at)?),
             StreamKind::Depth => Record::Depth(self.decode::<DepthRecord>(&payload, i, what, at)?),
             StreamKind::Pose => {
@@ -132,7 +142,20 @@ impl Recording {
             StreamKind::Truth => {
                 Record::Truth(Box::new(self.decode::<TruthRecord>(&payload, i, what, at)?))
             }
-        })
+        };
+        // Replay orders frames by the index's stamps, and by the headers' without an
+        // index: the record's own stamp must agree with both.
+        if record.stamp_ns() != frame.stamp_ns {
+            return Err(self.corrupt(
+                at,
+                format!(
+                    "record {i} ({what}) is stamped {} ns, but its frame header says {} ns",
+                    record.stamp_ns(),
+                    frame.stamp_ns
+                ),
+            ));
+        }
+        Ok(record)
     }
 
     fn read_preamble(&mut self) -> Result<(), RecordingError> {

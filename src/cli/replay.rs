@@ -239,8 +239,6 @@ fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// An error when a comma-separated option names an entry twice (two writers would race
-/// for one file).
 /// An error before the run when --save names a product no stage of `pipeline` makes.
 fn check_saved_products(pipeline: &Pipeline, names: &[String]) -> anyhow::Result<()> {
     let made: Vec<&str> = pipeline
@@ -260,6 +258,8 @@ fn check_saved_products(pipeline: &Pipeline, names: &[String]) -> anyhow::Result
     Ok(())
 }
 
+/// An error when a comma-separated option names an entry twice (two writers would race
+/// for one file).
 fn check_no_repeats(option: &str, names: &[String]) -> anyhow::Result<()> {
     for (i, name) in names.iter().enumerate() {
         if names[..i].contains(name) {

@@ -503,6 +503,23 @@ fn a_frame_range_past_the_end_is_cut_with_a_note() {
 }
 
 #[test]
+fn an_absurd_thread_count_is_an_error_not_a_crash() {
+    let tmp = tempfile::tempdir().unwrap();
+    let o = common::relume()
+        .args(["stages"])
+        .current_dir(tmp.path())
+        .env("RAYON_NUM_THREADS", "20000")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stderr(&o),
+        "error: RAYON_NUM_THREADS=20000 asks for more than 1024 worker threads; leave it \
+         unset for one per core\n"
+    );
+}
+
+#[test]
 fn an_interrupted_synth_leaves_no_partial_file() {
     for signal in ["-INT", "-TERM"] {
         let tmp = tempfile::tempdir().unwrap();

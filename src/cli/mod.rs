@@ -123,9 +123,29 @@ pub fn report(error: &anyhow::Error) -> String {
     message
 }
 
+/// The most worker threads `RAYON_NUM_THREADS` may ask for. Far more than any machine
+/// has cores; tens of thousands exhaust memory while the threads start.
+const MAX_THREADS: usize = 1024;
+
+/// An error when `RAYON_NUM_THREADS` asks for more than [`MAX_THREADS`] threads (rayon
+/// ignores values that are not a number, and 0 means one per core).
+fn check_thread_count() -> anyhow::Result<()> {
+    let requested = std::env::var("RAYON_NUM_THREADS")
+        .ok()
+        .and_then(|v| v.trim().parse::<u64>().ok());
+    if let Some(n) = requested.filter(|&n| n > MAX_THREADS as u64) {
+        anyhow::bail!(
+            "RAYON_NUM_THREADS={n} asks for more than {MAX_THREADS} worker threads; leave it \
+             unset for one per core"
+        );
+    }
+    Ok(())
+}
+
 /// Runs the command line; returns the exit code.
 pub fn main() -> anyhow::Result<i32> {
     let cli = Cli::parse();
+    check_thread_count()?;
     interrupt::install();
     let command = cli
         .command

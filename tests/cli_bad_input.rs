@@ -98,6 +98,66 @@ fn a_corrupt_record_stops_replay_unless_skipped() {
     assert!(stdout(&o).contains("1 corrupt"), "{}", stdout(&o));
 }
 
+/// An image whose bytes are damaged but whose checksum was made to fit: `--verify`
+/// counts it, and `--skip-corrupt` skips its frame rather than stopping in `decode`.
+#[test]
+fn an_image_that_does_not_decode_is_skipped_like_a_corrupt_record() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let path = small_recording(d, 4);
+    let rec = Recording::open(&path).unwrap();
+    let (record, entry) = rec
+        .index()
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| e.kind == StreamKind::Depth)
+        .nth(1)
+        .map(|(i, e)| (i, *e))
+        .unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let (start, end) = (
+        entry.offset as usize + 20,
+        entry.offset as usize + 20 + entry.len as usize,
+    );
+    // The PNG signature sits near the start of the image bytes in the payload.
+    let png = start
+        + bytes[start..end]
+            .windows(4)
+            .position(|w| w == b"\x89PNG")
+            .unwrap();
+    bytes[png + 1] ^= 0xFF;
+    let crc = crc32fast::hash(&bytes[entry.offset as usize + 8..end]);
+    bytes[entry.offset as usize + 4..entry.offset as usize + 8].copy_from_slice(&crc.to_le_bytes());
+    std::fs::write(&path, bytes).unwrap();
+
+    let o = run_in(d, &["replay", "small.relume", "--hash", "--out", "o"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("stage `decode` (decode) failed at frame 1"),
+        "{}",
+        stderr(&o)
+    );
+    let o = ok(run_in(
+        d,
+        &[
+            "replay",
+            "small.relume",
+            "--hash",
+            "--out",
+            "o",
+            "--skip-corrupt",
+        ],
+    ));
+    let frames: Vec<String> = stdout(&o).lines().map(|l| l[..6].to_string()).collect();
+    assert_eq!(frames, ["000000", "000002", "000003"]);
+    let expected = format!(
+        "skipped corrupt frame 1: small.relume: record {record} (depth) at byte {} cannot be \
+         decoded: cannot decode its image: ",
+        entry.offset
+    );
+    assert!(stderr(&o).contains(&expected), "{}", stderr(&o));
+}
+
 #[test]
 fn a_truncated_recording_replays_its_complete_frames() {
     let tmp = tempfile::tempdir().unwrap();

@@ -28,7 +28,8 @@ pub struct RunArgs {
     /// Frames to replay: A..B (B excluded), A.., ..B or a single index N.
     #[arg(long, value_parser = parse_frames)]
     pub(super) frames: Option<Range<usize>>,
-    /// Skip (and count) frames with corrupt records instead of stopping with an error.
+    /// Skip (and count) frames with corrupt records, or with images that do not decode
+    /// (as inspect --verify finds them), instead of stopping with an error.
     #[arg(long)]
     pub(super) skip_corrupt: bool,
     /// Seed for stages that draw random numbers.

@@ -29,6 +29,11 @@ pub trait FrameSource: Sync {
     }
     /// Reads frame `n` with its source products.
     fn read(&self, n: usize) -> Result<Frame, RecordingError>;
+    /// [`FrameSource::read`], also checking what a stage would find unreadable (images
+    /// that do not decode), so that `skip_corrupt` can skip such frames too.
+    fn read_checked(&self, n: usize) -> Result<Frame, RecordingError> {
+        self.read(n)
+    }
 }
 
 impl FrameSource for Replay {
@@ -37,14 +42,24 @@ impl FrameSource for Replay {
     }
 
     fn read(&self, n: usize) -> Result<Frame, RecordingError> {
-        let records = self.read_frame(n)?;
-        let mut frame = Frame::new(n, records.stamp_ns);
-        frame.insert(
-            super::pipeline::SOURCE_PRODUCT,
-            Product::Record(Arc::new(records)),
-        );
-        Ok(frame)
+        Ok(source_frame(n, self.read_frame(n)?))
     }
+
+    fn read_checked(&self, n: usize) -> Result<Frame, RecordingError> {
+        let records = self.read_frame(n)?;
+        self.check_images(n, &records)?;
+        Ok(source_frame(n, records))
+    }
+}
+
+/// Frame `n` holding its records as the source product.
+fn source_frame(n: usize, records: crate::recording::FrameRecords) -> Frame {
+    let mut frame = Frame::new(n, records.stamp_ns);
+    frame.insert(
+        super::pipeline::SOURCE_PRODUCT,
+        Product::Record(Arc::new(records)),
+    );
+    frame
 }
 
 /// Why a run stopped early.
@@ -309,7 +324,13 @@ fn source_loop(
             return (timings, true);
         }
         let start = Instant::now();
-        let frame = match catch_unwind(AssertUnwindSafe(|| source.read(n))) {
+        // Skipping corrupt frames means checking their images here, before a stage
+        // fails on them (a second decode, in this recovery mode only).
+        let read = || match options.skip_corrupt {
+            true => source.read_checked(n),
+            false => source.read(n),
+        };
+        let frame = match catch_unwind(AssertUnwindSafe(read)) {
             Ok(Ok(mut frame)) => {
                 frame.entered = start;
                 frame

@@ -2,6 +2,7 @@
 //! by seeking through the index.
 
 use super::association::{AssociationStats, FrameRef, associate};
+use super::codec;
 use super::error::RecordingError;
 use super::reader::Recording;
 use super::types::{ColorRecord, DepthRecord, Pose, Record, StreamKind, TruthRecord};
@@ -93,6 +94,33 @@ impl Replay {
     }
 
     /// Reads frame `n`'s records (a seek per record, no scan).
+    /// An error naming the record when frame `n`'s color or depth image (`records`, as
+    /// [`Replay::read_frame`] gave them) does not decode, as `inspect --verify` finds:
+    /// the checksum says the bytes are as written, not that they are an image.
+    pub fn check_images(&self, n: usize, records: &FrameRecords) -> Result<(), RecordingError> {
+        let Some(f) = self.frames.get(n) else {
+            return Ok(());
+        };
+        let color = codec::decode_color(&records.color.image).map(drop);
+        let depth = records
+            .depth
+            .as_ref()
+            .map_or(Ok(()), |d| codec::decode_depth_units(&d.image).map(drop));
+        for (record, result) in [(Some(f.color), color), (f.depth, depth)] {
+            if let (Some(i), Err(e)) = (record, result) {
+                let entry = self.recording.index()[i];
+                return Err(RecordingError::Decode {
+                    path: self.recording.path().to_path_buf(),
+                    record: i,
+                    kind: entry.kind.name(),
+                    offset: entry.offset,
+                    reason: format!("cannot decode its image: {e}"),
+                });
+            }
+        }
+        Ok(())
+    }
+
     pub fn read_frame(&self, n: usize) -> Result<FrameRecords, RecordingError> {
         let f = self
             .frames

@@ -93,7 +93,6 @@ impl Replay {
         }
     }
 
-    /// Reads frame `n`'s records (a seek per record, no scan).
     /// An error naming the record when frame `n`'s color or depth image (`records`, as
     /// [`Replay::read_frame`] gave them) does not decode, as `inspect --verify` finds:
     /// the checksum says the bytes are as written, not that they are an image.
@@ -121,6 +120,7 @@ impl Replay {
         Ok(())
     }
 
+    /// Reads frame `n`'s records (a seek per record, no scan).
     pub fn read_frame(&self, n: usize) -> Result<FrameRecords, RecordingError> {
         let f = self
             .frames

@@ -3,7 +3,7 @@
 //! and column of the offending value, and a hint (the keys a shape takes, the shapes
 //! there are, the closest spelling).
 
-use super::{Material, ObjectError, ObjectSpec, Shape, VirtualScene};
+use super::{MAX_TRANSLATION, Material, ObjectError, ObjectSpec, Shape, VirtualScene};
 use crate::graph::config::{ConfigError, Located, ObjectDecl, RawValue, SourceFile};
 use crate::graph::params::{a, did_you_mean};
 use glam::{Vec2, Vec3};
@@ -41,7 +41,7 @@ const COMMON: &[Key] = &[
     key("shape", Type::Str, "sphere, box, torus, quad or mesh"),
     key(
         "translation",
-        Type::Numbers(3, -1e4, 1e4),
+        Type::Numbers(3, -(MAX_TRANSLATION as f64), MAX_TRANSLATION as f64),
         "world position of the object's origin [x, y, z], metres; default [0, 0, 0]",
     ),
     key(

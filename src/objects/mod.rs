@@ -50,7 +50,7 @@ pub mod spec;
 
 pub use bvh::Bvh;
 pub use mesh::{load_obj, parse_obj};
-pub use spec::{ObjectError, ObjectSpec, Shape};
+pub use spec::{MAX_TRANSLATION, MAX_WORLD_COORDINATE, ObjectError, ObjectSpec, Shape};
 
 use glam::Vec3;
 

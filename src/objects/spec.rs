@@ -243,11 +243,15 @@ pub enum ObjectError {
     InvalidSpec { object: String, message: String },
 }
 
+/// The farthest an object's origin (its `translation`) may lie from the world origin
+/// along an axis, in metres; also the bound of a light centre placed by hand.
+pub const MAX_TRANSLATION: f32 = 1e4;
+
 /// The farthest a vertex may lie from the world origin along an axis, in metres: ten
-/// times the farthest translation. Recordings are of rooms; a vertex beyond this is a
-/// mesh in the wrong units or a stray value, and would stretch the objects' bounds,
-/// which centre the light, far from the scene.
-pub const MAX_WORLD_COORDINATE: f32 = 1e5;
+/// times [`MAX_TRANSLATION`]. Recordings are of rooms; a vertex beyond this is a mesh in
+/// the wrong units or a stray value, and would stretch the objects' bounds, which centre
+/// the light, far from the scene.
+pub const MAX_WORLD_COORDINATE: f32 = 10.0 * MAX_TRANSLATION;
 
 impl VirtualScene {
     /// The scene of `specs` in world space: object k uses material k; BVH built.

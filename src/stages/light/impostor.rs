@@ -16,6 +16,7 @@ use crate::graph::{
 };
 use crate::light::EnvMap;
 use crate::light::impostor::{ImpostorBuilder, ImpostorParams};
+use crate::objects::MAX_TRANSLATION;
 use glam::{DVec3, Vec3};
 use std::sync::Arc;
 
@@ -117,10 +118,7 @@ pub(crate) fn object_center(ctx: &BuildContext) -> Option<Vec3> {
         .map(|t| DVec3::from_array(t.object_position).as_vec3())
 }
 
-/// The largest coordinate of a centre, in metres: as far as objects may be placed.
-const MAX_CENTER_COORDINATE: f32 = 1e4;
-
-/// Parses "x,y,z" (finite numbers within [`MAX_CENTER_COORDINATE`], spaces allowed).
+/// Parses "x,y,z" (finite numbers within [`MAX_TRANSLATION`], spaces allowed).
 fn parse_center(text: &str) -> Result<Vec3, String> {
     let values: Vec<f32> = text
         .split(',')
@@ -131,10 +129,10 @@ fn parse_center(text: &str) -> Result<Vec3, String> {
         })?;
     match values.as_slice() {
         &[x, y, z] if values.iter().all(|v| v.is_finite()) => {
-            match values.iter().all(|v| v.abs() <= MAX_CENTER_COORDINATE) {
+            match values.iter().all(|v| v.abs() <= MAX_TRANSLATION) {
                 true => Ok(Vec3::new(x, y, z)),
                 false => Err(format!(
-                    "center = {text:?} lies more than {MAX_CENTER_COORDINATE} m from the origin along an axis"
+                    "center = {text:?} lies more than {MAX_TRANSLATION} m from the origin along an axis"
                 )),
             }
         }

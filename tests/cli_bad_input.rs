@@ -5,6 +5,7 @@
 mod common;
 
 use common::{ok, run_in, small_recording, stderr, stdout};
+use relume::recording::format::{FRAME_HEADER_LEN, IndexEntry};
 use relume::recording::{Recording, StreamKind};
 use std::path::Path;
 
@@ -43,20 +44,43 @@ fn a_failing_stage_exits_non_zero_naming_stage_and_frame() {
     );
 }
 
-/// Flips one byte in the middle of the payload of the `nth` record of `kind`.
-fn corrupt_record(path: &Path, kind: StreamKind, nth: usize) -> (usize, u64) {
+/// The `nth` record of `kind` in the recording at `path`: its number and index entry.
+fn nth_record(path: &Path, kind: StreamKind, nth: usize) -> (usize, IndexEntry) {
     let rec = Recording::open(path).unwrap();
-    let (record, entry) = rec
-        .index()
+    rec.index()
         .iter()
         .enumerate()
         .filter(|(_, e)| e.kind == kind)
         .nth(nth)
-        .unwrap();
+        .map(|(i, e)| (i, *e))
+        .unwrap()
+}
+
+/// Flips one byte in the middle of the payload of the `nth` record of `kind`.
+fn corrupt_record(path: &Path, kind: StreamKind, nth: usize) -> (usize, u64) {
+    let (record, entry) = nth_record(path, kind, nth);
     let mut bytes = std::fs::read(path).unwrap();
-    bytes[(entry.offset + 20 + entry.len as u64 / 2) as usize] ^= 0x40;
+    bytes[(entry.offset + FRAME_HEADER_LEN + entry.len as u64 / 2) as usize] ^= 0x40;
     std::fs::write(path, bytes).unwrap();
     (record, entry.offset)
+}
+
+/// `relume replay small.relume --hash --skip-corrupt` in `d`, which must succeed: the
+/// frames it replayed (from the hash lines) and its stderr.
+fn replay_skipping_corrupt(d: &Path) -> (Vec<String>, String) {
+    let o = ok(run_in(
+        d,
+        &[
+            "replay",
+            "small.relume",
+            "--hash",
+            "--out",
+            "o",
+            "--skip-corrupt",
+        ],
+    ));
+    let frames = stdout(&o).lines().map(|l| l[..6].to_string()).collect();
+    (frames, stderr(&o))
 }
 
 #[test]
@@ -73,25 +97,9 @@ fn a_corrupt_record_stops_replay_unless_skipped() {
     assert!(stderr(&o).contains(&expected), "{}", stderr(&o));
     assert_eq!(stdout(&o).lines().count(), 2, "frames 0 and 1 complete");
 
-    let o = ok(run_in(
-        d,
-        &[
-            "replay",
-            "small.relume",
-            "--hash",
-            "--out",
-            "o",
-            "--skip-corrupt",
-        ],
-    ));
-    let lines = stdout(&o);
-    let frames: Vec<&str> = lines.lines().map(|l| &l[..6]).collect();
+    let (frames, errors) = replay_skipping_corrupt(d);
     assert_eq!(frames, ["000000", "000001", "000003", "000004", "000005"]);
-    assert!(
-        stderr(&o).contains("1 corrupt frame(s) skipped"),
-        "{}",
-        stderr(&o)
-    );
+    assert!(errors.contains("1 corrupt frame(s) skipped"), "{errors}");
 
     let o = run_in(d, &["inspect", "small.relume", "--verify"]);
     assert_eq!(o.status.code(), Some(1));
@@ -105,20 +113,10 @@ fn an_image_that_does_not_decode_is_skipped_like_a_corrupt_record() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     let path = small_recording(d, 4);
-    let rec = Recording::open(&path).unwrap();
-    let (record, entry) = rec
-        .index()
-        .iter()
-        .enumerate()
-        .filter(|(_, e)| e.kind == StreamKind::Depth)
-        .nth(1)
-        .map(|(i, e)| (i, *e))
-        .unwrap();
+    let (record, entry) = nth_record(&path, StreamKind::Depth, 1);
     let mut bytes = std::fs::read(&path).unwrap();
-    let (start, end) = (
-        entry.offset as usize + 20,
-        entry.offset as usize + 20 + entry.len as usize,
-    );
+    let start = (entry.offset + FRAME_HEADER_LEN) as usize;
+    let end = start + entry.len as usize;
     // The PNG signature sits near the start of the image bytes in the payload.
     let png = start
         + bytes[start..end]
@@ -137,25 +135,14 @@ fn an_image_that_does_not_decode_is_skipped_like_a_corrupt_record() {
         "{}",
         stderr(&o)
     );
-    let o = ok(run_in(
-        d,
-        &[
-            "replay",
-            "small.relume",
-            "--hash",
-            "--out",
-            "o",
-            "--skip-corrupt",
-        ],
-    ));
-    let frames: Vec<String> = stdout(&o).lines().map(|l| l[..6].to_string()).collect();
+    let (frames, errors) = replay_skipping_corrupt(d);
     assert_eq!(frames, ["000000", "000002", "000003"]);
     let expected = format!(
         "skipped corrupt frame 1: small.relume: record {record} (depth) at byte {} cannot be \
          decoded: cannot decode its image: ",
         entry.offset
     );
-    assert!(stderr(&o).contains(&expected), "{}", stderr(&o));
+    assert!(errors.contains(&expected), "{errors}");
 }
 
 #[test]

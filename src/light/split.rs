@@ -1,9 +1,14 @@
 //! Splitting captured radiance into a direct and an indirect part (paper 004 Sec. 4.2).
 //!
-//! Per color channel, every texel's radiant intensity I_k = L_k dA_k is ranked; from the
-//! brightest down, intensities are accumulated until `ratio` of the channel's total is
-//! reached. The intensity where that happens is the channel's threshold: texels at or
-//! above it are *direct* in that channel, the rest *indirect*. The split is per channel
+//! Per color channel, texels are ranked by radiance L, brightest first, and their radiant
+//! intensities I_k = L_k dA_k are accumulated until `ratio` of the channel's total is
+//! reached. The radiance of the texel where that happens is the channel's threshold:
+//! texels whose radiance is at or above it are *direct* in that channel, the rest
+//! *indirect* ("texels in the atlas with a radiance larger than the threshold are
+//! assigned to the direct radiance atlas"). Ranking by radiance, not by L dA, keeps a
+//! small bright lamp direct wherever it lies in the map: a texel near a pole of a
+//! latitude-longitude map spans a fraction of an equator texel's solid angle, and a far
+//! wall's texels span d^2 times more area than a near lamp's. The split is per channel
 //! (paper 004 Fig. 5) so that a saturated colored source is direct even when its gray
 //! brightness is low. Each channel of each texel goes wholly to one part, so
 //! direct + indirect equals the original exactly.
@@ -47,46 +52,58 @@ fn channel_intensity(map: &EnvMap, index: usize, channel: usize, area: f32) -> f
     }
 }
 
-/// The per-channel intensity thresholds of the split (Sec. 4.2): the smallest texel
-/// intensity L dA such that the texels at or above it hold at least `ratio` of the
-/// channel's total. `f64::INFINITY` where nothing is direct (`ratio <= 0` or a black
-/// channel).
+/// Radiance and radiant intensity of channel `channel` of texel `index`, or `None` for a
+/// texel that cannot emit (see [`channel_intensity`]).
+#[inline]
+fn emitting(map: &EnvMap, index: usize, channel: usize, area: f32) -> Option<(f64, f64)> {
+    let intensity = channel_intensity(map, index, channel, area);
+    (intensity > 0.0).then(|| (map.radiance[index][channel] as f64, intensity))
+}
+
+/// The per-channel radiance thresholds of the split (Sec. 4.2): the smallest texel
+/// radiance L such that the texels of that radiance or more hold at least `ratio` of the
+/// channel's total radiant intensity. `f64::INFINITY` where nothing is direct
+/// (`ratio <= 0` or a black channel).
 pub fn split_thresholds(map: &EnvMap, ratio: f64) -> [f64; 3] {
     let areas: Vec<f32> = (0..map.radiance.len())
         .map(|i| texel_area(map, i))
         .collect();
     let mut out = [f64::INFINITY; 3];
     out.par_iter_mut().enumerate().for_each(|(channel, t)| {
-        let mut values: Vec<f64> = areas
+        let mut texels: Vec<(f64, f64)> = areas
             .iter()
             .enumerate()
-            .map(|(i, &a)| channel_intensity(map, i, channel, a))
-            .filter(|&v| v > 0.0)
+            .filter_map(|(i, &a)| emitting(map, i, channel, a))
             .collect();
-        // Equal values are indistinguishable, so an unstable sort gives one result.
-        values.par_sort_unstable_by(|a, b| b.total_cmp(a));
-        *t = threshold_of_sorted(&values, ratio);
+        // Brightest first. Ties in radiance are ordered by intensity, so that the sort
+        // is total and the running sum the same on every run.
+        texels.par_sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(b.1.total_cmp(&a.1)));
+        *t = threshold_of_sorted(&texels, ratio);
     });
     out
 }
 
-/// The threshold of intensities sorted from the largest down (all positive).
-fn threshold_of_sorted(descending: &[f64], ratio: f64) -> f64 {
+/// The threshold of `(radiance, intensity)` pairs sorted by radiance from the largest
+/// down (all positive): the radiance of the pair whose intensity brings the running sum
+/// to `ratio` of the total.
+fn threshold_of_sorted(descending: &[(f64, f64)], ratio: f64) -> f64 {
     // The total in the same order as the running sum, so ratio 1 ends exactly on the
     // last texel.
-    let total: f64 = descending.iter().sum();
+    let total: f64 = descending.iter().map(|&(_, i)| i).sum();
     if ratio.is_nan() || ratio <= 0.0 || total <= 0.0 {
         return f64::INFINITY;
     }
     let target = ratio.min(1.0) * total;
     let mut accumulated = 0.0;
-    for &v in descending {
-        accumulated += v;
+    for &(radiance, intensity) in descending {
+        accumulated += intensity;
         if accumulated >= target {
-            return v;
+            return radiance;
         }
     }
-    descending.last().copied().unwrap_or(f64::INFINITY)
+    descending
+        .last()
+        .map_or(f64::INFINITY, |&(radiance, _)| radiance)
 }
 
 /// Splits `map` into its direct and indirect parts (paper 004 Sec. 4.2) with the
@@ -108,7 +125,8 @@ pub fn split_direct_indirect(map: &EnvMap, ratio: f64) -> (EnvMap, EnvMap) {
                 let index = row * width + column;
                 let area = texel_area(map, index);
                 for (channel, &threshold) in thresholds.iter().enumerate() {
-                    if channel_intensity(map, index, channel, area) >= threshold {
+                    let radiance = emitting(map, index, channel, area).map(|(l, _)| l);
+                    if radiance.is_some_and(|l| l >= threshold) {
                         i[channel] = 0.0;
                     } else {
                         d[channel] = 0.0;
@@ -188,8 +206,9 @@ mod tests {
                 assert!(share >= 0.9, "channel {c}: {share}");
                 // Without the texels at the threshold itself the ratio is not reached.
                 let above: f64 = (0..map.radiance.len())
-                    .map(|i| channel_intensity(&map, i, c, texel_area(&map, i)))
-                    .filter(|&v| v > thresholds[c])
+                    .filter_map(|i| emitting(&map, i, c, texel_area(&map, i)))
+                    .filter(|&(l, _)| l > thresholds[c])
+                    .map(|(_, intensity)| intensity)
                     .sum();
                 assert!(above < 0.9 * all[c], "channel {c}: {above}");
             }
@@ -213,12 +232,13 @@ mod tests {
     }
 
     #[test]
-    fn threshold_is_the_texel_where_the_ratio_is_reached() {
-        // Intensities 8, 4, 2, 1 (total 15): 0.5 -> 8 alone (8/15 >= 0.5); 0.6 -> 8 + 4;
-        // 1 -> all; 0 -> none.
-        let v = [8.0, 4.0, 2.0, 1.0];
-        assert_eq!(threshold_of_sorted(&v, 0.5), 8.0);
-        assert_eq!(threshold_of_sorted(&v, 0.6), 4.0);
+    fn threshold_is_the_radiance_where_the_ratio_is_reached() {
+        // Radiances 8, 4, 2, 1 with intensities 1, 8, 4, 2 (total 15): 0.05 -> 8 alone
+        // (1/15); 0.5 -> down to 4 (9/15); 0.7 -> down to 2 (13/15); 1 -> all; 0 -> none.
+        let v = [(8.0, 1.0), (4.0, 8.0), (2.0, 4.0), (1.0, 2.0)];
+        assert_eq!(threshold_of_sorted(&v, 0.05), 8.0);
+        assert_eq!(threshold_of_sorted(&v, 0.5), 4.0);
+        assert_eq!(threshold_of_sorted(&v, 0.7), 2.0);
         assert_eq!(threshold_of_sorted(&v, 1.0), 1.0);
         assert_eq!(threshold_of_sorted(&v, 0.0), f64::INFINITY);
         assert_eq!(threshold_of_sorted(&[], 0.9), f64::INFINITY);
@@ -235,19 +255,48 @@ mod tests {
     }
 
     #[test]
-    fn finite_distances_weight_texels_by_area() {
-        // Two texels of equal radiance, one twice as far: four times the intensity.
+    fn intensity_decides_how_far_the_split_goes_radiance_decides_the_order() {
+        // Two texels of equal radiance, one twice as far: four times the intensity. The
+        // far one alone holds 4 / 5 of the total, but both have the threshold's radiance.
         let mut map = EnvMap::constant(4, 2, Vec3::ZERO);
         map.radiance[1] = Vec3::ONE;
         map.radiance[2] = Vec3::ONE;
         map.distance = vec![1.0; 8];
         map.distance[2] = 2.0;
-        let (direct, _) = split_direct_indirect(&map, 0.75);
-        assert_eq!(direct.radiance[2], Vec3::ONE);
+        let (direct, indirect) = split_direct_indirect(&map, 0.75);
         assert_eq!(
-            direct.radiance[1],
-            Vec3::ZERO,
-            "4 / 5 of the total is enough"
+            (direct.radiance[1], direct.radiance[2]),
+            (Vec3::ONE, Vec3::ONE)
         );
+        assert_eq!(indirect.radiance, vec![Vec3::ZERO; 8]);
+    }
+
+    #[test]
+    fn a_small_bright_lamp_near_the_pole_is_direct_before_a_large_dim_wall() {
+        // A lamp of radiance 100 at 2 m in the top row, where a texel spans about 1/20 of
+        // an equator texel's solid angle, and a wall of radiance 1 at 5 m on the equator.
+        // The wall's intensity is the larger (25 dOmega against about 20 dOmega), so
+        // ranking by L dA would make the wall direct and leave the lamp indirect.
+        let mut map = EnvMap::constant(64, 32, Vec3::ZERO);
+        let lamp = 3;
+        let wall = 16 * 64 + 5;
+        map.radiance[lamp] = Vec3::splat(100.0);
+        map.radiance[wall] = Vec3::ONE;
+        map.distance = vec![3.0; 64 * 32];
+        map.distance[lamp] = 2.0;
+        map.distance[wall] = 5.0;
+        let (lamp_intensity, wall_intensity) = (
+            channel_intensity(&map, lamp, 0, texel_area(&map, lamp)),
+            channel_intensity(&map, wall, 0, texel_area(&map, wall)),
+        );
+        assert!(
+            wall_intensity > lamp_intensity,
+            "the case the test is about"
+        );
+        let lamp_share = lamp_intensity / (lamp_intensity + wall_intensity);
+        let (direct, indirect) = split_direct_indirect(&map, lamp_share * 0.99);
+        assert_eq!(direct.radiance[lamp], Vec3::splat(100.0));
+        assert_eq!(indirect.radiance[wall], Vec3::ONE);
+        assert_eq!(direct.radiance[wall], Vec3::ZERO);
     }
 }

@@ -11,6 +11,8 @@
 //!   scheme off and on. The pipeline's objects cover about 5 % of the frame.
 //! - `sample.path/tenth`: the same as `plain` with the objects scaled up to cover about
 //!   a tenth of the frame (the budget case; the bench prints the share).
+//! - `sample.path/tenth_fast`: the same at `pipelines/mixed-reality-fast.toml`'s sample
+//!   counts, 4 direct + 4 indirect samples per pixel.
 //! - `sample.path/no_objects`: the same with no virtual object: the real scene's
 //!   estimates alone, the floor under every case with objects.
 //! - `objects/nearest`: the BVH alone, on one thread: the frame's object queries of
@@ -118,6 +120,16 @@ fn bench_sampling(c: &mut Criterion) {
         );
         group.bench_function("sample.path/tenth", |b| {
             b.iter(|| sample_path(&inputs, &params, &mut out).unwrap())
+        });
+        // The same at pipelines/mixed-reality-fast.toml's counts: 4 + 4 samples per pixel.
+        let fast = PathParams {
+            primary: 2,
+            direct: 2,
+            indirect: 2,
+            ..params
+        };
+        group.bench_function("sample.path/tenth_fast", |b| {
+            b.iter(|| sample_path(&inputs, &fast, &mut out).unwrap())
         });
         bench_object_queries(&mut group, &scaled, &inputs, &out);
         let no_objects = VirtualScene::default();

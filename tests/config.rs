@@ -61,6 +61,36 @@ fn the_default_pipeline_is_the_mixed_reality_chain() {
     );
 }
 
+/// The fast preset is the mixed-reality chain with fewer samples, and nothing else: a
+/// change to one file that is not made to the other fails here.
+#[test]
+fn the_fast_pipeline_is_mixed_reality_with_fewer_samples() {
+    let file = |name: &str| {
+        std::fs::read_to_string(format!("{}/pipelines/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    };
+    let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
+    let fast = file("mixed-reality-fast.toml");
+    assert_eq!(
+        body(&file("mixed-reality.toml"))
+            .replacen(
+                "name = \"mixed-reality\"",
+                "name = \"mixed-reality-fast\"",
+                1
+            )
+            .replacen(
+                "kind = \"sample.path\"\n",
+                "kind = \"sample.path\"\nparams = { primary = 2, direct = 2, indirect = 2 }\n",
+                1
+            ),
+        body(&fast)
+    );
+    let p = load(&fast).unwrap();
+    let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
+    for (key, value) in [("primary", 2), ("direct", 2), ("indirect", 2)] {
+        assert_eq!(path.params.int(key), value, "{key}");
+    }
+}
+
 #[test]
 fn unknown_kind_suggests_the_closest() {
     let e = error("[[stage]]\nkind = \"decode\"\n\n[[stage]]\nkind = \"normals.crss\"\n");

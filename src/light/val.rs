@@ -126,7 +126,9 @@ impl ValBuilder {
     ///    r_j = sqrt(sum lum L dA / sum lum L dOmega), the root-mean-square texel
     ///    distance weighted by each texel's share of the irradiance at the centre, and
     ///    faces the centre; so I_j / r_j^2 = sum L dOmega: at the map's centre, facing
-    ///    the light, the VAL gives the irradiance its texels give.
+    ///    the light, the VAL gives the irradiance its texels give (exactly in luminance;
+    ///    per channel where the cluster's texels share one chromaticity, and leaving out
+    ///    the spread of their cosines).
     ///
     /// Clusters that integrate nothing are dropped (fewer than M lights, never NaN); the
     /// lights keep the order of their centres, so a light keeps its index across frames

@@ -4,6 +4,13 @@
 //! [`EnvMap`] with finite distances, so a recording without a light probe can still
 //! light an object.
 //!
+//! The samplers use the map as Sec. 6.1's "standard environment mapping": radiance is
+//! looked up by direction alone, from every shading point, and occlusion comes from the
+//! screen-space tracer and the objects' BVH. Impostor tracing (refining the lookup
+//! direction from the stored distances, Szirmay-Kalos et al.) is not done, so light seen
+//! from points far from the centre has parallax error. The distances serve `light.split`
+//! and `light.val`, which place area lights at them.
+//!
 //! 1. **Splat**: each sample farther than `min_distance` from the centre covers a small
 //!    disk on the cube: its angular radius is `splat_radius / distance` (a world-size
 //!    disk, like `gbuffer.splat`'s), turned into face texels with the face's

@@ -1,7 +1,8 @@
 //! Per-pixel filter bandwidths of paper 001 Secs. 6-7: screen-space curvature (eq. 20),
 //! the direct-light bandwidth (eq. 17, with eq. 13 as its diffuse case) and the indirect
 //! bandwidth (eq. 18). Bandwidths are angular frequencies per metre of world space; the
-//! filter's standard deviation is sigma = 1 / B.
+//! filter's size is 1 / B (paper 001 Sec. 6.4 and Fig. 7's convention: eq. 23's Gaussian
+//! exp(-2 Bbar^2 d^2) has standard deviation 1 / (2 Bbar)).
 
 use crate::graph::StageError;
 use crate::raster::{ScalarImage, Vec3Image};
@@ -16,7 +17,8 @@ pub const MIN_NEIGHBOUR_DISTANCE: f32 = 1e-6;
 /// negative recorded distance gives a large but finite bandwidth.
 pub const MIN_OCCLUDER_DISTANCE: f32 = 1e-3;
 
-/// Bandwidths are clamped to this (per metre: sigma of 0.1 mm), so squares stay finite.
+/// Bandwidths are clamped to this (per metre: a filter size 1 / B of 0.1 mm), so squares
+/// stay finite.
 pub const MAX_BANDWIDTH: f32 = 1e4;
 
 /// Angular bandwidth B_rho of a Phong lobe cos^m about the mirror direction, per radian;
@@ -45,9 +47,11 @@ pub fn indirect_brdf_bandwidth(exponent: f32) -> f32 {
     }
 }
 
-/// The visibility factor cos^2(theta_occ) / z of eqs. 13 and 17 with cos^2 = 1 (only the
-/// distance is recorded, so the conservative value is taken): 0 where there is no
-/// occluder (z non-finite), 1 / max(z, [`MIN_OCCLUDER_DISTANCE`]) otherwise.
+/// The visibility factor cos^2(theta_occ) / z of eqs. 13 and 17 from the occluder distance
+/// the samplers record, t / cos(theta) of the nearest blocked sample: with the occluder's
+/// depth z = t cos(theta) (paper 001 Fig. 3c), cos^2(theta_occ) / z = 1 / (t / cos(theta)).
+/// 0 where there is no occluder (non-finite), 1 / max(value, [`MIN_OCCLUDER_DISTANCE`])
+/// otherwise.
 #[inline]
 fn inverse_distance(z: f32) -> f32 {
     if z.is_finite() {
@@ -59,7 +63,9 @@ fn inverse_distance(z: f32) -> f32 {
 
 /// Direct-light bandwidth along one image axis, paper 001 eq. 17:
 /// B = kappa (B_f + 2 B_rho) + (cos^2(theta_occ) / z) (B_f + 2 B_rho + B_e), with
-/// cos^2(theta_occ) = 1 and no visibility term where `occluder_distance` is infinite.
+/// cos^2(theta_occ) / z = 1 / `occluder_distance` (the samplers record t / cos(theta) of
+/// the nearest blocked sample, and z = t cos(theta)), and no visibility term where
+/// `occluder_distance` is infinite.
 /// With B_rho = 0 this is eq. 13. Clamped to [0, [`MAX_BANDWIDTH`]].
 #[inline]
 pub fn direct_bandwidth(

@@ -15,12 +15,16 @@
 //!    value or a position are skipped; a pixel without a value stays NaN. The weights
 //!    are the same for E_R and E_RV of one kind, so each is computed once and applied to
 //!    both: where E_RV == E_R over the footprint, the filtered values are equal bit for
-//!    bit (the composite's ratio stays exactly 1 away from the objects).
+//!    bit (the composite's ratio stays exactly 1 away from the objects). This departs
+//!    from paper 001 Fig. 7, which filters E_R with bandwidths from the real geometry
+//!    alone: here occluders and Phong exponents of the virtual objects narrow E_R's
+//!    filter too, so near the objects E_R keeps a little more noise (no bias).
 //! 4. Temporal (eqs. 24-26, `temporal = true`): each pixel's world position is projected
 //!    into the previous camera (previous pose, same intrinsics), rounded to a pixel, and
 //!    the 3 x 3 window around it is searched for the nearest previous world position
 //!    (x', y'); the Y pass adds the taps w' E'_X(x', y' + j) over the same radius, with
-//!    w' of eq. 25 (Bbar^2 averaged with the previous pixel's B^2). E'_X is the previous
+//!    w' of eq. 25 taking eq. 23's averaged Bbar^2 (the pixel's B^2 with the previous
+//!    pixel's) where eq. 25 has the pixel's B_X alone. E'_X is the previous
 //!    frame's X-filtered layers (filtered about their own pixels, not re-filtered about
 //!    p(x, y) as in eq. 24). A first frame, a size change, or a pixel behind the
 //!    previous camera or off its image, uses the spatial filter alone.
@@ -31,9 +35,10 @@
 //! frame).
 //!
 //! Outputs: `filtered_e_r_dir`, `filtered_e_r_ind`, `filtered_e_rv_dir`,
-//! `filtered_e_rv_ind` and the filter widths sigma = 1 / B in metres
-//! (`filter_width_dir`: mean of the X and Y sigmas; `filter_width_ind`), as in paper 001
-//! Fig. 7; INFINITY where B = 0 (flat over the window), NaN where there is no position.
+//! `filtered_e_rv_ind` and the filter sizes 1 / B in metres (`filter_width_dir`: mean of
+//! the X and Y sizes; `filter_width_ind`), as paper 001 Fig. 7 shows them (it calls 1 / B
+//! the standard deviation; eq. 23's Gaussian has 1 / (2 Bbar)); INFINITY where B = 0
+//! (flat over the window), NaN where there is no position.
 //!
 //! Cost: per pixel and kind (direct, indirect) 3 windows of 2R + 1 taps (X, Y, temporal
 //! Y), each tap 8 multiply-adds and a fast `exp` ([`gaussian::exp_neg_lanes`]) shared by

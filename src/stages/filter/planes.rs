@@ -109,8 +109,8 @@ pub struct BandwidthSettings {
 /// Fills the input planes `input` ([`INPUT_PLANES`] lane-interleaved planes of the
 /// images' size) with positions, squared bandwidths (eqs. 17, 18 from the curvatures of
 /// eq. 20) and cleaned values (0 with valid 0 where a layer has no finite value or the
-/// pixel no position), and writes the filter widths sigma = 1 / B (direct: mean of the
-/// X and Y sigmas; INFINITY where B = 0, NaN where there is no position). Eight pixels
+/// pixel no position), and writes the filter sizes 1 / B (paper 001 Fig. 7; direct: mean
+/// of the X and Y sizes; INFINITY where B = 0, NaN where there is no position). Eight pixels
 /// at a time (`prepare_lanes`, with `kernel`) where a row's X neighbours of all eight
 /// exist, one by one at the row's ends; the same bits either way. Each row is prepared
 /// in row-major order (`row_scratch`), then interleaved ([`fill_line`]). The stage
@@ -262,11 +262,11 @@ pub(super) fn prepare_pixel(
             put(kind + 6 + slot / 3, if ok { 1.0 } else { 0.0 });
         }
     }
-    let sigma = |b: f32| 1.0 / b;
+    let size = |b: f32| 1.0 / b;
     out.width_dir[x] = if has_position {
-        0.5 * (sigma(bx) + sigma(by))
+        0.5 * (size(bx) + size(by))
     } else {
         f32::NAN
     };
-    out.width_ind[x] = if has_position { sigma(bi) } else { f32::NAN };
+    out.width_ind[x] = if has_position { size(bi) } else { f32::NAN };
 }

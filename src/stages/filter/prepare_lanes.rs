@@ -224,11 +224,11 @@ pub(super) fn prepare_group<V: Lanes>(
             valid.store_slice(row, layout.in_row(kind + 6 + slot / 3, x0));
         }
     }
-    // Filter widths sigma = 1 / B.
+    // Filter sizes 1 / B (paper 001 Fig. 7).
     let one = V::splat(1.0);
     let nan = V::splat(f32::NAN);
-    let sigma_dir = V::splat(0.5).mul(one.div(bx).add(one.div(by)));
-    V::select(has_position, sigma_dir, nan).store_slice(out.width_dir, x0);
+    let size_dir = V::splat(0.5).mul(one.div(bx).add(one.div(by)));
+    V::select(has_position, size_dir, nan).store_slice(out.width_dir, x0);
     V::select(has_position, one.div(bi), nan).store_slice(out.width_ind, x0);
 }
 

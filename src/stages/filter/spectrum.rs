@@ -13,7 +13,8 @@ pub const SPECTRUM_WIDTH: u32 = 64;
 /// Fraction of the spectral energy inside the bandwidth (paper 001: 99 %).
 pub const ENERGY_FRACTION: f64 = 0.99;
 
-/// B_e of paper 001 Sec. 7, per radian, in the units of the curvature of eq. 20.
+/// B_e of paper 001 Sec. 7: an angular frequency (per radian), like B_f and B_rho; eq. 17
+/// turns it into a frequency per metre through the curvature (eq. 20) and 1 / z.
 ///
 /// The map's Rec. 709 luminance is box-downsampled to at most
 /// [`SPECTRUM_WIDTH`] x [`SPECTRUM_WIDTH`]/2 texels; its 2D DFT (a direct separable DFT,

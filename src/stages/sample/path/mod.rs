@@ -14,7 +14,7 @@
 //!   primaries of the visible surface (world space; the normal renormalized).
 //! - **E_R** is always estimated at the real shading point (the pixel's depth-map point
 //!   and normal; NaN where either is missing), with `direct` + `indirect` samples per
-//!   primary (16 + 16 by default).
+//!   primary (4 + 4 by default, 16 + 16 per pixel).
 //! - **Direct light** (units: irradiance, a constant environment L unoccluded gives
 //!   pi L): E^dir = mean of L V cos+ / pdf over samples of the importance table
 //!   ([`LightTable`], Sec. 5.2). Direct sample (j, k) reads stratum j * direct + k of
@@ -65,6 +65,10 @@
 //!   narrows the filter less than one overhead at the same distance. As in paper 001
 //!   Sec. 7, occluders of dim direct samples are ignored: those whose radiance (largest
 //!   channel) is below `occluder_threshold` (0.1) times the table's brightest sample.
+//!   The paper's threshold is an absolute intensity of 0.1 in its own units; relative to
+//!   the brightest sample, the cut is the same for any exposure or map scale. Under a
+//!   map dominated by one very bright source (a sun), it ignores the occluders of all
+//!   other light.
 //! - Random numbers are counter-based per (seed, frame, pixel, stream, sample), so the
 //!   products are the same for any thread count.
 //!
@@ -167,7 +171,7 @@ const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
         "occluder_threshold",
         ParamDefault::Float(0.1),
-        "direct_min_distance counts only occluders of samples at least this bright, as a fraction of the table's brightest sample (paper 001 Sec. 7 ignores occluders of samples below 0.1): dim light blocked nearby does not narrow the filter",
+        "direct_min_distance counts only occluders of samples at least this bright, as a fraction of the table's brightest sample (paper 001 Sec. 7 ignores occluders of samples below an absolute 0.1; a fraction is the same for any exposure): dim light blocked nearby does not narrow the filter",
     )
     .range(0.0, 1.0),
     ParamSpec::new(

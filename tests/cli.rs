@@ -277,6 +277,75 @@ fn ctrl_c_stops_after_the_frames_in_flight_and_keeps_complete_outputs() {
     );
 }
 
+/// The modification time of `path`, or `None` while it does not exist.
+fn modified(path: &Path) -> Option<std::time::SystemTime> {
+    path.metadata().and_then(|m| m.modified()).ok()
+}
+
+#[test]
+fn an_interrupted_bench_exits_130_with_the_complete_runs_only() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 20);
+    let pipeline = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"debug.sleep\"\nparams = { ms = 40.0 }\n[[stage]]\nkind = \"write\"\nparams = { products = [\"color\"] }\n";
+    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    // bench writes into a scratch folder under the temporary directory: watching its
+    // frames tells the runs apart (each run writes them all again).
+    std::fs::create_dir(d.join("tmp")).unwrap();
+    let child = common::relume()
+        .args([
+            "bench",
+            "small.relume",
+            "-p",
+            "p.toml",
+            "--repeat",
+            "3",
+            "--json",
+        ])
+        .env("TMPDIR", d.join("tmp"))
+        .current_dir(d)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let frames = d.join(format!("tmp/relume-bench-{}/color", child.id()));
+    let (first, last) = (frames.join("000000.png"), frames.join("000019.png"));
+    let start = std::time::Instant::now();
+    let wait_for = |done: &dyn Fn() -> bool| {
+        while !done() && start.elapsed().as_secs() < 60 {
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+    };
+    // The warm-up run's last frame, then the first measured run's, then the second
+    // measured run under way.
+    wait_for(&|| modified(&last).is_some());
+    let warm_up = modified(&last);
+    wait_for(&|| modified(&last) > warm_up);
+    let measured = modified(&last);
+    wait_for(&|| modified(&first) > measured);
+    let status = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(doc["interrupted"], true);
+    assert_eq!(doc["frames"], 20, "only complete runs are reported");
+    // The second measured run was under way when the interrupt came; if it finished
+    // first, the third was.
+    let runs = doc["repeat"].as_u64().unwrap();
+    assert!((1..=2).contains(&runs), "{runs}");
+    assert!(
+        stderr(&o).ends_with(&format!(
+            "interrupted: the timings cover the {runs} of 3 measured runs complete\n"
+        )),
+        "{}",
+        stderr(&o)
+    );
+}
+
 #[test]
 /// `relume` with no arguments is `relume replay` with no arguments (src/cli/mod.rs);
 /// this runs the same job on its first frames only, as the whole 30 frames of mixed

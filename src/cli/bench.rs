@@ -2,7 +2,6 @@
 
 use super::progress;
 use super::replay::{Pacing, RunArgs, load, some_frame_replayed, stop_on_interrupt};
-use anyhow::bail;
 use clap::Args;
 use relume::graph::{RunReport, Stats};
 use std::sync::atomic::Ordering;
@@ -20,7 +19,8 @@ pub struct BenchArgs {
     /// other stages (sample.path's threads, say) were using.
     #[arg(long)]
     isolated: bool,
-    /// Print JSON: stages.<name>.{median_ms, p95_ms, max_ms}, fps, isolated.
+    /// Print JSON: stages.<name>.{median_ms, p95_ms, max_ms}, fps, isolated, repeat (the
+    /// runs measured), interrupted.
     #[arg(long)]
     json: bool,
 }
@@ -41,8 +41,10 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
             let report = loaded
                 .run_once(&scratch, &a.run, pacing, &stop, &mut |_| {})
                 .map_err(|f| anyhow::Error::new(f.error))?;
-            if i > 0 {
-                reports.push(report); // run 0 warms caches and page-ins
+            // Run 0 warms caches and page-ins. A run cut short by an interrupt timed
+            // fewer frames than the others, so it is left out too.
+            if i > 0 && !report.interrupted {
+                reports.push(report);
             }
             bar.inc(1);
             if stop.load(Ordering::Relaxed) {
@@ -54,9 +56,23 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
     })();
     let _ = std::fs::remove_dir_all(&scratch);
     let reports = result?;
+    // As replay and eval: an interrupted bench exits 130, with what it measured.
+    let interrupted = stop.load(Ordering::Relaxed);
     if reports.is_empty() {
-        bail!("interrupted before a measured run");
+        // --repeat is at least 1, and only an interrupted run is left out.
+        eprintln!("error: interrupted before a measured run was complete");
+        return Ok(130);
     }
+    let status = if interrupted {
+        eprintln!(
+            "interrupted: the timings cover the {} of {} measured runs complete",
+            reports.len(),
+            a.repeat
+        );
+        130
+    } else {
+        0
+    };
     some_frame_replayed(&loaded, &reports[0])?;
     let names: Vec<(String, String)> = reports[0]
         .stages
@@ -96,11 +112,12 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
             "frames": frames,
             "repeat": reports.len(),
             "isolated": a.isolated,
+            "interrupted": interrupted,
             "stages": stages,
             "fps": median_fps,
         });
         outln!("{}", serde_json::to_string_pretty(&doc)?)?;
-        return Ok(0);
+        return Ok(status);
     }
     let width = names
         .iter()
@@ -156,5 +173,5 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
             reports.len()
         )?;
     }
-    Ok(0)
+    Ok(status)
 }

@@ -32,12 +32,15 @@ impl ErrorSums {
         }
     }
 
-    fn rmse(&self) -> f64 {
-        (self.squared / self.measured.max(1) as f64).sqrt()
+    /// `None` (null, not a perfect 0) where no pixel had both a depth and the truth's.
+    fn rmse(&self) -> Option<f64> {
+        (self.measured > 0).then(|| (self.squared / self.measured as f64).sqrt())
     }
 
-    fn hole_fraction(&self) -> f64 {
-        self.holes as f64 / (self.measured + self.holes).max(1) as f64
+    /// `None` where the truth saw no pixel.
+    fn hole_fraction(&self) -> Option<f64> {
+        let seen = self.measured + self.holes;
+        (seen > 0).then(|| self.holes as f64 / seen as f64)
     }
 }
 
@@ -171,6 +174,20 @@ mod tests {
     use super::*;
     use crate::graph::Product;
     use glam::{DQuat, DVec3};
+
+    #[test]
+    fn nothing_compared_gives_no_error_not_a_perfect_zero() {
+        let mut sums = ErrorSums::default();
+        assert_eq!((sums.rmse(), sums.hole_fraction()), (None, None));
+        // Only holes: no error to give, every seen pixel a hole.
+        sums.add(&[0.0, 0.0], &[1.0, 2.0]);
+        assert_eq!((sums.rmse(), sums.hole_fraction()), (None, Some(1.0)));
+        sums.add(&[1.5], &[1.0]);
+        assert_eq!(
+            (sums.rmse(), sums.hole_fraction()),
+            (Some(0.5), Some(2.0 / 3.0))
+        );
+    }
 
     #[test]
     fn warp_of_a_wall_under_a_sideways_move_shifts_it_in_the_image() {

@@ -56,7 +56,9 @@ impl NormalsScorer {
     pub fn report(&self) -> Option<Value> {
         (self.truth_valid > 0).then(|| {
             json!({
-                "mean_angle_deg": self.angle_sum_deg / self.estimated.max(1) as f64,
+                // null, not a perfect 0, where no pixel had a normal to score.
+                "mean_angle_deg": (self.estimated > 0)
+                    .then(|| self.angle_sum_deg / self.estimated as f64),
                 "median_angle_deg": median_of_histogram(&self.histogram, self.estimated) * BIN_DEG,
                 "valid_fraction": self.estimated as f64 / self.truth_valid as f64,
             })
@@ -89,5 +91,15 @@ mod tests {
         assert_eq!(median_of_histogram(&[0, 3, 1, 5], 9), 3.0);
         assert_eq!(median_of_histogram(&[2, 2], 4), 0.0);
         assert!(median_of_histogram(&[0, 0], 0).is_nan());
+    }
+
+    #[test]
+    fn no_normal_to_score_gives_null_angles_not_a_perfect_zero() {
+        let mut scorer = NormalsScorer::new("normals".into());
+        scorer.truth_valid = 48; // the truth saw pixels, the stage fitted none
+        let report = scorer.report().unwrap();
+        assert_eq!(report["mean_angle_deg"], Value::Null);
+        assert_eq!(report["median_angle_deg"], Value::Null);
+        assert_eq!(report["valid_fraction"], 0.0);
     }
 }

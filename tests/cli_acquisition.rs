@@ -236,6 +236,27 @@ fn livingroom1_runs_through_acquisition_and_eval_reports_self_consistency() {
     ));
     let text = stdout(&o);
     assert!(text.contains("has no ground truth"), "{text}");
+    // Normals, scored against the truth alone, are refused before the run.
+    let o = run_in(
+        d,
+        &[
+            "eval",
+            "lr.relume",
+            "-p",
+            &p,
+            "--stage",
+            "normals.plane_fit",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stderr(&o),
+        format!(
+            "error: {p}: stage `normals.plane_fit` (normals.plane_fit) is scored against the \
+             true normals, and the recording has no ground truth; the stages eval can score \
+             on it: gbuffer.splat, color.compensate, depth.fuse\n"
+        )
+    );
     let o = ok(run_in(
         d,
         &["eval", "lr.relume", "-p", &p, "--frames", "0..12", "--json"],

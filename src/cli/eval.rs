@@ -38,10 +38,12 @@ Scores (per stage, keyed by the stage's name):
                     psnr_db of the final image against the composite of the references;
                     psnr_db_unfiltered (the composite of the unfiltered layers)
 
-The 1024-sample references cost most of an eval at 640x480 (minutes per scored frame);
---reference-stride 4 computes them on every 4th pixel in x and y, 16 times faster.
+The 1024-sample references cost most of an eval at 640x480: about 25 s per scored frame
+on 2 cores (the default pipeline's eval of the built-in recording takes 1 minute, its
+replay 12 s). --reference-stride 4 computes them on every 4th pixel in x and y, 16 times
+faster.
 
-Example:
+Examples:
   relume synth -o room.relume && relume eval room.relume -p pipelines/acquisition.toml
   relume eval room.relume -p pipelines/mixed-reality-sampling.toml --json
   relume eval room.relume --json                    the default (mixed-reality) pipeline
@@ -163,8 +165,8 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     )?;
     if !evaluator.has_truth() {
         outln!(
-            "{path} has no ground truth: only self-consistency scores (depth warped from the \
-             previous frame, reference against the camera image) are reported"
+            "{path} has no ground truth: the scores that need it are left out (depth.fuse \
+             reports the previous frame's depth warped into the current view instead)"
         )?;
     }
     if let Some(Value::Object(stages)) = report.get("stages") {

@@ -75,9 +75,10 @@ Examples:
   relume inspect lr.relume --json
   relume replay lr.relume -p pipelines/mixed-reality-livingroom1.toml --frames 0..50 --out out/lr
   relume replay lr.relume -p pipelines/geometry.toml --frames 0..50 --trace t.json
-  relume replay lr.relume --hash > run1.txt         one digest line per frame, to diff runs
+  relume replay lr.relume -p pipelines/acquisition.toml --hash > run1.txt
+                                                   one digest line per frame, to diff runs
   relume eval recordings/default.relume --json      scores of the default pipeline's stages
-  relume bench lr.relume --repeat 5
+  relume bench lr.relume -p pipelines/mixed-reality-livingroom1.toml --frames 0..20
   relume stages                                    what a pipeline can use
   relume validate my.toml";
 

@@ -12,7 +12,7 @@
 //! | `light.importance` | `pdf_integral`, `irradiance_rel_error`, `maps_scored` (against brute-force integration of each map; see [`light`]) | no |
 //! | `light.val` | `sh_irradiance_rel_error`, `val_center_drift_m`, `environment_static`, `lights` | no |
 //! | `sample.path` | `ratio_rmse`, `ratio_rmse_alternative`, `object_aware`, `unbiased_p`, `frames_scored`, `region_pixels` (against 1024-sample references; see [`sampling`]) | no |
-//! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `temporal_flicker`, `temporal_flicker_spatial_only`, `frames_scored` (against the same references; see [`filter`]) | no |
+//! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `mse_unfiltered_by_layer`, `mse_filtered_by_layer` (per layer: E_R^dir, E_R^ind, E_RV^dir, E_RV^ind), `temporal_flicker`, `temporal_flicker_spatial_only`, `frames_scored` (against the same references; see [`filter`]) | no |
 //! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `frames_scored` (against a composite of the references; see [`composite`]) | no |
 //!
 //! Ground truth comes from the recording's truth stream (synthetic recordings).
@@ -30,7 +30,7 @@ pub use depth::forward_warp;
 pub use truth::FrameTruth;
 
 use crate::graph::{Frame, Pipeline, ResolvedStage};
-use crate::recording::Header;
+use crate::recording::{Header, StreamKind};
 use serde_json::{Map, Value, json};
 
 enum Scorer {
@@ -186,6 +186,28 @@ impl Evaluator {
                     "stage `{name}` {what}; the stages eval can score here: {scorable}"
                 ));
             }
+        }
+        // Normals are scored against the truth alone: named on a recording without a
+        // truth stream, they would run the whole pipeline to report nothing.
+        if !header.streams.contains(&StreamKind::Truth)
+            && let Some((name, kind, _)) = scorers
+                .iter()
+                .find(|(n, _, s)| options.stages.contains(n) && matches!(s, Scorer::Normals(_)))
+        {
+            let scorable: Vec<&str> = scorers
+                .iter()
+                .filter(|(_, _, s)| !matches!(s, Scorer::Normals(_)))
+                .map(|(n, _, _)| n.as_str())
+                .collect();
+            return Err(format!(
+                "stage `{name}` ({kind}) is scored against the true normals, and the recording \
+                 has no ground truth; the stages eval can score on it: {}",
+                if scorable.is_empty() {
+                    "none".to_string()
+                } else {
+                    scorable.join(", ")
+                }
+            ));
         }
         if !options.stages.is_empty() {
             scorers.retain(|(n, _, _)| options.stages.contains(n));

@@ -143,11 +143,28 @@ fn validate_and_stages_explain_pipelines() {
         "debug.sleep",
         "debug.fail",
         "max_depth_jump = 0.1",
+        "occlusion_margin = 0.1  (float",
         // Ports by role, with the default product where it is named otherwise.
         "reads: depth = refined_depth, normals, pose, radiance = compensated, light_table",
     ] {
         assert!(list.contains(kind), "stages lacks {kind}");
     }
+    // In JSON every default is a value of its parameter's type.
+    let kinds: serde_json::Value =
+        serde_json::from_str(&stdout(&ok(run_in(d, &["stages", "--json"])))).unwrap();
+    let default = |kind: &str, name: &str| {
+        let info = kinds.as_array().unwrap().iter().find(|k| k["kind"] == kind);
+        let params = info.unwrap()["params"].as_array().unwrap();
+        params.iter().find(|p| p["name"] == name).unwrap()["default"].clone()
+    };
+    assert_eq!(default("gbuffer.splat", "occlusion_margin"), 0.1);
+    assert_eq!(default("filter.axis_aligned", "temporal"), true);
+    assert_eq!(default("filter.axis_aligned", "radius"), 15);
+    assert_eq!(
+        default("write", "products"),
+        serde_json::json!(["depth", "normals"])
+    );
+    assert_eq!(default("write", "dir"), "");
 }
 
 #[test]

@@ -1,12 +1,14 @@
 //! `relume stages` and `relume validate`.
 
 use clap::Args;
-use relume::graph::{Params, Pipeline, Registry};
+use relume::graph::{ParamValue, Params, Pipeline, Registry};
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct StagesArgs {
-    /// Print JSON.
+    /// Print JSON: a list of {kind, summary, inputs, outputs, params}; ports are {role,
+    /// default (product name), kinds, optional}, parameters {name, type, default (a value
+    /// of that type), min, max, choices, doc}.
     #[arg(long)]
     json: bool,
 }
@@ -25,7 +27,7 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
         let port_list = |ports: &[relume::graph::Port]| {
             ports.iter().map(|p| serde_json::json!({ "role": p.role, "default": p.default_product, "kinds": p.kinds.iter().map(|k| k.name()).collect::<Vec<_>>(), "optional": p.optional })).collect::<Vec<_>>()
         };
-        let params: Vec<serde_json::Value> = info.params.iter().map(|p| serde_json::json!({ "name": p.name, "type": p.type_name(), "default": p.default_value().to_string(), "min": p.min, "max": p.max, "choices": p.choices, "doc": p.doc })).collect();
+        let params: Vec<serde_json::Value> = info.params.iter().map(|p| serde_json::json!({ "name": p.name, "type": p.type_name(), "default": json_value(&p.default_value()), "min": p.min, "max": p.max, "choices": p.choices, "doc": p.doc })).collect();
         if !a.json {
             outln!("{}\n    {}", info.kind, info.summary)?;
             // Each port by its role, which configs bind (`inputs = { depth = "..." }`),
@@ -71,6 +73,17 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
         outln!("{}", serde_json::to_string_pretty(&docs)?)?;
     }
     Ok(0)
+}
+
+/// A parameter value as JSON of its own type (a float default stays a number).
+fn json_value(value: &ParamValue) -> serde_json::Value {
+    match value {
+        ParamValue::Bool(b) => (*b).into(),
+        ParamValue::Int(i) => (*i).into(),
+        ParamValue::Float(x) => (*x).into(),
+        ParamValue::Str(s) => s.as_str().into(),
+        ParamValue::StrList(list) => list.clone().into(),
+    }
 }
 
 pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {

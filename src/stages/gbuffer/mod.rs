@@ -44,7 +44,7 @@ const PARAMS: &[ParamSpec] = &[
     .range(0.75, 4096.0),
     ParamSpec::new(
         "occlusion_margin",
-        ParamDefault::Float(splat::DEFAULT_OCCLUSION_MARGIN as f64),
+        ParamDefault::Float(splat::DEFAULT_OCCLUSION_MARGIN),
         "a sample whose centre lies this many metres behind the nearest sample centre of the 3x3 pixels around it is not splatted (occluded layers cost one projection)",
     )
     .range(0.0, 1e9),

@@ -66,15 +66,16 @@ impl Default for SplatParams {
         SplatParams {
             radius: 0.035,
             max_radius_px: DEFAULT_MAX_RADIUS_PX,
-            occlusion_margin: DEFAULT_OCCLUSION_MARGIN,
+            occlusion_margin: DEFAULT_OCCLUSION_MARGIN as f32,
         }
     }
 }
 
 /// Default of [`SplatParams::max_radius_px`].
 pub const DEFAULT_MAX_RADIUS_PX: f32 = 64.0;
-/// Default of [`SplatParams::occlusion_margin`], metres.
-pub const DEFAULT_OCCLUSION_MARGIN: f32 = 0.1;
+/// Default of [`SplatParams::occlusion_margin`], metres (f64: the stage's parameter
+/// default shows it as written).
+pub const DEFAULT_OCCLUSION_MARGIN: f64 = 0.1;
 
 /// A sample's projection after pass 1: the rows its footprint spans (`top > bottom`:
 /// none), its centre pixel ([`NO_PIXEL`] outside the image) and depth.

@@ -15,19 +15,24 @@ pub struct SynthArgs {
     /// Output recording (.relume).
     #[arg(short, long)]
     out: PathBuf,
-    /// Number of frames.
+    /// Number of frames. The camera's auto-exposure sweeps its whole range (0.5x to 2x)
+    /// and its white balance drifts over the recording, whatever its length, so a short
+    /// one changes them fast: below about 10 frames color.compensate cannot follow
+    /// (at 5 frames it falls back on 3 of them).
     #[arg(long, default_value_t = SynthConfig::default().frames)]
     frames: usize,
-    /// Image size, WIDTHxHEIGHT.
+    /// Image size, WIDTHxHEIGHT. The camera keeps the field of view of a 640x480
+    /// PrimeSense (fx = fy = 525 at that size), scaled per axis: a size that is not 4:3
+    /// has non-square pixels (640x240: fx 525, fy 262.5).
     #[arg(long, default_value = "640x480", value_parser = parse_size)]
     size: (u32, u32),
     /// Seed of every random choice (noise, holes, shading samples).
     #[arg(long, default_value_t = SynthConfig::default().seed)]
     seed: u64,
-    /// Frames per second of the stamps.
+    /// Frames per second of the stamps (0.001 to 1e6).
     #[arg(long, default_value_t = SynthConfig::default().fps)]
     fps: f64,
-    /// Amplitude of the camera's contrast change between frames (0 = none).
+    /// Amplitude of the camera's contrast change between frames (0 = none, at most 0.9).
     #[arg(long, default_value_t = SynthConfig::default().contrast)]
     contrast: f32,
     /// Store clean depth instead of Kinect-like noisy depth with holes.
@@ -35,6 +40,7 @@ pub struct SynthArgs {
     no_depth_noise: bool,
     /// Focal length multiplier: `--size 320x240 --zoom 2` sees the central 320x240
     /// pixels of the full 640x480 camera (a small image as finely sampled as the full one).
+    /// 0.25 to 16.
     #[arg(long, default_value_t = SynthConfig::default().zoom)]
     zoom: f64,
 }

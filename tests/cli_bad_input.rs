@@ -104,6 +104,13 @@ fn a_corrupt_record_stops_replay_unless_skipped() {
     let o = run_in(d, &["inspect", "small.relume", "--verify"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stdout(&o).contains("1 corrupt"), "{}", stdout(&o));
+    let o = run_in(d, &["inspect", "small.relume", "--verify", "--json"]);
+    assert_eq!(o.status.code(), Some(1));
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let streams = doc["streams"].as_array().unwrap();
+    let records: u64 = streams.iter().map(|s| s["records"].as_u64().unwrap()).sum();
+    assert_eq!(doc["records_verified"], records);
+    assert_eq!(doc["corrupt_records"].as_array().unwrap().len(), 1);
 }
 
 /// An image whose bytes are damaged but whose checksum was made to fit: `--verify`

@@ -94,6 +94,14 @@ fn tum_import_associates_depth_and_interpolates_poses() {
         (4, 1, 3)
     );
     assert_eq!(replay.recording.header().depth_unit_m, 1.0 / 5000.0);
+    // The settings as the command line takes them, so an import can be repeated.
+    let settings = &replay.recording.header().provenance.settings;
+    assert_eq!(settings["intrinsics"], "525,525,319.5,239.5");
+    assert_eq!(settings["store"], "compressed");
+    assert_eq!(
+        relume::recording::importers::parse_intrinsics(&settings["intrinsics"]).unwrap(),
+        ImportOptions::default().intrinsics
+    );
     let expected_color_index = [0u32, 1, 2, 4];
     for (n, &i) in expected_color_index.iter().enumerate() {
         let f = replay.read_frame(n).unwrap();

@@ -8,7 +8,8 @@ use std::path::PathBuf;
 pub struct InspectArgs {
     /// The recording (.relume).
     recording: PathBuf,
-    /// Print JSON (keys include frames, frames_with_pose, streams, association).
+    /// Print JSON (keys include frames, frames_with_pose, streams, association; with
+    /// --verify, records_verified and corrupt_records).
     #[arg(long)]
     json: bool,
     /// Read every record and check its checksum and encoding, images decoded; the exit
@@ -66,6 +67,7 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
         "attachments": h.attachments.iter().map(|a| serde_json::json!({ "name": a.name, "kind": a.kind, "width": a.image.width, "height": a.image.height, "channels": a.image.channels })).collect::<Vec<_>>(),
         "damage": rec.damage().map(|d| d.to_string()),
         "verified": a.verify,
+        "records_verified": a.verify.then_some(index.len()),
         "corrupt_records": corrupt,
     });
     if a.json {

@@ -235,8 +235,17 @@ pub(crate) fn import_header(
         .iter()
         .map(|(k, v)| (k.to_string(), v.clone()))
         .collect();
-    settings.insert("intrinsics".into(), format!("{:?}", options.intrinsics));
-    settings.insert("store".into(), format!("{:?}", options.store));
+    // As `--intrinsics` and `--store` take them, so the settings can be given again.
+    let k = &options.intrinsics;
+    settings.insert(
+        "intrinsics".into(),
+        format!("{},{},{},{}", k.fx, k.fy, k.cx, k.cy),
+    );
+    let store = match options.store {
+        StoreMode::Compressed => "compressed",
+        StoreMode::Raw => "raw",
+    };
+    settings.insert("store".into(), store.into());
     Header {
         name: dir
             .file_name()

@@ -223,7 +223,7 @@ pub(super) fn stop_on_interrupt() -> Arc<AtomicBool> {
 /// An error before the run, rather than after it, when the file an option names cannot
 /// be written: something other than a regular file stands there (a folder, a device),
 /// or its folder does not exist.
-fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
+pub(super) fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
     // Where the file will be written: through a symbolic link, to what it leads to.
     let target =
         output_target(path).map_err(|e| anyhow::anyhow!("{option} {}: {e}", path.display()))?;

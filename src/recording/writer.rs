@@ -142,6 +142,13 @@ impl Drop for RecordingWriter {
 /// device such as /dev/null, a FIFO, a directory) is an error.
 pub fn output_target(path: &Path) -> std::io::Result<PathBuf> {
     use std::io::{Error, ErrorKind};
+    // "out/" would be written as the file "out" (or fail if that is missing).
+    if path.as_os_str().to_string_lossy().ends_with('/') {
+        return Err(Error::new(
+            ErrorKind::InvalidInput,
+            "ends in `/`, which names a folder: give a file name",
+        ));
+    }
     let mut target = path.to_path_buf();
     // As many links as Linux follows (MAXSYMLINKS).
     for _ in 0..40 {
@@ -151,6 +158,12 @@ pub fn output_target(path: &Path) -> std::io::Result<PathBuf> {
         };
         if meta.is_file() {
             return Ok(target);
+        }
+        if meta.is_dir() {
+            return Err(Error::new(
+                ErrorKind::InvalidInput,
+                "is a folder: give a file name",
+            ));
         }
         if !meta.file_type().is_symlink() {
             return Err(Error::new(
@@ -230,12 +243,28 @@ mod tests {
 
         std::fs::create_dir(d.join("folder")).unwrap();
         let e = write_file_atomic(&d.join("folder"), b"x").unwrap_err();
+        assert_eq!(e.to_string(), "is a folder: give a file name");
+        assert!(d.join("folder").is_dir());
+        let e = write_file_atomic(&d.join("new/"), b"x").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "ends in `/`, which names a folder: give a file name"
+        );
+        let fifo = d.join("fifo");
+        assert!(
+            std::process::Command::new("mkfifo")
+                .arg(&fifo)
+                .status()
+                .unwrap()
+                .success()
+        );
+        let e = write_file_atomic(&fifo, b"x").unwrap_err();
         assert_eq!(
             e.to_string(),
             "not a regular file (outputs are written beside their target and renamed over \
              it, which would replace it)"
         );
-        assert!(d.join("folder").is_dir());
+        std::fs::remove_file(&fifo).unwrap();
         std::os::unix::fs::symlink("loop.png", d.join("loop.png")).unwrap();
         let e = write_file_atomic(&d.join("loop.png"), b"x").unwrap_err();
         assert_eq!(e.to_string(), "too many levels of symbolic links");

@@ -15,7 +15,14 @@ pub fn read_regular(path: &Path) -> std::io::Result<Vec<u8>> {
 /// [`read_regular`] as UTF-8 text.
 pub fn read_regular_to_string(path: &Path) -> std::io::Result<String> {
     check_regular(path)?;
-    std::fs::read_to_string(path)
+    std::fs::read_to_string(path).map_err(|e| match e.kind() {
+        // std says "stream did not contain valid UTF-8", which does not say what is wrong.
+        ErrorKind::InvalidData => Error::new(
+            ErrorKind::InvalidData,
+            "is not a text file (not valid UTF-8)",
+        ),
+        _ => e,
+    })
 }
 
 fn check_regular(path: &Path) -> std::io::Result<()> {
@@ -55,6 +62,12 @@ mod tests {
                 "is not a regular file (a device, pipe or socket)"
             );
         }
+        let binary = dir.path().join("b.relume");
+        std::fs::write(&binary, b"RELUME\xff\xfe").unwrap();
+        assert_eq!(
+            read_regular_to_string(&binary).unwrap_err().to_string(),
+            "is not a text file (not valid UTF-8)"
+        );
         let missing = read_regular(&dir.path().join("none")).unwrap_err();
         assert_eq!(missing.kind(), ErrorKind::NotFound);
     }

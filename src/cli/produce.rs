@@ -24,7 +24,7 @@ pub struct SynthArgs {
     /// Image size, WIDTHxHEIGHT. The camera keeps the field of view of a 640x480
     /// PrimeSense (fx = fy = 525 at that size), scaled per axis: a size that is not 4:3
     /// has non-square pixels (640x240: fx 525, fy 262.5).
-    #[arg(long, default_value = "640x480", value_parser = parse_size)]
+    #[arg(long, default_value = "640x480", value_parser = parse_size, allow_hyphen_values = true)]
     size: (u32, u32),
     /// Seed of every random choice (noise, holes, shading samples).
     #[arg(long, default_value_t = SynthConfig::default().seed)]

@@ -178,10 +178,7 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
             let mut any = false;
             for (key, value) in scores.iter().filter(|(k, _)| *k != "kind") {
                 any = true;
-                match value.as_f64() {
-                    Some(v) if value.is_f64() => outln!("  {key:<34} {v:.5}")?,
-                    _ => outln!("  {key:<34} {value}")?,
-                }
+                outln!("  {key:<34} {}", score_text(value))?;
             }
             if !any {
                 outln!("  (nothing to score without ground truth)")?;
@@ -189,4 +186,17 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
         }
     }
     Ok(status)
+}
+
+/// A score as eval's text prints it: floats (alone or in a list) to 5 decimals, anything
+/// else as JSON (null, integers, booleans).
+fn score_text(value: &Value) -> String {
+    match value {
+        Value::Number(n) if n.is_f64() => format!("{:.5}", n.as_f64().unwrap_or(f64::NAN)),
+        Value::Array(items) => {
+            let items: Vec<String> = items.iter().map(score_text).collect();
+            format!("[{}]", items.join(", "))
+        }
+        other => other.to_string(),
+    }
 }

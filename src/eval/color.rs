@@ -199,17 +199,14 @@ impl ReferenceScorer {
         }
     }
 
+    /// null where nothing was compared (no frame, or no pixel both covered and
+    /// unclipped), as every other scorer gives it; 0 would be a score.
     pub fn report(&self) -> Value {
-        let mut out = json!({
-            "coverage": self.covered as f64 / self.pixels.max(1) as f64,
-        });
-        if self.samples > 0 {
-            let mse = self.squared / self.samples as f64;
-            out.as_object_mut()
-                .expect("an object")
-                .insert("reference_psnr_db".into(), json!(-10.0 * mse.log10()));
-        }
-        out
+        json!({
+            "coverage": (self.pixels > 0).then(|| self.covered as f64 / self.pixels as f64),
+            "reference_psnr_db": (self.samples > 0)
+                .then(|| -10.0 * (self.squared / self.samples as f64).log10()),
+        })
     }
 }
 
@@ -223,5 +220,20 @@ mod tests {
         assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
         assert!(median(&[]).is_nan());
         assert_eq!(frobenius(Mat3::IDENTITY * 2.0), 12f32.sqrt());
+    }
+
+    #[test]
+    fn a_reference_with_nothing_compared_scores_null() {
+        let mut scorer = ReferenceScorer::new("reference".into(), "coverage".into(), None);
+        let report = scorer.report();
+        assert_eq!(report["coverage"], Value::Null);
+        assert_eq!(report["reference_psnr_db"], Value::Null);
+        // Covered pixels, none comparable (every camera pixel clipped, say).
+        (scorer.pixels, scorer.covered) = (4, 3);
+        let report = scorer.report();
+        assert_eq!(report["coverage"], 0.75);
+        assert_eq!(report["reference_psnr_db"], Value::Null);
+        (scorer.squared, scorer.samples) = (0.04, 4); // mse 0.01: 20 dB
+        assert!((scorer.report()["reference_psnr_db"].as_f64().unwrap() - 20.0).abs() < 1e-9);
     }
 }

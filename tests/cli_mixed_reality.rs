@@ -154,6 +154,8 @@ fn eval_scores_the_filter_and_the_composite() {
             .unwrap_or_else(|| panic!("{k} missing in {stage}"))
     };
     assert_eq!(filter["frames_scored"], 1);
+    assert_eq!(filter["scored_frames"], serde_json::json!([14]));
+    assert_eq!(composite["scored_frames"], serde_json::json!([14]));
     let (unfiltered, filtered, gaussian) = (
         key(filter, "mse_unfiltered"),
         key(filter, "mse_filtered"),

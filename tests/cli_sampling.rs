@@ -200,6 +200,11 @@ fn eval_scores_a_short_recording_on_its_last_frame() {
     let report: Value = serde_json::from_str(&stdout(&o)).unwrap();
     let path = &report["stages"]["sample.path"];
     assert_eq!(path["frames_scored"], 1, "{path}");
+    assert_eq!(
+        path["scored_frames"],
+        serde_json::json!([3]),
+        "the last: {path}"
+    );
     let ratio_rmse = path["ratio_rmse"].as_f64().unwrap();
     assert!(ratio_rmse > 0.0 && ratio_rmse < 0.3, "{path}");
 }

@@ -27,7 +27,8 @@ pub struct CompositeScorer {
     encoder: GammaEncoder,
     /// The sampling's unfiltered layers: e_r_dir, e_r_ind, e_rv_dir, e_rv_ind.
     unfiltered: Option<[String; 4]>,
-    frames_scored: usize,
+    /// The indices of the frames scored (those with a reference).
+    scored_frames: Vec<usize>,
     squared: f64,
     squared_unfiltered: f64,
     values: u64,
@@ -43,7 +44,7 @@ impl CompositeScorer {
             unfiltered: sampler.map(|s| {
                 ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind"].map(|r| super::output(s, r))
             }),
-            frames_scored: 0,
+            scored_frames: Vec::new(),
             squared: 0.0,
             squared_unfiltered: 0.0,
             values: 0,
@@ -110,7 +111,7 @@ impl CompositeScorer {
             }
         }
         self.values += (0..own.data.len()).filter(|&i| scored(i)).count() as u64 * 3;
-        self.frames_scored += 1;
+        self.scored_frames.push(frame.index);
         Ok(())
     }
 
@@ -123,7 +124,8 @@ impl CompositeScorer {
             }
         };
         let mut report = json!({
-            "frames_scored": self.frames_scored,
+            "frames_scored": self.scored_frames.len(),
+            "scored_frames": self.scored_frames,
             "psnr_db": psnr(self.squared),
         });
         if self.unfiltered.is_some() {

@@ -46,7 +46,8 @@ pub struct FilterScorer {
     /// The pipeline's `sample.path`, whose outputs feed the filter (`None`: no flicker
     /// score).
     sampler: Option<(PathRunner, ResolvedStage)>,
-    frames_scored: usize,
+    /// The indices of the frames scored (those with a reference).
+    scored_frames: Vec<usize>,
     unfiltered: Mse,
     filtered: Mse,
     gaussian: Mse,
@@ -97,7 +98,7 @@ impl FilterScorer {
             objects,
             seed,
             sampler,
-            frames_scored: 0,
+            scored_frames: Vec::new(),
             unfiltered: Mse::default(),
             filtered: Mse::default(),
             gaussian: Mse::default(),
@@ -154,7 +155,7 @@ impl FilterScorer {
             self.flicker_spatial.sum += sum;
             self.flicker_spatial.count += count;
         }
-        self.frames_scored += 1;
+        self.scored_frames.push(frame.index);
         Ok(())
     }
 
@@ -229,7 +230,8 @@ impl FilterScorer {
 
     pub fn report(&self) -> Value {
         json!({
-            "frames_scored": self.frames_scored,
+            "frames_scored": self.scored_frames.len(),
+            "scored_frames": self.scored_frames,
             "mse_unfiltered": self.unfiltered.value(),
             "mse_filtered": self.filtered.value(),
             "mse_gaussian_same_radius": self.gaussian.value(),

@@ -11,9 +11,9 @@
 //! | `gbuffer.splat` | `reference_psnr_db` (reference against the compensated camera image where both exist and the camera pixel is not clipped, peak 1), `coverage` | no |
 //! | `light.importance` | `pdf_integral`, `irradiance_rel_error`, `maps_scored` (against brute-force integration of each map; see [`light`]) | no |
 //! | `light.val` | `sh_irradiance_rel_error`, `val_center_drift_m`, `environment_static`, `lights` | no |
-//! | `sample.path` | `ratio_rmse`, `ratio_rmse_alternative`, `object_aware`, `unbiased_p`, `frames_scored`, `region_pixels` (against 1024-sample references; see [`sampling`]) | no |
-//! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `mse_unfiltered_by_layer`, `mse_filtered_by_layer` (per layer: E_R^dir, E_R^ind, E_RV^dir, E_RV^ind), `temporal_flicker`, `temporal_flicker_spatial_only`, `frames_scored` (against the same references; see [`filter`]) | no |
-//! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `frames_scored` (against a composite of the references; see [`composite`]) | no |
+//! | `sample.path` | `ratio_rmse`, `ratio_rmse_alternative`, `object_aware`, `unbiased_p`, `frames_scored`, `scored_frames` (their indices), `region_pixels` (against 1024-sample references; see [`sampling`]) | no |
+//! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `mse_unfiltered_by_layer`, `mse_filtered_by_layer` (per layer: E_R^dir, E_R^ind, E_RV^dir, E_RV^ind), `temporal_flicker`, `temporal_flicker_spatial_only`, `frames_scored`, `scored_frames` (against the same references; see [`filter`]) | no |
+//! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `frames_scored`, `scored_frames` (against a composite of the references; see [`composite`]) | no |
 //!
 //! Ground truth comes from the recording's truth stream (synthetic recordings).
 

@@ -256,7 +256,8 @@ pub struct PathScorer {
     runner: PathRunner,
     /// e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask.
     outputs: [String; 5],
-    frames_scored: usize,
+    /// The indices of the frames scored (those with a reference).
+    scored_frames: Vec<usize>,
     pixels: u64,
     squared: f64,
     alternative_squared: f64,
@@ -274,7 +275,7 @@ impl PathScorer {
             runner: PathRunner::new(stage, objects, intrinsics, seed),
             outputs: ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind", "mask"]
                 .map(|r| super::output(stage, r)),
-            frames_scored: 0,
+            scored_frames: Vec::new(),
             pixels: 0,
             squared: 0.0,
             alternative_squared: 0.0,
@@ -374,7 +375,7 @@ impl PathScorer {
         if se > 0.0 && region.iter().any(|&r| r) {
             self.z_scores.push((m - reference_mean) / se);
         }
-        self.frames_scored += 1;
+        self.scored_frames.push(frame.index);
         Ok(())
     }
 
@@ -383,7 +384,8 @@ impl PathScorer {
         let pooled_z =
             self.z_scores.iter().sum::<f64>() / (self.z_scores.len().max(1) as f64).sqrt();
         json!({
-            "frames_scored": self.frames_scored,
+            "frames_scored": self.scored_frames.len(),
+            "scored_frames": self.scored_frames,
             "region_pixels": self.pixels,
             "object_aware": self.runner.params.object_aware,
             "ratio_rmse": if self.pixels > 0 { rmse(self.squared) } else { f64::NAN },

@@ -61,6 +61,9 @@ enum Command {
     /// Run a pipeline and score its stages against the recording's ground truth.
     Eval(eval::EvalArgs),
     /// Benchmark each stage of a pipeline: medians over repeated runs after a warm-up.
+    ///
+    /// The pipeline's `write` stages write into a temporary folder, removed afterwards:
+    /// a bench times the writing but leaves no files behind.
     Bench(bench::BenchArgs),
     /// List every stage kind with its inputs, outputs and parameters.
     Stages(catalog::StagesArgs),

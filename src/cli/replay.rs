@@ -25,7 +25,8 @@ pub struct RunArgs {
     /// Pipeline file (TOML). Default: the built-in pipelines/default.toml.
     #[arg(short, long)]
     pub(super) pipeline: Option<PathBuf>,
-    /// Frames to replay: A..B (B excluded), A.., ..B or a single index N.
+    /// Frames to replay: A..B (B excluded), A.., ..B or a single index N. Default: every
+    /// frame.
     #[arg(long, value_parser = parse_frames)]
     pub(super) frames: Option<Range<usize>>,
     /// Skip (and count) frames with corrupt records, or with images that do not decode

@@ -243,13 +243,16 @@ fn bench_isolated_runs_one_frame_at_a_time() {
     );
 }
 
+/// Decodes, sleeps 40 ms and writes the color image of each frame: a run slow enough to
+/// interrupt in the middle, whose progress shows in the files it writes.
+const SLOW_COLOR_WRITER: &str = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"debug.sleep\"\nparams = { ms = 40.0 }\n[[stage]]\nkind = \"write\"\nparams = { products = [\"color\"] }\n";
+
 #[test]
 fn ctrl_c_stops_after_the_frames_in_flight_and_keeps_complete_outputs() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     small_recording(d, 40);
-    let pipeline = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"debug.sleep\"\nparams = { ms = 40.0 }\n[[stage]]\nkind = \"write\"\nparams = { products = [\"color\"] }\n";
-    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    std::fs::write(d.join("p.toml"), SLOW_COLOR_WRITER).unwrap();
     let child = common::relume()
         .args([
             "replay",
@@ -304,8 +307,7 @@ fn an_interrupted_bench_exits_130_with_the_complete_runs_only() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     small_recording(d, 20);
-    let pipeline = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"debug.sleep\"\nparams = { ms = 40.0 }\n[[stage]]\nkind = \"write\"\nparams = { products = [\"color\"] }\n";
-    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    std::fs::write(d.join("p.toml"), SLOW_COLOR_WRITER).unwrap();
     // bench writes into a scratch folder under the temporary directory: watching its
     // frames tells the runs apart (each run writes them all again).
     std::fs::create_dir(d.join("tmp")).unwrap();

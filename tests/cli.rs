@@ -297,9 +297,12 @@ fn ctrl_c_stops_after_the_frames_in_flight_and_keeps_complete_outputs() {
     );
 }
 
-/// The modification time of `path`, or `None` while it does not exist.
-fn modified(path: &Path) -> Option<std::time::SystemTime> {
-    path.metadata().and_then(|m| m.modified()).ok()
+/// Which write of `path` stands there: its inode and modification time (outputs are
+/// renamed over their target, so each write brings a new inode), `None` before the first.
+fn version(path: &Path) -> Option<(u64, std::time::SystemTime)> {
+    use std::os::unix::fs::MetadataExt;
+    let meta = path.metadata().ok()?;
+    Some((meta.ino(), meta.modified().ok()?))
 }
 
 #[test]
@@ -337,11 +340,11 @@ fn an_interrupted_bench_exits_130_with_the_complete_runs_only() {
     };
     // The warm-up run's last frame, then the first measured run's, then the second
     // measured run under way.
-    wait_for(&|| modified(&last).is_some());
-    let warm_up = modified(&last);
-    wait_for(&|| modified(&last) > warm_up);
-    let measured = modified(&last);
-    wait_for(&|| modified(&first) > measured);
+    wait_for(&|| version(&last).is_some());
+    let warm_up = version(&last);
+    wait_for(&|| version(&last) != warm_up);
+    let measured = version(&first);
+    wait_for(&|| version(&first) != measured);
     let status = std::process::Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()

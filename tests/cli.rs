@@ -1,5 +1,6 @@
 //! The command line as a user runs it: the main job, replays, hashes, benchmarks and
-//! the catalog. Bad input, refusals and interruptions are in cli_bad_input.rs.
+//! the catalog. Bad input, refusals and interruptions are in cli_bad_input.rs, damaged
+//! recordings in cli_damaged.rs.
 
 mod common;
 
@@ -307,65 +308,87 @@ fn version(path: &Path) -> Option<(u64, std::time::SystemTime)> {
 
 #[test]
 fn an_interrupted_bench_exits_130_with_the_complete_runs_only() {
-    let tmp = tempfile::tempdir().unwrap();
-    let d = tmp.path();
-    small_recording(d, 20);
-    std::fs::write(d.join("p.toml"), SLOW_COLOR_WRITER).unwrap();
-    // bench writes into a scratch folder under the temporary directory: watching its
-    // frames tells the runs apart (each run writes them all again).
-    std::fs::create_dir(d.join("tmp")).unwrap();
-    let child = common::relume()
-        .args([
-            "bench",
-            "small.relume",
-            "-p",
-            "p.toml",
-            "--repeat",
-            "3",
-            "--json",
-        ])
-        .env("TMPDIR", d.join("tmp"))
-        .current_dir(d)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let frames = d.join(format!("tmp/relume-bench-{}/color", child.id()));
-    let (first, last) = (frames.join("000000.png"), frames.join("000019.png"));
-    let start = std::time::Instant::now();
-    let wait_for = |done: &dyn Fn() -> bool| {
-        while !done() && start.elapsed().as_secs() < 60 {
-            std::thread::sleep(std::time::Duration::from_millis(5));
+    for during_warm_up in [true, false] {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
+        small_recording(d, 20);
+        std::fs::write(d.join("p.toml"), SLOW_COLOR_WRITER).unwrap();
+        // bench writes into a scratch folder under the temporary directory: watching its
+        // frames tells the runs apart (each run writes them all again).
+        std::fs::create_dir(d.join("tmp")).unwrap();
+        let child = common::relume()
+            .args([
+                "bench",
+                "small.relume",
+                "-p",
+                "p.toml",
+                "--repeat",
+                "3",
+                "--json",
+            ])
+            .env("TMPDIR", d.join("tmp"))
+            .current_dir(d)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let frames = d.join(format!("tmp/relume-bench-{}/color", child.id()));
+        let (first, last) = (frames.join("000000.png"), frames.join("000019.png"));
+        let start = std::time::Instant::now();
+        let wait_for = |done: &dyn Fn() -> bool, what: &str| {
+            while !done() {
+                assert!(
+                    start.elapsed().as_secs() < 60,
+                    "no sign of {what} after a minute"
+                );
+                std::thread::sleep(std::time::Duration::from_millis(5));
+            }
+        };
+        if during_warm_up {
+            wait_for(&|| version(&first).is_some(), "the warm-up run");
+        } else {
+            // The warm-up run's last frame, then the first measured run's, then the
+            // second measured run under way.
+            wait_for(&|| version(&last).is_some(), "the warm-up run's end");
+            let warm_up = version(&last);
+            wait_for(
+                &|| version(&last) != warm_up,
+                "the first measured run's end",
+            );
+            let measured = version(&first);
+            wait_for(&|| version(&first) != measured, "the second measured run");
         }
-    };
-    // The warm-up run's last frame, then the first measured run's, then the second
-    // measured run under way.
-    wait_for(&|| version(&last).is_some());
-    let warm_up = version(&last);
-    wait_for(&|| version(&last) != warm_up);
-    let measured = version(&first);
-    wait_for(&|| version(&first) != measured);
-    let status = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let o = child.wait_with_output().unwrap();
-    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
-    let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
-    assert_eq!(doc["interrupted"], true);
-    assert_eq!(doc["frames"], 20, "only complete runs are reported");
-    // The second measured run was under way when the interrupt came; if it finished
-    // first, the third was.
-    let runs = doc["repeat"].as_u64().unwrap();
-    assert!((1..=2).contains(&runs), "{runs}");
-    assert!(
-        stderr(&o).ends_with(&format!(
-            "interrupted: the timings cover the {runs} of 3 measured runs complete\n"
-        )),
-        "{}",
-        stderr(&o)
-    );
+        let status = std::process::Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+        if during_warm_up {
+            assert_eq!(stdout(&o), "");
+            assert!(
+                stderr(&o).ends_with("error: interrupted before a measured run was complete\n"),
+                "{}",
+                stderr(&o)
+            );
+            continue;
+        }
+        let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        assert_eq!(doc["interrupted"], true);
+        assert_eq!(doc["frames"], 20, "only complete runs are reported");
+        // The second measured run was under way when the interrupt came; if it finished
+        // first, the third was.
+        let runs = doc["repeat"].as_u64().unwrap();
+        assert!((1..=2).contains(&runs), "{runs}");
+        assert!(
+            stderr(&o).ends_with(&format!(
+                "interrupted: the timings cover the {runs} of 3 measured runs complete\n"
+            )),
+            "{}",
+            stderr(&o)
+        );
+    }
 }
 
 #[test]

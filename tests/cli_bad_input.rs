@@ -58,6 +58,25 @@ fn bad_files_are_clear_errors() {
     // The cause once, not repeated by the error's source chain.
     let cause = std::fs::File::open(d.join("missing.relume")).unwrap_err();
     assert_eq!(stderr(&o), format!("error: missing.relume: {cause}\n"));
+    // A binary file where a pipeline (text) belongs.
+    std::fs::write(d.join("p.toml"), b"RELUME\xff\xfe\x00").unwrap();
+    let o = run_in(d, &["validate", "p.toml"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stderr(&o),
+        "error: p.toml: cannot read the pipeline: is not a text file (not valid UTF-8)\n"
+    );
+    // A negative size reaches the size parser, not clap's flag matching.
+    let o = run_in(d, &["synth", "-o", "r.relume", "--size", "-320x240"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).starts_with(
+            "error: invalid value '-320x240' for '--size <SIZE>': expected WIDTHxHEIGHT \
+             with positive integers, e.g. 320x240, got \"-320x240\"\n"
+        ),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]

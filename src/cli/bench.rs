@@ -56,8 +56,9 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
     })();
     let _ = std::fs::remove_dir_all(&scratch);
     let reports = result?;
-    // As replay and eval: an interrupted bench exits 130, with what it measured.
-    let interrupted = stop.load(Ordering::Relaxed);
+    // As replay and eval: a bench stopped before its last run was complete exits 130,
+    // with what it measured (an interrupt after the last frame was sent changes nothing).
+    let interrupted = reports.len() < a.repeat as usize;
     if reports.is_empty() {
         // --repeat is at least 1, and only an interrupted run is left out.
         eprintln!("error: interrupted before a measured run was complete");

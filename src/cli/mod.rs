@@ -62,8 +62,9 @@ enum Command {
     Eval(eval::EvalArgs),
     /// Benchmark each stage of a pipeline: medians over repeated runs after a warm-up.
     ///
-    /// The pipeline's `write` stages write into a temporary folder, removed afterwards:
-    /// a bench times the writing but leaves no files behind.
+    /// The pipeline's `write` stages write into a temporary folder, removed afterwards
+    /// (also after a first Ctrl-C; a second one aborts at once and leaves it): a bench
+    /// times the writing but leaves no files behind.
     Bench(bench::BenchArgs),
     /// List every stage kind with its inputs, outputs and parameters.
     Stages(catalog::StagesArgs),

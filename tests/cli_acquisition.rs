@@ -257,6 +257,17 @@ fn livingroom1_runs_through_acquisition_and_eval_reports_self_consistency() {
              on it: gbuffer.splat, color.compensate, depth.fuse\n"
         )
     );
+    // As is a pipeline whose only scores are its normals'.
+    let geometry = concat!(env!("CARGO_MANIFEST_DIR"), "/pipelines/geometry.toml");
+    let o = run_in(d, &["eval", "lr.relume", "-p", geometry]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stderr(&o),
+        format!(
+            "error: {geometry}: the pipeline's only stages to score, `normals.cross`, are \
+             scored against the true normals, and the recording has no ground truth\n"
+        )
+    );
     let o = ok(run_in(
         d,
         &["eval", "lr.relume", "-p", &p, "--frames", "0..12", "--json"],

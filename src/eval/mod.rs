@@ -212,6 +212,19 @@ impl Evaluator {
         if !options.stages.is_empty() {
             scorers.retain(|(n, _, _)| options.stages.contains(n));
         }
+        if !header.streams.contains(&StreamKind::Truth)
+            && !scorers.is_empty()
+            && scorers
+                .iter()
+                .all(|(_, _, s)| matches!(s, Scorer::Normals(_)))
+        {
+            let names: Vec<String> = scorers.iter().map(|(n, _, _)| format!("`{n}`")).collect();
+            return Err(format!(
+                "the pipeline's only stages to score, {}, are scored against the true \
+                 normals, and the recording has no ground truth",
+                names.join(", ")
+            ));
+        }
         let needs_references = scorers.iter().any(|(_, _, s)| {
             matches!(
                 s,

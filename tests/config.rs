@@ -61,8 +61,8 @@ fn the_default_pipeline_is_the_mixed_reality_chain() {
     );
 }
 
-/// The fast preset is the mixed-reality chain with fewer samples, and nothing else: a
-/// change to one file that is not made to the other fails here.
+/// The fast preset is the mixed-reality chain with fewer samples and a fixed B_e, and
+/// nothing else: a change to one file that is not made to the other fails here.
 #[test]
 fn the_fast_pipeline_is_mixed_reality_with_fewer_samples() {
     let file = |name: &str| {
@@ -81,6 +81,11 @@ fn the_fast_pipeline_is_mixed_reality_with_fewer_samples() {
                 "kind = \"sample.path\"\n",
                 "kind = \"sample.path\"\nparams = { primary = 2, direct = 2, indirect = 2 }\n",
                 1
+            )
+            .replacen(
+                "kind = \"filter.axis_aligned\"\n",
+                "kind = \"filter.axis_aligned\"\nparams = { environment_bandwidth = 4.0 }\n",
+                1
             ),
         body(&fast)
     );
@@ -89,6 +94,8 @@ fn the_fast_pipeline_is_mixed_reality_with_fewer_samples() {
     for (key, value) in [("primary", 2), ("direct", 2), ("indirect", 2)] {
         assert_eq!(path.params.int(key), value, "{key}");
     }
+    let filter = p.stages.iter().find(|s| s.kind == "filter.axis_aligned");
+    assert_eq!(filter.unwrap().params.float("environment_bandwidth"), 4.0);
 }
 
 #[test]

@@ -100,7 +100,8 @@ pub(crate) fn input(stage: &ResolvedStage, role: &str) -> String {
 impl Evaluator {
     /// An evaluator for the scorable stages of `pipeline` run with `seed` (see the
     /// module table), or those `options` names. Fails when a named stage is not in the
-    /// pipeline or cannot be scored.
+    /// pipeline or cannot be scored, or when the stages to score need ground truth the
+    /// recording lacks (normals).
     pub fn new(
         pipeline: &Pipeline,
         header: &Header,
@@ -188,8 +189,10 @@ impl Evaluator {
             }
         }
         // Normals are scored against the truth alone: named on a recording without a
-        // truth stream, they would run the whole pipeline to report nothing.
-        if !header.streams.contains(&StreamKind::Truth)
+        // truth stream, or the only stages to score, they would run the whole pipeline
+        // to report nothing.
+        let has_truth = header.streams.contains(&StreamKind::Truth);
+        if !has_truth
             && let Some((name, kind, _)) = scorers
                 .iter()
                 .find(|(n, _, s)| options.stages.contains(n) && matches!(s, Scorer::Normals(_)))
@@ -212,7 +215,7 @@ impl Evaluator {
         if !options.stages.is_empty() {
             scorers.retain(|(n, _, _)| options.stages.contains(n));
         }
-        if !header.streams.contains(&StreamKind::Truth)
+        if !has_truth
             && !scorers.is_empty()
             && scorers
                 .iter()

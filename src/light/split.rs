@@ -62,8 +62,8 @@ fn emitting(map: &EnvMap, index: usize, channel: usize, area: f32) -> Option<(f6
 
 /// The per-channel radiance thresholds of the split (Sec. 4.2): the largest texel
 /// radiance L such that the texels of that radiance or more hold at least `ratio` of the
-/// channel's total radiant intensity (the brightest texels that reach the ratio). `f64::INFINITY` where nothing is direct
-/// (`ratio <= 0` or a black channel).
+/// channel's total radiant intensity (the brightest texels that reach the ratio).
+/// `f64::INFINITY` where nothing is direct (`ratio <= 0` or a black channel).
 pub fn split_thresholds(map: &EnvMap, ratio: f64) -> [f64; 3] {
     let areas: Vec<f32> = (0..map.radiance.len())
         .map(|i| texel_area(map, i))

@@ -173,7 +173,7 @@ fn a_closed_or_full_standard_output_ends_the_command_without_a_panic() {
     }
 }
 #[test]
-fn import_warns_of_frames_without_a_pose() {
+fn import_warns_of_what_pipelines_will_miss() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     let rw = d.join("rw");
@@ -205,6 +205,22 @@ fn import_warns_of_frames_without_a_pose() {
         stderr(&o),
         "warning: r.relume: no camera poses: pipelines that read `pose` (the default one \
          does) will not run\n"
+    );
+    // Depth images of another size than the color images.
+    for i in 0..2 {
+        image::ImageBuffer::<image::Luma<u16>, _>::from_pixel(4, 3, image::Luma([1500]))
+            .save(rw.join(format!("depth/{i:05}.png")))
+            .unwrap();
+    }
+    let o = ok(run_in(d, &["import", "redwood", "rw", "-o", "r.relume"]));
+    assert!(
+        stderr(&o).ends_with(
+            "warning: r.relume: the color images are 8x6 and the depth images 4x3: stages \
+             that combine them, such as cloud.samples (in the acquisition and \
+             mixed-reality pipelines), stop at the first frame\n"
+        ),
+        "{}",
+        stderr(&o)
     );
 }
 

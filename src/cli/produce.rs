@@ -224,8 +224,19 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     )?;
     // What the recording lacks that most pipelines need, from its frames as replay
     // builds them. A dataset may lack it, so this warns rather than fails.
-    let stats = Replay::open(out, ReplayOptions::default())?.stats;
-    for warning in missing_streams(&stats) {
+    let replay = Replay::open(out, ReplayOptions::default())?;
+    let mut warnings = missing_streams(&replay.stats);
+    let header = replay.recording.header();
+    let (color, depth) = (&header.color_intrinsics, &header.depth_intrinsics);
+    if replay.stats.frames > 0 && (color.width, color.height) != (depth.width, depth.height) {
+        warnings.push(format!(
+            "the color images are {}x{} and the depth images {}x{}: stages that combine \
+             them, such as cloud.samples (in the acquisition and mixed-reality pipelines), \
+             stop at the first frame",
+            color.width, color.height, depth.width, depth.height
+        ));
+    }
+    for warning in warnings {
         eprintln!("warning: {}: {warning}", out.display());
     }
     Ok(0)

@@ -274,12 +274,7 @@ fn ctrl_c_stops_after_the_frames_in_flight_and_keeps_complete_outputs() {
     while !first.exists() && start.elapsed().as_secs() < 30 {
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
-    let status = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let o = child.wait_with_output().unwrap();
+    let o = common::signal_and_wait(child, "-INT");
     assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
     assert!(stderr(&o).contains("interrupted:"), "{}", stderr(&o));
     let written = common::file_names(&d.join("out/color"));
@@ -358,12 +353,7 @@ fn an_interrupted_bench_exits_130_with_the_complete_runs_only() {
             let measured = version(&first);
             wait_for(&|| version(&first) != measured, "the second measured run");
         }
-        let status = std::process::Command::new("kill")
-            .args(["-INT", &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(status.success());
-        let o = child.wait_with_output().unwrap();
+        let o = common::signal_and_wait(child, "-INT");
         assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
         if during_warm_up {
             assert_eq!(stdout(&o), "");

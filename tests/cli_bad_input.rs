@@ -419,12 +419,7 @@ fn an_interrupted_synth_leaves_no_partial_file() {
             std::thread::sleep(std::time::Duration::from_millis(10));
         }
         assert!(partial.exists(), "the recording is being written");
-        let status = std::process::Command::new("kill")
-            .args([signal, &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(status.success());
-        let o = child.wait_with_output().unwrap();
+        let o = common::signal_and_wait(child, signal);
         assert_eq!(o.status.code(), Some(130), "{signal}: {}", stderr(&o));
         assert!(
             stderr(&o).ends_with("interrupted: the unfinished recording was removed\n"),

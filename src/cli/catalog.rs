@@ -38,9 +38,10 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
                     return "-".to_string();
                 }
                 let port = |p: &relume::graph::Port| {
-                    let mut shown = match p.role == p.default_product {
-                        true => p.role.clone(),
-                        false => format!("{} = {}", p.role, p.default_product),
+                    let mut shown = if p.role == p.default_product {
+                        p.role.clone()
+                    } else {
+                        format!("{} = {}", p.role, p.default_product)
                     };
                     if p.optional {
                         shown.push_str(" (optional)");

@@ -29,7 +29,7 @@ mod progress;
 mod replay;
 
 use clap::{Parser, Subcommand};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// relume replays recorded RGB-D sensor logs (color, depth, camera pose) through
 /// configurable pipelines of stages, times every stage per frame, and compares runs
@@ -85,6 +85,26 @@ Examples:
   relume bench lr.relume -p pipelines/mixed-reality-livingroom1.toml --frames 0..20
   relume stages                                    what a pipeline can use
   relume validate my.toml";
+
+/// An error before any work (a replay, a synth, an import), rather than after it, when
+/// the file an option names cannot be written: something other than a regular file
+/// stands there (a folder, a device), or its folder does not exist.
+pub(crate) fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
+    // Where the file will be written: through a symbolic link, to what it leads to.
+    let target = relume::recording::writer::output_target(path)
+        .map_err(|e| anyhow::anyhow!("{option} {}: {e}", path.display()))?;
+    if let Some(folder) = target.parent()
+        && !folder.as_os_str().is_empty()
+        && !folder.is_dir()
+    {
+        anyhow::bail!(
+            "{option} {}: the folder {} does not exist",
+            path.display(),
+            folder.display()
+        );
+    }
+    Ok(())
+}
 
 /// Writes to standard output: an error naming it when that fails, where `print!`
 /// would panic. A reader that went away ([`is_broken_pipe`]) ends the command quietly.

@@ -70,7 +70,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
         depth_noise: !a.no_depth_noise,
         ..SynthConfig::default()
     };
-    super::replay::check_output_file("-o", &a.out)?;
+    super::check_output_file("-o", &a.out)?;
     let start = std::time::Instant::now();
     let _partial = PartialFile::watch(&a.out);
     let summary = generate(&config, &a.out)?;
@@ -182,7 +182,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     let out = match &command {
         ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => &common.out,
     };
-    super::replay::check_output_file("-o", out)?;
+    super::check_output_file("-o", out)?;
     let _partial = PartialFile::watch(out);
     let bar = progress::bar(0, "importing");
     let mut tick = |done: usize, total: usize| {

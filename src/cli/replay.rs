@@ -6,7 +6,7 @@ use clap::{Args, Parser};
 use relume::graph::{
     Frame, Pipeline, Product, ProductKind, Registry, RunFailure, RunOptions, RunReport, run,
 };
-use relume::recording::writer::{output_target, write_file_atomic};
+use relume::recording::writer::write_file_atomic;
 use relume::recording::{Replay, ReplayOptions};
 use relume::stages::write::ply::ply_bytes;
 use relume::stages::write::{write_exr, write_png, write_record};
@@ -221,26 +221,6 @@ pub(super) fn stop_on_interrupt() -> Arc<AtomicBool> {
     super::interrupt::stop_flag()
 }
 
-/// An error before the run, rather than after it, when the file an option names cannot
-/// be written: something other than a regular file stands there (a folder, a device),
-/// or its folder does not exist.
-pub(super) fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
-    // Where the file will be written: through a symbolic link, to what it leads to.
-    let target =
-        output_target(path).map_err(|e| anyhow::anyhow!("{option} {}: {e}", path.display()))?;
-    if let Some(folder) = target.parent()
-        && !folder.as_os_str().is_empty()
-        && !folder.is_dir()
-    {
-        bail!(
-            "{option} {}: the folder {} does not exist",
-            path.display(),
-            folder.display()
-        );
-    }
-    Ok(())
-}
-
 /// An error before the run when --save names a product no stage of `pipeline` makes.
 fn check_saved_products(pipeline: &Pipeline, names: &[String]) -> anyhow::Result<()> {
     let made: Vec<&str> = pipeline
@@ -282,7 +262,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
     ];
     for (i, (option, path, extensions)) in outputs.iter().enumerate() {
         let Some(path) = path else { continue };
-        check_output_file(option, path)?;
+        super::check_output_file(option, path)?;
         let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("");
         if !extensions.iter().any(|e| e.eq_ignore_ascii_case(extension)) {
             bail!(

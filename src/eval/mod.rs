@@ -45,6 +45,24 @@ enum Scorer {
     Composite(Box<composite::CompositeScorer>),
 }
 
+impl Scorer {
+    /// True for a scorer with nothing to report without ground truth (see the module
+    /// table): the normals, compared with the true normals alone.
+    fn needs_truth(&self) -> bool {
+        matches!(self, Scorer::Normals(_))
+    }
+}
+
+/// Stage names for a message: "a, b" or "none".
+fn name_list<'a>(names: impl Iterator<Item = &'a str>) -> String {
+    let names: Vec<&str> = names.collect();
+    if names.is_empty() {
+        "none".to_string()
+    } else {
+        names.join(", ")
+    }
+}
+
 /// Scores a pipeline's stages over the frames given to [`Evaluator::observe`].
 pub struct Evaluator {
     scorers: Vec<(String, &'static str, Scorer)>,
@@ -177,12 +195,7 @@ impl Evaluator {
                 } else {
                     "is not in the pipeline"
                 };
-                let scorable: Vec<&str> = scorers.iter().map(|(n, _, _)| n.as_str()).collect();
-                let scorable = if scorable.is_empty() {
-                    "none".to_string()
-                } else {
-                    scorable.join(", ")
-                };
+                let scorable = name_list(scorers.iter().map(|(n, _, _)| n.as_str()));
                 return Err(format!(
                     "stage `{name}` {what}; the stages eval can score here: {scorable}"
                 ));
@@ -195,32 +208,23 @@ impl Evaluator {
         if !has_truth
             && let Some((name, kind, _)) = scorers
                 .iter()
-                .find(|(n, _, s)| options.stages.contains(n) && matches!(s, Scorer::Normals(_)))
+                .find(|(n, _, s)| options.stages.contains(n) && s.needs_truth())
         {
-            let scorable: Vec<&str> = scorers
-                .iter()
-                .filter(|(_, _, s)| !matches!(s, Scorer::Normals(_)))
-                .map(|(n, _, _)| n.as_str())
-                .collect();
+            let scorable = name_list(
+                scorers
+                    .iter()
+                    .filter(|(_, _, s)| !s.needs_truth())
+                    .map(|(n, _, _)| n.as_str()),
+            );
             return Err(format!(
                 "stage `{name}` ({kind}) is scored against the true normals, and the recording \
-                 has no ground truth; the stages eval can score on it: {}",
-                if scorable.is_empty() {
-                    "none".to_string()
-                } else {
-                    scorable.join(", ")
-                }
+                 has no ground truth; the stages eval can score on it: {scorable}"
             ));
         }
         if !options.stages.is_empty() {
             scorers.retain(|(n, _, _)| options.stages.contains(n));
         }
-        if !has_truth
-            && !scorers.is_empty()
-            && scorers
-                .iter()
-                .all(|(_, _, s)| matches!(s, Scorer::Normals(_)))
-        {
+        if !has_truth && !scorers.is_empty() && scorers.iter().all(|(_, _, s)| s.needs_truth()) {
             let names: Vec<String> = scorers.iter().map(|(n, _, _)| format!("`{n}`")).collect();
             return Err(format!(
                 "the pipeline's only stages to score, {}, are scored against the true \

@@ -326,9 +326,12 @@ fn source_loop(
         let start = Instant::now();
         // Skipping corrupt frames means checking their images here, before a stage
         // fails on them (a second decode, in this recovery mode only).
-        let read = || match options.skip_corrupt {
-            true => source.read_checked(n),
-            false => source.read(n),
+        let read = || {
+            if options.skip_corrupt {
+                source.read_checked(n)
+            } else {
+                source.read(n)
+            }
         };
         let frame = match catch_unwind(AssertUnwindSafe(read)) {
             Ok(Ok(mut frame)) => {

@@ -185,9 +185,12 @@ impl ObjectSpec {
             .find(|v| v.abs().max_element() > MAX_WORLD_COORDINATE);
         if let Some(v) = far {
             // Huge coordinates in exponent form, the others as they are.
-            let shown = v.to_array().map(|c| match c.abs() < 1e6 {
-                true => c.to_string(),
-                false => format!("{c:e}"),
+            let shown = v.to_array().map(|c| {
+                if c.abs() < 1e6 {
+                    c.to_string()
+                } else {
+                    format!("{c:e}")
+                }
             });
             return Err(invalid(format!(
                 "a vertex lies at [{}] m, more than {MAX_WORLD_COORDINATE:e} m from the origin along an axis: check the mesh's units and `scale`",

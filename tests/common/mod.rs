@@ -36,6 +36,17 @@ pub fn relume() -> Command {
     Command::new(env!("CARGO_BIN_EXE_relume"))
 }
 
+/// Sends `signal` (as `kill` takes it: "-INT", "-TERM") to `child` and waits for its
+/// output.
+pub fn signal_and_wait(child: std::process::Child, signal: &str) -> Output {
+    let status = Command::new("kill")
+        .args([signal, &child.id().to_string()])
+        .status()
+        .expect("run kill");
+    assert!(status.success(), "kill {signal} failed");
+    child.wait_with_output().expect("wait for relume")
+}
+
 /// Runs `relume` with `args` in `cwd`; returns its output.
 pub fn run_in(cwd: &std::path::Path, args: &[&str]) -> Output {
     relume()

@@ -129,11 +129,12 @@ fn parse_center(text: &str) -> Result<Vec3, String> {
         })?;
     match values.as_slice() {
         &[x, y, z] if values.iter().all(|v| v.is_finite()) => {
-            match values.iter().all(|v| v.abs() <= MAX_TRANSLATION) {
-                true => Ok(Vec3::new(x, y, z)),
-                false => Err(format!(
+            if values.iter().all(|v| v.abs() <= MAX_TRANSLATION) {
+                Ok(Vec3::new(x, y, z))
+            } else {
+                Err(format!(
                     "center = {text:?} lies more than {MAX_TRANSLATION} m from the origin along an axis"
-                )),
+                ))
             }
         }
         _ => Err(format!(

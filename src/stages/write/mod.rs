@@ -57,12 +57,13 @@ fn check_dir(dir: &str) -> Result<(), String> {
             std::path::Component::Normal(_) | std::path::Component::CurDir
         )
     });
-    match inside {
-        true => Ok(()),
-        false => Err(format!(
+    if inside {
+        Ok(())
+    } else {
+        Err(format!(
             "dir = {dir:?} must be a folder under the output directory (--out): no absolute \
              path, no `..`"
-        )),
+        ))
     }
 }
 

@@ -75,6 +75,7 @@ fn bench_sampling(c: &mut Criterion) {
                 done.pose(&spec.inputs["pose"]).unwrap().matrix().as_mat4(),
             ),
             table: done.light_table(&spec.inputs["light_table"]).unwrap(),
+            environment: None,
             objects: &pipeline.objects,
             frame: WARM_FRAMES as u64,
         };

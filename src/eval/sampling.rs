@@ -25,6 +25,7 @@ use crate::raster::{Image, Vec3Image};
 use crate::recording::Intrinsics;
 use crate::rng;
 use crate::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
+use crate::stages::sample::query::QueryKind;
 use glam::{Affine3A, Vec3};
 use serde_json::{Value, json};
 use std::ops::Range;
@@ -71,6 +72,8 @@ pub fn two_sided_p(z: f64) -> f64 {
 pub struct PathRunner {
     /// depth, normals, pose, radiance, light_table.
     inputs: [String; 5],
+    /// The distance impostor, for the `em` and `dit` queries.
+    environment: Option<String>,
     /// The stage's own settings.
     pub params: PathParams,
     objects: Arc<VirtualScene>,
@@ -87,6 +90,7 @@ impl PathRunner {
         PathRunner {
             inputs: ["depth", "normals", "pose", "radiance", "light_table"]
                 .map(|r| super::input(stage, r)),
+            environment: stage.inputs.get("environment").cloned(),
             params: PathParams::from_params(&stage.params, seed),
             objects,
             intrinsics,
@@ -106,6 +110,10 @@ impl PathRunner {
         ) else {
             return None;
         };
+        let environment = match &self.environment {
+            Some(name) => Some(frame.environment(name).ok()?.as_ref()),
+            None => None,
+        };
         let inputs = PathInputs {
             depth,
             normals,
@@ -113,6 +121,7 @@ impl PathRunner {
             camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
             camera_to_world: Affine3A::from_mat4(pose.matrix().as_mat4()),
             table,
+            environment,
             objects: &self.objects,
             frame: frame.index as u64,
         };
@@ -152,7 +161,11 @@ impl ReferenceLayers {
     ) -> Option<Result<ReferenceLayers, String>> {
         let mut sums: Option<ReferenceLayers> = None;
         for k in 0..REFERENCE_RUNS {
+            // Every query is scored against the same reference: screen-space
+            // marching with self-occlusion, as `sample.path` runs by default.
             let params = PathParams {
+                query: QueryKind::Ssrt,
+                visibility: true,
                 direct: REFERENCE_SAMPLES,
                 indirect: REFERENCE_SAMPLES,
                 object_aware: false,

@@ -5,9 +5,13 @@
 //! |---|---|---|
 //! | `sample.path` | [`path`] | two-mode path sampling (paper 001 Sec. 5) |
 //! | `sample.val` | [`val`] | shading from virtual area lights and SH9 (paper 004 Sec. 5) |
+//!
+//! [`query`] is the radiance query the renderers ask about the real scene (paper 000
+//! Fig. 5): screen-space marching, Environment Mapping or Distance Impostor Tracing.
 
 pub mod path;
 pub mod pyramid;
+pub mod query;
 pub mod ssrt;
 pub mod val;
 

@@ -10,7 +10,8 @@ use crate::light::LightSample;
 use crate::objects::VirtualHit;
 use crate::raster::depth_is_valid;
 use crate::simd;
-use crate::stages::sample::ssrt::{RayOrigin, RealHit, ScreenTracer};
+use crate::stages::sample::query::{Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery, Source};
+use crate::stages::sample::ssrt::{RayOrigin, ScreenTracer};
 use glam::{Mat3A, Vec3, Vec3A};
 use std::f32::consts::PI;
 
@@ -75,6 +76,8 @@ pub(super) struct Kernel<'a> {
     pub(super) inputs: &'a PathInputs<'a>,
     pub(super) params: &'a PathParams,
     pub(super) tracer: ScreenTracer<'a>,
+    /// The distance impostor's query (`em`, `dit`); `None` for screen-space marching.
+    pub(super) impostor: Option<ImpostorQuery<'a>>,
     pub(super) to_world: Mat3A,
     pub(super) to_camera: Mat3A,
     pub(super) camera_position: Vec3,
@@ -99,6 +102,7 @@ impl<'a> Kernel<'a> {
         inputs: &'a PathInputs<'a>,
         params: &'a PathParams,
         tracer: ScreenTracer<'a>,
+        impostor: Option<ImpostorQuery<'a>>,
         lanes: simd::Kernel,
     ) -> Self {
         let c2w = inputs.camera_to_world;
@@ -126,6 +130,7 @@ impl<'a> Kernel<'a> {
             inputs,
             params,
             tracer,
+            impostor,
             to_world,
             to_camera,
             camera_position,
@@ -169,7 +174,7 @@ impl<'a> Kernel<'a> {
         x: u32,
         y: u32,
         drawn: &Drawn,
-        hits: &[Option<RealHit>],
+        hits: &[Option<Hit>],
     ) -> PixelResult {
         let Drawn {
             real,
@@ -385,20 +390,48 @@ impl<'a> Kernel<'a> {
         Some((i, &table[i]))
     }
 
-    /// The first real surface along camera-space direction `dir` from the real point,
-    /// within `max_distance`.
+    /// The screen-space query over this frame's depth map.
     #[inline]
-    pub(super) fn trace_real(&self, rp: &RealPoint, dir: Vec3) -> Option<RealHit> {
-        let origin = rp.origin.as_ref()?;
-        self.tracer
-            .trace_from(origin, dir, self.params.max_distance)
+    fn screen(&self) -> ScreenQuery<'_> {
+        ScreenQuery {
+            tracer: &self.tracer,
+            radiance: self.inputs.radiance,
+            max_distance: self.params.max_distance,
+        }
     }
 
-    /// Camera radiance of the real surface at `pixel` (0 where it is missing).
+    /// What the stage's query answers along camera-space direction `dir_camera` from
+    /// the real point.
     #[inline]
-    pub(super) fn radiance_at(&self, pixel: (u32, u32)) -> Vec3 {
-        let l = *self.inputs.radiance.at(pixel.0, pixel.1);
-        if l.is_finite() { l } else { Vec3::ZERO }
+    pub(super) fn query_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
+        match &self.impostor {
+            Some(query) => query.query(&Ray {
+                origin: rp.world,
+                dir: Vec3::from(self.to_world * Vec3A::from(dir_camera)),
+                t_max: f32::INFINITY,
+            }),
+            None => {
+                let origin = rp.origin.as_ref()?;
+                let screen = self.screen();
+                self.tracer
+                    .trace_from(origin, dir_camera, self.params.max_distance)
+                    .map(|real| screen.hit(real))
+            }
+        }
+    }
+
+    /// What the stage's query answers along world ray `origin + t dir`.
+    #[inline]
+    pub(super) fn query_world(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
+        let ray = Ray {
+            origin,
+            dir,
+            t_max: f32::INFINITY,
+        };
+        match &self.impostor {
+            Some(query) => query.query(&ray),
+            None => self.screen().query(&ray),
+        }
     }
 
     /// Direct and indirect samples of primary j at the real point, drawn in `samples`
@@ -410,7 +443,7 @@ impl<'a> Kernel<'a> {
         &self,
         rp: &RealPoint,
         samples: &RealSamples,
-        hits: &[Option<RealHit>],
+        hits: &[Option<Hit>],
         j: u32,
         bounce_stream: &Stream,
         with_rv: bool,
@@ -426,13 +459,22 @@ impl<'a> Kernel<'a> {
             if let Some(DirectRay { sample, cos, ray }) = samples.direct[s] {
                 let ls = &self.inputs.table.samples[sample];
                 match hits[ray] {
-                    Some(hit) => self.record_occluder(acc, ls.radiance, hit.t, cos),
-                    None => {
-                        c = ls.radiance * (cos / ls.pdf);
+                    Some(Hit {
+                        source: Source::Surface,
+                        t,
+                        ..
+                    }) => self.record_occluder(acc, ls.radiance, t, cos),
+                    arrival => {
+                        // The environment: at infinity with the table's radiance, or
+                        // where the impostor query met it (an object beyond it is
+                        // hidden: paper 000 Sec. 6.4, ray 3).
+                        let (radiance, t_light) =
+                            arrival.map_or((ls.radiance, f32::INFINITY), |h| (h.radiance, h.t));
+                        c = radiance * (cos / ls.pdf);
                         c_rv = c;
                         let blocker = match rv_objects {
                             Some(o) if rp.cone_world.admits(ls.direction) => {
-                                o.hit(rp.world, ls.direction, f32::INFINITY)
+                                o.hit(rp.world, ls.direction, t_light)
                             }
                             _ => None,
                         };
@@ -458,10 +500,17 @@ impl<'a> Kernel<'a> {
             let s = (j * params.indirect + k) as usize;
             let IndirectRay { dir_camera, ray } = samples.indirect[s];
             let (l, t_real) = match hits[ray] {
-                Some(hit) => {
-                    acc.indirect_min = acc.indirect_min.min(hit.t);
-                    (self.radiance_at(hit.pixel), hit.t)
+                Some(Hit {
+                    source: Source::Surface,
+                    t,
+                    radiance,
+                }) => {
+                    acc.indirect_min = acc.indirect_min.min(t);
+                    (radiance, t)
                 }
+                // The environment is counted by direct light; an object nearer than
+                // it still reflects.
+                Some(hit) => (Vec3::ZERO, hit.t),
                 None => (Vec3::ZERO, f32::INFINITY),
             };
             acc.r_ind += l;

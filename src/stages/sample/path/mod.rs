@@ -93,6 +93,7 @@
 
 mod bounds;
 mod kernel;
+mod rays;
 pub mod sampling;
 mod span;
 mod virtual_paths;
@@ -100,12 +101,13 @@ mod virtual_paths;
 pub use kernel::{MAX_CANDIDATES, PixelResult};
 
 use super::pyramid::DepthPyramid;
+use super::query::{ImpostorQuery, MAX_ITERATIONS, QueryKind};
 use super::ssrt::{ScreenTracer, TraceParams};
 use crate::graph::{
     Frame, ParamDefault, ParamSpec, Params, Port, Ports, Product, ProductKind, Stage, StageError,
     StageInfo,
 };
-use crate::light::LightTable;
+use crate::light::{EnvMap, LightTable};
 use crate::objects::VirtualScene;
 use crate::pinhole::Pinhole;
 use crate::raster::{DepthImage, Image, LabelImage, ScalarImage, Vec3Image};
@@ -121,6 +123,23 @@ use std::sync::Arc;
 pub const MAX_SAMPLES: u32 = 64;
 
 const PARAMS: &[ParamSpec] = &[
+    ParamSpec::new(
+        "query",
+        ParamDefault::Str("ssrt"),
+        "how rays meet the real scene (paper 000 Sec. 6): ssrt = screen-space march over the depth map within max_distance, the environment map beyond; em = Environment Mapping, a direction lookup into the distance impostor; dit = Distance Impostor Tracing, the lookup refined from the impostor's distances. em and dit read the `environment` product (light.impostor's map)",
+    )
+    .choices(QueryKind::NAMES),
+    ParamSpec::new(
+        "iterations",
+        ParamDefault::Int(4),
+        "dit: refinement steps of the impostor lookup (0 gives em's answer)",
+    )
+    .range(0.0, MAX_ITERATIONS as f64),
+    ParamSpec::new(
+        "visibility",
+        ParamDefault::Bool(true),
+        "test the virtual objects' rays against the objects themselves (self-shadowing and self-reflection; paper 000 Table 3's visibility test). Off: cheaper, objects lit as if nothing of them were in the way",
+    ),
     ParamSpec::new(
         "primary",
         ParamDefault::Int(4),
@@ -215,10 +234,15 @@ pub const INFO: StageInfo = StageInfo {
     kind: "sample.path",
     summary: "two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5)",
     params: PARAMS,
-    ports: |_| Ports {
+    ports: |p| Ports {
         inputs: INPUTS
             .iter()
             .map(|(role, product, kinds)| Port::new(role, product, kinds))
+            .chain(
+                query_kind(p)
+                    .needs_environment()
+                    .then(|| Port::new("environment", "environment", &[ProductKind::Environment])),
+            )
             .collect(),
         outputs: OUTPUTS
             .iter()
@@ -230,6 +254,10 @@ pub const INFO: StageInfo = StageInfo {
         params.check()?;
         Ok(Box::new(PathStage {
             inputs: INPUTS.map(|(role, _, _)| ctx.input(role)),
+            environment: params
+                .query
+                .needs_environment()
+                .then(|| ctx.input("environment")),
             outputs: OUTPUTS.map(|(role, _)| ctx.output(role)),
             params,
             intrinsics: ctx.header.depth_intrinsics,
@@ -237,6 +265,11 @@ pub const INFO: StageInfo = StageInfo {
         }))
     },
 };
+
+/// The `query` parameter of checked parameters `p`.
+fn query_kind(p: &Params) -> QueryKind {
+    QueryKind::from_name(p.str("query")).unwrap_or_default()
+}
 
 /// What [`sample_path`] reads for one frame.
 #[derive(Clone, Copy)]
@@ -252,6 +285,8 @@ pub struct PathInputs<'a> {
     pub camera_to_world: Affine3A,
     /// Importance samples of the environment, in stratified order.
     pub table: &'a LightTable,
+    /// The distance impostor the `em` and `dit` queries read (unused by `ssrt`).
+    pub environment: Option<&'a EnvMap>,
     pub objects: &'a VirtualScene,
     /// The frame index (a key of the random numbers).
     pub frame: u64,
@@ -260,6 +295,12 @@ pub struct PathInputs<'a> {
 /// Settings of [`sample_path`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathParams {
+    /// How rays meet the real scene.
+    pub query: QueryKind,
+    /// `dit`: refinement steps of the impostor lookup.
+    pub iterations: u32,
+    /// Whether the objects' own rays are tested against the objects (self-occlusion).
+    pub visibility: bool,
     /// Primary samples per pixel.
     pub primary: u32,
     /// Direct samples per primary sample.
@@ -292,6 +333,9 @@ pub struct PathParams {
 impl Default for PathParams {
     fn default() -> Self {
         PathParams {
+            query: QueryKind::Ssrt,
+            iterations: 4,
+            visibility: true,
             primary: 4,
             direct: 4,
             indirect: 4,
@@ -313,6 +357,9 @@ impl PathParams {
     /// `seed` (`relume eval` re-runs the stage's math with them).
     pub fn from_params(p: &Params, seed: u64) -> PathParams {
         PathParams {
+            query: query_kind(p),
+            iterations: p.int("iterations") as u32,
+            visibility: p.bool("visibility"),
             primary: p.int("primary") as u32,
             direct: p.int("direct") as u32,
             indirect: p.int("indirect") as u32,
@@ -351,6 +398,12 @@ impl PathParams {
                     "{} / {}, expected 0..={MAX_SAMPLES}",
                     self.direct, self.indirect
                 ),
+            );
+        }
+        if self.iterations > MAX_ITERATIONS {
+            return bad(
+                "iterations",
+                format!("{}, expected 0..={MAX_ITERATIONS}", self.iterations),
             );
         }
         if self.pixel_stride == 0 {
@@ -507,6 +560,7 @@ pub(crate) fn sample_path_with_kernel(
             "sample.path: the camera pose is not finite".into(),
         ));
     }
+    let impostor = impostor_query(inputs, params)?;
     if w == 0 || h == 0 {
         return Ok(());
     }
@@ -517,7 +571,7 @@ pub(crate) fn sample_path_with_kernel(
         inputs.camera_to_world,
         params.trace,
     );
-    let kernel = Kernel::new(inputs, params, tracer, lanes);
+    let kernel = Kernel::new(inputs, params, tracer, impostor, lanes);
     let stride = params.pixel_stride as usize;
     let xs: Vec<u32> = (0..w).step_by(stride).collect();
     rows(out, w as usize)
@@ -525,7 +579,7 @@ pub(crate) fn sample_path_with_kernel(
         .enumerate()
         .filter(|(y, _)| y % stride == 0)
         .for_each_init(
-            || Span::new(&kernel.tracer, params),
+            || Span::new(&kernel, params),
             |span, (y, mut row)| {
                 for xs in xs.chunks(SPAN_PIXELS) {
                     kernel.shade_span(y as u32, xs, span, |x, r| row.set(x as usize, r));
@@ -535,9 +589,46 @@ pub(crate) fn sample_path_with_kernel(
     Ok(())
 }
 
+/// The impostor query `params` ask for, over the inputs' environment map; the error
+/// says what is missing or malformed.
+fn impostor_query<'a>(
+    inputs: &PathInputs<'a>,
+    params: &PathParams,
+) -> Result<Option<ImpostorQuery<'a>>, StageError> {
+    let iterations = match params.query {
+        QueryKind::Ssrt => return Ok(None),
+        QueryKind::Em => 0,
+        QueryKind::Dit => params.iterations,
+    };
+    let query = params.query.name();
+    let Some(map) = inputs.environment else {
+        return Err(StageError::Failed(format!(
+            "sample.path: query \"{query}\" needs an environment map (the distance impostor of light.impostor)"
+        )));
+    };
+    let texels = map.width as usize * map.height as usize;
+    if texels == 0 || map.radiance.len() != texels || map.distance.len() != texels {
+        return Err(StageError::Failed(format!(
+            "sample.path: query \"{query}\": the environment map is {}x{} with {} radiance and {} distance texels",
+            map.width,
+            map.height,
+            map.radiance.len(),
+            map.distance.len()
+        )));
+    }
+    if !map.center.is_finite() {
+        return Err(StageError::Failed(format!(
+            "sample.path: query \"{query}\": the environment map's centre is not finite"
+        )));
+    }
+    Ok(Some(ImpostorQuery { map, iterations }))
+}
+
 struct PathStage {
     /// Product names of depth, normals, pose, radiance, light_table.
     inputs: [String; 5],
+    /// Product name of the distance impostor (`em`, `dit`).
+    environment: Option<String>,
     outputs: [String; 12],
     params: PathParams,
     intrinsics: Intrinsics,
@@ -555,6 +646,10 @@ impl Stage for PathStage {
             camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
             camera_to_world: Affine3A::from_mat4(frame.pose(pose)?.matrix().as_mat4()),
             table: frame.light_table(table)?,
+            environment: match &self.environment {
+                Some(name) => Some(frame.environment(name)?.as_ref()),
+                None => None,
+            },
             objects: &self.objects,
             frame: frame.index as u64,
         };
@@ -583,6 +678,8 @@ impl Stage for PathStage {
 
 #[cfg(test)]
 mod determinism_tests;
+#[cfg(test)]
+mod query_tests;
 #[cfg(test)]
 mod stage_tests;
 #[cfg(test)]

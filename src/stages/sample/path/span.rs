@@ -1,17 +1,20 @@
 //! Pixels are estimated a span of a row at a time: first every real point's samples are
 //! drawn, each pixel's primaries meet the objects or not, and the virtual hits' samples
-//! are drawn, with all their screen-space rays queued; then the rays are traced in one
-//! [`TraceBatch`] (eight at a time with AVX2); then each pixel is estimated from its
-//! samples and their hits. The rays, the hits and therefore the estimates are those of
-//! tracing each ray in turn. Results go to [`RowOut`], one row of every output.
+//! are drawn, with all their rays queued; then the rays are answered in one
+//! [`RayBatch`] (with `ssrt`, marched eight at a time with AVX2); then each pixel is
+//! estimated from its samples and their hits. The rays, the hits and therefore the
+//! estimates are those of tracing each ray in turn. Results go to [`RowOut`], one row
+//! of every output.
 
 use super::kernel::{Kernel, RealPoint};
+use super::rays::RayBatch;
 use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
 use super::virtual_paths::{VirtualDirect, VirtualIndirect};
 use super::{PathOutputs, PathParams, PixelResult};
 use crate::objects::VirtualHit;
-use crate::stages::sample::ssrt::{ScreenTracer, TraceBatch};
-use glam::Vec3;
+use crate::stages::sample::query::ScreenQuery;
+use crate::stages::sample::ssrt::TraceBatch;
+use glam::{Vec3, Vec3A};
 
 /// Pixels per span: enough rays (about 23 per pixel) that the batch's lanes rarely wait
 /// at its end, few enough that its buffers stay in the cache (about 50 KB).
@@ -61,7 +64,7 @@ pub(super) struct Drawn<'a> {
 
 /// A span's samples and rays; reused from span to span.
 pub(super) struct Span<'t> {
-    batch: TraceBatch<'t>,
+    batch: RayBatch<'t>,
     real: Vec<Option<RealPoint>>,
     direct: Vec<Option<DirectRay>>,
     indirect: Vec<IndirectRay>,
@@ -73,12 +76,26 @@ pub(super) struct Span<'t> {
 }
 
 impl<'t> Span<'t> {
-    /// Buffers for spans of up to [`SPAN_PIXELS`] pixels whose rays `tracer` traces.
-    pub(super) fn new(tracer: &'t ScreenTracer<'t>, params: &PathParams) -> Span<'t> {
+    /// Buffers for spans of up to [`SPAN_PIXELS`] pixels whose rays `kernel`'s query
+    /// answers.
+    pub(super) fn new(kernel: &'t Kernel<'t>, params: &PathParams) -> Span<'t> {
         let direct = SPAN_PIXELS * (params.primary * params.direct) as usize;
         let indirect = SPAN_PIXELS * (params.primary * params.indirect) as usize;
+        let hits = Vec::with_capacity(direct + indirect);
+        let batch = match kernel.impostor {
+            Some(query) => RayBatch::Impostor { query, hits },
+            None => RayBatch::Screen {
+                batch: Box::new(TraceBatch::new(&kernel.tracer, direct + indirect)),
+                query: ScreenQuery {
+                    tracer: &kernel.tracer,
+                    radiance: kernel.inputs.radiance,
+                    max_distance: params.max_distance,
+                },
+                hits,
+            },
+        };
         Span {
-            batch: TraceBatch::new(tracer, direct + indirect),
+            batch,
             real: Vec::with_capacity(SPAN_PIXELS),
             direct: Vec::with_capacity(direct),
             indirect: Vec::with_capacity(indirect),
@@ -203,7 +220,6 @@ impl Kernel<'_> {
         let (direct_stream, indirect_stream) =
             (rng.stream(StreamId::Direct), rng.stream(StreamId::Indirect));
         let t_max = params.max_distance;
-        let origin = rp.origin.as_ref();
         for s in 0..params.primary * params.direct {
             let drawn = self
                 .direct_sample(&direct_stream, s)
@@ -212,7 +228,11 @@ impl Kernel<'_> {
                     (cos > 0.0 && ls.pdf > 0.0).then(|| DirectRay {
                         sample,
                         cos,
-                        ray: span.batch.push(origin, self.table_camera[sample], t_max),
+                        ray: span.batch.push(
+                            || (rp.world, ls.direction),
+                            || (rp.origin, self.table_camera[sample]),
+                            t_max,
+                        ),
                     })
                 });
             span.direct.push(drawn);
@@ -220,9 +240,14 @@ impl Kernel<'_> {
         for s in 0..params.primary * params.indirect {
             let (u1, u2) = indirect_stream.pair(s as u64);
             let dir_camera = rp.basis_camera.to_world(cosine_hemisphere(u1, u2));
+            let world_dir = || Vec3::from(self.to_world * Vec3A::from(dir_camera));
             span.indirect.push(IndirectRay {
                 dir_camera,
-                ray: span.batch.push(origin, dir_camera, t_max),
+                ray: span.batch.push(
+                    || (rp.world, world_dir()),
+                    || (rp.origin, dir_camera),
+                    t_max,
+                ),
             });
         }
     }

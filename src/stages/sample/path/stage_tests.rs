@@ -33,6 +33,7 @@ fn empty_tables_images_and_bad_sizes_are_handled() {
         camera: Pinhole::new(&Intrinsics::PRIMESENSE, 0, 0),
         camera_to_world: pose(),
         table: &table,
+        environment: None,
         objects: &objects,
         frame: 0,
     };
@@ -103,6 +104,7 @@ fn the_stage_reads_its_products_and_writes_every_output() {
         camera: camera(),
         camera_to_world: Affine3A::from_mat4(pose_record.matrix().as_mat4()),
         table: &table,
+        environment: None,
         objects: &objects,
         frame: 7,
     };

@@ -131,6 +131,18 @@ pub(super) fn run_with_kernel(
     params: &PathParams,
     lanes: simd::Kernel,
 ) -> PathOutputs {
+    run_with_environment(scene, objects, table, None, params, lanes)
+}
+
+/// [`run_with_kernel`] with a distance impostor for the `em` and `dit` queries.
+pub(super) fn run_with_environment(
+    scene: &Scene,
+    objects: &VirtualScene,
+    table: &LightTable,
+    environment: Option<&EnvMap>,
+    params: &PathParams,
+    lanes: simd::Kernel,
+) -> PathOutputs {
     let inputs = PathInputs {
         depth: &scene.depth,
         normals: &scene.normals,
@@ -138,6 +150,7 @@ pub(super) fn run_with_kernel(
         camera: camera(),
         camera_to_world: pose(),
         table,
+        environment,
         objects,
         frame: 7,
     };

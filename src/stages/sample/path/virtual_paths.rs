@@ -4,11 +4,12 @@
 
 use super::bounds::Objects;
 use super::kernel::{Acc, Kernel, MAX_CANDIDATES, RealPoint, SURFACE_OFFSET};
+use super::rays::RayBatch;
 use super::sampling::{
     Basis, PixelRng, Stream, StreamId, below, cosine_hemisphere, phong_lobe, phong_weight,
 };
 use crate::objects::VirtualHit;
-use crate::stages::sample::ssrt::{RealHit, TraceBatch};
+use crate::stages::sample::query::{Hit, Source};
 use glam::{Vec3, Vec3A};
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -21,14 +22,13 @@ pub(super) enum VirtualDirect {
     /// Table sample `sample` at cosine `cos` to the normal, blocked by a virtual surface
     /// at distance `t`.
     Blocked { sample: usize, cos: f32, t: f32 },
-    /// Table sample `sample` at cosine `cos`, whose screen-space ray is `ray` in the
-    /// span's batch.
+    /// Table sample `sample` at cosine `cos`, whose ray is `ray` in the span's batch.
     Open { sample: usize, cos: f32, ray: usize },
 }
 
 /// An indirect sample at a virtual primary: its world direction and weight, and its
-/// screen-space ray in the span's batch (none where the weight is 0: the direction
-/// lies below the surface, and the sample brings nothing).
+/// ray in the span's batch (none where the weight is 0: the direction lies below the
+/// surface, and the sample brings nothing).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct VirtualIndirect {
     pub(super) dir: Vec3,
@@ -57,9 +57,9 @@ impl Surface {
 
 impl Kernel<'_> {
     /// Draws the E_RV samples of primary j at a virtual hit seen from direction
-    /// `to_viewer`: direct samples are tested against the objects here, and the
-    /// screen-space rays of the open ones and of the indirect samples are queued in
-    /// `batch`. [`Kernel::virtual_samples`] then estimates from them.
+    /// `to_viewer`: direct samples are tested against the objects here (unless
+    /// `visibility` is off), and the rays of the open ones and of the indirect samples
+    /// are queued in `batch`. [`Kernel::virtual_samples`] then estimates from them.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn draw_virtual_samples(
         &self,
@@ -68,7 +68,7 @@ impl Kernel<'_> {
         j: u32,
         direct_stream: &Stream,
         indirect_stream: &Stream,
-        batch: &mut TraceBatch<'_>,
+        batch: &mut RayBatch<'_>,
         direct: &mut Vec<VirtualDirect>,
         indirect: &mut Vec<VirtualIndirect>,
     ) {
@@ -76,7 +76,9 @@ impl Kernel<'_> {
         let surface = Surface::new(hit, to_viewer);
         let n = hit.normal;
         let t_max = params.max_distance;
-        let objects = self.objects.as_ref();
+        // Self-occlusion of the objects' own illumination (paper 000 Table 3's
+        // visibility test).
+        let objects = self.objects.as_ref().filter(|_| params.visibility);
         for k in 0..params.direct {
             let s = j * params.direct + k;
             let drawn = match self.direct_sample(direct_stream, s) {
@@ -91,15 +93,15 @@ impl Kernel<'_> {
                                 cos,
                                 t: blocker.t,
                             },
-                            None => {
-                                let (origin, dir) =
-                                    self.tracer.camera_ray(surface.origin, ls.direction);
-                                VirtualDirect::Open {
-                                    sample,
-                                    cos,
-                                    ray: batch.push(origin.as_ref(), dir, t_max),
-                                }
-                            }
+                            None => VirtualDirect::Open {
+                                sample,
+                                cos,
+                                ray: batch.push(
+                                    || (surface.origin, ls.direction),
+                                    || self.tracer.camera_ray(surface.origin, ls.direction),
+                                    t_max,
+                                ),
+                            },
                         }
                     } else {
                         VirtualDirect::Unlit
@@ -133,8 +135,11 @@ impl Kernel<'_> {
                 (basis.to_world(cosine_hemisphere(u1, u2)), 1.0)
             };
             let ray = (weight > 0.0).then(|| {
-                let (origin, dir_camera) = self.tracer.camera_ray(surface.origin, dir);
-                batch.push(origin.as_ref(), dir_camera, t_max)
+                batch.push(
+                    || (surface.origin, dir),
+                    || self.tracer.camera_ray(surface.origin, dir),
+                    t_max,
+                )
             });
             indirect.push(VirtualIndirect { dir, weight, ray });
         }
@@ -150,7 +155,7 @@ impl Kernel<'_> {
         to_viewer: Vec3,
         direct: &[VirtualDirect],
         indirect: &[VirtualIndirect],
-        hits: &[Option<RealHit>],
+        hits: &[Option<Hit>],
         bounce_stream: &Stream,
         acc: &mut Acc,
     ) {
@@ -166,8 +171,13 @@ impl Kernel<'_> {
                 VirtualDirect::Open { sample, cos, ray } => {
                     let ls = &table[sample];
                     match hits[ray] {
-                        Some(real) => self.record_occluder(acc, ls.radiance, real.t, cos),
-                        None => {
+                        Some(Hit {
+                            source: Source::Surface,
+                            t,
+                            ..
+                        }) => self.record_occluder(acc, ls.radiance, t, cos),
+                        arrival => {
+                            let radiance = arrival.map_or(ls.radiance, |h| h.radiance);
                             let lobe = if surface.glossy {
                                 phong_weight(
                                     surface.mirror.dot(ls.direction),
@@ -176,7 +186,7 @@ impl Kernel<'_> {
                             } else {
                                 1.0
                             };
-                            c = ls.radiance * (cos / ls.pdf * lobe);
+                            c = radiance * (cos / ls.pdf * lobe);
                         }
                     }
                 }
@@ -193,27 +203,15 @@ impl Kernel<'_> {
         acc.rv_ind_n += self.params.indirect;
     }
 
-    /// The distance to the nearest virtual or real occluder along a ray leaving a
-    /// virtual surface (real ones within `max_distance`).
-    pub(super) fn occluder_distance(&self, origin: Vec3, dir: Vec3) -> Option<f32> {
-        let objects = self.objects.as_ref()?;
-        if let Some(hit) = objects.hit(origin, dir, f32::INFINITY) {
-            return Some(hit.t);
-        }
-        self.tracer
-            .trace(origin, dir, self.params.max_distance)
-            .map(|h| h.t)
-    }
-
     /// Radiance arriving at a virtual surface from `dir`: the nearer of the object
-    /// (its outgoing radiance) and the real surface `real` that the ray's screen-space
-    /// march found (its camera radiance); 0 when the ray escapes (the environment is
-    /// counted by direct light).
+    /// (its outgoing radiance; not tested when `visibility` is off) and the real
+    /// surface `real` that the query met (its camera radiance); 0 when the ray reaches
+    /// the environment (it is counted by direct light).
     pub(super) fn incoming(
         &self,
         origin: Vec3,
         dir: Vec3,
-        real: Option<RealHit>,
+        real: Option<Hit>,
         bounce_stream: &Stream,
         acc: &mut Acc,
     ) -> Vec3 {
@@ -221,23 +219,30 @@ impl Kernel<'_> {
             return Vec3::ZERO;
         };
         let t_real = real.map_or(f32::INFINITY, |h| h.t);
-        if let Some(hit) = objects.hit(origin, dir, t_real) {
+        if self.params.visibility
+            && let Some(hit) = objects.hit(origin, dir, t_real)
+        {
             acc.indirect_min = acc.indirect_min.min(hit.t);
             return self.object_radiance(&hit, bounce_stream, acc);
         }
         match real {
-            Some(h) => {
-                acc.indirect_min = acc.indirect_min.min(h.t);
-                self.radiance_at(h.pixel)
+            Some(Hit {
+                source: Source::Surface,
+                t,
+                radiance,
+            }) => {
+                acc.indirect_min = acc.indirect_min.min(t);
+                radiance
             }
-            None => Vec3::ZERO,
+            _ => Vec3::ZERO,
         }
     }
 
     /// The outgoing radiance of a virtual surface towards the ray that hit it:
     /// (k_V / pi) E^dir from one importance sample of the table, with virtual
-    /// (self-shadowing) and real visibility. Glossy surfaces are treated as diffuse
-    /// for this bounce (as paper 000 Sec. 6.4 does); no further bounce.
+    /// (self-shadowing, when `visibility` is on) and real visibility, and the radiance
+    /// the query brings along the sample's direction. Glossy surfaces are treated as
+    /// diffuse for this bounce (as paper 000 Sec. 6.4 does); no further bounce.
     pub(super) fn object_radiance(
         &self,
         hit: &VirtualHit,
@@ -256,10 +261,23 @@ impl Kernel<'_> {
             return Vec3::ZERO;
         }
         let origin = hit.position + hit.normal * SURFACE_OFFSET;
-        if self.occluder_distance(origin, ls.direction).is_some() {
+        if self.params.visibility
+            && self
+                .objects
+                .as_ref()
+                .is_some_and(|o| o.hit(origin, ls.direction, f32::INFINITY).is_some())
+        {
             return Vec3::ZERO;
         }
-        hit.material.albedo * FRAC_1_PI * ls.radiance * (cos / ls.pdf)
+        let radiance = match self.query_world(origin, ls.direction) {
+            Some(Hit {
+                source: Source::Surface,
+                ..
+            }) => return Vec3::ZERO,
+            Some(h) => h.radiance,
+            None => ls.radiance,
+        };
+        hit.material.albedo * FRAC_1_PI * radiance * (cos / ls.pdf)
     }
 
     /// Paper 000 Sec. 7: the differential indirect irradiance E_RV - E_R at the real
@@ -324,13 +342,17 @@ impl Kernel<'_> {
             let Some(hit) = objects.scene.intersect(rp.world, dir, 0.0, f32::INFINITY) else {
                 continue;
             };
-            let real = self.trace_real(rp, dir_camera);
+            let real = self.query_from_real(rp, dir_camera);
             if real.is_some_and(|r| r.t <= hit.t) {
-                continue; // the real surface is in front: no difference
+                continue; // the real scene is in front: no difference
             }
             met = true;
             acc.indirect_min = acc.indirect_min.min(hit.t);
-            let l_real = real.map_or(Vec3::ZERO, |r| self.radiance_at(r.pixel));
+            // Environment light is counted by direct light.
+            let l_real = match real {
+                Some(r) if r.source == Source::Surface => r.radiance,
+                _ => Vec3::ZERO,
+            };
             sum += self.object_radiance(&hit, bounce_stream, acc) - l_real;
         }
         met.then(|| sum * (PI * in_box as f32 / (traced as f32 * n as f32)))

@@ -1,0 +1,84 @@
+//! The rays of a span, answered by the stage's radiance query
+//! ([`crate::stages::sample::query`]): with `ssrt` they are queued in camera space and
+//! marched together ([`TraceBatch`], eight lanes at a time where the CPU has AVX2); with
+//! the impostor queries each is answered as it is pushed (a lookup or a few, no march).
+//! Either way [`RayBatch::hits`] holds one answer per ray, in push order.
+
+use crate::simd;
+use crate::stages::sample::query::{Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery};
+use crate::stages::sample::ssrt::{RayOrigin, TraceBatch};
+use glam::Vec3;
+
+/// A span's rays and their answers; reused from span to span (one per rayon worker,
+/// so the box around the large screen-space batch costs nothing per ray).
+pub(super) enum RayBatch<'t> {
+    /// Screen-space marching: rays wait in `batch` until [`RayBatch::trace`].
+    Screen {
+        batch: Box<TraceBatch<'t>>,
+        query: ScreenQuery<'t>,
+        hits: Vec<Option<Hit>>,
+    },
+    /// The distance impostor: answered at once.
+    Impostor {
+        query: ImpostorQuery<'t>,
+        hits: Vec<Option<Hit>>,
+    },
+}
+
+impl<'t> RayBatch<'t> {
+    /// Removes every ray.
+    pub(super) fn clear(&mut self) {
+        match self {
+            RayBatch::Screen { batch, hits, .. } => {
+                batch.clear();
+                hits.clear();
+            }
+            RayBatch::Impostor { hits, .. } => hits.clear(),
+        }
+    }
+
+    /// Adds a ray and returns its index. `world` gives its world origin and unit
+    /// direction (asked only by the impostor queries), `camera` its projected origin
+    /// and camera-space direction (asked only by screen-space marching, whose rays end
+    /// after `max_distance`).
+    #[inline]
+    pub(super) fn push(
+        &mut self,
+        world: impl FnOnce() -> (Vec3, Vec3),
+        camera: impl FnOnce() -> (Option<RayOrigin>, Vec3),
+        max_distance: f32,
+    ) -> usize {
+        match self {
+            RayBatch::Screen { batch, .. } => {
+                let (origin, dir) = camera();
+                batch.push(origin.as_ref(), dir, max_distance)
+            }
+            RayBatch::Impostor { query, hits } => {
+                let (origin, dir) = world();
+                hits.push(query.query(&Ray {
+                    origin,
+                    dir,
+                    t_max: f32::INFINITY,
+                }));
+                hits.len() - 1
+            }
+        }
+    }
+
+    /// Answers every ray pushed since the last clear (marching the screen-space ones
+    /// with `lanes` where the CPU has it: the hits are the same with any).
+    pub(super) fn trace(&mut self, lanes: simd::Kernel) {
+        if let RayBatch::Screen { batch, query, hits } = self {
+            batch.trace(lanes);
+            hits.clear();
+            hits.extend(batch.hits().iter().map(|h| h.map(|real| query.hit(real))));
+        }
+    }
+
+    /// Per ray, in push order: what the query answered.
+    pub(super) fn hits(&self) -> &[Option<Hit>] {
+        match self {
+            RayBatch::Screen { hits, .. } | RayBatch::Impostor { hits, .. } => hits,
+        }
+    }
+}

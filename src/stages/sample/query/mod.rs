@@ -1,0 +1,119 @@
+//! The radiance query (paper 000 Sec. 6, Fig. 5: "an interface to query radiance from
+//! the scene"): a ray in; the radiance arriving along it, how far away it comes from,
+//! and what sent it, out. The renderers ask it both when they shade a virtual object
+//! (paper 000 eq. 3) and when they estimate the differential background (eqs. 4, 8),
+//! and each implementation is one way of representing the real scene:
+//!
+//! | `query` | implementation | the real scene is |
+//! |---|---|---|
+//! | `ssrt` | [`ScreenQuery`] | the fused depth map, marched in screen space within `max_distance`; beyond it the environment map stands, looked up by direction |
+//! | `em` | [`ImpostorQuery`] with 0 iterations | the distance impostor looked up by direction alone (Environment Mapping, Sec. 6.1) |
+//! | `dit` | [`ImpostorQuery`] | the distance impostor traced: the lookup direction refined from its stored distances (Distance Impostor Tracing, Sec. 6.1, after Szirmay-Kalos et al.) |
+//!
+//! This module is a leaf: it knows rays, maps and depth images, not stages.
+//!
+//! What a [`Hit`] means to a renderer (paper 001's two-mode split of the same
+//! integral): a [`Source::Surface`] is real geometry near the shading point; it blocks
+//! the environment light behind it and reflects `radiance` (the camera's light of the
+//! room) as indirect light. A [`Source::Environment`] is the environment light itself,
+//! arriving from distance `t` with `radiance`: direct light, and the distance up to
+//! which a virtual object can stand in front of it (the "ray 3" early occlusion of
+//! Sec. 6.4 is an object farther than `t`). No hit (`None`) is the environment at
+//! infinity, whose radiance the renderer takes from its importance table.
+
+mod impostor;
+mod screen;
+
+pub use impostor::{ImpostorQuery, MAX_ITERATIONS, TracedImpostor, trace_impostor};
+pub use screen::ScreenQuery;
+
+use glam::Vec3;
+
+/// A ray of the query: `origin + t dir` for 0 <= t <= `t_max` (world space, metres;
+/// `dir` unit).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub t_max: f32,
+}
+
+/// What sent the radiance of a [`Hit`] (see the module docs for what each means to a
+/// renderer).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Source {
+    /// Real geometry near the shading point: it occludes the environment behind it.
+    Surface,
+    /// The environment light, at a finite or infinite distance.
+    Environment,
+}
+
+/// The answer of a query: radiance arriving along the ray from distance `t`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f32,
+    pub radiance: Vec3,
+    pub source: Source,
+}
+
+/// The name of an implementation, as the `query` parameter of the sampling stage takes
+/// it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum QueryKind {
+    /// Screen-space ray marching over the depth map (paper 001's sampler as relume ran
+    /// it before the query existed).
+    #[default]
+    Ssrt,
+    /// Environment Mapping: a direction lookup into the distance impostor.
+    Em,
+    /// Distance Impostor Tracing.
+    Dit,
+}
+
+impl QueryKind {
+    /// The parameter values, in the order of the variants.
+    pub const NAMES: &'static [&'static str] = &["ssrt", "em", "dit"];
+
+    /// The kind named `name` (one of [`QueryKind::NAMES`]).
+    pub fn from_name(name: &str) -> Option<QueryKind> {
+        match name {
+            "ssrt" => Some(QueryKind::Ssrt),
+            "em" => Some(QueryKind::Em),
+            "dit" => Some(QueryKind::Dit),
+            _ => None,
+        }
+    }
+
+    /// The parameter value of this kind.
+    pub fn name(self) -> &'static str {
+        match self {
+            QueryKind::Ssrt => "ssrt",
+            QueryKind::Em => "em",
+            QueryKind::Dit => "dit",
+        }
+    }
+
+    /// Whether the implementation reads the distance impostor (an environment map with
+    /// distances).
+    pub fn needs_environment(self) -> bool {
+        self != QueryKind::Ssrt
+    }
+}
+
+/// A representation of the real scene that answers rays (paper 000 Fig. 5). An
+/// implementation must be deterministic: the same ray gives the same bits.
+pub trait RadianceQuery: Sync {
+    /// The radiance arriving at `ray.origin` from `ray.dir`, or `None` when nothing
+    /// this representation holds lies within `ray.t_max` (the environment at infinity).
+    fn query(&self, ray: &Ray) -> Option<Hit>;
+
+    /// [`RadianceQuery::query`] for every ray, into `out` (cleared first), in order.
+    /// Implementations that gain from tracing many rays together override it.
+    fn query_batch(&self, rays: &[Ray], out: &mut Vec<Option<Hit>>) {
+        out.clear();
+        out.extend(rays.iter().map(|ray| self.query(ray)));
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -13,6 +13,11 @@
 //!   a tenth of the frame (the budget case; the bench prints the share).
 //! - `sample.path/tenth_fast`: the same at `pipelines/mixed-reality-fast.toml`'s sample
 //!   counts, 4 direct + 4 indirect samples per pixel.
+//! - `sample.path/table3/<query>_<N>[_novis]`: paper 000 Table 3's grid on the
+//!   `tenth` case: each radiance query (`ssrt`, `em`, `dit` with 4 iterations) at N =
+//!   16, 32 and 64 samples per pixel and layer (4 primaries x 4, 8, 16 direct and as
+//!   many indirect), with the objects' self-occlusion test and without (`_novis`).
+//!   `RELUME_BENCH_TABLE3=16` limits it to one N.
 //! - `sample.path/no_objects`: the same with no virtual object: the real scene's
 //!   estimates alone, the floor under every case with objects.
 //! - `objects/nearest`: the BVH alone, on one thread: the frame's object queries of
@@ -75,7 +80,8 @@ fn bench_sampling(c: &mut Criterion) {
                 done.pose(&spec.inputs["pose"]).unwrap().matrix().as_mat4(),
             ),
             table: done.light_table(&spec.inputs["light_table"]).unwrap(),
-            environment: None,
+            // light.impostor's map, for the em and dit queries.
+            environment: Some(done.environment("environment").unwrap().as_ref()),
             objects: &pipeline.objects,
             frame: WARM_FRAMES as u64,
         };
@@ -134,6 +140,7 @@ fn bench_sampling(c: &mut Criterion) {
         group.bench_function("sample.path/tenth_fast", |b| {
             b.iter(|| sample_path(&inputs, &fast, &mut fast_out).unwrap())
         });
+        bench_queries(&mut group, &inputs, &params);
         bench_object_queries(&mut group, &scaled, &inputs, &out);
         let no_objects = VirtualScene::default();
         let inputs = PathInputs {
@@ -324,6 +331,45 @@ fn bench_tracer(
                 batch.hits().iter().filter(|h| h.is_some()).count()
             })
         });
+    }
+}
+
+/// Paper 000 Table 3's grid: every query at N = 16, 32, 64 samples per pixel, with
+/// and without the visibility test, on `inputs` (the `tenth` case).
+fn bench_queries(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    inputs: &PathInputs,
+    params: &PathParams,
+) {
+    use relume::stages::sample::query::QueryKind;
+    let counts: Vec<u32> = match std::env::var("RELUME_BENCH_TABLE3") {
+        Ok(n) => vec![n.parse().expect("RELUME_BENCH_TABLE3 is 16, 32 or 64")],
+        Err(_) => vec![16, 32, 64],
+    };
+    let size = (inputs.depth.width, inputs.depth.height);
+    let mut out = PathOutputs::new(size.0, size.1);
+    for query in [QueryKind::Ssrt, QueryKind::Em, QueryKind::Dit] {
+        for &n in &counts {
+            for visibility in [true, false] {
+                let per_primary = n / params.primary.max(1);
+                let p = PathParams {
+                    query,
+                    iterations: 4,
+                    visibility,
+                    direct: per_primary,
+                    indirect: per_primary,
+                    ..*params
+                };
+                let name = format!(
+                    "sample.path/table3/{}_{n}{}",
+                    query.name(),
+                    if visibility { "" } else { "_novis" }
+                );
+                group.bench_function(name, |b| {
+                    b.iter(|| sample_path(inputs, &p, &mut out).unwrap())
+                });
+            }
+        }
     }
 }
 

@@ -89,3 +89,98 @@ fn the_fast_pipeline_is_mixed_reality_with_fewer_samples_and_a_fixed_b_e() {
     let filter = p.stages.iter().find(|s| s.kind == "filter.axis_aligned");
     assert_eq!(filter.unwrap().params.float("environment_bandwidth"), 4.0);
 }
+
+/// Paper 000's low / medium / high presets are the mixed-reality chain with only
+/// sample.path's parameters changed: its query, samples, cache and visibility.
+#[test]
+fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
+    let file = |name: &str| {
+        std::fs::read_to_string(format!("{}/pipelines/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    };
+    let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
+    let presets = [
+        (
+            "low",
+            "query = \"em\", visibility = false, object_aware = true, candidates = 16, cache_size = 8",
+        ),
+        (
+            "medium",
+            "query = \"dit\", iterations = 4, object_aware = true, candidates = 16, cache_size = 8",
+        ),
+        (
+            "high",
+            "query = \"dit\", iterations = 8, primary = 4, direct = 16, indirect = 16, object_aware = true, candidates = 64, cache_size = 32",
+        ),
+    ];
+    for (level, params) in presets {
+        let name = format!("mixed-reality-nei-{level}");
+        let text = file(&format!("{name}.toml"));
+        assert_eq!(
+            body(&file("mixed-reality.toml"))
+                .replacen("name = \"mixed-reality\"", &format!("name = \"{name}\""), 1)
+                .replacen(
+                    "kind = \"sample.path\"\n",
+                    &format!("kind = \"sample.path\"\nparams = {{ {params} }}\n"),
+                    1
+                ),
+            body(&text),
+            "{name}"
+        );
+        let p = Pipeline::parse(
+            &SourceFile {
+                name: format!("pipelines/{name}.toml"),
+                text,
+            },
+            &Registry::builtin(),
+        )
+        .unwrap();
+        let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
+        assert_eq!(path.inputs["environment"], "environment", "{name}");
+        assert_eq!(path.params.bool("visibility"), level != "low", "{name}");
+    }
+}
+
+/// The impostor queries read light.impostor's map: a pipeline where no stage makes
+/// it is refused when it loads, naming the missing product and the stage.
+#[test]
+fn an_impostor_query_without_an_environment_map_is_refused_at_load_time() {
+    let text = std::fs::read_to_string(format!(
+        "{}/pipelines/mixed-reality.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap()
+    .replacen(
+        "kind = \"light.impostor\"\n",
+        "kind = \"light.impostor\"\noutputs = { environment = \"room\" }\n",
+        1,
+    )
+    .replacen(
+        "kind = \"light.importance\"\n",
+        "kind = \"light.importance\"\ninputs = { environment = \"room\" }\n",
+        1,
+    )
+    .replacen(
+        "kind = \"filter.axis_aligned\"\n",
+        "kind = \"filter.axis_aligned\"\ninputs = { environment = \"room\" }\n",
+        1,
+    );
+    let source = |text: String| SourceFile {
+        name: "p.toml".into(),
+        text,
+    };
+    // ssrt does not read it: the pipeline loads.
+    Pipeline::parse(&source(text.clone()), &Registry::builtin()).unwrap();
+    let dit = text.replacen(
+        "kind = \"sample.path\"\n",
+        "kind = \"sample.path\"\nparams = { query = \"dit\" }\n",
+        1,
+    );
+    let Err(err) = Pipeline::parse(&source(dit), &Registry::builtin()) else {
+        panic!("a dit query with no `environment` product loaded");
+    };
+    let err = err.to_string();
+    assert!(
+        err.contains("`environment`") && err.contains("sample.path"),
+        "{err}"
+    );
+}

@@ -77,7 +77,7 @@ pub(super) struct Kernel<'a> {
     pub(super) params: &'a PathParams,
     pub(super) tracer: ScreenTracer<'a>,
     /// The distance impostor's query (`em`, `dit`); `None` for screen-space marching.
-    pub(super) impostor: Option<ImpostorQuery<'a>>,
+    pub(super) impostor: Option<ImpostorQuery>,
     pub(super) to_world: Mat3A,
     pub(super) to_camera: Mat3A,
     pub(super) camera_position: Vec3,
@@ -93,6 +93,9 @@ pub(super) struct Kernel<'a> {
     pub(super) occluder_min_radiance: f32,
     /// The table's directions in camera space (where the screen-space tracer works).
     pub(super) table_camera: Vec<Vec3>,
+    /// `em`: the impostor's answer per table sample (it does not depend on the ray's
+    /// origin), looked up once per frame instead of once per ray.
+    pub(super) table_em: Vec<Option<Hit>>,
     /// How the screen-space rays are marched (the same hits with any).
     pub(super) lanes: simd::Kernel,
 }
@@ -102,7 +105,7 @@ impl<'a> Kernel<'a> {
         inputs: &'a PathInputs<'a>,
         params: &'a PathParams,
         tracer: ScreenTracer<'a>,
-        impostor: Option<ImpostorQuery<'a>>,
+        impostor: Option<ImpostorQuery>,
         lanes: simd::Kernel,
     ) -> Self {
         let c2w = inputs.camera_to_world;
@@ -126,6 +129,22 @@ impl<'a> Kernel<'a> {
         let object_pixels = objects
             .as_ref()
             .map_or([0, 0, -1, -1], |o| object_pixel_bounds(inputs, &o.aabb));
+        // Environment Mapping's answer does not depend on the ray's origin.
+        let table_em = match &impostor {
+            Some(q) if q.iterations == 0 => inputs
+                .table
+                .samples
+                .iter()
+                .map(|ls| {
+                    q.query(&Ray {
+                        origin: q.center,
+                        dir: ls.direction,
+                        t_max: f32::INFINITY,
+                    })
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
         Kernel {
             inputs,
             params,
@@ -151,6 +170,7 @@ impl<'a> Kernel<'a> {
                 .iter()
                 .map(|ls| Vec3::from(to_camera * Vec3A::from(ls.direction)))
                 .collect(),
+            table_em,
             lanes,
         }
     }
@@ -417,6 +437,25 @@ impl<'a> Kernel<'a> {
                     .trace_from(origin, dir_camera, self.params.max_distance)
                     .map(|real| screen.hit(real))
             }
+        }
+    }
+
+    /// The impostor's answer for table sample `sample` from `origin`: looked up once
+    /// per frame for `em`, traced for `dit`.
+    #[inline]
+    pub(super) fn impostor_direct(
+        &self,
+        query: &ImpostorQuery,
+        origin: Vec3,
+        sample: usize,
+    ) -> Option<Hit> {
+        match self.table_em.get(sample) {
+            Some(&answer) => answer,
+            None => query.query(&Ray {
+                origin,
+                dir: self.inputs.table.samples[sample].direction,
+                t_max: f32::INFINITY,
+            }),
         }
     }
 

@@ -1,13 +1,24 @@
 //! The rays of a span, answered by the stage's radiance query
 //! ([`crate::stages::sample::query`]): with `ssrt` they are queued in camera space and
 //! marched together ([`TraceBatch`], eight lanes at a time where the CPU has AVX2); with
-//! the impostor queries each is answered as it is pushed (a lookup or a few, no march).
-//! Either way [`RayBatch::hits`] holds one answer per ray, in push order.
+//! the impostor queries each is answered as it is pushed (a lookup or a few, no march),
+//! by the caller, who knows when an answer can be had for less (see
+//! [`Kernel::impostor_direct`](super::kernel::Kernel) and [`NOT_ASKED`]). Either way
+//! [`RayBatch::hits`] holds one answer per ray, in push order.
 
 use crate::simd;
-use crate::stages::sample::query::{Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery};
+use crate::stages::sample::query::{Hit, ImpostorQuery, ScreenQuery, Source};
 use crate::stages::sample::ssrt::{RayOrigin, TraceBatch};
 use glam::Vec3;
+
+/// The answer recorded for an impostor ray whose answer cannot matter: an indirect ray
+/// from a real point outside the objects' cone (no object can be in its way, and the
+/// environment brings indirect light nothing: direct light counts it).
+pub(super) const NOT_ASKED: Hit = Hit {
+    t: f32::INFINITY,
+    radiance: Vec3::ZERO,
+    source: Source::Environment,
+};
 
 /// A span's rays and their answers; reused from span to span (one per rayon worker,
 /// so the box around the large screen-space batch costs nothing per ray).
@@ -20,7 +31,7 @@ pub(super) enum RayBatch<'t> {
     },
     /// The distance impostor: answered at once.
     Impostor {
-        query: ImpostorQuery<'t>,
+        query: &'t ImpostorQuery,
         hits: Vec<Option<Hit>>,
     },
 }
@@ -37,14 +48,14 @@ impl<'t> RayBatch<'t> {
         }
     }
 
-    /// Adds a ray and returns its index. `world` gives its world origin and unit
-    /// direction (asked only by the impostor queries), `camera` its projected origin
-    /// and camera-space direction (asked only by screen-space marching, whose rays end
-    /// after `max_distance`).
+    /// Adds a ray and returns its index. `impostor` answers it with the impostor
+    /// query (called only by the impostor queries), `camera` gives its projected
+    /// origin and camera-space direction (called only by screen-space marching, whose
+    /// rays end after `max_distance`).
     #[inline]
     pub(super) fn push(
         &mut self,
-        world: impl FnOnce() -> (Vec3, Vec3),
+        impostor: impl FnOnce(&ImpostorQuery) -> Option<Hit>,
         camera: impl FnOnce() -> (Option<RayOrigin>, Vec3),
         max_distance: f32,
     ) -> usize {
@@ -54,12 +65,7 @@ impl<'t> RayBatch<'t> {
                 batch.push(origin.as_ref(), dir, max_distance)
             }
             RayBatch::Impostor { query, hits } => {
-                let (origin, dir) = world();
-                hits.push(query.query(&Ray {
-                    origin,
-                    dir,
-                    t_max: f32::INFINITY,
-                }));
+                hits.push(impostor(query));
                 hits.len() - 1
             }
         }

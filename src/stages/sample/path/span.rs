@@ -7,12 +7,12 @@
 //! of every output.
 
 use super::kernel::{Kernel, RealPoint};
-use super::rays::RayBatch;
+use super::rays::{NOT_ASKED, RayBatch};
 use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
 use super::virtual_paths::{VirtualDirect, VirtualIndirect};
 use super::{PathOutputs, PathParams, PixelResult};
 use crate::objects::VirtualHit;
-use crate::stages::sample::query::ScreenQuery;
+use crate::stages::sample::query::{ImpostorQuery, RadianceQuery, Ray, ScreenQuery};
 use crate::stages::sample::ssrt::TraceBatch;
 use glam::{Vec3, Vec3A};
 
@@ -82,7 +82,7 @@ impl<'t> Span<'t> {
         let direct = SPAN_PIXELS * (params.primary * params.direct) as usize;
         let indirect = SPAN_PIXELS * (params.primary * params.indirect) as usize;
         let hits = Vec::with_capacity(direct + indirect);
-        let batch = match kernel.impostor {
+        let batch = match &kernel.impostor {
             Some(query) => RayBatch::Impostor { query, hits },
             None => RayBatch::Screen {
                 batch: Box::new(TraceBatch::new(&kernel.tracer, direct + indirect)),
@@ -229,7 +229,7 @@ impl Kernel<'_> {
                         sample,
                         cos,
                         ray: span.batch.push(
-                            || (rp.world, ls.direction),
+                            |q| self.impostor_direct(q, rp.world, sample),
                             || (rp.origin, self.table_camera[sample]),
                             t_max,
                         ),
@@ -240,14 +240,21 @@ impl Kernel<'_> {
         for s in 0..params.primary * params.indirect {
             let (u1, u2) = indirect_stream.pair(s as u64);
             let dir_camera = rp.basis_camera.to_world(cosine_hemisphere(u1, u2));
-            let world_dir = || Vec3::from(self.to_world * Vec3A::from(dir_camera));
+            // For the impostor, only rays that may meet an object need their
+            // distance (see `real_samples`).
+            let impostor = |q: &ImpostorQuery| {
+                if self.params.object_aware || !rp.cone_camera.admits(dir_camera) {
+                    return Some(NOT_ASKED);
+                }
+                q.query(&Ray {
+                    origin: rp.world,
+                    dir: Vec3::from(self.to_world * Vec3A::from(dir_camera)),
+                    t_max: f32::INFINITY,
+                })
+            };
             span.indirect.push(IndirectRay {
                 dir_camera,
-                ray: span.batch.push(
-                    || (rp.world, world_dir()),
-                    || (rp.origin, dir_camera),
-                    t_max,
-                ),
+                ray: span.batch.push(impostor, || (rp.origin, dir_camera), t_max),
             });
         }
     }

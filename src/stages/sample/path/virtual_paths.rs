@@ -9,7 +9,7 @@ use super::sampling::{
     Basis, PixelRng, Stream, StreamId, below, cosine_hemisphere, phong_lobe, phong_weight,
 };
 use crate::objects::VirtualHit;
-use crate::stages::sample::query::{Hit, Source};
+use crate::stages::sample::query::{Hit, RadianceQuery, Ray, Source};
 use glam::{Vec3, Vec3A};
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -97,7 +97,7 @@ impl Kernel<'_> {
                                 sample,
                                 cos,
                                 ray: batch.push(
-                                    || (surface.origin, ls.direction),
+                                    |q| self.impostor_direct(q, surface.origin, sample),
                                     || self.tracer.camera_ray(surface.origin, ls.direction),
                                     t_max,
                                 ),
@@ -136,7 +136,13 @@ impl Kernel<'_> {
             };
             let ray = (weight > 0.0).then(|| {
                 batch.push(
-                    || (surface.origin, dir),
+                    |q| {
+                        q.query(&Ray {
+                            origin: surface.origin,
+                            dir,
+                            t_max: f32::INFINITY,
+                        })
+                    },
                     || self.tracer.camera_ray(surface.origin, dir),
                     t_max,
                 )

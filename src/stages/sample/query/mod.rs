@@ -24,7 +24,7 @@
 mod impostor;
 mod screen;
 
-pub use impostor::{ImpostorQuery, MAX_ITERATIONS, TracedImpostor, trace_impostor};
+pub use impostor::{ImpostorQuery, MAX_ITERATIONS, TracedImpostor};
 pub use screen::ScreenQuery;
 
 use glam::Vec3;

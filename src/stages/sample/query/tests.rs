@@ -59,11 +59,12 @@ fn directions(n: usize) -> Vec<Vec3> {
 /// Mean distance (metres) between the point DIT finds and the exact hit, over rays
 /// from `origin`.
 fn mean_hit_error(map: &EnvMap, origin: Vec3, iterations: u32) -> f32 {
+    let query = ImpostorQuery::new(map, iterations);
     let dirs = directions(2000);
     let total: f32 = dirs
         .iter()
         .map(|&d| {
-            let traced = trace_impostor(map, origin, d, iterations);
+            let traced = query.trace(origin, d);
             let found = origin + d * traced.t;
             (found - (origin + d * exit(origin, d))).length()
         })
@@ -97,10 +98,7 @@ fn dit_converges_to_the_exact_hit_in_a_box_room_seen_from_off_centre() {
 fn dit_radiance_approaches_the_wall_seen_along_the_ray() {
     let map = box_impostor(1024);
     let origin = CENTER + Vec3::new(-0.9, 0.6, -1.1);
-    let query = |iterations| ImpostorQuery {
-        map: &map,
-        iterations,
-    };
+    let query = |iterations| ImpostorQuery::new(&map, iterations);
     let error = |iterations| {
         let q = query(iterations);
         directions(1000)
@@ -127,29 +125,43 @@ fn dit_radiance_approaches_the_wall_seen_along_the_ray() {
 #[test]
 fn dit_with_zero_iterations_is_environment_mapping() {
     let map = box_impostor(256);
+    let em = ImpostorQuery::new(&map, 0);
     let origin = CENTER + Vec3::new(0.5, -0.3, 0.2);
+    let mut resampling_error = 0.0;
     for d in directions(500) {
-        let texel = map.texel_of(d);
-        let em = trace_impostor(&map, origin, d, 0);
-        assert_eq!(
-            em,
-            TracedImpostor {
-                texel,
-                t: map.distance[texel]
-            }
-        );
-        let hit = ImpostorQuery {
-            map: &map,
-            iterations: 0,
-        }
-        .query(&Ray {
+        // The lookup along the ray's own direction, from anywhere.
+        let texel = em.cube.texel_of(d);
+        let expected = TracedImpostor {
+            texel,
+            t: em.cube.distance[texel],
+        };
+        assert_eq!(em.trace(origin, d), expected);
+        let ray = Ray {
             origin,
             dir: d,
             t_max: f32::INFINITY,
-        })
-        .unwrap();
-        assert_eq!(hit.radiance, map.radiance(d));
-        assert_eq!(hit.t.to_bits(), map.distance[texel].to_bits());
+        };
+        let hit = em.query(&ray).unwrap();
+        assert_eq!(hit.radiance, em.cube.radiance[texel]);
+        assert_eq!(hit.t.to_bits(), em.cube.distance[texel].to_bits());
+        resampling_error += (hit.radiance - map.radiance(d)).abs().max_element() / 500.0;
+    }
+    // The cube holds the lat-long map's texels: those of its texel centres, within a
+    // lat-long texel of d (a ramp of about 0.01 per texel, steps at the room's edges).
+    assert!(resampling_error < 0.01, "{resampling_error}");
+}
+
+#[test]
+fn the_cube_holds_the_maps_texel_at_each_centre_direction() {
+    let map = box_impostor(128);
+    let query = ImpostorQuery::new(&map, 0);
+    assert_eq!(query.cube.face_size, 64);
+    assert_eq!(query.center, CENTER);
+    for i in (0..query.cube.radiance.len()).step_by(97) {
+        let d = query.cube.texel_direction(i);
+        assert_eq!(query.cube.texel_of(d), i, "texel {i}");
+        assert_eq!(query.cube.radiance[i], map.radiance(d));
+        assert_eq!(query.cube.distance[i], map.distance[map.texel_of(d)]);
     }
 }
 
@@ -158,29 +170,31 @@ fn from_the_centre_dit_keeps_the_lookup_direction() {
     // At the centre every sphere step lands on the texel it read: tracing cannot do
     // better than the map, and must not do worse.
     let map = box_impostor(256);
+    let dit = ImpostorQuery::new(&map, 8);
     for d in directions(500) {
-        let traced = trace_impostor(&map, CENTER, d, 8);
-        assert_eq!(traced.texel, map.texel_of(d));
+        assert_eq!(dit.trace(CENTER, d).texel, dit.cube.texel_of(d));
     }
 }
 
 #[test]
 fn a_distant_map_or_a_hole_answers_as_environment_mapping() {
-    let mut map = EnvMap::from_fn(64, 32, |d| d.abs());
+    let map = EnvMap::from_fn(64, 32, |d| d.abs());
     let origin = Vec3::new(0.3, -0.2, 0.1);
+    let dit = ImpostorQuery::new(&map, 8);
     for d in directions(200) {
-        let traced = trace_impostor(&map, origin, d, 8);
-        assert_eq!(traced.texel, map.texel_of(d));
+        let traced = dit.trace(origin, d);
+        assert_eq!(traced.texel, dit.cube.texel_of(d));
         assert!(traced.t.is_infinite());
     }
     // Finite everywhere but a hole where the first step would land: the step keeps
     // the texel it had instead of reading the hole's missing light.
-    map.distance = vec![2.0; map.radiance.len()];
+    let mut dit = ImpostorQuery::new(&map, 1);
+    dit.cube.distance.fill(2.0);
     let d = Vec3::new(1.0, 0.2, 0.0).normalize();
-    let first = trace_impostor(&map, origin, d, 1).texel;
-    assert_ne!(first, map.texel_of(d), "the step moves the lookup");
-    map.distance[first] = f32::INFINITY;
-    assert_eq!(trace_impostor(&map, origin, d, 1).texel, map.texel_of(d));
+    let first = dit.trace(origin, d).texel;
+    assert_ne!(first, dit.cube.texel_of(d), "the step moves the lookup");
+    dit.cube.distance[first] = f32::INFINITY;
+    assert_eq!(dit.trace(origin, d).texel, dit.cube.texel_of(d));
 }
 
 #[test]

@@ -1,0 +1,244 @@
+//! The parameters of `sample.path`: their declarations (ranges and docs, checked when
+//! a pipeline loads) and [`PathParams`], the settings the estimator runs with.
+
+use super::MAX_CANDIDATES;
+use crate::graph::{ParamDefault, ParamSpec, Params, StageError};
+use crate::stages::sample::query::{MAX_ITERATIONS, QueryKind};
+use crate::stages::sample::ssrt::TraceParams;
+
+/// Most primary, direct or indirect samples per pixel the stage accepts.
+pub const MAX_SAMPLES: u32 = 64;
+
+pub(super) const PARAMS: &[ParamSpec] = &[
+    ParamSpec::new(
+        "query",
+        ParamDefault::Str("ssrt"),
+        "how rays meet the real scene (paper 000 Sec. 6): ssrt = screen-space march over the depth map within max_distance, the environment map beyond; em = Environment Mapping, a direction lookup into the distance impostor; dit = Distance Impostor Tracing, the lookup refined from the impostor's distances. em and dit read the `environment` product (light.impostor's map)",
+    )
+    .choices(QueryKind::NAMES),
+    ParamSpec::new(
+        "iterations",
+        ParamDefault::Int(4),
+        "dit: refinement steps of the impostor lookup (0 gives em's answer)",
+    )
+    .range(0.0, MAX_ITERATIONS as f64),
+    ParamSpec::new(
+        "visibility",
+        ParamDefault::Bool(true),
+        "test the virtual objects' rays against the objects themselves (self-shadowing and self-reflection; paper 000 Table 3's visibility test). Off: cheaper, objects lit as if nothing of them were in the way",
+    ),
+    ParamSpec::new(
+        "primary",
+        ParamDefault::Int(4),
+        "primary samples (jittered view rays) per pixel: decide the mask and the shading point (paper 001: 4)",
+    )
+    .range(1.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "direct",
+        ParamDefault::Int(4),
+        "direct-light samples per primary sample (paper 001: 4, 16 per pixel)",
+    )
+    .range(0.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "indirect",
+        ParamDefault::Int(4),
+        "indirect (one-bounce) samples per primary sample (paper 001: 4, 16 per pixel)",
+    )
+    .range(0.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "object_aware",
+        ParamDefault::Bool(false),
+        "estimate E_RV^ind at real points as E_R^ind plus an object-aware differential (paper 000 Sec. 7)",
+    ),
+    ParamSpec::new(
+        "cache_size",
+        ParamDefault::Int(16),
+        "object-aware: most candidate directions traced per pixel, |H_a| (paper 000: 16 or 32)",
+    )
+    .range(1.0, MAX_CANDIDATES as f64),
+    ParamSpec::new(
+        "candidates",
+        ParamDefault::Int(64),
+        "object-aware: cosine directions tested against the objects' bounding box per pixel, N",
+    )
+    .range(1.0, MAX_CANDIDATES as f64),
+    ParamSpec::new(
+        "max_distance",
+        ParamDefault::Float(1.0),
+        "metres a screen-space ray marches: real geometry beyond it neither occludes nor reflects (the environment map stands for it)",
+    )
+    .range(0.01, 1000.0),
+    ParamSpec::new(
+        "normal_offset",
+        ParamDefault::Float(1.0),
+        "real ray origins are raised off the surface along its normal by this many pixel footprints (depth / focal length), so grazing rays do not hit their own surface between pixel centres",
+    )
+    .range(0.0, 16.0),
+    ParamSpec::new(
+        "occluder_threshold",
+        ParamDefault::Float(0.1),
+        "direct_min_distance counts only occluders of samples at least this bright, as a fraction of the table's brightest sample (paper 001 Sec. 7 ignores occluders of samples below an absolute 0.1; a fraction is the same for any exposure): dim light blocked nearby does not narrow the filter",
+    )
+    .range(0.0, 1.0),
+    ParamSpec::new(
+        "thickness",
+        ParamDefault::Float(0.1),
+        "metres behind the depth map that still count as inside a real surface",
+    )
+    .range(0.001, 10.0),
+    ParamSpec::new(
+        "skip_pixels",
+        ParamDefault::Float(1.5),
+        "pixels skipped at the start of a screen-space march, against self-intersection",
+    )
+    .range(0.0, 64.0),
+];
+
+/// The `query` parameter of checked parameters `p`.
+pub(super) fn query_kind(p: &Params) -> QueryKind {
+    QueryKind::from_name(p.str("query")).unwrap_or_default()
+}
+
+/// Settings of [`sample_path`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathParams {
+    /// How rays meet the real scene.
+    pub query: QueryKind,
+    /// `dit`: refinement steps of the impostor lookup.
+    pub iterations: u32,
+    /// Whether the objects' own rays are tested against the objects (self-occlusion).
+    pub visibility: bool,
+    /// Primary samples per pixel.
+    pub primary: u32,
+    /// Direct samples per primary sample.
+    pub direct: u32,
+    /// Indirect samples per primary sample.
+    pub indirect: u32,
+    pub seed: u64,
+    /// Object-aware differential for E_RV^ind at real points (paper 000 Sec. 7).
+    pub object_aware: bool,
+    /// Object-aware: most directions traced per pixel (|H_a|).
+    pub cache_size: u32,
+    /// Object-aware: directions tested against the bounding box per pixel (N).
+    pub candidates: u32,
+    pub trace: TraceParams,
+    /// Metres a screen-space ray marches.
+    pub max_distance: f32,
+    /// Pixel footprints (depth / focal length) by which real ray origins are raised
+    /// along the normal.
+    pub normal_offset: f32,
+    /// Blocked direct samples whose radiance is below this fraction of the table's
+    /// brightest do not set `direct_min_distance`.
+    pub occluder_threshold: f32,
+    /// Shade only the pixels whose x and y are multiples of this (1: every pixel); the
+    /// others keep [`PathOutputs::new`]'s values (NaN irradiance). A shaded pixel gets
+    /// the bits a full run gives it (random numbers are hashed per pixel): `relume eval`
+    /// computes its many-sample references on such a lattice. Not a stage parameter.
+    pub pixel_stride: u32,
+}
+
+impl Default for PathParams {
+    fn default() -> Self {
+        PathParams {
+            query: QueryKind::Ssrt,
+            iterations: 4,
+            visibility: true,
+            primary: 4,
+            direct: 4,
+            indirect: 4,
+            seed: 0,
+            object_aware: false,
+            cache_size: 16,
+            candidates: 64,
+            trace: TraceParams::default(),
+            max_distance: 1.0,
+            normal_offset: 1.0,
+            occluder_threshold: 0.1,
+            pixel_stride: 1,
+        }
+    }
+}
+
+impl PathParams {
+    /// The settings of a `sample.path` stage with (checked) parameters `p`, run with
+    /// `seed` (`relume eval` re-runs the stage's math with them).
+    pub fn from_params(p: &Params, seed: u64) -> PathParams {
+        PathParams {
+            query: query_kind(p),
+            iterations: p.int("iterations") as u32,
+            visibility: p.bool("visibility"),
+            primary: p.int("primary") as u32,
+            direct: p.int("direct") as u32,
+            indirect: p.int("indirect") as u32,
+            seed,
+            object_aware: p.bool("object_aware"),
+            cache_size: p.int("cache_size") as u32,
+            candidates: p.int("candidates") as u32,
+            trace: TraceParams {
+                thickness: p.float("thickness") as f32,
+                skip_pixels: p.float("skip_pixels") as f32,
+            },
+            max_distance: p.float("max_distance") as f32,
+            normal_offset: p.float("normal_offset") as f32,
+            occluder_threshold: p.float("occluder_threshold") as f32,
+            pixel_stride: 1,
+        }
+    }
+
+    /// Checks the counts and distances; the error names the bad value.
+    pub fn check(&self) -> Result<(), StageError> {
+        let bad = |what: &str, value: String| {
+            Err(StageError::Failed(format!(
+                "sample.path: {what} is {value}"
+            )))
+        };
+        if !(1..=MAX_SAMPLES).contains(&self.primary) {
+            return bad(
+                "primary",
+                format!("{}, expected 1..={MAX_SAMPLES}", self.primary),
+            );
+        }
+        if self.direct > MAX_SAMPLES || self.indirect > MAX_SAMPLES {
+            return bad(
+                "direct or indirect",
+                format!(
+                    "{} / {}, expected 0..={MAX_SAMPLES}",
+                    self.direct, self.indirect
+                ),
+            );
+        }
+        if self.iterations > MAX_ITERATIONS {
+            return bad(
+                "iterations",
+                format!("{}, expected 0..={MAX_ITERATIONS}", self.iterations),
+            );
+        }
+        if self.pixel_stride == 0 {
+            return bad("pixel_stride", "0, expected 1 or more".into());
+        }
+        let max = MAX_CANDIDATES as u32;
+        if !(1..=max).contains(&self.candidates) || !(1..=max).contains(&self.cache_size) {
+            return bad(
+                "candidates or cache_size",
+                format!(
+                    "{} / {}, expected 1..={max}",
+                    self.candidates, self.cache_size
+                ),
+            );
+        }
+        let distances_valid = self.max_distance > 0.0
+            && self.trace.thickness >= 0.0
+            && self.normal_offset >= 0.0
+            && self.normal_offset.is_finite();
+        if !distances_valid {
+            return bad(
+                "max_distance, thickness or normal_offset",
+                format!(
+                    "{} / {} / {}",
+                    self.max_distance, self.trace.thickness, self.normal_offset
+                ),
+            );
+        }
+        Ok(())
+    }
+}

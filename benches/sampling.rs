@@ -41,7 +41,7 @@ use relume::light::{ImpostorBuilder, ImpostorParams, LightTable, ValBuilder, Val
 use relume::objects::{Triangle, VirtualScene};
 use relume::pinhole::Pinhole;
 use relume::stages::sample::path::sampling::{Basis, cosine_hemisphere};
-use relume::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
+use relume::stages::sample::path::{IrradianceLayers, PathInputs, PathParams, sample_path};
 
 /// Frames replayed before the measured one.
 const WARM_FRAMES: usize = 12;
@@ -101,7 +101,7 @@ fn bench_sampling(c: &mut Criterion) {
             } else {
                 "plain"
             };
-            let mut out = PathOutputs::new(depth.width, depth.height);
+            let mut out = IrradianceLayers::new(depth.width, depth.height);
             group.bench_function(format!("sample.path/{name}"), |b| {
                 b.iter(|| sample_path(&inputs, &params, &mut out).unwrap())
             });
@@ -119,7 +119,7 @@ fn bench_sampling(c: &mut Criterion) {
             seed: 1,
             ..PathParams::from_params(&spec.params, 1)
         };
-        let mut out = PathOutputs::new(depth.width, depth.height);
+        let mut out = IrradianceLayers::new(depth.width, depth.height);
         sample_path(&inputs, &params, &mut out).unwrap();
         eprintln!(
             "sample.path/tenth: the objects, scaled by {TENTH_SCALE}, cover {:.1} % of the image",
@@ -136,7 +136,7 @@ fn bench_sampling(c: &mut Criterion) {
             indirect: 2,
             ..params
         };
-        let mut fast_out = PathOutputs::new(depth.width, depth.height);
+        let mut fast_out = IrradianceLayers::new(depth.width, depth.height);
         group.bench_function("sample.path/tenth_fast", |b| {
             b.iter(|| sample_path(&inputs, &fast, &mut fast_out).unwrap())
         });
@@ -231,7 +231,7 @@ fn bench_object_queries(
     group: &mut criterion::BenchmarkGroup<criterion::measurement::WallTime>,
     objects: &VirtualScene,
     inputs: &PathInputs,
-    out: &PathOutputs,
+    out: &IrradianceLayers,
 ) {
     let camera_position = glam::Vec3::from(inputs.camera_to_world.translation);
     let bounds = objects.bounds();
@@ -347,7 +347,7 @@ fn bench_queries(
         Err(_) => vec![16, 32, 64],
     };
     let size = (inputs.depth.width, inputs.depth.height);
-    let mut out = PathOutputs::new(size.0, size.1);
+    let mut out = IrradianceLayers::new(size.0, size.1);
     for query in [QueryKind::Ssrt, QueryKind::Em, QueryKind::Dit] {
         for &n in &counts {
             for visibility in [true, false] {

@@ -21,12 +21,13 @@
 //!   channels.
 
 use super::sampling::{PathRunner, ReferenceLayers};
-use crate::graph::{BuildContext, Frame, ParamValue, Product, Registry, ResolvedStage, Stage};
+use crate::graph::{BuildContext, Frame, ParamValue, Registry, ResolvedStage, Stage};
 use crate::objects::VirtualScene;
 use crate::raster::{Image, Vec3Image};
 use crate::recording::Header;
 use crate::rng;
-use crate::stages::sample::path::{PathOutputs, PathParams};
+use crate::stages::sample::layers::LAYER_OUTPUTS;
+use crate::stages::sample::path::{IrradianceLayers, PathParams};
 use glam::{DVec3, Vec3};
 use serde_json::{Value, json};
 use std::sync::Arc;
@@ -165,7 +166,7 @@ impl FilterScorer {
         &self,
         frame: &Frame,
         sampler: &ResolvedStage,
-        runs: &[PathOutputs],
+        runs: &[IrradianceLayers],
         temporal: bool,
     ) -> Result<(f64, u64), String> {
         let mut params = self.stage.params.clone();
@@ -244,7 +245,7 @@ impl FilterScorer {
 }
 
 /// The sampling of `frame` re-run [`FLICKER_FRAMES`] times with fresh random numbers.
-fn flicker_runs(runner: &PathRunner, frame: &Frame) -> Result<Vec<PathOutputs>, String> {
+fn flicker_runs(runner: &PathRunner, frame: &Frame) -> Result<Vec<IrradianceLayers>, String> {
     (0..FLICKER_FRAMES)
         .map(|k| {
             let params = PathParams {
@@ -259,34 +260,12 @@ fn flicker_runs(runner: &PathRunner, frame: &Frame) -> Result<Vec<PathOutputs>, 
 }
 
 /// Puts a sampling run's products into `frame` under the names `sampler` gives them.
-pub fn insert_outputs(frame: &mut Frame, sampler: &ResolvedStage, run: &PathOutputs) {
-    let name = |role: &str| super::output(sampler, role);
-    let products = [
-        ("e_r_dir", Product::Radiance(run.e_r_dir.clone())),
-        ("e_r_ind", Product::Radiance(run.e_r_ind.clone())),
-        ("e_rv_dir", Product::Radiance(run.e_rv_dir.clone())),
-        ("e_rv_ind", Product::Radiance(run.e_rv_ind.clone())),
-        ("mask", Product::Scalar(run.mask.clone())),
-        ("k_v", Product::Radiance(run.k_v.clone())),
-        ("exponent", Product::Scalar(run.exponent.clone())),
-        (
-            "world_position",
-            Product::Points(run.world_position.clone()),
-        ),
-        ("world_normal", Product::Normals(run.world_normal.clone())),
-        (
-            "direct_min_distance",
-            Product::Scalar(run.direct_min_distance.clone()),
-        ),
-        (
-            "indirect_min_distance",
-            Product::Scalar(run.indirect_min_distance.clone()),
-        ),
-        ("touched", Product::Labels(run.touched.clone())),
-    ];
-    for (role, product) in products {
-        frame.insert(&name(role), product);
-    }
+pub fn insert_outputs(frame: &mut Frame, sampler: &ResolvedStage, run: &IrradianceLayers) {
+    let names: Vec<String> = LAYER_OUTPUTS
+        .iter()
+        .map(|(role, _)| super::output(sampler, role))
+        .collect();
+    run.clone().insert_into(frame, &names);
 }
 
 /// A separable image-space Gaussian over |i| <= `radius` with standard deviation

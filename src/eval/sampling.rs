@@ -24,7 +24,7 @@ use crate::pinhole::Pinhole;
 use crate::raster::{Image, Vec3Image};
 use crate::recording::Intrinsics;
 use crate::rng;
-use crate::stages::sample::path::{PathInputs, PathOutputs, PathParams, sample_path};
+use crate::stages::sample::path::{IrradianceLayers, PathInputs, PathParams, sample_path};
 use crate::stages::sample::query::QueryKind;
 use glam::{Affine3A, Vec3};
 use serde_json::{Value, json};
@@ -99,7 +99,11 @@ impl PathRunner {
 
     /// The stage's outputs with `params` on `frame`'s inputs; `None` when the frame
     /// lacks one of them.
-    pub fn run(&self, frame: &Frame, params: &PathParams) -> Option<Result<PathOutputs, String>> {
+    pub fn run(
+        &self,
+        frame: &Frame,
+        params: &PathParams,
+    ) -> Option<Result<IrradianceLayers, String>> {
         let [depth, normals, pose, radiance, table] = &self.inputs;
         let (Ok(depth), Ok(normals), Ok(pose), Ok(radiance), Ok(table)) = (
             frame.depth(depth),
@@ -125,7 +129,7 @@ impl PathRunner {
             objects: &self.objects,
             frame: frame.index as u64,
         };
-        let mut out = PathOutputs::new(depth.width, depth.height);
+        let mut out = IrradianceLayers::new(depth.width, depth.height);
         Some(
             sample_path(&inputs, params, &mut out)
                 .map(|()| out)
@@ -334,7 +338,7 @@ impl PathScorer {
             .collect();
         let ratio = |r: Vec3, rv: Vec3| channel_mean(rv) / channel_mean(r);
         let params = self.runner.params;
-        let run = |params: &PathParams| -> Result<PathOutputs, String> {
+        let run = |params: &PathParams| -> Result<IrradianceLayers, String> {
             self.runner
                 .run(frame, params)
                 .unwrap_or_else(|| Err("the frame lost its inputs".into()))

@@ -9,6 +9,7 @@
 //! [`query`] is the radiance query the renderers ask about the real scene (paper 000
 //! Fig. 5): screen-space marching, Environment Mapping or Distance Impostor Tracing.
 
+pub mod layers;
 pub mod path;
 pub mod pyramid;
 pub mod query;
@@ -23,14 +24,22 @@ mod tests {
         (info.ports)(&Params::defaults(info.params)).outputs
     }
 
-    /// `sample.val` stands in for `sample.path` with a one-line change only if it writes
-    /// the same roles, under the same default names and kinds (all but `touched`).
+    /// The renderers write the layers of [`layers::LAYER_OUTPUTS`], under the roles'
+    /// own names: one stands in for another with a one-line change (`sample.val`
+    /// writes all but `touched`).
     #[test]
-    fn sample_val_writes_the_roles_of_sample_path() {
-        let path = outputs(&super::path::INFO);
-        let val = outputs(&super::val::INFO);
-        let shared: Vec<&Port> = path.iter().filter(|p| p.role != "touched").collect();
-        assert_eq!(shared.len(), 11);
-        assert_eq!(shared, val.iter().collect::<Vec<_>>());
+    fn every_renderer_writes_the_shared_layers() {
+        let roles = |ports: Vec<Port>| -> Vec<(String, String)> {
+            ports
+                .into_iter()
+                .map(|p| (p.role.to_string(), p.default_product.to_string()))
+                .collect()
+        };
+        let layers: Vec<(String, String)> = super::layers::LAYER_OUTPUTS
+            .iter()
+            .map(|(r, _)| (r.to_string(), r.to_string()))
+            .collect();
+        assert_eq!(roles(outputs(&super::path::INFO)), layers);
+        assert_eq!(roles(outputs(&super::val::INFO)), layers[..11]);
     }
 }

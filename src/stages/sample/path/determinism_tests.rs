@@ -8,6 +8,7 @@ use super::tests::{
 use super::*;
 use crate::objects::Material;
 use crate::stages::with_threads;
+use glam::Vec3;
 
 /// The floor with a wall across it at world z = `wall_z` (facing the camera).
 fn floor_and_wall_scene(wall_z: f32) -> Scene {

@@ -10,6 +10,7 @@ use crate::light::LightSample;
 use crate::objects::VirtualHit;
 use crate::raster::depth_is_valid;
 use crate::simd;
+use crate::stages::sample::layers::PixelLayers;
 use crate::stages::sample::query::{Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery, Source};
 use crate::stages::sample::ssrt::{RayOrigin, ScreenTracer};
 use glam::{Mat3A, Vec3, Vec3A};
@@ -19,23 +20,6 @@ use std::f32::consts::PI;
 pub(super) const SURFACE_OFFSET: f32 = 1e-4;
 /// The most object-aware candidates per pixel (size of the H_a index cache).
 pub const MAX_CANDIDATES: usize = 256;
-
-/// What one pixel produces (see [`super::PathOutputs`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PixelResult {
-    pub e_r_dir: Vec3,
-    pub e_r_ind: Vec3,
-    pub e_rv_dir: Vec3,
-    pub e_rv_ind: Vec3,
-    pub mask: f32,
-    pub k_v: Vec3,
-    pub exponent: f32,
-    pub world_position: Vec3,
-    pub world_normal: Vec3,
-    pub direct_min_distance: f32,
-    pub indirect_min_distance: f32,
-    pub touched: bool,
-}
 
 /// A real shading point: the pixel's depth-map point and normal.
 pub(super) struct RealPoint {
@@ -195,7 +179,7 @@ impl<'a> Kernel<'a> {
         y: u32,
         drawn: &Drawn,
         hits: &[Option<Hit>],
-    ) -> PixelResult {
+    ) -> PixelLayers {
         let Drawn {
             real,
             real_samples: samples,
@@ -298,7 +282,7 @@ impl<'a> Kernel<'a> {
         if acc.touched && differential != Vec3::ZERO {
             e_rv_ind += differential * (acc.rv_ind_real_n as f32 / acc.rv_ind_n as f32);
         }
-        PixelResult {
+        PixelLayers {
             e_r_dir,
             e_r_ind,
             e_rv_dir,

@@ -72,6 +72,20 @@
 //! - Random numbers are counter-based per (seed, frame, pixel, stream, sample), so the
 //!   products are the same for any thread count.
 //!
+//! **The radiance query** (`query`, paper 000 Sec. 6; see [`super::query`]) decides
+//! how every ray above meets the real scene. `ssrt` (the default, described above)
+//! marches the depth map within `max_distance` and takes the environment map beyond.
+//! `em` and `dit` read the distance impostor (`environment`, light.impostor's map)
+//! instead: every ray reaches the environment at the impostor's distance, so direct
+//! samples take the radiance the query returns (for `em` the table's direction looked
+//! up from the impostor's centre; for `dit` traced from the shading point), nothing is
+//! near real geometry (E_R^ind = 0: the room's light is all direct light), and an
+//! object farther along a ray than the environment is hidden (Sec. 6.4, ray 3).
+//! `visibility = false` drops the objects' self-occlusion test (their own direct
+//! samples, reflected rays and bounce radiance are not tested against them: Table 3's
+//! cheaper rows). The estimates keep their correlation: E_RV == E_R bit for bit where
+//! no path meets an object, with any query.
+//!
 //! `max_distance` bounds the screen-space march (default 1 m): real geometry nearer
 //! than that occludes and reflects; beyond it the environment map stands for the room.
 //! It also bounds the cost of each march. Real ray origins are raised along the normal
@@ -99,24 +113,26 @@ pub mod sampling;
 mod span;
 mod virtual_paths;
 
-pub use kernel::{MAX_CANDIDATES, PixelResult};
+pub use super::layers::IrradianceLayers;
+pub use kernel::MAX_CANDIDATES;
 pub use params::{MAX_SAMPLES, PathParams};
 use params::{PARAMS, query_kind};
 
+use super::layers::{LAYER_OUTPUTS, rows};
 use super::pyramid::DepthPyramid;
 use super::query::{ImpostorQuery, QueryKind};
 use super::ssrt::ScreenTracer;
-use crate::graph::{Frame, Port, Ports, Product, ProductKind, Stage, StageError, StageInfo};
+use crate::graph::{Frame, Port, Ports, ProductKind, Stage, StageError, StageInfo};
 use crate::light::{EnvMap, LightTable};
 use crate::objects::VirtualScene;
 use crate::pinhole::Pinhole;
-use crate::raster::{DepthImage, Image, LabelImage, ScalarImage, Vec3Image};
+use crate::raster::{DepthImage, Vec3Image};
 use crate::recording::Intrinsics;
 use crate::simd;
-use glam::{Affine3A, Vec3};
+use glam::Affine3A;
 use kernel::Kernel;
 use rayon::prelude::*;
-use span::{SPAN_PIXELS, Span, rows};
+use span::{SPAN_PIXELS, Span};
 use std::sync::Arc;
 
 const INPUTS: [(&str, &str, &[ProductKind]); 5] = [
@@ -125,21 +141,6 @@ const INPUTS: [(&str, &str, &[ProductKind]); 5] = [
     ("pose", "pose", &[ProductKind::Pose]),
     ("radiance", "compensated", &[ProductKind::Radiance]),
     ("light_table", "light_table", &[ProductKind::LightTable]),
-];
-
-const OUTPUTS: [(&str, &[ProductKind]); 12] = [
-    ("e_r_dir", &[ProductKind::Radiance]),
-    ("e_r_ind", &[ProductKind::Radiance]),
-    ("e_rv_dir", &[ProductKind::Radiance]),
-    ("e_rv_ind", &[ProductKind::Radiance]),
-    ("mask", &[ProductKind::Scalar]),
-    ("k_v", &[ProductKind::Radiance]),
-    ("exponent", &[ProductKind::Scalar]),
-    ("world_position", &[ProductKind::Points]),
-    ("world_normal", &[ProductKind::Normals]),
-    ("direct_min_distance", &[ProductKind::Scalar]),
-    ("indirect_min_distance", &[ProductKind::Scalar]),
-    ("touched", &[ProductKind::Labels]),
 ];
 
 pub const INFO: StageInfo = StageInfo {
@@ -156,7 +157,7 @@ pub const INFO: StageInfo = StageInfo {
                     .then(|| Port::new("environment", "environment", &[ProductKind::Environment])),
             )
             .collect(),
-        outputs: OUTPUTS
+        outputs: LAYER_OUTPUTS
             .iter()
             .map(|(role, kinds)| Port::new(role, role, kinds))
             .collect(),
@@ -170,7 +171,7 @@ pub const INFO: StageInfo = StageInfo {
                 .query
                 .needs_environment()
                 .then(|| ctx.input("environment")),
-            outputs: OUTPUTS.map(|(role, _)| ctx.output(role)),
+            outputs: LAYER_OUTPUTS.map(|(role, _)| ctx.output(role)),
             params,
             intrinsics: ctx.header.depth_intrinsics,
             objects: Arc::clone(ctx.objects),
@@ -199,72 +200,6 @@ pub struct PathInputs<'a> {
     pub frame: u64,
 }
 
-/// The products of [`sample_path`], one value per pixel.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PathOutputs {
-    /// Irradiance, real geometry only, direct / indirect (NaN: no real shading point).
-    pub e_r_dir: Vec3Image,
-    pub e_r_ind: Vec3Image,
-    /// Irradiance with the virtual objects (NaN: no shading point at all).
-    pub e_rv_dir: Vec3Image,
-    pub e_rv_ind: Vec3Image,
-    /// Fraction of primary samples that see real geometry.
-    pub mask: ScalarImage,
-    /// Mean albedo of the virtual primaries (0 where none).
-    pub k_v: Vec3Image,
-    /// Mean Phong exponent of the virtual primaries (0 where none, or diffuse): the
-    /// filter's B_rho (paper 001 eq. 17) and B_h (eq. 18).
-    pub exponent: ScalarImage,
-    /// Mean world position / unit normal of the visible surfaces (NaN / zero: none).
-    pub world_position: Vec3Image,
-    pub world_normal: Vec3Image,
-    /// Metres to the nearest blocker of a direct sample / hit of an indirect ray.
-    pub direct_min_distance: ScalarImage,
-    pub indirect_min_distance: ScalarImage,
-    /// 1 where some path met a virtual object (E_RV may differ from E_R), else 0.
-    pub touched: LabelImage,
-}
-
-impl PathOutputs {
-    /// Buffers for a `width` x `height` frame.
-    pub fn new(width: u32, height: u32) -> PathOutputs {
-        let v = |value: Vec3| Image::filled(width, height, value);
-        PathOutputs {
-            e_r_dir: v(Vec3::NAN),
-            e_r_ind: v(Vec3::NAN),
-            e_rv_dir: v(Vec3::NAN),
-            e_rv_ind: v(Vec3::NAN),
-            mask: Image::filled(width, height, 1.0),
-            k_v: v(Vec3::ZERO),
-            exponent: Image::filled(width, height, 0.0),
-            world_position: v(Vec3::NAN),
-            world_normal: v(Vec3::ZERO),
-            direct_min_distance: Image::filled(width, height, f32::INFINITY),
-            indirect_min_distance: Image::filled(width, height, f32::INFINITY),
-            touched: Image::filled(width, height, 0),
-        }
-    }
-
-    /// The width and height of every buffer, if they agree.
-    fn size(&self) -> Option<(u32, u32)> {
-        let s = (self.e_r_dir.width, self.e_r_dir.height);
-        let all = [
-            self.e_r_ind.same_size(&self.e_r_dir),
-            self.e_rv_dir.same_size(&self.e_r_dir),
-            self.e_rv_ind.same_size(&self.e_r_dir),
-            self.mask.same_size(&self.e_r_dir),
-            self.k_v.same_size(&self.e_r_dir),
-            self.exponent.same_size(&self.e_r_dir),
-            self.world_position.same_size(&self.e_r_dir),
-            self.world_normal.same_size(&self.e_r_dir),
-            self.direct_min_distance.same_size(&self.e_r_dir),
-            self.indirect_min_distance.same_size(&self.e_r_dir),
-            self.touched.same_size(&self.e_r_dir),
-        ];
-        all.iter().all(|&b| b).then_some(s)
-    }
-}
-
 /// Estimates E_R and E_RV (direct and indirect), the mask, k_V, the mean visible
 /// surface and the minimum hit distances of every pixel (paper 001 Sec. 5; see the
 /// module docs). Builds the depth pyramid of the frame (O(pixels)) and fills `out`,
@@ -272,7 +207,7 @@ impl PathOutputs {
 pub fn sample_path(
     inputs: &PathInputs,
     params: &PathParams,
-    out: &mut PathOutputs,
+    out: &mut IrradianceLayers,
 ) -> Result<(), StageError> {
     params.check()?;
     let pyramid = DepthPyramid::new(inputs.depth);
@@ -285,7 +220,7 @@ pub fn sample_path_with_pyramid(
     inputs: &PathInputs,
     params: &PathParams,
     pyramid: &DepthPyramid,
-    out: &mut PathOutputs,
+    out: &mut IrradianceLayers,
 ) -> Result<(), StageError> {
     sample_path_with_kernel(inputs, params, pyramid, simd::Kernel::detect(), out)
 }
@@ -297,7 +232,7 @@ pub(crate) fn sample_path_with_kernel(
     params: &PathParams,
     pyramid: &DepthPyramid,
     lanes: simd::Kernel,
-    out: &mut PathOutputs,
+    out: &mut IrradianceLayers,
 ) -> Result<(), StageError> {
     params.check()?;
     let (w, h) = (inputs.depth.width, inputs.depth.height);
@@ -416,25 +351,9 @@ impl Stage for PathStage {
             objects: &self.objects,
             frame: frame.index as u64,
         };
-        let mut out = PathOutputs::new(depth.width, depth.height);
+        let mut out = IrradianceLayers::new(depth.width, depth.height);
         sample_path(&inputs, &self.params, &mut out)?;
-        let products = [
-            Product::Radiance(out.e_r_dir),
-            Product::Radiance(out.e_r_ind),
-            Product::Radiance(out.e_rv_dir),
-            Product::Radiance(out.e_rv_ind),
-            Product::Scalar(out.mask),
-            Product::Radiance(out.k_v),
-            Product::Scalar(out.exponent),
-            Product::Points(out.world_position),
-            Product::Normals(out.world_normal),
-            Product::Scalar(out.direct_min_distance),
-            Product::Scalar(out.indirect_min_distance),
-            Product::Labels(out.touched),
-        ];
-        for (name, product) in self.outputs.iter().zip(products) {
-            frame.insert(name, product);
-        }
+        out.insert_into(frame, &self.outputs);
         Ok(())
     }
 }

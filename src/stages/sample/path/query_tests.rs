@@ -12,6 +12,7 @@ use super::tests::{
 use super::*;
 use crate::objects::Material;
 use crate::stages::with_threads;
+use glam::Vec3;
 use std::f32::consts::PI;
 
 /// Every query, with its iterations.
@@ -212,7 +213,7 @@ fn visibility_switches_the_objects_self_occlusion() {
             )
         };
         let (with, without) = (run(true), run(false));
-        let mean = |out: &PathOutputs| {
+        let mean = |out: &IrradianceLayers| {
             let virtual_pixels: Vec<f32> = (0..(W * H) as usize)
                 .filter(|&i| out.mask.data[i] == 0.0)
                 .map(|i| out.e_rv_dir.data[i].x / (PI * SKY.x))

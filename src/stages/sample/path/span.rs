@@ -3,15 +3,16 @@
 //! are drawn, with all their rays queued; then the rays are answered in one
 //! [`RayBatch`] (with `ssrt`, marched eight at a time with AVX2); then each pixel is
 //! estimated from its samples and their hits. The rays, the hits and therefore the
-//! estimates are those of tracing each ray in turn. Results go to [`RowOut`], one row
-//! of every output.
+//! estimates are those of tracing each ray in turn. Each pixel's result goes to the
+//! caller.
 
+use super::PathParams;
 use super::kernel::{Kernel, RealPoint};
 use super::rays::{NOT_ASKED, RayBatch};
 use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
 use super::virtual_paths::{VirtualDirect, VirtualIndirect};
-use super::{PathOutputs, PathParams, PixelResult};
 use crate::objects::VirtualHit;
+use crate::stages::sample::layers::PixelLayers;
 use crate::stages::sample::query::{ImpostorQuery, RadianceQuery, Ray, ScreenQuery};
 use crate::stages::sample::ssrt::TraceBatch;
 use glam::{Vec3, Vec3A};
@@ -113,7 +114,7 @@ impl Kernel<'_> {
         y: u32,
         xs: &[u32],
         span: &mut Span<'_>,
-        mut emit: impl FnMut(u32, &PixelResult),
+        mut emit: impl FnMut(u32, &PixelLayers),
     ) {
         let inputs = self.inputs;
         span.batch.clear();
@@ -258,89 +259,4 @@ impl Kernel<'_> {
             });
         }
     }
-}
-
-/// One row of every output buffer.
-pub(super) struct RowOut<'a> {
-    e_r_dir: &'a mut [Vec3],
-    e_r_ind: &'a mut [Vec3],
-    e_rv_dir: &'a mut [Vec3],
-    e_rv_ind: &'a mut [Vec3],
-    mask: &'a mut [f32],
-    k_v: &'a mut [Vec3],
-    exponent: &'a mut [f32],
-    world_position: &'a mut [Vec3],
-    world_normal: &'a mut [Vec3],
-    direct_min_distance: &'a mut [f32],
-    indirect_min_distance: &'a mut [f32],
-    touched: &'a mut [u8],
-}
-
-impl RowOut<'_> {
-    #[inline]
-    pub(super) fn set(&mut self, x: usize, r: &PixelResult) {
-        self.e_r_dir[x] = r.e_r_dir;
-        self.e_r_ind[x] = r.e_r_ind;
-        self.e_rv_dir[x] = r.e_rv_dir;
-        self.e_rv_ind[x] = r.e_rv_ind;
-        self.mask[x] = r.mask;
-        self.k_v[x] = r.k_v;
-        self.exponent[x] = r.exponent;
-        self.world_position[x] = r.world_position;
-        self.world_normal[x] = r.world_normal;
-        self.direct_min_distance[x] = r.direct_min_distance;
-        self.indirect_min_distance[x] = r.indirect_min_distance;
-        self.touched[x] = r.touched as u8;
-    }
-}
-
-/// The rows of every output buffer, top to bottom.
-pub(super) fn rows(out: &mut PathOutputs, width: usize) -> Vec<RowOut<'_>> {
-    let mut e_r_dir = out.e_r_dir.data.chunks_mut(width);
-    let mut e_r_ind = out.e_r_ind.data.chunks_mut(width);
-    let mut e_rv_dir = out.e_rv_dir.data.chunks_mut(width);
-    let mut e_rv_ind = out.e_rv_ind.data.chunks_mut(width);
-    let mut mask = out.mask.data.chunks_mut(width);
-    let mut k_v = out.k_v.data.chunks_mut(width);
-    let mut exponent = out.exponent.data.chunks_mut(width);
-    let mut world_position = out.world_position.data.chunks_mut(width);
-    let mut world_normal = out.world_normal.data.chunks_mut(width);
-    let mut direct_min = out.direct_min_distance.data.chunks_mut(width);
-    let mut indirect_min = out.indirect_min_distance.data.chunks_mut(width);
-    let mut touched = out.touched.data.chunks_mut(width);
-    let mut rows = Vec::new();
-    while let (Some(a), Some(b), Some(c), Some(d), Some(e), Some(f)) = (
-        e_r_dir.next(),
-        e_r_ind.next(),
-        e_rv_dir.next(),
-        e_rv_ind.next(),
-        mask.next(),
-        k_v.next(),
-    ) {
-        let (Some(exponent), Some(g), Some(h), Some(i), Some(j), Some(k)) = (
-            exponent.next(),
-            world_position.next(),
-            world_normal.next(),
-            direct_min.next(),
-            indirect_min.next(),
-            touched.next(),
-        ) else {
-            break;
-        };
-        rows.push(RowOut {
-            e_r_dir: a,
-            e_r_ind: b,
-            e_rv_dir: c,
-            e_rv_ind: d,
-            mask: e,
-            k_v: f,
-            exponent,
-            world_position: g,
-            world_normal: h,
-            direct_min_distance: i,
-            indirect_min_distance: j,
-            touched: k,
-        });
-    }
-    rows
 }

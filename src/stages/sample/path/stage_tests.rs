@@ -5,9 +5,12 @@ use super::tests::{
     uniform_table,
 };
 use super::*;
+use crate::graph::Product;
 use crate::graph::{BuildContext, Params};
 use crate::objects::Material;
+use crate::raster::Image;
 use crate::recording::{Header, Pose};
+use glam::Vec3;
 use glam::{DQuat, DVec3};
 use std::collections::BTreeMap;
 
@@ -37,7 +40,12 @@ fn empty_tables_images_and_bad_sizes_are_handled() {
         objects: &objects,
         frame: 0,
     };
-    sample_path(&inputs, &PathParams::default(), &mut PathOutputs::new(0, 0)).unwrap();
+    sample_path(
+        &inputs,
+        &PathParams::default(),
+        &mut IrradianceLayers::new(0, 0),
+    )
+    .unwrap();
     let small = Image::filled(3, 2, Vec3::ZERO);
     let bad = PathInputs {
         depth: &scene.depth,
@@ -46,9 +54,13 @@ fn empty_tables_images_and_bad_sizes_are_handled() {
         camera: camera(),
         ..inputs
     };
-    let err = sample_path(&bad, &PathParams::default(), &mut PathOutputs::new(W, H))
-        .unwrap_err()
-        .to_string();
+    let err = sample_path(
+        &bad,
+        &PathParams::default(),
+        &mut IrradianceLayers::new(W, H),
+    )
+    .unwrap_err()
+    .to_string();
     assert!(err.contains("normals is 3x2, depth is 96x72"), "{err}");
     let params = PathParams {
         primary: 0,
@@ -108,7 +120,7 @@ fn the_stage_reads_its_products_and_writes_every_output() {
         objects: &objects,
         frame: 7,
     };
-    let mut direct = PathOutputs::new(W, H);
+    let mut direct = IrradianceLayers::new(W, H);
     let p = PathParams {
         seed: 3,
         ..Default::default()
@@ -121,7 +133,7 @@ fn the_stage_reads_its_products_and_writes_every_output() {
             .zip(&direct.e_rv_dir.data)
             .all(|(a, b)| same_bits(*a, *b))
     );
-    for (role, _) in OUTPUTS {
+    for (role, _) in LAYER_OUTPUTS {
         assert!(frame.get(role).is_some(), "{role}");
     }
     assert_eq!(frame.labels("touched").unwrap().data, direct.touched.data);
@@ -138,8 +150,8 @@ fn a_pixel_stride_shades_the_lattice_with_the_bits_of_a_full_run() {
         ..Default::default()
     };
     let lattice = run(&scene, &objects, &table, &params);
-    let fresh = PathOutputs::new(W, H);
-    let layers = |o: &PathOutputs| {
+    let fresh = IrradianceLayers::new(W, H);
+    let layers = |o: &IrradianceLayers| {
         [
             &o.e_r_dir,
             &o.e_r_ind,

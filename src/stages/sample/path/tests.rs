@@ -4,6 +4,8 @@
 use super::*;
 use crate::light::LightSample;
 use crate::objects::{Material, Triangle};
+use crate::raster::Image;
+use glam::Vec3;
 use std::f32::consts::PI;
 
 pub(super) const W: u32 = 96;
@@ -120,7 +122,7 @@ pub(super) fn run(
     objects: &VirtualScene,
     table: &LightTable,
     params: &PathParams,
-) -> PathOutputs {
+) -> IrradianceLayers {
     run_with_kernel(scene, objects, table, params, simd::Kernel::detect())
 }
 
@@ -130,7 +132,7 @@ pub(super) fn run_with_kernel(
     table: &LightTable,
     params: &PathParams,
     lanes: simd::Kernel,
-) -> PathOutputs {
+) -> IrradianceLayers {
     run_with_environment(scene, objects, table, None, params, lanes)
 }
 
@@ -142,7 +144,7 @@ pub(super) fn run_with_environment(
     environment: Option<&EnvMap>,
     params: &PathParams,
     lanes: simd::Kernel,
-) -> PathOutputs {
+) -> IrradianceLayers {
     let inputs = PathInputs {
         depth: &scene.depth,
         normals: &scene.normals,
@@ -154,7 +156,7 @@ pub(super) fn run_with_environment(
         objects,
         frame: 7,
     };
-    let mut out = PathOutputs::new(W, H);
+    let mut out = IrradianceLayers::new(W, H);
     let pyramid = DepthPyramid::new(&scene.depth);
     sample_path_with_kernel(&inputs, params, &pyramid, lanes, &mut out).unwrap();
     out
@@ -169,7 +171,7 @@ pub(super) fn pixel_of(p: Vec3) -> usize {
 }
 
 /// Every output as bits, for exact comparisons (NaN included).
-pub(super) fn bits(out: &PathOutputs) -> Vec<u32> {
+pub(super) fn bits(out: &IrradianceLayers) -> Vec<u32> {
     let mut b = Vec::new();
     for image in [
         &out.e_r_dir,
@@ -204,7 +206,7 @@ pub(super) fn same_bits(a: Vec3, b: Vec3) -> bool {
 
 /// E_RV equals E_R bit for bit (both parts) at every untouched pixel; returns how many
 /// pixels were touched.
-fn assert_untouched_pixels_equal(out: &PathOutputs) -> usize {
+fn assert_untouched_pixels_equal(out: &IrradianceLayers) -> usize {
     let mut touched = 0;
     for i in 0..out.touched.data.len() {
         if out.touched.data[i] != 0 {

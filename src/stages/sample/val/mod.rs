@@ -51,13 +51,12 @@ mod shadow;
 mod tests;
 mod virtual_maps;
 
-use crate::graph::{
-    Frame, ParamDefault, ParamSpec, Product, ProductKind, Stage, StageError, StageInfo,
-};
+use super::layers::{IrradianceLayers, LAYER_OUTPUTS, rows};
+use crate::graph::{Frame, ParamDefault, ParamSpec, ProductKind, Stage, StageError, StageInfo};
 use crate::light::AreaLights;
 use crate::objects::VirtualScene;
 use crate::pinhole::Pinhole;
-use crate::raster::{DepthImage, Image, ScalarImage, Vec3Image, depth_is_valid};
+use crate::raster::{DepthImage, Vec3Image, depth_is_valid};
 use crate::recording::Intrinsics;
 use crate::simd::{Kernel, Portable};
 use glam::{Affine3A, Vec2, Vec3, Vec3A};
@@ -101,20 +100,9 @@ const PARAMS: &[ParamSpec] = &[
     .range(0.0, 1e6),
 ];
 
-/// The output roles, in [`ValOutputs`] order.
-const OUTPUTS: [(&str, &[ProductKind]); 11] = [
-    ("e_r_dir", &[ProductKind::Radiance]),
-    ("e_r_ind", &[ProductKind::Radiance]),
-    ("e_rv_dir", &[ProductKind::Radiance]),
-    ("e_rv_ind", &[ProductKind::Radiance]),
-    ("mask", &[ProductKind::Scalar]),
-    ("k_v", &[ProductKind::Radiance]),
-    ("exponent", &[ProductKind::Scalar]),
-    ("world_position", &[ProductKind::Points]),
-    ("world_normal", &[ProductKind::Normals]),
-    ("direct_min_distance", &[ProductKind::Scalar]),
-    ("indirect_min_distance", &[ProductKind::Scalar]),
-];
+/// The output roles: every layer but `touched` (no path is traced, so no pixel is
+/// known to be untouched).
+const OUTPUTS: &[(&str, &[ProductKind])] = LAYER_OUTPUTS.split_at(11).0;
 
 pub const INFO: StageInfo = StageInfo {
     kind: "sample.val",
@@ -128,7 +116,7 @@ pub const INFO: StageInfo = StageInfo {
                 ("pose", &[ProductKind::Pose]),
                 ("lights", &[ProductKind::AreaLights]),
             ],
-            &OUTPUTS,
+            OUTPUTS,
         );
         ports.inputs[0].default_product = "refined_depth".into();
         ports
@@ -137,7 +125,7 @@ pub const INFO: StageInfo = StageInfo {
         let p = ctx.params;
         Ok(Box::new(SampleVal {
             inputs: ["depth", "normals", "pose", "lights"].map(|r| ctx.input(r)),
-            outputs: OUTPUTS.map(|(r, _)| ctx.output(r)),
+            outputs: OUTPUTS.iter().map(|(r, _)| ctx.output(r)).collect(),
             intrinsics: ctx.header.depth_intrinsics,
             objects: ctx.objects.clone(),
             params: ValShadingParams {
@@ -188,59 +176,11 @@ pub struct ValInputs<'a> {
     pub objects: &'a VirtualScene,
 }
 
-/// The products of [`ValRenderer::render`], under the names of the stage's roles.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ValOutputs {
-    pub e_r_dir: Vec3Image,
-    pub e_r_ind: Vec3Image,
-    pub e_rv_dir: Vec3Image,
-    pub e_rv_ind: Vec3Image,
-    /// 1 where real geometry is visible, 0 where a virtual object is.
-    pub mask: ScalarImage,
-    pub k_v: Vec3Image,
-    /// The Phong exponent the shading used: 0 (glossy objects are shaded as diffuse).
-    pub exponent: ScalarImage,
-    pub world_position: Vec3Image,
-    pub world_normal: Vec3Image,
-    pub direct_min_distance: ScalarImage,
-    pub indirect_min_distance: ScalarImage,
-}
-
-impl ValOutputs {
-    pub fn new(width: u32, height: u32) -> ValOutputs {
-        let v = |x| Image::filled(width, height, x);
-        let s = |x| Image::filled(width, height, x);
-        // About 30 MB at 640x480: filled on two threads.
-        let ((e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask, exponent), rest) = rayon::join(
-            || {
-                let zero = Vec3::ZERO;
-                (v(zero), v(zero), v(zero), v(zero), s(1.0), s(0.0))
-            },
-            || {
-                let zero = Vec3::ZERO;
-                let (infinity, nan) = (f32::INFINITY, Vec3::NAN);
-                (v(zero), v(nan), v(zero), s(infinity), s(infinity))
-            },
-        );
-        let (k_v, world_position, world_normal, direct_min_distance, indirect_min_distance) = rest;
-        ValOutputs {
-            e_r_dir,
-            e_r_ind,
-            e_rv_dir,
-            e_rv_ind,
-            mask,
-            k_v,
-            exponent,
-            world_position,
-            world_normal,
-            direct_min_distance,
-            indirect_min_distance,
-        }
-    }
-
-    fn size(&self) -> (u32, u32) {
-        (self.mask.width, self.mask.height)
-    }
+/// The layers [`ValRenderer::render`] writes: irradiance starts at 0 (a pixel with
+/// neither a real point nor an object has none), `exponent` stays 0 (glossy objects
+/// are shaded as diffuse) and `touched` is not written.
+pub fn val_layers(width: u32, height: u32) -> IrradianceLayers {
+    IrradianceLayers::filled(width, height, Vec3::ZERO)
 }
 
 /// Shades frames with reusable buffers (real points, camera raster, shadow maps).
@@ -289,16 +229,13 @@ impl ValRenderer {
         &mut self,
         inputs: &ValInputs,
         params: &ValShadingParams,
-        out: &mut ValOutputs,
+        out: &mut IrradianceLayers,
     ) -> Result<(), StageError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
-        if !inputs.depth.same_size(inputs.normals) || out.size() != (w, h) {
+        if !inputs.depth.same_size(inputs.normals) || out.size() != Some((w, h)) {
             return Err(StageError::Failed(format!(
                 "sample.val: depth is {w}x{h}, normals {}x{}, outputs {}x{}",
-                inputs.normals.width,
-                inputs.normals.height,
-                out.size().0,
-                out.size().1
+                inputs.normals.width, inputs.normals.height, out.mask.width, out.mask.height
             )));
         }
         if (inputs.camera.width, inputs.camera.height) != (w, h) {
@@ -347,33 +284,21 @@ impl ValRenderer {
             sh,
             sampling: sampling_of(inputs),
         };
-        (
-            out.e_r_dir.data.par_chunks_mut(wu.max(1)),
-            out.e_r_ind.data.par_chunks_mut(wu.max(1)),
-            out.e_rv_dir.data.par_chunks_mut(wu.max(1)),
-            out.e_rv_ind.data.par_chunks_mut(wu.max(1)),
-            out.mask.data.par_chunks_mut(wu.max(1)),
-            out.k_v.data.par_chunks_mut(wu.max(1)),
-            out.world_position.data.par_chunks_mut(wu.max(1)),
-            out.world_normal.data.par_chunks_mut(wu.max(1)),
-            out.direct_min_distance.data.par_chunks_mut(wu.max(1)),
-            out.indirect_min_distance.data.par_chunks_mut(wu.max(1)),
-        )
+        rows(out, wu)
             .into_par_iter()
             .enumerate()
             .for_each(|(y, row)| {
-                let (e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask, k_v, pos, nrm, dmin, imin) = row;
                 let mut row = RowOut {
-                    e_r_dir,
-                    e_r_ind,
-                    e_rv_dir,
-                    e_rv_ind,
-                    mask,
-                    k_v,
-                    position: pos,
-                    normal: nrm,
-                    direct_min_distance: dmin,
-                    indirect_min_distance: imin,
+                    e_r_dir: row.e_r_dir,
+                    e_r_ind: row.e_r_ind,
+                    e_rv_dir: row.e_rv_dir,
+                    e_rv_ind: row.e_rv_ind,
+                    mask: row.mask,
+                    k_v: row.k_v,
+                    position: row.world_position,
+                    normal: row.world_normal,
+                    direct_min_distance: row.direct_min_distance,
+                    indirect_min_distance: row.indirect_min_distance,
                 };
                 #[cfg(test)]
                 if scalar_reference {
@@ -490,15 +415,18 @@ impl ValRenderer {
 }
 
 /// [`ValRenderer::render`] with fresh buffers (for `relume eval` and one-off use).
-pub fn sample_val(inputs: &ValInputs, params: &ValShadingParams) -> Result<ValOutputs, StageError> {
-    let mut out = ValOutputs::new(inputs.depth.width, inputs.depth.height);
+pub fn sample_val(
+    inputs: &ValInputs,
+    params: &ValShadingParams,
+) -> Result<IrradianceLayers, StageError> {
+    let mut out = val_layers(inputs.depth.width, inputs.depth.height);
     ValRenderer::default().render(inputs, params, &mut out)?;
     Ok(out)
 }
 
 struct SampleVal {
     inputs: [String; 4],
-    outputs: [String; 11],
+    outputs: Vec<String>,
     intrinsics: Intrinsics,
     objects: Arc<VirtualScene>,
     params: ValShadingParams,
@@ -520,24 +448,9 @@ impl Stage for SampleVal {
             lights,
             objects: &self.objects,
         };
-        let mut out = ValOutputs::new(depth.width, depth.height);
+        let mut out = val_layers(depth.width, depth.height);
         self.renderer.render(&inputs, &self.params, &mut out)?;
-        let products = [
-            Product::Radiance(out.e_r_dir),
-            Product::Radiance(out.e_r_ind),
-            Product::Radiance(out.e_rv_dir),
-            Product::Radiance(out.e_rv_ind),
-            Product::Scalar(out.mask),
-            Product::Radiance(out.k_v),
-            Product::Scalar(out.exponent),
-            Product::Points(out.world_position),
-            Product::Normals(out.world_normal),
-            Product::Scalar(out.direct_min_distance),
-            Product::Scalar(out.indirect_min_distance),
-        ];
-        for (name, product) in self.outputs.iter().zip(products) {
-            frame.insert(name, product);
-        }
+        out.insert_into(frame, &self.outputs);
         Ok(())
     }
 }

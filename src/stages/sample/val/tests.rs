@@ -1,7 +1,9 @@
 use super::*;
+use crate::graph::Product;
 use crate::light::sh::project_sh9;
 use crate::light::{AreaLight, EnvMap};
 use crate::objects::{Material, Triangle};
+use crate::raster::{Image, ScalarImage};
 use glam::Mat3;
 
 const W: u32 = 160;
@@ -108,7 +110,7 @@ fn render(
     normals: &Vec3Image,
     lights: &AreaLights,
     scene: &VirtualScene,
-) -> ValOutputs {
+) -> IrradianceLayers {
     let (camera, camera_to_world) = camera();
     let inputs = ValInputs {
         depth,
@@ -528,7 +530,7 @@ fn kernels_match_the_scalar_path(
         objects: scene,
     };
     let run = |mut renderer: ValRenderer| {
-        let mut out = ValOutputs::new(depth.width, depth.height);
+        let mut out = val_layers(depth.width, depth.height);
         renderer.render(&inputs, params, &mut out).unwrap();
         out
     };

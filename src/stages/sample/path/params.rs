@@ -99,7 +99,7 @@ pub(super) fn query_kind(p: &Params) -> QueryKind {
     QueryKind::from_name(p.str("query")).unwrap_or_default()
 }
 
-/// Settings of [`sample_path`].
+/// Settings of [`sample_path`](super::sample_path).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathParams {
     /// How rays meet the real scene.
@@ -131,7 +131,7 @@ pub struct PathParams {
     /// brightest do not set `direct_min_distance`.
     pub occluder_threshold: f32,
     /// Shade only the pixels whose x and y are multiples of this (1: every pixel); the
-    /// others keep [`IrradianceLayers::new`]'s values (NaN irradiance). A shaded pixel gets
+    /// others keep [`IrradianceLayers::new`](crate::stages::sample::layers::IrradianceLayers::new)'s values (NaN irradiance). A shaded pixel gets
     /// the bits a full run gives it (random numbers are hashed per pixel): `relume eval`
     /// computes its many-sample references on such a lattice. Not a stage parameter.
     pub pixel_stride: u32,

@@ -46,8 +46,9 @@ pub(super) struct Acc {
     pub(super) rv_ind: Vec3,
     pub(super) rv_dir_n: u32,
     pub(super) rv_ind_n: u32,
-    /// Indirect samples of E_RV taken at the real point.
+    /// Indirect / direct samples of E_RV taken at the real point.
     pub(super) rv_ind_real_n: u32,
+    pub(super) rv_dir_real_n: u32,
     pub(super) direct_min: f32,
     pub(super) indirect_min: f32,
     pub(super) touched: bool,
@@ -72,6 +73,8 @@ pub(super) struct Kernel<'a> {
     /// the objects.
     pub(super) object_pixels: [i64; 4],
     pub(super) strata: Vec<u32>,
+    /// The table's strata for the object-aware direct candidates.
+    pub(super) candidate_strata: Vec<u32>,
     /// Blocked direct samples dimmer than this (largest channel of the sample's
     /// radiance) do not count towards `direct_min_distance`.
     pub(super) occluder_min_radiance: f32,
@@ -141,6 +144,7 @@ impl<'a> Kernel<'a> {
             camera_cone,
             object_pixels,
             strata: strata_bounds(params.primary * params.direct, inputs.table.samples.len()),
+            candidate_strata: strata_bounds(params.candidates, inputs.table.samples.len()),
             occluder_min_radiance: params.occluder_threshold
                 * inputs
                     .table
@@ -199,6 +203,7 @@ impl<'a> Kernel<'a> {
             rv_dir_n: 0,
             rv_ind_n: 0,
             rv_ind_real_n: 0,
+            rv_dir_real_n: 0,
             direct_min: f32::INFINITY,
             indirect_min: f32::INFINITY,
             touched: false,
@@ -249,6 +254,15 @@ impl<'a> Kernel<'a> {
                 }
             }
         }
+        let mut direct_differential = Vec3::ZERO;
+        if params.object_aware_direct
+            && acc.rv_dir_real_n > 0
+            && let (Some(rp), Some(objects)) = (real, &self.objects)
+            && let Some(d) = self.object_aware_direct(rp, objects, &rng, &mut acc)
+        {
+            direct_differential = d;
+            acc.touched = true;
+        }
         let mut differential = Vec3::ZERO;
         if params.object_aware
             && acc.rv_ind_real_n > 0
@@ -269,11 +283,15 @@ impl<'a> Kernel<'a> {
             (nan, nan)
         };
         let any_surface = surfaces > 0;
-        let e_rv_dir = if any_surface {
+        let mut e_rv_dir = if any_surface {
             mean(acc.rv_dir, acc.rv_dir_n, 1.0)
         } else {
             nan
         };
+        if acc.touched && direct_differential != Vec3::ZERO {
+            let share = acc.rv_dir_real_n as f32 / acc.rv_dir_n as f32;
+            e_rv_dir = (e_rv_dir + direct_differential * share).max(Vec3::ZERO);
+        }
         let mut e_rv_ind = if any_surface {
             mean(acc.rv_ind, acc.rv_ind_n, PI)
         } else {
@@ -443,6 +461,22 @@ impl<'a> Kernel<'a> {
         }
     }
 
+    /// What the stage's query answers along table sample `sample`'s direction from
+    /// the real point.
+    #[inline]
+    pub(super) fn direct_arrival(&self, rp: &RealPoint, sample: usize) -> Option<Hit> {
+        match &self.impostor {
+            Some(query) => self.impostor_direct(query, rp.world, sample),
+            None => {
+                let origin = rp.origin.as_ref()?;
+                let screen = self.screen();
+                self.tracer
+                    .trace_from(origin, self.table_camera[sample], self.params.max_distance)
+                    .map(|real| screen.hit(real))
+            }
+        }
+    }
+
     /// What the stage's query answers along world ray `origin + t dir`.
     #[inline]
     pub(super) fn query_world(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
@@ -473,8 +507,10 @@ impl<'a> Kernel<'a> {
         acc: &mut Acc,
     ) {
         let params = self.params;
-        // The objects E_RV sees from here with the correlated samples.
+        // The objects E_RV sees from here with the correlated samples (direct ones:
+        // unless the object-aware differential stands for them).
         let rv_objects = if with_rv { self.objects.as_ref() } else { None };
+        let rv_blockers = rv_objects.filter(|_| !params.object_aware_direct);
         for k in 0..params.direct {
             let s = (j * params.direct + k) as usize;
             let mut c = Vec3::ZERO;
@@ -495,7 +531,7 @@ impl<'a> Kernel<'a> {
                             arrival.map_or((ls.radiance, f32::INFINITY), |h| (h.radiance, h.t));
                         c = radiance * (cos / ls.pdf);
                         c_rv = c;
-                        let blocker = match rv_objects {
+                        let blocker = match rv_blockers {
                             Some(o) if rp.cone_world.admits(ls.direction) => {
                                 o.hit(rp.world, ls.direction, t_light)
                             }
@@ -518,6 +554,7 @@ impl<'a> Kernel<'a> {
             acc.rv_dir_n += params.direct;
             acc.rv_ind_n += params.indirect;
             acc.rv_ind_real_n += params.indirect;
+            acc.rv_dir_real_n += params.direct;
         }
         for k in 0..params.indirect {
             let s = (j * params.indirect + k) as usize;

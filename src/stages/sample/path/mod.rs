@@ -107,6 +107,7 @@
 
 mod bounds;
 mod kernel;
+mod object_aware;
 mod params;
 mod rays;
 pub mod sampling;
@@ -360,6 +361,8 @@ impl Stage for PathStage {
 
 #[cfg(test)]
 mod determinism_tests;
+#[cfg(test)]
+mod object_aware_tests;
 #[cfg(test)]
 mod query_tests;
 #[cfg(test)]

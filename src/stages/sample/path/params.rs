@@ -51,15 +51,20 @@ pub(super) const PARAMS: &[ParamSpec] = &[
         "estimate E_RV^ind at real points as E_R^ind plus an object-aware differential (paper 000 Sec. 7)",
     ),
     ParamSpec::new(
+        "object_aware_direct",
+        ParamDefault::Bool(false),
+        "estimate E_RV^dir at real points as E_R^dir minus the light of `candidates` table samples of which at most `cache_size` meeting the objects' box are traced (paper 000 eq. 9 for direct light)",
+    ),
+    ParamSpec::new(
         "cache_size",
         ParamDefault::Int(16),
-        "object-aware: most candidate directions traced per pixel, |H_a| (paper 000: 16 or 32)",
+        "object-aware (indirect and direct): most candidates traced per pixel, |H_a| (paper 000: 8, 16 or 32)",
     )
     .range(1.0, MAX_CANDIDATES as f64),
     ParamSpec::new(
         "candidates",
         ParamDefault::Int(64),
-        "object-aware: cosine directions tested against the objects' bounding box per pixel, N",
+        "object-aware: candidates (cosine directions; table samples for direct light) tested against the objects' bounding box per pixel, N",
     )
     .range(1.0, MAX_CANDIDATES as f64),
     ParamSpec::new(
@@ -117,6 +122,9 @@ pub struct PathParams {
     pub seed: u64,
     /// Object-aware differential for E_RV^ind at real points (paper 000 Sec. 7).
     pub object_aware: bool,
+    /// Object-aware differential for E_RV^dir at real points (paper 000 eq. 9 for
+    /// direct light).
+    pub object_aware_direct: bool,
     /// Object-aware: most directions traced per pixel (|H_a|).
     pub cache_size: u32,
     /// Object-aware: directions tested against the bounding box per pixel (N).
@@ -148,6 +156,7 @@ impl Default for PathParams {
             indirect: 4,
             seed: 0,
             object_aware: false,
+            object_aware_direct: false,
             cache_size: 16,
             candidates: 64,
             trace: TraceParams::default(),
@@ -172,6 +181,7 @@ impl PathParams {
             indirect: p.int("indirect") as u32,
             seed,
             object_aware: p.bool("object_aware"),
+            object_aware_direct: p.bool("object_aware_direct"),
             cache_size: p.int("cache_size") as u32,
             candidates: p.int("candidates") as u32,
             trace: TraceParams {

@@ -90,9 +90,10 @@ fn every_query_keeps_e_rv_equal_to_e_r_where_no_path_met_an_object() {
     let env = dome(Vec3::new(0.0, 1.0, 1.0), 6.0);
     let objects = gray_sphere(SPHERE_CENTER);
     for &(query, iterations) in QUERIES {
-        for object_aware in [false, true] {
+        for (object_aware, object_aware_direct) in [(false, false), (true, false), (true, true)] {
             let p = PathParams {
                 object_aware,
+                object_aware_direct,
                 ..params(query, iterations)
             };
             let run = || {

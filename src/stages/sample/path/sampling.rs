@@ -38,6 +38,10 @@ pub enum StreamId {
     Candidate = 5,
     /// Object-aware reservoir choices of H_a.
     Reservoir = 6,
+    /// Object-aware candidate table samples for direct light.
+    DirectCandidate = 7,
+    /// Their reservoir choices.
+    DirectReservoir = 8,
 }
 
 impl PixelRng {

@@ -1,17 +1,14 @@
 //! The paths of `sample.path` that meet the virtual objects: E_RV at virtual primaries
-//! (paper 001 Sec. 5), the objects' outgoing radiance along indirect rays, and the
-//! object-aware differential (paper 000 Sec. 7).
+//! (paper 001 Sec. 5) and the objects' outgoing radiance along indirect rays. The
+//! object-aware differential (paper 000 Sec. 7) is in `object_aware`.
 
-use super::bounds::Objects;
-use super::kernel::{Acc, Kernel, MAX_CANDIDATES, RealPoint, SURFACE_OFFSET};
+use super::kernel::{Acc, Kernel, SURFACE_OFFSET};
 use super::rays::RayBatch;
-use super::sampling::{
-    Basis, PixelRng, Stream, StreamId, below, cosine_hemisphere, phong_lobe, phong_weight,
-};
+use super::sampling::{Basis, Stream, below, cosine_hemisphere, phong_lobe, phong_weight};
 use crate::objects::VirtualHit;
 use crate::stages::sample::query::{Hit, RadianceQuery, Ray, Source};
-use glam::{Vec3, Vec3A};
-use std::f32::consts::{FRAC_1_PI, PI};
+use glam::Vec3;
+use std::f32::consts::FRAC_1_PI;
 
 /// A direct sample at a virtual primary, as drawn before the span's rays are traced.
 #[derive(Clone, Copy, Debug)]
@@ -284,83 +281,5 @@ impl Kernel<'_> {
             None => ls.radiance,
         };
         hit.material.albedo * FRAC_1_PI * radiance * (cos / ls.pdf)
-    }
-
-    /// Paper 000 Sec. 7: the differential indirect irradiance E_RV - E_R at the real
-    /// point from `candidates` cosine directions, of which those meeting the bounding
-    /// box (H) are traced, at most `cache_size` of them (H_a, a uniform random subset
-    /// by reservoir sampling), the sum scaled by (1 + |H_b| / |H_a|) / candidates.
-    /// `None` when no traced direction meets an object.
-    pub(super) fn object_aware(
-        &self,
-        rp: &RealPoint,
-        objects: &Objects,
-        rng: &PixelRng,
-        bounce_stream: &Stream,
-        acc: &mut Acc,
-    ) -> Option<Vec3> {
-        let params = self.params;
-        let n = (params.candidates as usize).min(MAX_CANDIDATES);
-        let cache_size = (params.cache_size as usize).clamp(1, MAX_CANDIDATES);
-        // No cosine direction can meet the sphere when its cone lies below the horizon.
-        let cone = rp.cone_camera;
-        let sin_half = (1.0 - cone.cos_half * cone.cos_half).max(0.0).sqrt();
-        if cone.cos_half > -1.0 && cone.axis.dot(rp.basis_camera.n) < -sin_half - 1e-5 {
-            return None;
-        }
-        let candidates = rng.stream(StreamId::Candidate);
-        let reservoir = rng.stream(StreamId::Reservoir);
-        let direction = |i: usize| {
-            let (u1, u2) = candidates.pair(i as u64);
-            rp.basis_camera.to_world(cosine_hemisphere(u1, u2))
-        };
-        let mut cache = [0u16; MAX_CANDIDATES];
-        let mut in_box = 0usize;
-        for i in 0..n {
-            let dir_camera = direction(i);
-            if !cone.admits(dir_camera) {
-                continue;
-            }
-            let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
-            if objects
-                .aabb
-                .ray_span(rp.world, dir.recip(), 0.0, f32::INFINITY)
-                .is_none()
-            {
-                continue;
-            }
-            if in_box < cache_size {
-                cache[in_box] = i as u16;
-            } else {
-                let r = below(reservoir.bits(i as u64), in_box as u32 + 1) as usize;
-                if r < cache_size {
-                    cache[r] = i as u16;
-                }
-            }
-            in_box += 1;
-        }
-        let traced = in_box.min(cache_size);
-        let mut sum = Vec3::ZERO;
-        let mut met = false;
-        for &i in &cache[..traced] {
-            let dir_camera = direction(i as usize);
-            let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
-            let Some(hit) = objects.scene.intersect(rp.world, dir, 0.0, f32::INFINITY) else {
-                continue;
-            };
-            let real = self.query_from_real(rp, dir_camera);
-            if real.is_some_and(|r| r.t <= hit.t) {
-                continue; // the real scene is in front: no difference
-            }
-            met = true;
-            acc.indirect_min = acc.indirect_min.min(hit.t);
-            // Environment light is counted by direct light.
-            let l_real = match real {
-                Some(r) if r.source == Source::Surface => r.radiance,
-                _ => Vec3::ZERO,
-            };
-            sum += self.object_radiance(&hit, bounce_stream, acc) - l_real;
-        }
-        met.then(|| sum * (PI * in_box as f32 / (traced as f32 * n as f32)))
     }
 }

@@ -101,15 +101,15 @@ fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
     let presets = [
         (
             "low",
-            "query = \"em\", visibility = false, object_aware = true, object_aware_direct = true, candidates = 16, cache_size = 8",
+            "query = \"em\", visibility = false, object_aware = true, candidates = 16, cache_size = 8",
         ),
         (
             "medium",
-            "query = \"dit\", iterations = 4, object_aware = true, object_aware_direct = true, candidates = 16, cache_size = 8",
+            "query = \"dit\", iterations = 4, object_aware = true, candidates = 16, cache_size = 8",
         ),
         (
             "high",
-            "query = \"dit\", iterations = 8, primary = 4, direct = 16, indirect = 16, object_aware = true, object_aware_direct = true, candidates = 64, cache_size = 32",
+            "query = \"dit\", iterations = 8, primary = 4, direct = 16, indirect = 16, object_aware = true, candidates = 64, cache_size = 32",
         ),
     ];
     for (level, params) in presets {

@@ -105,7 +105,7 @@ fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
         ),
         (
             "medium",
-            "query = \"dit\", iterations = 4, object_aware = true, candidates = 16, cache_size = 8",
+            "query = \"dit\", iterations = 6, object_aware = true, candidates = 16, cache_size = 8",
         ),
         (
             "high",

@@ -170,6 +170,7 @@ impl ReferenceLayers {
             let params = PathParams {
                 query: QueryKind::Ssrt,
                 visibility: true,
+                object_aware_direct: false,
                 direct: REFERENCE_SAMPLES,
                 indirect: REFERENCE_SAMPLES,
                 object_aware: false,

@@ -35,7 +35,8 @@
 //!   numbers, same paths) with the objects added, and both sums are accumulated in the
 //!   same order, so E_RV == E_R bit for bit wherever no path meets an object; `touched`
 //!   is 1 where some path did (a virtual primary, a blocked direct sample, an indirect
-//!   ray reflected by an object, or an object-aware candidate that met one). The
+//!   ray reflected by an object, or an object-aware candidate that met one; with
+//!   `object_aware_direct`, direct samples are not tested and only candidates count). The
 //!   virtual test runs only for rays inside the cone of the objects' bounding sphere
 //!   and then through their bounding box, so the RV work concentrates near them.
 //! - **At a virtual primary** E_RV is estimated at the object surface: direct from the
@@ -55,7 +56,9 @@
 //!   L_RV - L_R is scaled by pi (1 + |H_b| / |H_a|) / candidates. It is unbiased, and
 //!   E_RV == E_R still holds exactly where no candidate meets an object. Direct light
 //!   keeps the correlated table samples (they already follow the light, and a blocked
-//!   sample is exactly what a shadow needs).
+//!   sample is exactly what a shadow needs) unless `object_aware_direct = true`, which
+//!   estimates E_RV^dir the same way from `candidates` table samples (see
+//!   `object_aware.rs`); the correlated samples then carry no blocking.
 //! - `direct_min_distance` / `indirect_min_distance` (metres, over E_R and E_RV paths,
 //!   INFINITY where none; the filter's bandwidths need them): for indirect rays the
 //!   smallest hit distance; for blocked direct samples the smallest t / cos(theta) of
@@ -305,22 +308,9 @@ fn impostor_query(
             "sample.path: query \"{query}\" needs an environment map (the distance impostor of light.impostor)"
         )));
     };
-    let texels = map.width as usize * map.height as usize;
-    if texels == 0 || map.radiance.len() != texels || map.distance.len() != texels {
-        return Err(StageError::Failed(format!(
-            "sample.path: query \"{query}\": the environment map is {}x{} with {} radiance and {} distance texels",
-            map.width,
-            map.height,
-            map.radiance.len(),
-            map.distance.len()
-        )));
-    }
-    if !map.center.is_finite() {
-        return Err(StageError::Failed(format!(
-            "sample.path: query \"{query}\": the environment map's centre is not finite"
-        )));
-    }
-    Ok(Some(ImpostorQuery::new(map, iterations)))
+    ImpostorQuery::new(map, iterations)
+        .map(Some)
+        .map_err(|e| StageError::Failed(format!("sample.path: query \"{query}\": {e}")))
 }
 
 struct PathStage {

@@ -1,4 +1,5 @@
-//! Object-aware sampling (paper 000 Sec. 7, eq. 9): at a real point, E_RV = E_R plus a
+//! Object-aware sampling (paper 000 Sec. 7: eq. 9 and the scaled estimator after it):
+//! at a real point, E_RV = E_R plus a
 //! differential estimated only from the directions that may meet the objects.
 //!
 //! Of N candidate directions, those meeting the objects' bounding box form H; at most

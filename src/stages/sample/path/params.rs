@@ -18,7 +18,7 @@ pub(super) const PARAMS: &[ParamSpec] = &[
     .choices(QueryKind::NAMES),
     ParamSpec::new(
         "iterations",
-        ParamDefault::Int(4),
+        ParamDefault::Int(6),
         "dit: refinement steps of the impostor lookup (0 gives em's answer)",
     )
     .range(0.0, MAX_ITERATIONS as f64),
@@ -53,7 +53,7 @@ pub(super) const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
         "object_aware_direct",
         ParamDefault::Bool(false),
-        "estimate E_RV^dir at real points as E_R^dir minus the light of `candidates` table samples of which at most `cache_size` meeting the objects' box are traced (paper 000 eq. 9 for direct light)",
+        "estimate E_RV^dir at real points as E_R^dir minus the light of `candidates` table samples of which at most `cache_size` meeting the objects' box are traced (paper 000 Sec. 7's estimator after eq. 9, for direct light)",
     ),
     ParamSpec::new(
         "cache_size",
@@ -122,8 +122,8 @@ pub struct PathParams {
     pub seed: u64,
     /// Object-aware differential for E_RV^ind at real points (paper 000 Sec. 7).
     pub object_aware: bool,
-    /// Object-aware differential for E_RV^dir at real points (paper 000 eq. 9 for
-    /// direct light).
+    /// Object-aware differential for E_RV^dir at real points (paper 000 Sec. 7's
+    /// scaled estimator, after eq. 9, for direct light).
     pub object_aware_direct: bool,
     /// Object-aware: most directions traced per pixel (|H_a|).
     pub cache_size: u32,
@@ -149,7 +149,7 @@ impl Default for PathParams {
     fn default() -> Self {
         PathParams {
             query: QueryKind::Ssrt,
-            iterations: 4,
+            iterations: 6,
             visibility: true,
             primary: 4,
             direct: 4,

@@ -12,8 +12,9 @@ use crate::stages::sample::ssrt::{RayOrigin, TraceBatch};
 use glam::Vec3;
 
 /// The answer recorded for an impostor ray whose answer cannot matter: an indirect ray
-/// from a real point outside the objects' cone (no object can be in its way, and the
-/// environment brings indirect light nothing: direct light counts it).
+/// from a real point outside the objects' cone (no object can be in its way), or any
+/// indirect ray from a real point when the object-aware differential stands for them;
+/// the environment brings indirect light nothing (direct light counts it).
 pub(super) const NOT_ASKED: Hit = Hit {
     t: f32::INFINITY,
     radiance: Vec3::ZERO,

@@ -8,7 +8,7 @@
 //! |---|---|---|
 //! | `ssrt` | [`ScreenQuery`] | the fused depth map, marched in screen space within `max_distance`; beyond it the environment map stands, looked up by direction |
 //! | `em` | [`ImpostorQuery`] with 0 iterations | the distance impostor looked up by direction alone (Environment Mapping, Sec. 6.1) |
-//! | `dit` | [`ImpostorQuery`] | the distance impostor traced: the lookup direction refined from its stored distances (Distance Impostor Tracing, Sec. 6.1, after Szirmay-Kalos et al.) |
+//! | `dit` | [`ImpostorQuery`] | the distance impostor traced: the lookup refined from its stored distances until the ray crosses the stored surface (Distance Impostor Tracing, Sec. 6.1, after Szirmay-Kalos et al.) |
 //!
 //! This module is a leaf: it knows rays, maps and depth images, not stages.
 //!
@@ -24,7 +24,7 @@
 mod impostor;
 mod screen;
 
-pub use impostor::{ImpostorQuery, MAX_ITERATIONS, TracedImpostor};
+pub use impostor::{ImpostorQuery, MAX_FACE_SIZE, MAX_ITERATIONS, START_DISTANCE, TracedImpostor};
 pub use screen::ScreenQuery;
 
 use glam::Vec3;
@@ -108,7 +108,9 @@ pub trait RadianceQuery: Sync {
     fn query(&self, ray: &Ray) -> Option<Hit>;
 
     /// [`RadianceQuery::query`] for every ray, into `out` (cleared first), in order.
-    /// Implementations that gain from tracing many rays together override it.
+    /// An implementation that gains from tracing many rays together may override it
+    /// (`sample.path` marches its screen-space rays in lane batches of its own,
+    /// `path/rays.rs`, with the same answers as [`ScreenQuery`] ray by ray).
     fn query_batch(&self, rays: &[Ray], out: &mut Vec<Option<Hit>>) {
         out.clear();
         out.extend(rays.iter().map(|ray| self.query(ray)));

@@ -11,7 +11,7 @@ use crate::objects::VirtualHit;
 use crate::raster::depth_is_valid;
 use crate::simd;
 use crate::stages::sample::layers::PixelLayers;
-use crate::stages::sample::query::{Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery, Source};
+use crate::stages::sample::query::{Hit, ImpostorQuery, RadianceQuery, Ray, Source};
 use crate::stages::sample::ssrt::{RayOrigin, ScreenTracer};
 use glam::{Mat3A, Vec3, Vec3A};
 use std::f32::consts::PI;
@@ -410,85 +410,6 @@ impl<'a> Kernel<'a> {
         let table = &self.inputs.table.samples;
         let i = stratum_index(&self.strata, s as usize, table.len(), stream.bits(s as u64))?;
         Some((i, &table[i]))
-    }
-
-    /// The screen-space query over this frame's depth map.
-    #[inline]
-    fn screen(&self) -> ScreenQuery<'_> {
-        ScreenQuery {
-            tracer: &self.tracer,
-            radiance: self.inputs.radiance,
-            max_distance: self.params.max_distance,
-        }
-    }
-
-    /// What the stage's query answers along camera-space direction `dir_camera` from
-    /// the real point.
-    #[inline]
-    pub(super) fn query_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
-        match &self.impostor {
-            Some(query) => query.query(&Ray {
-                origin: rp.world,
-                dir: Vec3::from(self.to_world * Vec3A::from(dir_camera)),
-                t_max: f32::INFINITY,
-            }),
-            None => {
-                let origin = rp.origin.as_ref()?;
-                let screen = self.screen();
-                self.tracer
-                    .trace_from(origin, dir_camera, self.params.max_distance)
-                    .map(|real| screen.hit(real))
-            }
-        }
-    }
-
-    /// The impostor's answer for table sample `sample` from `origin`: looked up once
-    /// per frame for `em`, traced for `dit`.
-    #[inline]
-    pub(super) fn impostor_direct(
-        &self,
-        query: &ImpostorQuery,
-        origin: Vec3,
-        sample: usize,
-    ) -> Option<Hit> {
-        match self.table_em.get(sample) {
-            Some(&answer) => answer,
-            None => query.query(&Ray {
-                origin,
-                dir: self.inputs.table.samples[sample].direction,
-                t_max: f32::INFINITY,
-            }),
-        }
-    }
-
-    /// What the stage's query answers along table sample `sample`'s direction from
-    /// the real point.
-    #[inline]
-    pub(super) fn direct_arrival(&self, rp: &RealPoint, sample: usize) -> Option<Hit> {
-        match &self.impostor {
-            Some(query) => self.impostor_direct(query, rp.world, sample),
-            None => {
-                let origin = rp.origin.as_ref()?;
-                let screen = self.screen();
-                self.tracer
-                    .trace_from(origin, self.table_camera[sample], self.params.max_distance)
-                    .map(|real| screen.hit(real))
-            }
-        }
-    }
-
-    /// What the stage's query answers along world ray `origin + t dir`.
-    #[inline]
-    pub(super) fn query_world(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
-        let ray = Ray {
-            origin,
-            dir,
-            t_max: f32::INFINITY,
-        };
-        match &self.impostor {
-            Some(query) => query.query(&ray),
-            None => self.screen().query(&ray),
-        }
     }
 
     /// Direct and indirect samples of primary j at the real point, drawn in `samples`

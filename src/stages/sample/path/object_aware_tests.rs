@@ -1,31 +1,13 @@
-//! Object-aware sampling of direct light (paper 000 eq. 9): the same mean as the
+//! Object-aware sampling of direct light (paper 000 Sec. 7): the same mean as the
 //! correlated direct samples, with less noise in the shadow.
 
 use super::tests::{
-    SPHERE_CENTER, SPHERE_RADIUS, floor_scene, pixel_of, run, sphere, uniform_table,
+    SPHERE_CENTER, SPHERE_RADIUS, block_around, floor_scene, mean, run, sphere, uniform_table,
+    variance,
 };
 use super::*;
 use crate::objects::Material;
 use glam::Vec3;
-
-fn mean(xs: &[f64]) -> f64 {
-    xs.iter().sum::<f64>() / xs.len() as f64
-}
-
-fn variance(xs: &[f64]) -> f64 {
-    let m = mean(xs);
-    xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (xs.len() - 1) as f64
-}
-
-/// The 3 x 3 pixels around the pixel that shows world point `p`.
-fn block_around(p: Vec3) -> Vec<usize> {
-    let c = pixel_of(p) as i64;
-    let w = super::tests::W as i64;
-    [-w - 1, -w, -w + 1, -1, 0, 1, w - 1, w, w + 1]
-        .iter()
-        .map(|d| (c + d) as usize)
-        .collect()
-}
 
 #[test]
 fn object_aware_direct_light_is_unbiased_and_lowers_the_variance_in_the_shadow() {

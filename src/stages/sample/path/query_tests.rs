@@ -6,8 +6,8 @@
 //! 000 Sec. 6.4, ray 3), and `visibility` switches the objects' self-occlusion.
 
 use super::tests::{
-    H, SKY, SPHERE_CENTER, SPHERE_RADIUS, W, bits, floor_scene, pixel_of, run_with_environment,
-    same_bits, sphere, uniform_table,
+    H, SKY, SPHERE_CENTER, SPHERE_RADIUS, W, assert_untouched_pixels_equal, bits, floor_scene,
+    pixel_of, run_with_environment, same_bits, sphere, uniform_table,
 };
 use super::*;
 use crate::objects::Material;
@@ -107,21 +107,7 @@ fn every_query_keeps_e_rv_equal_to_e_r_where_no_path_met_an_object() {
                 )
             };
             let out = run();
-            let mut touched = 0;
-            for i in 0..out.touched.data.len() {
-                if out.touched.data[i] != 0 {
-                    touched += 1;
-                    continue;
-                }
-                assert!(
-                    same_bits(out.e_rv_dir.data[i], out.e_r_dir.data[i]),
-                    "{query:?} {i}"
-                );
-                assert!(
-                    same_bits(out.e_rv_ind.data[i], out.e_r_ind.data[i]),
-                    "{query:?} {i}"
-                );
-            }
+            let touched = assert_untouched_pixels_equal(&out);
             assert!(touched > 200, "{query:?}: {touched} touched pixels");
             // The sphere's shadow on the floor below it.
             let below = pixel_of(Vec3::new(SPHERE_CENTER.x, 0.0, SPHERE_CENTER.z));

@@ -3,13 +3,15 @@
 //! marched together ([`TraceBatch`], eight lanes at a time where the CPU has AVX2); with
 //! the impostor queries each is answered as it is pushed (a lookup or a few, no march),
 //! by the caller, who knows when an answer can be had for less (see
-//! [`Kernel::impostor_direct`](super::kernel::Kernel) and [`NOT_ASKED`]). Either way
-//! [`RayBatch::hits`] holds one answer per ray, in push order.
+//! `Kernel::impostor_direct` and [`NOT_ASKED`]). Either way [`RayBatch::hits`] holds
+//! one answer per ray, in push order. The questions the estimator asks one ray at a
+//! time (the object-aware candidates, the bounce off an object) are here too.
 
+use super::kernel::{Kernel, RealPoint};
 use crate::simd;
-use crate::stages::sample::query::{Hit, ImpostorQuery, ScreenQuery, Source};
+use crate::stages::sample::query::{Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery, Source};
 use crate::stages::sample::ssrt::{RayOrigin, TraceBatch};
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 /// The answer recorded for an impostor ray whose answer cannot matter: an indirect ray
 /// from a real point outside the objects' cone (no object can be in its way), or any
@@ -86,6 +88,88 @@ impl<'t> RayBatch<'t> {
     pub(super) fn hits(&self) -> &[Option<Hit>] {
         match self {
             RayBatch::Screen { hits, .. } | RayBatch::Impostor { hits, .. } => hits,
+        }
+    }
+}
+
+/// The one-off questions the estimator asks the stage's query (those not batched).
+impl Kernel<'_> {
+    /// The screen-space query over this frame's depth map.
+    #[inline]
+    fn screen(&self) -> ScreenQuery<'_> {
+        ScreenQuery {
+            tracer: &self.tracer,
+            radiance: self.inputs.radiance,
+            max_distance: self.params.max_distance,
+        }
+    }
+
+    /// What the stage's query answers along camera-space direction `dir_camera` from
+    /// the real point.
+    #[inline]
+    pub(super) fn query_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
+        match &self.impostor {
+            Some(query) => query.query(&Ray {
+                origin: rp.world,
+                dir: Vec3::from(self.to_world * Vec3A::from(dir_camera)),
+                t_max: f32::INFINITY,
+            }),
+            None => {
+                let origin = rp.origin.as_ref()?;
+                let screen = self.screen();
+                self.tracer
+                    .trace_from(origin, dir_camera, self.params.max_distance)
+                    .map(|real| screen.hit(real))
+            }
+        }
+    }
+
+    /// The impostor's answer for table sample `sample` from `origin`: looked up once
+    /// per frame for `em`, traced for `dit`.
+    #[inline]
+    pub(super) fn impostor_direct(
+        &self,
+        query: &ImpostorQuery,
+        origin: Vec3,
+        sample: usize,
+    ) -> Option<Hit> {
+        match self.table_em.get(sample) {
+            Some(&answer) => answer,
+            None => query.query(&Ray {
+                origin,
+                dir: self.inputs.table.samples[sample].direction,
+                t_max: f32::INFINITY,
+            }),
+        }
+    }
+
+    /// What the stage's query answers along table sample `sample`'s direction from
+    /// the real point.
+    #[inline]
+    pub(super) fn direct_arrival(&self, rp: &RealPoint, sample: usize) -> Option<Hit> {
+        match &self.impostor {
+            Some(query) => self.impostor_direct(query, rp.world, sample),
+            None => {
+                let origin = rp.origin.as_ref()?;
+                let screen = self.screen();
+                self.tracer
+                    .trace_from(origin, self.table_camera[sample], self.params.max_distance)
+                    .map(|real| screen.hit(real))
+            }
+        }
+    }
+
+    /// What the stage's query answers along world ray `origin + t dir`.
+    #[inline]
+    pub(super) fn query_world(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
+        let ray = Ray {
+            origin,
+            dir,
+            t_max: f32::INFINITY,
+        };
+        match &self.impostor {
+            Some(query) => query.query(&ray),
+            None => self.screen().query(&ray),
         }
     }
 }

@@ -206,7 +206,7 @@ pub(super) fn same_bits(a: Vec3, b: Vec3) -> bool {
 
 /// E_RV equals E_R bit for bit (both parts) at every untouched pixel; returns how many
 /// pixels were touched.
-fn assert_untouched_pixels_equal(out: &IrradianceLayers) -> usize {
+pub(super) fn assert_untouched_pixels_equal(out: &IrradianceLayers) -> usize {
     let mut touched = 0;
     for i in 0..out.touched.data.len() {
         if out.touched.data[i] != 0 {
@@ -271,7 +271,7 @@ fn constant_environment_over_a_floor_gives_pi_l_and_no_indirect_light() {
 }
 
 /// The 3x3 block of pixels around the one that sees world point `p`.
-fn block_around(p: Vec3) -> Vec<usize> {
+pub(super) fn block_around(p: Vec3) -> Vec<usize> {
     let c = pixel_of(p) as i64;
     let w = W as i64;
     [-w - 1, -w, -w + 1, -1, 0, 1, w - 1, w, w + 1]
@@ -521,11 +521,11 @@ fn object_aware_sampling_is_unbiased_and_lowers_the_variance() {
     );
 }
 
-fn mean(xs: &[f64]) -> f64 {
+pub(super) fn mean(xs: &[f64]) -> f64 {
     xs.iter().sum::<f64>() / xs.len() as f64
 }
 
-fn variance(xs: &[f64]) -> f64 {
+pub(super) fn variance(xs: &[f64]) -> f64 {
     let m = mean(xs);
     xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (xs.len() - 1) as f64
 }

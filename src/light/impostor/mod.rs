@@ -117,17 +117,23 @@ impl CubeImpostor {
     /// The unit direction of the centre of texel `index` (the inverse of
     /// [`CubeImpostor::texel_of`] at texel centres).
     pub fn texel_direction(&self, index: usize) -> Vec3 {
-        let n = self.face_size as usize;
-        let (face, rest) = (index / (n * n), index % (n * n));
-        let (row, column) = (rest / n, rest % n);
-        let to_coord = |i: usize| -1.0 + (2 * i + 1) as f32 / n as f32;
-        let axis = face / 2;
-        let mut d = Vec3::ZERO;
-        d[axis] = if face % 2 == 0 { 1.0 } else { -1.0 };
-        d[(axis + 1) % 3] = to_coord(column);
-        d[(axis + 2) % 3] = to_coord(row);
-        d.normalize()
+        cube_texel_direction(self.face_size, index)
     }
+}
+
+/// The unit direction of the centre of texel `index` of a cube of `face_size` texels a
+/// side ([`CubeImpostor::texel_direction`] without the cube).
+pub fn cube_texel_direction(face_size: u32, index: usize) -> Vec3 {
+    let n = face_size as usize;
+    let (face, rest) = (index / (n * n), index % (n * n));
+    let (row, column) = (rest / n, rest % n);
+    let to_coord = |i: usize| -1.0 + (2 * i + 1) as f32 / n as f32;
+    let axis = face / 2;
+    let mut d = Vec3::ZERO;
+    d[axis] = if face % 2 == 0 { 1.0 } else { -1.0 };
+    d[(axis + 1) % 3] = to_coord(column);
+    d[(axis + 2) % 3] = to_coord(row);
+    d.normalize()
 }
 
 /// The face looking along `d`'s largest component and `d`'s (u, v) on it, in [-1, 1].

@@ -122,13 +122,7 @@ impl<'a> Kernel<'a> {
                 .table
                 .samples
                 .iter()
-                .map(|ls| {
-                    q.query(&Ray {
-                        origin: q.center,
-                        dir: ls.direction,
-                        t_max: f32::INFINITY,
-                    })
-                })
+                .map(|ls| q.query(&Ray::unbounded(q.center, ls.direction)))
                 .collect(),
             _ => Vec::new(),
         };

@@ -31,6 +31,17 @@ fn dome(center: Vec3, radius: f32) -> EnvMap {
     map
 }
 
+/// The floor scene with `objects` under `env`, marched with the CPU's own lanes.
+fn run_floor(
+    objects: &VirtualScene,
+    table: &LightTable,
+    env: &EnvMap,
+    params: &PathParams,
+) -> IrradianceLayers {
+    let lanes = simd::Kernel::detect();
+    run_with_environment(&floor_scene(), objects, table, Some(env), params, lanes)
+}
+
 fn params(query: QueryKind, iterations: u32) -> PathParams {
     PathParams {
         query,
@@ -54,13 +65,11 @@ fn every_query_gives_pi_l_under_a_constant_environment() {
     let table = uniform_table(4096);
     let env = dome(Vec3::new(0.0, 1.0, 1.0), 6.0);
     for &(query, iterations) in QUERIES {
-        let out = run_with_environment(
-            &scene,
+        let out = run_floor(
             &VirtualScene::default(),
             &table,
-            Some(&env),
+            &env,
             &params(query, iterations),
-            simd::Kernel::detect(),
         );
         let (mut sum, mut n) = (glam::DVec3::ZERO, 0);
         for i in 0..out.e_r_dir.data.len() {
@@ -85,7 +94,6 @@ fn every_query_gives_pi_l_under_a_constant_environment() {
 
 #[test]
 fn every_query_keeps_e_rv_equal_to_e_r_where_no_path_met_an_object() {
-    let scene = floor_scene();
     let table = uniform_table(1024);
     let env = dome(Vec3::new(0.0, 1.0, 1.0), 6.0);
     let objects = gray_sphere(SPHERE_CENTER);
@@ -96,16 +104,7 @@ fn every_query_keeps_e_rv_equal_to_e_r_where_no_path_met_an_object() {
                 object_aware_direct,
                 ..params(query, iterations)
             };
-            let run = || {
-                run_with_environment(
-                    &scene,
-                    &objects,
-                    &table,
-                    Some(&env),
-                    &p,
-                    simd::Kernel::detect(),
-                )
-            };
+            let run = || run_floor(&objects, &table, &env, &p);
             let out = run();
             let touched = assert_untouched_pixels_equal(&out);
             assert!(touched > 200, "{query:?}: {touched} touched pixels");
@@ -120,7 +119,7 @@ fn every_query_keeps_e_rv_equal_to_e_r_where_no_path_met_an_object() {
                 "{query:?}: thread counts differ"
             );
             let portable = run_with_environment(
-                &scene,
+                &floor_scene(),
                 &objects,
                 &table,
                 Some(&env),
@@ -138,20 +137,12 @@ fn an_object_beyond_the_impostor_casts_no_shadow_but_one_at_infinity_does() {
     // of 1.5 m: from the floor, the environment stands in front of the sphere (ray 3 of
     // paper 000 Fig. 7), so em and dit see no difference; ssrt's environment is at
     // infinity, behind the sphere, which shadows the floor.
-    let scene = floor_scene();
     let table = uniform_table(1024);
     let env = dome(Vec3::new(0.0, 0.0, 1.0), 1.5);
     let high = Vec3::new(0.0, 2.7, 1.0);
     let objects = gray_sphere(high);
     for &(query, iterations) in QUERIES {
-        let out = run_with_environment(
-            &scene,
-            &objects,
-            &table,
-            Some(&env),
-            &params(query, iterations),
-            simd::Kernel::detect(),
-        );
+        let out = run_floor(&objects, &table, &env, &params(query, iterations));
         assert!(
             out.mask.data.iter().all(|&m| m == 1.0),
             "the sphere is out of view"
@@ -177,7 +168,6 @@ fn visibility_switches_the_objects_self_occlusion() {
     // geometry (the impostor queries): with the visibility test the upper sphere
     // shadows the lower one; without it every virtual point gets the pi L of its
     // whole hemisphere.
-    let scene = floor_scene();
     let table = uniform_table(4096);
     let env = dome(Vec3::new(0.0, 1.0, 1.0), 6.0);
     let mut objects = gray_sphere(SPHERE_CENTER);
@@ -190,14 +180,7 @@ fn visibility_switches_the_objects_self_occlusion() {
                 visibility,
                 ..params(query, 4)
             };
-            run_with_environment(
-                &scene,
-                &objects,
-                &table,
-                Some(&env),
-                &p,
-                simd::Kernel::detect(),
-            )
+            run_floor(&objects, &table, &env, &p)
         };
         let (with, without) = (run(true), run(false));
         let mean = |out: &IrradianceLayers| {

@@ -96,7 +96,7 @@ impl<'t> RayBatch<'t> {
 impl Kernel<'_> {
     /// The screen-space query over this frame's depth map.
     #[inline]
-    fn screen(&self) -> ScreenQuery<'_> {
+    pub(super) fn screen(&self) -> ScreenQuery<'_> {
         ScreenQuery {
             tracer: &self.tracer,
             radiance: self.inputs.radiance,
@@ -104,23 +104,32 @@ impl Kernel<'_> {
         }
     }
 
+    /// The world ray from the real point along camera-space direction `dir_camera`.
+    #[inline]
+    pub(super) fn real_ray(&self, rp: &RealPoint, dir_camera: Vec3) -> Ray {
+        Ray::unbounded(
+            rp.world,
+            Vec3::from(self.to_world * Vec3A::from(dir_camera)),
+        )
+    }
+
+    /// What the screen-space march meets along camera-space direction `dir_camera`
+    /// from the real point (its projected origin).
+    #[inline]
+    fn screen_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
+        let origin = rp.origin.as_ref()?;
+        self.tracer
+            .trace_from(origin, dir_camera, self.params.max_distance)
+            .map(|real| self.screen().hit(real))
+    }
+
     /// What the stage's query answers along camera-space direction `dir_camera` from
     /// the real point.
     #[inline]
     pub(super) fn query_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
         match &self.impostor {
-            Some(query) => query.query(&Ray {
-                origin: rp.world,
-                dir: Vec3::from(self.to_world * Vec3A::from(dir_camera)),
-                t_max: f32::INFINITY,
-            }),
-            None => {
-                let origin = rp.origin.as_ref()?;
-                let screen = self.screen();
-                self.tracer
-                    .trace_from(origin, dir_camera, self.params.max_distance)
-                    .map(|real| screen.hit(real))
-            }
+            Some(query) => query.query(&self.real_ray(rp, dir_camera)),
+            None => self.screen_from_real(rp, dir_camera),
         }
     }
 
@@ -135,11 +144,10 @@ impl Kernel<'_> {
     ) -> Option<Hit> {
         match self.table_em.get(sample) {
             Some(&answer) => answer,
-            None => query.query(&Ray {
-                origin,
-                dir: self.inputs.table.samples[sample].direction,
-                t_max: f32::INFINITY,
-            }),
+            None => {
+                let dir = self.inputs.table.samples[sample].direction;
+                query.query(&Ray::unbounded(origin, dir))
+            }
         }
     }
 
@@ -149,24 +157,14 @@ impl Kernel<'_> {
     pub(super) fn direct_arrival(&self, rp: &RealPoint, sample: usize) -> Option<Hit> {
         match &self.impostor {
             Some(query) => self.impostor_direct(query, rp.world, sample),
-            None => {
-                let origin = rp.origin.as_ref()?;
-                let screen = self.screen();
-                self.tracer
-                    .trace_from(origin, self.table_camera[sample], self.params.max_distance)
-                    .map(|real| screen.hit(real))
-            }
+            None => self.screen_from_real(rp, self.table_camera[sample]),
         }
     }
 
     /// What the stage's query answers along world ray `origin + t dir`.
     #[inline]
     pub(super) fn query_world(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
-        let ray = Ray {
-            origin,
-            dir,
-            t_max: f32::INFINITY,
-        };
+        let ray = Ray::unbounded(origin, dir);
         match &self.impostor {
             Some(query) => query.query(&ray),
             None => self.screen().query(&ray),

@@ -13,9 +13,9 @@ use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
 use super::virtual_paths::{VirtualDirect, VirtualIndirect};
 use crate::objects::VirtualHit;
 use crate::stages::sample::layers::PixelLayers;
-use crate::stages::sample::query::{ImpostorQuery, RadianceQuery, Ray, ScreenQuery};
+use crate::stages::sample::query::{ImpostorQuery, RadianceQuery};
 use crate::stages::sample::ssrt::TraceBatch;
-use glam::{Vec3, Vec3A};
+use glam::Vec3;
 
 /// Pixels per span: enough rays (about 23 per pixel) that the batch's lanes rarely wait
 /// at its end, few enough that its buffers stay in the cache (about 50 KB).
@@ -87,11 +87,7 @@ impl<'t> Span<'t> {
             Some(query) => RayBatch::Impostor { query, hits },
             None => RayBatch::Screen {
                 batch: Box::new(TraceBatch::new(&kernel.tracer, direct + indirect)),
-                query: ScreenQuery {
-                    tracer: &kernel.tracer,
-                    radiance: kernel.inputs.radiance,
-                    max_distance: params.max_distance,
-                },
+                query: kernel.screen(),
                 hits,
             },
         };
@@ -247,11 +243,7 @@ impl Kernel<'_> {
                 if self.params.object_aware || !rp.cone_camera.admits(dir_camera) {
                     return Some(NOT_ASKED);
                 }
-                q.query(&Ray {
-                    origin: rp.world,
-                    dir: Vec3::from(self.to_world * Vec3A::from(dir_camera)),
-                    t_max: f32::INFINITY,
-                })
+                q.query(&self.real_ray(rp, dir_camera))
             };
             span.indirect.push(IndirectRay {
                 dir_camera,

@@ -133,13 +133,7 @@ impl Kernel<'_> {
             };
             let ray = (weight > 0.0).then(|| {
                 batch.push(
-                    |q| {
-                        q.query(&Ray {
-                            origin: surface.origin,
-                            dir,
-                            t_max: f32::INFINITY,
-                        })
-                    },
+                    |q| q.query(&Ray::unbounded(surface.origin, dir)),
                     || self.tracer.camera_ray(surface.origin, dir),
                     t_max,
                 )

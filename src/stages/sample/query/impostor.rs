@@ -34,6 +34,7 @@
 //! a cone's solid angle): every query is a thin ray.
 
 use super::{Hit, RadianceQuery, Ray, Source};
+use crate::light::impostor::cube_texel_direction;
 use crate::light::{CubeImpostor, EnvMap};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -119,18 +120,13 @@ impl ImpostorQuery {
             radiance: vec![Vec3::ZERO; 6 * n * n],
             distance: vec![f32::INFINITY; 6 * n * n],
         };
-        let directions = CubeImpostor {
-            face_size,
-            radiance: Vec::new(),
-            distance: Vec::new(),
-        };
         cube.radiance
             .par_chunks_mut(n)
             .zip(cube.distance.par_chunks_mut(n))
             .enumerate()
             .for_each(|(row, (radiance, distance))| {
                 for i in 0..n {
-                    let texel = map.texel_of(directions.texel_direction(row * n + i));
+                    let texel = map.texel_of(cube_texel_direction(face_size, row * n + i));
                     let l = map.radiance[texel];
                     radiance[i] = if l.is_finite() { l } else { Vec3::ZERO };
                     distance[i] = map.distance[texel];

@@ -38,6 +38,18 @@ pub struct Ray {
     pub t_max: f32,
 }
 
+impl Ray {
+    /// The ray `origin + t dir` for every t >= 0.
+    #[inline]
+    pub fn unbounded(origin: Vec3, dir: Vec3) -> Ray {
+        Ray {
+            origin,
+            dir,
+            t_max: f32::INFINITY,
+        }
+    }
+}
+
 /// What sent the radiance of a [`Hit`] (see the module docs for what each means to a
 /// renderer).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -71,26 +83,20 @@ pub enum QueryKind {
 }
 
 impl QueryKind {
+    /// Every kind, in the order of [`QueryKind::NAMES`].
+    const ALL: [QueryKind; 3] = [QueryKind::Ssrt, QueryKind::Em, QueryKind::Dit];
     /// The parameter values, in the order of the variants.
     pub const NAMES: &'static [&'static str] = &["ssrt", "em", "dit"];
 
     /// The kind named `name` (one of [`QueryKind::NAMES`]).
     pub fn from_name(name: &str) -> Option<QueryKind> {
-        match name {
-            "ssrt" => Some(QueryKind::Ssrt),
-            "em" => Some(QueryKind::Em),
-            "dit" => Some(QueryKind::Dit),
-            _ => None,
-        }
+        let i = Self::NAMES.iter().position(|&n| n == name)?;
+        Some(Self::ALL[i])
     }
 
     /// The parameter value of this kind.
     pub fn name(self) -> &'static str {
-        match self {
-            QueryKind::Ssrt => "ssrt",
-            QueryKind::Em => "em",
-            QueryKind::Dit => "dit",
-        }
+        Self::NAMES[self as usize]
     }
 
     /// Whether the implementation reads the distance impostor (an environment map with
@@ -102,19 +108,12 @@ impl QueryKind {
 
 /// A representation of the real scene that answers rays (paper 000 Fig. 5). An
 /// implementation must be deterministic: the same ray gives the same bits.
+/// `sample.path` marches its screen-space rays in lane batches of its own
+/// (`path/rays.rs`), with the answers [`ScreenQuery`] gives ray by ray.
 pub trait RadianceQuery: Sync {
     /// The radiance arriving at `ray.origin` from `ray.dir`, or `None` when nothing
     /// this representation holds lies within `ray.t_max` (the environment at infinity).
     fn query(&self, ray: &Ray) -> Option<Hit>;
-
-    /// [`RadianceQuery::query`] for every ray, into `out` (cleared first), in order.
-    /// An implementation that gains from tracing many rays together may override it
-    /// (`sample.path` marches its screen-space rays in lane batches of its own,
-    /// `path/rays.rs`, with the same answers as [`ScreenQuery`] ray by ray).
-    fn query_batch(&self, rays: &[Ray], out: &mut Vec<Option<Hit>>) {
-        out.clear();
-        out.extend(rays.iter().map(|ray| self.query(ray)));
-    }
 }
 
 #[cfg(test)]

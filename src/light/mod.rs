@@ -19,6 +19,7 @@ pub mod sh;
 pub mod split;
 pub mod table;
 pub mod val;
+pub mod voxels;
 
 pub use distribution::{Distribution2D, pdf_integral};
 pub use envmap::EnvMap;

@@ -47,6 +47,7 @@ pub mod mesh;
 mod obj_lines;
 pub mod shapes;
 pub mod spec;
+pub mod voxelize;
 
 pub use bvh::Bvh;
 pub use mesh::{load_obj, parse_obj};

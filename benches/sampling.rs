@@ -38,6 +38,7 @@ mod common;
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Affine3A;
 use relume::light::{ImpostorBuilder, ImpostorParams, LightTable, ValBuilder, ValParams};
+use relume::objects::voxelize::solid_volume;
 use relume::objects::{Triangle, VirtualScene};
 use relume::pinhole::Pinhole;
 use relume::stages::sample::path::sampling::{Basis, cosine_hemisphere};
@@ -82,7 +83,10 @@ fn bench_sampling(c: &mut Criterion) {
             table: done.light_table(&spec.inputs["light_table"]).unwrap(),
             // light.impostor's map, for the em and dit queries.
             environment: Some(done.environment("environment").unwrap().as_ref()),
+            // light.voxels' volume, for the vct query.
+            voxels: Some(done.voxels("voxels").unwrap().as_ref()),
             objects: &pipeline.objects,
+            object_voxels: None,
             frame: WARM_FRAMES as u64,
         };
         bench_tracer(
@@ -348,13 +352,23 @@ fn bench_queries(
     };
     let size = (inputs.depth.width, inputs.depth.height);
     let mut out = IrradianceLayers::new(size.0, size.1);
-    for query in [QueryKind::Ssrt, QueryKind::Em, QueryKind::Dit] {
+    // The stage builds the objects' solid volume once, not per frame.
+    let object_volume = solid_volume(inputs.objects, params.object_voxels);
+    let inputs = &PathInputs {
+        object_voxels: Some(&object_volume),
+        ..*inputs
+    };
+    for query in [
+        QueryKind::Ssrt,
+        QueryKind::Em,
+        QueryKind::Dit,
+        QueryKind::Vct,
+    ] {
         for &n in &counts {
             for visibility in [true, false] {
                 let per_primary = n / params.primary.max(1);
                 let p = PathParams {
                     query,
-                    iterations: 4,
                     visibility,
                     direct: per_primary,
                     indirect: per_primary,

@@ -19,7 +19,9 @@
 //!   0.01 says the estimator converges to something else. Pooled over scored frames.
 
 use crate::graph::{Frame, ResolvedStage};
+use crate::light::voxels::VoxelVolume;
 use crate::objects::VirtualScene;
+use crate::objects::voxelize::solid_volume;
 use crate::pinhole::Pinhole;
 use crate::raster::{Image, Vec3Image};
 use crate::recording::Intrinsics;
@@ -74,6 +76,9 @@ pub struct PathRunner {
     inputs: [String; 5],
     /// The distance impostor, for the `em` and `dit` queries.
     environment: Option<String>,
+    /// The scene's voxel volume, for the `vct` query, and the objects' solid volume.
+    voxels: Option<String>,
+    object_voxels: Option<Arc<VoxelVolume>>,
     /// The stage's own settings.
     pub params: PathParams,
     objects: Arc<VirtualScene>,
@@ -87,11 +92,17 @@ impl PathRunner {
         intrinsics: Intrinsics,
         seed: u64,
     ) -> PathRunner {
+        let params = PathParams::from_params(&stage.params, seed);
         PathRunner {
             inputs: ["depth", "normals", "pose", "radiance", "light_table"]
                 .map(|r| super::input(stage, r)),
             environment: stage.inputs.get("environment").cloned(),
-            params: PathParams::from_params(&stage.params, seed),
+            voxels: stage.inputs.get("voxels").cloned(),
+            object_voxels: params
+                .query
+                .needs_voxels()
+                .then(|| Arc::new(solid_volume(&objects, params.object_voxels))),
+            params,
             objects,
             intrinsics,
         }
@@ -118,6 +129,10 @@ impl PathRunner {
             Some(name) => Some(frame.environment(name).ok()?.as_ref()),
             None => None,
         };
+        let voxels = match &self.voxels {
+            Some(name) => Some(frame.voxels(name).ok()?.as_ref()),
+            None => None,
+        };
         let inputs = PathInputs {
             depth,
             normals,
@@ -126,7 +141,9 @@ impl PathRunner {
             camera_to_world: Affine3A::from_mat4(pose.matrix().as_mat4()),
             table,
             environment,
+            voxels,
             objects: &self.objects,
+            object_voxels: self.object_voxels.as_deref(),
             frame: frame.index as u64,
         };
         let mut out = IrradianceLayers::new(depth.width, depth.height);

@@ -89,3 +89,4 @@ typed_getter!(cloud, Cloud, Arc<EnvCloud>);
 typed_getter!(environment, Environment, Arc<crate::light::EnvMap>);
 typed_getter!(light_table, LightTable, Arc<crate::light::LightTable>);
 typed_getter!(area_lights, AreaLights, Arc<crate::light::AreaLights>);
+typed_getter!(voxels, Voxels, Arc<crate::light::voxels::VoxelVolume>);

@@ -1,5 +1,6 @@
 //! The values that flow between stages: [`Product`] and its [`ProductKind`].
 
+use crate::light::voxels::VoxelVolume;
 use crate::light::{AreaLights, EnvMap, LightTable};
 use crate::raster::{DepthImage, LabelImage, Rgb8Image, ScalarImage, Vec3Image};
 use crate::recording::{FrameRecords, Pose};
@@ -37,6 +38,8 @@ pub enum ProductKind {
     LightTable,
     /// Virtual area lights and SH9 indirect light ([`crate::light::AreaLights`]).
     AreaLights,
+    /// A mip-mapped voxel volume of the scene ([`crate::light::voxels::VoxelVolume`]).
+    Voxels,
 }
 
 impl ProductKind {
@@ -57,6 +60,7 @@ impl ProductKind {
             ProductKind::Environment => "environment map",
             ProductKind::LightTable => "light sample table",
             ProductKind::AreaLights => "set of area lights",
+            ProductKind::Voxels => "voxel volume",
         }
     }
 
@@ -203,6 +207,7 @@ pub enum Product {
     Environment(Arc<EnvMap>),
     LightTable(Arc<LightTable>),
     AreaLights(Arc<AreaLights>),
+    Voxels(Arc<VoxelVolume>),
 }
 
 impl Product {
@@ -222,6 +227,7 @@ impl Product {
             Product::Environment(_) => ProductKind::Environment,
             Product::LightTable(_) => ProductKind::LightTable,
             Product::AreaLights(_) => ProductKind::AreaLights,
+            Product::Voxels(_) => ProductKind::Voxels,
         }
     }
 
@@ -320,6 +326,17 @@ impl Product {
                     floats(&mut h, &[l.area]);
                 }
                 vec3s(&mut h, &set.sh9);
+            }
+            Product::Voxels(volume) => {
+                floats(&mut h, &volume.origin.to_array());
+                floats(&mut h, &[volume.voxel_size]);
+                for level in &volume.levels {
+                    dims(&mut h, level.dims[0], level.dims[1]);
+                    h.update(&level.dims[2].to_le_bytes());
+                    for v in &level.voxels {
+                        floats(&mut h, &v.to_array());
+                    }
+                }
             }
         }
         h.digest()

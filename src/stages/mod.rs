@@ -17,6 +17,7 @@
 //! | `light.importance` | [`light::importance`] | the table of environment importance samples (paper 001 Sec. 5.2) |
 //! | `light.split` | [`light::split`] | direct and indirect parts of the environment light by an energy ratio per channel (paper 004 Sec. 4.2) |
 //! | `light.val` | [`light::val`] | virtual area lights (importance samples + k-means + eq. 7) and SH9 of the indirect part (paper 004 Secs. 4.3-4.4) |
+//! | `light.voxels` | [`light::voxels`] | a mip-mapped voxel volume of the environment-sample cloud, for cone tracing (paper 000 Sec. 6.1) |
 //! | `sample.path` | [`sample::path`] | two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5) |
 //! | `sample.val` | [`sample::val`] | noise-free E_R / E_RV from the area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5) |
 //! | `filter.axis_aligned` | [`filter`] | axis-aligned world-space Gaussian of the four irradiance layers, bandwidths of eqs. 17-18, temporal reuse (paper 001 Secs. 6-7) |
@@ -59,6 +60,7 @@ pub fn builtin() -> Vec<StageInfo> {
         light::importance::INFO,
         light::split::INFO,
         light::val::INFO,
+        light::voxels::INFO,
         sample::path::INFO,
         sample::val::INFO,
         filter::INFO,

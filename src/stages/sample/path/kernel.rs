@@ -3,21 +3,27 @@
 //! [`super`] for what each estimate means.
 
 use super::bounds::{Cone, Objects, object_pixel_bounds};
+use super::rays::WorldQuery;
 use super::sampling::{Basis, PixelRng, Stream, StreamId, strata_bounds, stratum_index};
 use super::span::{DirectRay, Drawn, IndirectRay, RealSamples};
 use super::{PathInputs, PathParams};
 use crate::light::LightSample;
+use crate::light::voxels::{ConeMarch, VoxelVolume};
 use crate::objects::VirtualHit;
 use crate::raster::depth_is_valid;
 use crate::simd;
 use crate::stages::sample::layers::PixelLayers;
-use crate::stages::sample::query::{Hit, ImpostorQuery, RadianceQuery, Ray, Source};
+use crate::stages::sample::query::{Hit, RadianceQuery, Ray, Source, cone_spread};
 use crate::stages::sample::ssrt::{RayOrigin, ScreenTracer};
 use glam::{Mat3A, Vec3, Vec3A};
 use std::f32::consts::PI;
 
 /// Offset (metres) of rays leaving a virtual surface along its normal.
 pub(super) const SURFACE_OFFSET: f32 = 1e-4;
+/// `vct`: how many of the object volume's voxels a cone leaving a virtual surface
+/// starts off it (the solid voxelization puts the surface up to a voxel from where it
+/// is, and trilinear sampling reaches a voxel further).
+pub(super) const LEAVE_VOXELS: f32 = 1.5;
 /// The most object-aware candidates per pixel (size of the H_a index cache).
 pub const MAX_CANDIDATES: usize = 256;
 
@@ -27,6 +33,9 @@ pub(super) struct RealPoint {
     /// projected for the screen-space tracer: `None` when it leaves the image), and
     /// the surface point itself (world).
     pub(super) world: Vec3,
+    /// Where the world-space query's rays start: `world`, but raised a voxel
+    /// further under `vct`.
+    pub(super) query_origin: Vec3,
     pub(super) origin: Option<RayOrigin>,
     pub(super) surface: Vec3,
     pub(super) normal_world: Vec3,
@@ -61,8 +70,14 @@ pub(super) struct Kernel<'a> {
     pub(super) inputs: &'a PathInputs<'a>,
     pub(super) params: &'a PathParams,
     pub(super) tracer: ScreenTracer<'a>,
-    /// The distance impostor's query (`em`, `dit`); `None` for screen-space marching.
-    pub(super) impostor: Option<ImpostorQuery>,
+    /// The world-space query (`em`, `dit`, `vct`); `None` for screen-space marching.
+    pub(super) world_query: Option<WorldQuery<'a>>,
+    /// `vct`: the objects' solid volume, whose cones give their shadows.
+    pub(super) object_volume: Option<&'a VoxelVolume>,
+    /// `vct`: the cone spreads of direct and indirect samples at real points (the
+    /// pixel's samples share the hemisphere: [`cone_spread`]).
+    pub(super) direct_spread: f32,
+    pub(super) indirect_spread: f32,
     pub(super) to_world: Mat3A,
     pub(super) to_camera: Mat3A,
     pub(super) camera_position: Vec3,
@@ -92,7 +107,8 @@ impl<'a> Kernel<'a> {
         inputs: &'a PathInputs<'a>,
         params: &'a PathParams,
         tracer: ScreenTracer<'a>,
-        impostor: Option<ImpostorQuery>,
+        world_query: Option<WorldQuery<'a>>,
+        object_volume: Option<&'a VoxelVolume>,
         lanes: simd::Kernel,
     ) -> Self {
         let c2w = inputs.camera_to_world;
@@ -117,8 +133,8 @@ impl<'a> Kernel<'a> {
             .as_ref()
             .map_or([0, 0, -1, -1], |o| object_pixel_bounds(inputs, &o.aabb));
         // Environment Mapping's answer does not depend on the ray's origin.
-        let table_em = match &impostor {
-            Some(q) if q.iterations == 0 => inputs
+        let table_em = match &world_query {
+            Some(WorldQuery::Impostor(q)) if q.iterations == 0 => inputs
                 .table
                 .samples
                 .iter()
@@ -130,7 +146,10 @@ impl<'a> Kernel<'a> {
             inputs,
             params,
             tracer,
-            impostor,
+            world_query,
+            object_volume,
+            direct_spread: cone_spread(params.primary * params.direct, 0.0),
+            indirect_spread: cone_spread(params.primary * params.indirect, 0.0),
             to_world,
             to_camera,
             camera_position,
@@ -155,6 +174,35 @@ impl<'a> Kernel<'a> {
             table_em,
             lanes,
         }
+    }
+
+    /// `vct`: the cone of a direct sample's aperture from `origin` along `dir` through
+    /// the objects' solid volume, up to `t_max`: its opacity is the share of the
+    /// light the objects block (paper 000 eq. 6's 1 - alpha).
+    #[inline]
+    pub(super) fn object_cone(
+        &self,
+        volume: &VoxelVolume,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> ConeMarch {
+        volume.march(origin, dir, self.direct_spread, 0.0, t_max)
+    }
+
+    /// `vct`: [`Kernel::object_cone`] leaving a virtual surface at `position` with
+    /// normal `normal`: it starts [`LEAVE_VOXELS`] of the volume's voxels off the
+    /// surface, out of the voxels that hold the surface itself.
+    #[inline]
+    pub(super) fn object_shadow(
+        &self,
+        volume: &VoxelVolume,
+        position: Vec3,
+        normal: Vec3,
+        dir: Vec3,
+    ) -> ConeMarch {
+        let origin = position + normal * (LEAVE_VOXELS * volume.voxel_size);
+        self.object_cone(volume, origin, dir, f32::INFINITY)
     }
 
     /// Records a blocked direct sample for the filter: its occluder at distance `t`
@@ -343,6 +391,12 @@ impl<'a> Kernel<'a> {
         let world = self.inputs.camera_to_world.transform_point3(camera);
         let surface = self.inputs.camera_to_world.transform_point3(surface);
         let normal_world = Vec3::from(self.to_world * Vec3A::from(normal_camera));
+        let query_origin = match &self.world_query {
+            // Cones leave the surface's own voxel (raised a voxel along the normal,
+            // as voxel cone tracers do).
+            Some(WorldQuery::Voxels(q)) => world + normal_world * q.volume.voxel_size,
+            _ => world,
+        };
         let (cone_world, cone_camera) = match &self.objects {
             Some(o) => {
                 let c = o.cone(world);
@@ -353,6 +407,7 @@ impl<'a> Kernel<'a> {
         };
         Some(RealPoint {
             world,
+            query_origin,
             origin: self.tracer.origin(camera),
             surface,
             normal_world,
@@ -446,16 +501,24 @@ impl<'a> Kernel<'a> {
                             arrival.map_or((ls.radiance, f32::INFINITY), |h| (h.radiance, h.t));
                         c = radiance * (cos / ls.pdf);
                         c_rv = c;
-                        let blocker = match rv_blockers {
-                            Some(o) if rp.cone_world.admits(ls.direction) => {
-                                o.hit(rp.world, ls.direction, t_light)
+                        match (rv_blockers, self.object_volume) {
+                            (Some(_), Some(volume)) if rp.cone_world.admits(ls.direction) => {
+                                let cone =
+                                    self.object_cone(volume, rp.world, ls.direction, t_light);
+                                if cone.opacity > 0.0 {
+                                    c_rv = c * (1.0 - cone.opacity);
+                                    acc.touched = true;
+                                    self.record_occluder(acc, ls.radiance, cone.t_half, cos);
+                                }
                             }
-                            _ => None,
-                        };
-                        if let Some(hit) = blocker {
-                            c_rv = Vec3::ZERO;
-                            acc.touched = true;
-                            self.record_occluder(acc, ls.radiance, hit.t, cos);
+                            (Some(o), None) if rp.cone_world.admits(ls.direction) => {
+                                if let Some(hit) = o.hit(rp.world, ls.direction, t_light) {
+                                    c_rv = Vec3::ZERO;
+                                    acc.touched = true;
+                                    self.record_occluder(acc, ls.radiance, hit.t, cos);
+                                }
+                            }
+                            _ => {}
                         }
                     }
                 }

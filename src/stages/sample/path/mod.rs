@@ -84,6 +84,16 @@
 //! up from the impostor's centre; for `dit` traced from the shading point), nothing is
 //! near real geometry (E_R^ind = 0: the room's light is all direct light), and an
 //! object farther along a ray than the environment is hidden (Sec. 6.4, ray 3).
+//! `vct` reads the scene's voxel volume (`voxels`, light.voxels) the same way, each ray
+//! a cone whose aperture follows its sample's share of the lobe ([`super::query::cone_spread`]:
+//! 2 pi / N of the hemisphere, narrowed to a glossy object's Phong lobe), starting a
+//! voxel off the surface; and the objects' shadows (direct light blocked at real
+//! points, the objects' own direct samples and bounce) come from cones through their
+//! solid volume (`object_voxels` a side, built once): the light that passes is
+//! 1 - opacity (paper 000 eq. 6), so shadows are soft and a sample is partly
+//! blocked. Where it departs from the paper: the objects' radiance along indirect rays
+//! and the object-aware candidates still come from the meshes (the BVH), not from
+//! normals and materials stored in the voxels.
 //! `visibility = false` drops the objects' self-occlusion test (their own direct
 //! samples, reflected rays and bounce radiance are not tested against them: Table 3's
 //! cheaper rows). The estimates keep their correlation: E_RV == E_R bit for bit where
@@ -124,11 +134,13 @@ use params::{PARAMS, query_kind};
 
 use super::layers::{LAYER_OUTPUTS, rows};
 use super::pyramid::DepthPyramid;
-use super::query::{ImpostorQuery, QueryKind};
+use super::query::{ImpostorQuery, QueryKind, VoxelQuery};
 use super::ssrt::ScreenTracer;
 use crate::graph::{Frame, Port, Ports, ProductKind, Stage, StageError, StageInfo};
+use crate::light::voxels::VoxelVolume;
 use crate::light::{EnvMap, LightTable};
 use crate::objects::VirtualScene;
+use crate::objects::voxelize::solid_volume;
 use crate::pinhole::Pinhole;
 use crate::raster::{DepthImage, Vec3Image};
 use crate::recording::Intrinsics;
@@ -136,6 +148,7 @@ use crate::simd;
 use glam::Affine3A;
 use kernel::Kernel;
 use rayon::prelude::*;
+use rays::WorldQuery;
 use span::{SPAN_PIXELS, Span};
 use std::sync::Arc;
 
@@ -160,6 +173,11 @@ pub const INFO: StageInfo = StageInfo {
                     .needs_environment()
                     .then(|| Port::new("environment", "environment", &[ProductKind::Environment])),
             )
+            .chain(
+                query_kind(p)
+                    .needs_voxels()
+                    .then(|| Port::new("voxels", "voxels", &[ProductKind::Voxels])),
+            )
             .collect(),
         outputs: LAYER_OUTPUTS
             .iter()
@@ -175,7 +193,13 @@ pub const INFO: StageInfo = StageInfo {
                 .query
                 .needs_environment()
                 .then(|| ctx.input("environment")),
+            voxels: params.query.needs_voxels().then(|| ctx.input("voxels")),
             outputs: LAYER_OUTPUTS.map(|(role, _)| ctx.output(role)),
+            // The objects do not move: their solid volume is built once.
+            object_voxels: params
+                .query
+                .needs_voxels()
+                .then(|| Arc::new(solid_volume(ctx.objects, params.object_voxels))),
             params,
             intrinsics: ctx.header.depth_intrinsics,
             objects: Arc::clone(ctx.objects),
@@ -197,9 +221,14 @@ pub struct PathInputs<'a> {
     pub camera_to_world: Affine3A,
     /// Importance samples of the environment, in stratified order.
     pub table: &'a LightTable,
-    /// The distance impostor the `em` and `dit` queries read (unused by `ssrt`).
+    /// The distance impostor the `em` and `dit` queries read (unused by the others).
     pub environment: Option<&'a EnvMap>,
+    /// The scene's voxel volume the `vct` query reads (unused by the others).
+    pub voxels: Option<&'a VoxelVolume>,
     pub objects: &'a VirtualScene,
+    /// `vct`: the objects' solid volume ([`solid_volume`] of `objects` at
+    /// `object_voxels`); built for the call when `None`.
+    pub object_voxels: Option<&'a VoxelVolume>,
     /// The frame index (a key of the random numbers).
     pub frame: u64,
 }
@@ -262,10 +291,19 @@ pub(crate) fn sample_path_with_kernel(
             "sample.path: the camera pose is not finite".into(),
         ));
     }
-    let impostor = impostor_query(inputs, params)?;
+    let world_query = world_query(inputs, params)?;
     if w == 0 || h == 0 {
         return Ok(());
     }
+    let built;
+    let object_volume = match (params.query, inputs.object_voxels) {
+        (QueryKind::Vct, Some(volume)) => Some(volume),
+        (QueryKind::Vct, None) => {
+            built = solid_volume(inputs.objects, params.object_voxels);
+            Some(&built)
+        }
+        _ => None,
+    };
     let tracer = ScreenTracer::with_pyramid(
         inputs.depth,
         pyramid,
@@ -273,7 +311,7 @@ pub(crate) fn sample_path_with_kernel(
         inputs.camera_to_world,
         params.trace,
     );
-    let kernel = Kernel::new(inputs, params, tracer, impostor, lanes);
+    let kernel = Kernel::new(inputs, params, tracer, world_query, object_volume, lanes);
     let stride = params.pixel_stride as usize;
     let xs: Vec<u32> = (0..w).step_by(stride).collect();
     rows(out, w as usize)
@@ -291,25 +329,34 @@ pub(crate) fn sample_path_with_kernel(
     Ok(())
 }
 
-/// The impostor query `params` ask for, over the inputs' environment map; the error
-/// says what is missing or malformed.
-fn impostor_query(
-    inputs: &PathInputs,
+/// The world-space query `params` ask for (`None` for screen-space marching), over
+/// the inputs' environment map or voxel volume; the error says what is missing or
+/// malformed.
+fn world_query<'a>(
+    inputs: &PathInputs<'a>,
     params: &PathParams,
-) -> Result<Option<ImpostorQuery>, StageError> {
+) -> Result<Option<WorldQuery<'a>>, StageError> {
+    let query = params.query.name();
     let iterations = match params.query {
         QueryKind::Ssrt => return Ok(None),
+        QueryKind::Vct => {
+            let Some(volume) = inputs.voxels else {
+                return Err(StageError::Failed(format!(
+                    "sample.path: query \"{query}\" needs a voxel volume (the `voxels` of light.voxels)"
+                )));
+            };
+            return Ok(Some(WorldQuery::Voxels(VoxelQuery::new(volume))));
+        }
         QueryKind::Em => 0,
         QueryKind::Dit => params.iterations,
     };
-    let query = params.query.name();
     let Some(map) = inputs.environment else {
         return Err(StageError::Failed(format!(
             "sample.path: query \"{query}\" needs an environment map (the distance impostor of light.impostor)"
         )));
     };
     ImpostorQuery::new(map, iterations)
-        .map(Some)
+        .map(|q| Some(WorldQuery::Impostor(q)))
         .map_err(|e| StageError::Failed(format!("sample.path: query \"{query}\": {e}")))
 }
 
@@ -318,6 +365,10 @@ struct PathStage {
     inputs: [String; 5],
     /// Product name of the distance impostor (`em`, `dit`).
     environment: Option<String>,
+    /// Product name of the scene's voxel volume (`vct`).
+    voxels: Option<String>,
+    /// The objects' solid volume (`vct`).
+    object_voxels: Option<Arc<VoxelVolume>>,
     outputs: [String; 12],
     params: PathParams,
     intrinsics: Intrinsics,
@@ -339,7 +390,12 @@ impl Stage for PathStage {
                 Some(name) => Some(frame.environment(name)?.as_ref()),
                 None => None,
             },
+            voxels: match &self.voxels {
+                Some(name) => Some(frame.voxels(name)?.as_ref()),
+                None => None,
+            },
             objects: &self.objects,
+            object_voxels: self.object_voxels.as_deref(),
             frame: frame.index as u64,
         };
         let mut out = IrradianceLayers::new(depth.width, depth.height);

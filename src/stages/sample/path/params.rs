@@ -8,12 +8,14 @@ use crate::stages::sample::ssrt::TraceParams;
 
 /// Most primary, direct or indirect samples per pixel the stage accepts.
 pub const MAX_SAMPLES: u32 = 64;
+/// Most voxels along a side of the objects' solid volume (`vct`).
+pub const MAX_OBJECT_VOXELS: u32 = 256;
 
 pub(super) const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
         "query",
         ParamDefault::Str("ssrt"),
-        "how rays meet the real scene (paper 000 Sec. 6): ssrt = screen-space march over the depth map within max_distance, the environment map beyond; em = Environment Mapping, a direction lookup into the distance impostor; dit = Distance Impostor Tracing, the lookup refined from the impostor's distances. em and dit read the `environment` product (light.impostor's map)",
+        "how rays meet the real scene (paper 000 Sec. 6): ssrt = screen-space march over the depth map within max_distance, the environment map beyond; em = Environment Mapping, a direction lookup into the distance impostor; dit = Distance Impostor Tracing, the lookup refined from the impostor's distances; vct = Voxel Cone Tracing, cones through the scene's voxel volume, and the objects' shadows from cones through their solid volume. em and dit read the `environment` product (light.impostor's map), vct the `voxels` product (light.voxels)",
     )
     .choices(QueryKind::NAMES),
     ParamSpec::new(
@@ -22,6 +24,12 @@ pub(super) const PARAMS: &[ParamSpec] = &[
         "dit: refinement steps of the impostor lookup (0 gives em's answer)",
     )
     .range(0.0, MAX_ITERATIONS as f64),
+    ParamSpec::new(
+        "object_voxels",
+        ParamDefault::Int(32),
+        "vct: voxels along the longest side of the objects' solid volume, whose cones give their shadows and self-shadows (paper 000 Table 2: 32 for low and medium, 128 for high)",
+    )
+    .range(1.0, MAX_OBJECT_VOXELS as f64),
     ParamSpec::new(
         "visibility",
         ParamDefault::Bool(true),
@@ -111,6 +119,8 @@ pub struct PathParams {
     pub query: QueryKind,
     /// `dit`: refinement steps of the impostor lookup.
     pub iterations: u32,
+    /// `vct`: voxels along the longest side of the objects' solid volume.
+    pub object_voxels: u32,
     /// Whether the objects' own rays are tested against the objects (self-occlusion).
     pub visibility: bool,
     /// Primary samples per pixel.
@@ -150,6 +160,7 @@ impl Default for PathParams {
         PathParams {
             query: QueryKind::Ssrt,
             iterations: 6,
+            object_voxels: 32,
             visibility: true,
             primary: 4,
             direct: 4,
@@ -175,6 +186,7 @@ impl PathParams {
         PathParams {
             query: query_kind(p),
             iterations: p.int("iterations") as u32,
+            object_voxels: p.int("object_voxels") as u32,
             visibility: p.bool("visibility"),
             primary: p.int("primary") as u32,
             direct: p.int("direct") as u32,
@@ -221,6 +233,12 @@ impl PathParams {
             return bad(
                 "iterations",
                 format!("{}, expected 0..={MAX_ITERATIONS}", self.iterations),
+            );
+        }
+        if !(1..=MAX_OBJECT_VOXELS).contains(&self.object_voxels) {
+            return bad(
+                "object_voxels",
+                format!("{}, expected 1..={MAX_OBJECT_VOXELS}", self.object_voxels),
             );
         }
         if self.pixel_stride == 0 {

@@ -10,6 +10,7 @@ use super::tests::{
     pixel_of, run_with_environment, same_bits, sphere, uniform_table,
 };
 use super::*;
+use crate::light::voxels::VoxelVolume;
 use crate::objects::Material;
 use crate::stages::with_threads;
 use glam::Vec3;
@@ -20,26 +21,57 @@ const QUERIES: &[(QueryKind, u32)] = &[
     (QueryKind::Ssrt, 0),
     (QueryKind::Em, 0),
     (QueryKind::Dit, 4),
+    (QueryKind::Vct, 0),
 ];
 
-/// A constant environment `SKY` stored at `radius` metres around `center`: a dome the
-/// impostor queries can trace.
-fn dome(center: Vec3, radius: f32) -> EnvMap {
-    let mut map = EnvMap::constant(128, 64, SKY);
-    map.center = center;
-    map.distance = vec![radius; map.radiance.len()];
-    map
+/// A constant environment `SKY` at `radius` metres around a centre, as the distance
+/// impostor the impostor queries trace and as the voxel volume `vct` marches.
+struct Dome {
+    env: EnvMap,
+    voxels: VoxelVolume,
 }
 
-/// The floor scene with `objects` under `env`, marched with the CPU's own lanes.
+impl Dome {
+    fn world(&self) -> (Option<&EnvMap>, Option<&VoxelVolume>) {
+        (Some(&self.env), Some(&self.voxels))
+    }
+}
+
+fn dome(center: Vec3, radius: f32) -> Dome {
+    let mut env = EnvMap::constant(128, 64, SKY);
+    env.center = center;
+    env.distance = vec![radius; env.radiance.len()];
+    // Samples on the sphere about half a voxel apart.
+    let voxel = 0.1;
+    let rings = (std::f32::consts::PI * radius / (0.5 * voxel)) as u32;
+    let mut positions = Vec::new();
+    for ring in 0..=rings {
+        let theta = std::f32::consts::PI * ring as f32 / rings as f32;
+        let around = ((2.0 * rings as f32 * theta.sin()) as u32).max(1);
+        for k in 0..around {
+            let phi = 2.0 * PI * k as f32 / around as f32;
+            let d = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
+            positions.push(center + d * radius);
+        }
+    }
+    let radiances = vec![SKY; positions.len()];
+    let voxels = VoxelVolume::from_points(&positions, &radiances, voxel).unwrap();
+    Dome { env, voxels }
+}
+
+/// The floor scene with `objects` under `dome`, marched with the CPU's own lanes.
 fn run_floor(
     objects: &VirtualScene,
     table: &LightTable,
-    env: &EnvMap,
+    dome: &Dome,
     params: &PathParams,
 ) -> IrradianceLayers {
     let lanes = simd::Kernel::detect();
-    run_with_environment(&floor_scene(), objects, table, Some(env), params, lanes)
+    run_with_environment(&floor_scene(), objects, table, dome.world(), params, lanes)
 }
 
 fn params(query: QueryKind, iterations: u32) -> PathParams {
@@ -122,7 +154,7 @@ fn every_query_keeps_e_rv_equal_to_e_r_where_no_path_met_an_object() {
                 &floor_scene(),
                 &objects,
                 &table,
-                Some(&env),
+                env.world(),
                 &p,
                 simd::Kernel::Portable,
             );
@@ -155,6 +187,14 @@ fn an_object_beyond_the_impostor_casts_no_shadow_but_one_at_infinity_does() {
                 touched > 100 && rv.x < r.x,
                 "ssrt: {touched} touched, {rv} vs {r}"
             );
+        } else if query == QueryKind::Vct {
+            // The volume holds the dome as what it is, a shell: floor points outside
+            // it see the sphere with nothing in between. Inside, the dome hides it.
+            let inside = (0..out.touched.data.len())
+                .filter(|&i| (out.world_position.data[i] - env.env.center).length() < 1.2);
+            let touched_inside = inside.filter(|&i| out.touched.data[i] != 0).count();
+            assert_eq!(touched_inside, 0, "{query:?}");
+            assert!(same_bits(r, rv), "{query:?}");
         } else {
             assert_eq!(touched, 0, "{query:?}");
             assert!(same_bits(r, rv), "{query:?}");
@@ -174,7 +214,7 @@ fn visibility_switches_the_objects_self_occlusion() {
     let above = gray_sphere(SPHERE_CENTER + Vec3::new(0.0, 2.2 * SPHERE_RADIUS, 0.0));
     objects.triangles.extend(above.triangles);
     objects.rebuild();
-    for query in [QueryKind::Em, QueryKind::Dit] {
+    for query in [QueryKind::Em, QueryKind::Dit, QueryKind::Vct] {
         let run = |visibility| {
             let p = PathParams {
                 visibility,
@@ -196,4 +236,21 @@ fn visibility_switches_the_objects_self_occlusion() {
         assert!((b - 1.0).abs() < 0.06, "{query:?}: without visibility {b}");
         assert!(a < b - 0.03, "{query:?}: with visibility {a}, without {b}");
     }
+}
+
+#[test]
+fn vct_cones_leave_a_convex_object_unshadowed_by_itself() {
+    // A lone sphere cannot shadow itself: the cones of its direct samples start off
+    // its surface (LEAVE_VOXELS) and must find its solid volume clear.
+    let table = uniform_table(4096);
+    let env = dome(Vec3::new(0.0, 1.0, 1.0), 6.0);
+    let objects = gray_sphere(SPHERE_CENTER);
+    let out = run_floor(&objects, &table, &env, &params(QueryKind::Vct, 0));
+    let virtual_pixels: Vec<f32> = (0..(W * H) as usize)
+        .filter(|&i| out.mask.data[i] == 0.0)
+        .map(|i| out.e_rv_dir.data[i].x / (PI * SKY.x))
+        .collect();
+    assert!(virtual_pixels.len() > 150, "{}", virtual_pixels.len());
+    let mean = virtual_pixels.iter().sum::<f32>() / virtual_pixels.len() as f32;
+    assert!((mean - 1.0).abs() < 0.06, "E_dir / (pi L) = {mean}");
 }

@@ -1,15 +1,17 @@
 //! The rays of a span, answered by the stage's radiance query
 //! ([`crate::stages::sample::query`]): with `ssrt` they are queued in camera space and
 //! marched together ([`TraceBatch`], eight lanes at a time where the CPU has AVX2); with
-//! the impostor queries each is answered as it is pushed (a lookup or a few, no march),
-//! by the caller, who knows when an answer can be had for less (see
-//! `Kernel::impostor_direct` and [`NOT_ASKED`]). Either way [`RayBatch::hits`] holds
+//! the world-space queries ([`WorldQuery`]: the impostor's and the voxel volume's) each
+//! is answered as it is pushed, by the caller, who knows when an answer can be had for
+//! less (see `Kernel::world_direct` and [`NOT_ASKED`]). Either way [`RayBatch::hits`] holds
 //! one answer per ray, in push order. The questions the estimator asks one ray at a
 //! time (the object-aware candidates, the bounce off an object) are here too.
 
 use super::kernel::{Kernel, RealPoint};
 use crate::simd;
-use crate::stages::sample::query::{Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery, Source};
+use crate::stages::sample::query::{
+    Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery, Source, VoxelQuery,
+};
 use crate::stages::sample::ssrt::{RayOrigin, TraceBatch};
 use glam::{Vec3, Vec3A};
 
@@ -23,6 +25,24 @@ pub(super) const NOT_ASKED: Hit = Hit {
     source: Source::Environment,
 };
 
+/// The queries answered in world space, ray by ray as the rays are drawn (no
+/// screen-space march to batch): the distance impostor's (`em`, `dit`) and the voxel
+/// volume's (`vct`).
+pub(super) enum WorldQuery<'a> {
+    Impostor(ImpostorQuery),
+    Voxels(VoxelQuery<'a>),
+}
+
+impl RadianceQuery for WorldQuery<'_> {
+    #[inline]
+    fn query(&self, ray: &Ray) -> Option<Hit> {
+        match self {
+            WorldQuery::Impostor(q) => q.query(ray),
+            WorldQuery::Voxels(q) => q.query(ray),
+        }
+    }
+}
+
 /// A span's rays and their answers; reused from span to span (one per rayon worker,
 /// so the box around the large screen-space batch costs nothing per ray).
 pub(super) enum RayBatch<'t> {
@@ -32,9 +52,9 @@ pub(super) enum RayBatch<'t> {
         query: ScreenQuery<'t>,
         hits: Vec<Option<Hit>>,
     },
-    /// The distance impostor: answered at once.
-    Impostor {
-        query: &'t ImpostorQuery,
+    /// A world-space query: answered at once.
+    World {
+        query: &'t WorldQuery<'t>,
         hits: Vec<Option<Hit>>,
     },
 }
@@ -47,18 +67,18 @@ impl<'t> RayBatch<'t> {
                 batch.clear();
                 hits.clear();
             }
-            RayBatch::Impostor { hits, .. } => hits.clear(),
+            RayBatch::World { hits, .. } => hits.clear(),
         }
     }
 
-    /// Adds a ray and returns its index. `impostor` answers it with the impostor
-    /// query (called only by the impostor queries), `camera` gives its projected
-    /// origin and camera-space direction (called only by screen-space marching, whose
-    /// rays end after `max_distance`).
+    /// Adds a ray and returns its index. `world` answers it with the world-space
+    /// query (called only by those queries), `camera` gives its projected origin and
+    /// camera-space direction (called only by screen-space marching, whose rays end
+    /// after `max_distance`).
     #[inline]
     pub(super) fn push(
         &mut self,
-        impostor: impl FnOnce(&ImpostorQuery) -> Option<Hit>,
+        world: impl FnOnce(&WorldQuery) -> Option<Hit>,
         camera: impl FnOnce() -> (Option<RayOrigin>, Vec3),
         max_distance: f32,
     ) -> usize {
@@ -67,8 +87,8 @@ impl<'t> RayBatch<'t> {
                 let (origin, dir) = camera();
                 batch.push(origin.as_ref(), dir, max_distance)
             }
-            RayBatch::Impostor { query, hits } => {
-                hits.push(impostor(query));
+            RayBatch::World { query, hits } => {
+                hits.push(world(query));
                 hits.len() - 1
             }
         }
@@ -87,7 +107,7 @@ impl<'t> RayBatch<'t> {
     /// Per ray, in push order: what the query answered.
     pub(super) fn hits(&self) -> &[Option<Hit>] {
         match self {
-            RayBatch::Screen { hits, .. } | RayBatch::Impostor { hits, .. } => hits,
+            RayBatch::Screen { hits, .. } | RayBatch::World { hits, .. } => hits,
         }
     }
 }
@@ -104,12 +124,14 @@ impl Kernel<'_> {
         }
     }
 
-    /// The world ray from the real point along camera-space direction `dir_camera`.
+    /// The world cone (of an indirect sample's aperture) from the real point along
+    /// camera-space direction `dir_camera`.
     #[inline]
     pub(super) fn real_ray(&self, rp: &RealPoint, dir_camera: Vec3) -> Ray {
-        Ray::unbounded(
-            rp.world,
+        Ray::cone(
+            rp.query_origin,
             Vec3::from(self.to_world * Vec3A::from(dir_camera)),
+            self.indirect_spread,
         )
     }
 
@@ -127,18 +149,18 @@ impl Kernel<'_> {
     /// the real point.
     #[inline]
     pub(super) fn query_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
-        match &self.impostor {
+        match &self.world_query {
             Some(query) => query.query(&self.real_ray(rp, dir_camera)),
             None => self.screen_from_real(rp, dir_camera),
         }
     }
 
-    /// The impostor's answer for table sample `sample` from `origin`: looked up once
-    /// per frame for `em`, traced for `dit`.
+    /// The world-space query's answer for table sample `sample` from `origin` (a
+    /// cone of a direct sample's aperture): looked up once per frame for `em`.
     #[inline]
-    pub(super) fn impostor_direct(
+    pub(super) fn world_direct(
         &self,
-        query: &ImpostorQuery,
+        query: &WorldQuery,
         origin: Vec3,
         sample: usize,
     ) -> Option<Hit> {
@@ -146,7 +168,7 @@ impl Kernel<'_> {
             Some(&answer) => answer,
             None => {
                 let dir = self.inputs.table.samples[sample].direction;
-                query.query(&Ray::unbounded(origin, dir))
+                query.query(&Ray::cone(origin, dir, self.direct_spread))
             }
         }
     }
@@ -155,17 +177,18 @@ impl Kernel<'_> {
     /// the real point.
     #[inline]
     pub(super) fn direct_arrival(&self, rp: &RealPoint, sample: usize) -> Option<Hit> {
-        match &self.impostor {
-            Some(query) => self.impostor_direct(query, rp.world, sample),
+        match &self.world_query {
+            Some(query) => self.world_direct(query, rp.query_origin, sample),
             None => self.screen_from_real(rp, self.table_camera[sample]),
         }
     }
 
-    /// What the stage's query answers along world ray `origin + t dir`.
+    /// What the stage's query answers along world direction `dir` from `origin` (a
+    /// cone of a direct sample's aperture).
     #[inline]
     pub(super) fn query_world(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
-        let ray = Ray::unbounded(origin, dir);
-        match &self.impostor {
+        let ray = Ray::cone(origin, dir, self.direct_spread);
+        match &self.world_query {
             Some(query) => query.query(&ray),
             None => self.screen().query(&ray),
         }

@@ -8,12 +8,12 @@
 
 use super::PathParams;
 use super::kernel::{Kernel, RealPoint};
-use super::rays::{NOT_ASKED, RayBatch};
+use super::rays::{NOT_ASKED, RayBatch, WorldQuery};
 use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
 use super::virtual_paths::{VirtualDirect, VirtualIndirect};
 use crate::objects::VirtualHit;
 use crate::stages::sample::layers::PixelLayers;
-use crate::stages::sample::query::{ImpostorQuery, RadianceQuery};
+use crate::stages::sample::query::RadianceQuery;
 use crate::stages::sample::ssrt::TraceBatch;
 use glam::Vec3;
 
@@ -83,8 +83,8 @@ impl<'t> Span<'t> {
         let direct = SPAN_PIXELS * (params.primary * params.direct) as usize;
         let indirect = SPAN_PIXELS * (params.primary * params.indirect) as usize;
         let hits = Vec::with_capacity(direct + indirect);
-        let batch = match &kernel.impostor {
-            Some(query) => RayBatch::Impostor { query, hits },
+        let batch = match &kernel.world_query {
+            Some(query) => RayBatch::World { query, hits },
             None => RayBatch::Screen {
                 batch: Box::new(TraceBatch::new(&kernel.tracer, direct + indirect)),
                 query: kernel.screen(),
@@ -226,7 +226,7 @@ impl Kernel<'_> {
                         sample,
                         cos,
                         ray: span.batch.push(
-                            |q| self.impostor_direct(q, rp.world, sample),
+                            |q| self.world_direct(q, rp.query_origin, sample),
                             || (rp.origin, self.table_camera[sample]),
                             t_max,
                         ),
@@ -237,9 +237,9 @@ impl Kernel<'_> {
         for s in 0..params.primary * params.indirect {
             let (u1, u2) = indirect_stream.pair(s as u64);
             let dir_camera = rp.basis_camera.to_world(cosine_hemisphere(u1, u2));
-            // For the impostor, only rays that may meet an object need their
-            // distance (see `real_samples`).
-            let impostor = |q: &ImpostorQuery| {
+            // For the world-space queries, only rays that may meet an object need
+            // their distance (see `real_samples`).
+            let world = |q: &WorldQuery| {
                 if self.params.object_aware || !rp.cone_camera.admits(dir_camera) {
                     return Some(NOT_ASKED);
                 }
@@ -247,7 +247,7 @@ impl Kernel<'_> {
             };
             span.indirect.push(IndirectRay {
                 dir_camera,
-                ray: span.batch.push(impostor, || (rp.origin, dir_camera), t_max),
+                ray: span.batch.push(world, || (rp.origin, dir_camera), t_max),
             });
         }
     }

@@ -37,6 +37,8 @@ fn empty_tables_images_and_bad_sizes_are_handled() {
         camera_to_world: pose(),
         table: &table,
         environment: None,
+        voxels: None,
+        object_voxels: None,
         objects: &objects,
         frame: 0,
     };
@@ -117,6 +119,8 @@ fn the_stage_reads_its_products_and_writes_every_output() {
         camera_to_world: Affine3A::from_mat4(pose_record.matrix().as_mat4()),
         table: &table,
         environment: None,
+        voxels: None,
+        object_voxels: None,
         objects: &objects,
         frame: 7,
     };

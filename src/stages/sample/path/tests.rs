@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::light::LightSample;
+use crate::light::voxels::VoxelVolume;
 use crate::objects::{Material, Triangle};
 use crate::raster::Image;
 use glam::Vec3;
@@ -133,15 +134,16 @@ pub(super) fn run_with_kernel(
     params: &PathParams,
     lanes: simd::Kernel,
 ) -> IrradianceLayers {
-    run_with_environment(scene, objects, table, None, params, lanes)
+    run_with_environment(scene, objects, table, (None, None), params, lanes)
 }
 
-/// [`run_with_kernel`] with a distance impostor for the `em` and `dit` queries.
+/// [`run_with_kernel`] with a distance impostor for the `em` and `dit` queries and a
+/// voxel volume for `vct`.
 pub(super) fn run_with_environment(
     scene: &Scene,
     objects: &VirtualScene,
     table: &LightTable,
-    environment: Option<&EnvMap>,
+    (environment, voxels): (Option<&EnvMap>, Option<&VoxelVolume>),
     params: &PathParams,
     lanes: simd::Kernel,
 ) -> IrradianceLayers {
@@ -153,7 +155,9 @@ pub(super) fn run_with_environment(
         camera_to_world: pose(),
         table,
         environment,
+        voxels,
         objects,
+        object_voxels: None,
         frame: 7,
     };
     let mut out = IrradianceLayers::new(W, H);

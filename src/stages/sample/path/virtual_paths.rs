@@ -5,8 +5,9 @@
 use super::kernel::{Acc, Kernel, SURFACE_OFFSET};
 use super::rays::RayBatch;
 use super::sampling::{Basis, Stream, below, cosine_hemisphere, phong_lobe, phong_weight};
+use crate::light::voxels::OPAQUE;
 use crate::objects::VirtualHit;
-use crate::stages::sample::query::{Hit, RadianceQuery, Ray, Source};
+use crate::stages::sample::query::{Hit, RadianceQuery, Ray, Source, cone_spread};
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
 
@@ -19,8 +20,15 @@ pub(super) enum VirtualDirect {
     /// Table sample `sample` at cosine `cos` to the normal, blocked by a virtual surface
     /// at distance `t`.
     Blocked { sample: usize, cos: f32, t: f32 },
-    /// Table sample `sample` at cosine `cos`, whose ray is `ray` in the span's batch.
-    Open { sample: usize, cos: f32, ray: usize },
+    /// Table sample `sample` at cosine `cos`, whose ray is `ray` in the span's batch,
+    /// `visible` the share of its light the objects let through (1 but under `vct`,
+    /// whose cones are partly blocked).
+    Open {
+        sample: usize,
+        cos: f32,
+        ray: usize,
+        visible: f32,
+    },
 }
 
 /// An indirect sample at a virtual primary: its world direction and weight, and its
@@ -82,22 +90,31 @@ impl Kernel<'_> {
                 Some((sample, ls)) => {
                     let cos = n.dot(ls.direction);
                     if cos > 0.0 && ls.pdf > 0.0 {
-                        match objects
-                            .and_then(|o| o.hit(surface.origin, ls.direction, f32::INFINITY))
-                        {
-                            Some(blocker) => VirtualDirect::Blocked {
-                                sample,
-                                cos,
-                                t: blocker.t,
-                            },
+                        let (blocker, visible) = match (objects, self.object_volume) {
+                            (Some(_), Some(volume)) => {
+                                let cone =
+                                    self.object_shadow(volume, hit.position, n, ls.direction);
+                                let blocked = cone.opacity >= OPAQUE;
+                                (blocked.then_some(cone.t_half), 1.0 - cone.opacity)
+                            }
+                            (Some(o), None) => (
+                                o.hit(surface.origin, ls.direction, f32::INFINITY)
+                                    .map(|b| b.t),
+                                1.0,
+                            ),
+                            _ => (None, 1.0),
+                        };
+                        match blocker {
+                            Some(t) => VirtualDirect::Blocked { sample, cos, t },
                             None => VirtualDirect::Open {
                                 sample,
                                 cos,
                                 ray: batch.push(
-                                    |q| self.impostor_direct(q, surface.origin, sample),
+                                    |q| self.world_direct(q, surface.origin, sample),
                                     || self.tracer.camera_ray(surface.origin, ls.direction),
                                     t_max,
                                 ),
+                                visible,
                             },
                         }
                     } else {
@@ -113,6 +130,13 @@ impl Kernel<'_> {
         } else {
             n
         });
+        // `vct`: the cones share the lobe (the Phong lobe's width when glossy).
+        let exponent = if surface.glossy {
+            hit.material.exponent
+        } else {
+            0.0
+        };
+        let spread = cone_spread(params.primary * params.indirect, exponent);
         for k in 0..params.indirect {
             let s = j * params.indirect + k;
             let (u1, u2) = indirect_stream.pair(s as u64);
@@ -133,7 +157,7 @@ impl Kernel<'_> {
             };
             let ray = (weight > 0.0).then(|| {
                 batch.push(
-                    |q| q.query(&Ray::unbounded(surface.origin, dir)),
+                    |q| q.query(&Ray::cone(surface.origin, dir, spread)),
                     || self.tracer.camera_ray(surface.origin, dir),
                     t_max,
                 )
@@ -165,7 +189,12 @@ impl Kernel<'_> {
                 VirtualDirect::Blocked { sample, cos, t } => {
                     self.record_occluder(acc, table[sample].radiance, t, cos);
                 }
-                VirtualDirect::Open { sample, cos, ray } => {
+                VirtualDirect::Open {
+                    sample,
+                    cos,
+                    ray,
+                    visible,
+                } => {
                     let ls = &table[sample];
                     match hits[ray] {
                         Some(Hit {
@@ -183,7 +212,7 @@ impl Kernel<'_> {
                             } else {
                                 1.0
                             };
-                            c = radiance * (cos / ls.pdf * lobe);
+                            c = radiance * (cos / ls.pdf * lobe * visible);
                         }
                     }
                 }
@@ -258,13 +287,21 @@ impl Kernel<'_> {
             return Vec3::ZERO;
         }
         let origin = hit.position + hit.normal * SURFACE_OFFSET;
+        let mut visible = 1.0;
         if self.params.visibility
-            && self
-                .objects
-                .as_ref()
-                .is_some_and(|o| o.hit(origin, ls.direction, f32::INFINITY).is_some())
+            && let Some(objects) = &self.objects
         {
-            return Vec3::ZERO;
+            match self.object_volume {
+                Some(volume) => {
+                    visible -= self
+                        .object_shadow(volume, hit.position, hit.normal, ls.direction)
+                        .opacity;
+                }
+                None if objects.hit(origin, ls.direction, f32::INFINITY).is_some() => {
+                    return Vec3::ZERO;
+                }
+                None => {}
+            }
         }
         let radiance = match self.query_world(origin, ls.direction) {
             Some(Hit {
@@ -274,6 +311,6 @@ impl Kernel<'_> {
             Some(h) => h.radiance,
             None => ls.radiance,
         };
-        hit.material.albedo * FRAC_1_PI * radiance * (cos / ls.pdf)
+        hit.material.albedo * FRAC_1_PI * radiance * (cos / ls.pdf * visible)
     }
 }

@@ -9,6 +9,7 @@
 //! | `ssrt` | [`ScreenQuery`] | the fused depth map, marched in screen space within `max_distance`; beyond it the environment map stands, looked up by direction |
 //! | `em` | [`ImpostorQuery`] with 0 iterations | the distance impostor looked up by direction alone (Environment Mapping, Sec. 6.1) |
 //! | `dit` | [`ImpostorQuery`] | the distance impostor traced: the lookup refined from its stored distances until the ray crosses the stored surface (Distance Impostor Tracing, Sec. 6.1, after Szirmay-Kalos et al.) |
+//! | `vct` | [`VoxelQuery`] | the environment cloud voxelized into a mip-mapped volume, marched by cones (Voxel Cone Tracing, Secs. 6.1 and 6.5, after Crassin et al.) |
 //!
 //! This module is a leaf: it knows rays, maps and depth images, not stages.
 //!
@@ -23,29 +24,41 @@
 
 mod impostor;
 mod screen;
+mod voxels;
 
 pub use impostor::{ImpostorQuery, MAX_FACE_SIZE, MAX_ITERATIONS, START_DISTANCE, TracedImpostor};
 pub use screen::ScreenQuery;
+pub use voxels::{MAX_SPREAD, MIN_OPACITY, VoxelQuery, cone_spread};
 
 use glam::Vec3;
 
-/// A ray of the query: `origin + t dir` for 0 <= t <= `t_max` (world space, metres;
-/// `dir` unit).
+/// A ray or a cone of the query: `origin + t dir` for 0 <= t <= `t_max` (world space,
+/// metres; `dir` unit), `spread` the tangent of the cone's half aperture (0: a ray).
+/// Only [`VoxelQuery`] reads `spread`; the others answer the cone's axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ray {
     pub origin: Vec3,
     pub dir: Vec3,
     pub t_max: f32,
+    pub spread: f32,
 }
 
 impl Ray {
     /// The ray `origin + t dir` for every t >= 0.
     #[inline]
     pub fn unbounded(origin: Vec3, dir: Vec3) -> Ray {
+        Ray::cone(origin, dir, 0.0)
+    }
+
+    /// The cone about `origin + t dir` for every t >= 0 whose half aperture has tangent
+    /// `spread`.
+    #[inline]
+    pub fn cone(origin: Vec3, dir: Vec3, spread: f32) -> Ray {
         Ray {
             origin,
             dir,
             t_max: f32::INFINITY,
+            spread,
         }
     }
 }
@@ -80,13 +93,20 @@ pub enum QueryKind {
     Em,
     /// Distance Impostor Tracing.
     Dit,
+    /// Voxel Cone Tracing.
+    Vct,
 }
 
 impl QueryKind {
     /// Every kind, in the order of [`QueryKind::NAMES`].
-    const ALL: [QueryKind; 3] = [QueryKind::Ssrt, QueryKind::Em, QueryKind::Dit];
+    const ALL: [QueryKind; 4] = [
+        QueryKind::Ssrt,
+        QueryKind::Em,
+        QueryKind::Dit,
+        QueryKind::Vct,
+    ];
     /// The parameter values, in the order of the variants.
-    pub const NAMES: &'static [&'static str] = &["ssrt", "em", "dit"];
+    pub const NAMES: &'static [&'static str] = &["ssrt", "em", "dit", "vct"];
 
     /// The kind named `name` (one of [`QueryKind::NAMES`]).
     pub fn from_name(name: &str) -> Option<QueryKind> {
@@ -102,7 +122,12 @@ impl QueryKind {
     /// Whether the implementation reads the distance impostor (an environment map with
     /// distances).
     pub fn needs_environment(self) -> bool {
-        self != QueryKind::Ssrt
+        matches!(self, QueryKind::Em | QueryKind::Dit)
+    }
+
+    /// Whether the implementation reads the scene's voxel volume (`light.voxels`).
+    pub fn needs_voxels(self) -> bool {
+        self == QueryKind::Vct
     }
 }
 

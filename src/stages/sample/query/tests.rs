@@ -109,6 +109,7 @@ fn dit_radiance_approaches_the_wall_seen_along_the_ray() {
                     origin,
                     dir: d,
                     t_max: f32::INFINITY,
+                    spread: 0.0,
                 };
                 let hit = q.query(&ray).expect("every ray meets the impostor");
                 assert_eq!(hit.source, Source::Environment);
@@ -141,6 +142,7 @@ fn dit_with_zero_iterations_is_environment_mapping() {
             origin,
             dir: d,
             t_max: f32::INFINITY,
+            spread: 0.0,
         };
         let hit = em.query(&ray).unwrap();
         assert_eq!(hit.radiance, em.cube.radiance[texel]);
@@ -264,6 +266,7 @@ fn query_kinds_round_trip_their_names() {
     for &name in QueryKind::NAMES {
         assert_eq!(QueryKind::from_name(name).unwrap().name(), name);
     }
-    assert_eq!(QueryKind::from_name("vct"), None);
+    assert_eq!(QueryKind::from_name("vtc"), None);
+    assert!(QueryKind::Vct.needs_voxels() && !QueryKind::Vct.needs_environment());
     assert_eq!(QueryKind::default(), QueryKind::Ssrt);
 }

@@ -1,0 +1,76 @@
+//! `light.voxels` (paper 000 Sec. 6.1, "(Scene) Voxel Volume"): the environment-sample
+//! cloud voxelized into a mip-mapped volume of radiance and opacity, which
+//! `sample.path`'s `query = "vct"` marches cones through. The math is
+//! [`crate::light::voxels`].
+//!
+//! The cloud already holds the current frame's fused depth (`cloud.samples` adds it),
+//! so the volume is the whole reconstructed room. It is rebuilt only when the cloud
+//! changes (a new `Arc`); a frame without the cloud (the first frame when reading
+//! `cloud@prev`) gets an empty volume, through which every cone stays clear.
+
+use crate::graph::{
+    EnvCloud, Frame, ParamDefault, ParamSpec, Port, Ports, Product, ProductKind, Stage, StageError,
+    StageInfo,
+};
+use crate::light::voxels::VoxelVolume;
+use std::sync::Arc;
+
+const PARAMS: &[ParamSpec] = &[ParamSpec::new(
+    "voxel_size",
+    ParamDefault::Float(0.04),
+    "edge of the finest voxels in metres (two of the cloud's 2 cm cells; grown where the cloud's extent would need more than 256 a side)",
+)
+.range(1e-4, 100.0)];
+
+pub const INFO: StageInfo = StageInfo {
+    kind: "light.voxels",
+    summary: "a mip-mapped voxel volume of the environment-sample cloud, for voxel cone tracing (paper 000 Sec. 6.1)",
+    params: PARAMS,
+    ports: |_| Ports {
+        // Without a cloud (the first frame under `cloud@prev`) the volume is empty.
+        inputs: vec![Port::new("cloud", "cloud", &[ProductKind::Cloud]).optional()],
+        outputs: vec![Port::new("voxels", "voxels", &[ProductKind::Voxels])],
+    },
+    build: |ctx| {
+        Ok(Box::new(Voxels {
+            cloud: ctx.input("cloud"),
+            voxels: ctx.output("voxels"),
+            voxel_size: ctx.params.float("voxel_size") as f32,
+            last: None,
+        }))
+    },
+};
+
+struct Voxels {
+    cloud: String,
+    voxels: String,
+    voxel_size: f32,
+    /// The last cloud and its volume.
+    last: Option<(Option<Arc<EnvCloud>>, Arc<VoxelVolume>)>,
+}
+
+impl Stage for Voxels {
+    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
+        let cloud = match frame.cloud(&self.cloud) {
+            Ok(c) => Some(Arc::clone(c)),
+            Err(StageError::MissingInput(_)) => None,
+            Err(e) => return Err(e),
+        };
+        let same = match (&self.last, &cloud) {
+            (Some((Some(a), _)), Some(b)) => Arc::ptr_eq(a, b),
+            (Some((None, _)), None) => true,
+            _ => false,
+        };
+        if !same {
+            let volume = match &cloud {
+                Some(c) => VoxelVolume::from_points(&c.positions, &c.colors, self.voxel_size)
+                    .map_err(|e| StageError::Failed(format!("cloud `{}`: {e}", self.cloud)))?,
+                None => VoxelVolume::empty(),
+            };
+            self.last = Some((cloud, Arc::new(volume)));
+        }
+        let volume = Arc::clone(&self.last.as_ref().expect("set above").1);
+        frame.insert(&self.voxels, Product::Voxels(volume));
+        Ok(())
+    }
+}

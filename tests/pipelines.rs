@@ -140,6 +140,59 @@ fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
     }
 }
 
+/// The vct pipeline is the mixed-reality chain with light.voxels added and only
+/// sample.path's query (and the medium preset's object-aware sampling) changed.
+#[test]
+fn the_vct_pipeline_is_mixed_reality_with_voxel_cone_tracing() {
+    let file = |name: &str| {
+        std::fs::read_to_string(format!("{}/pipelines/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    };
+    let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
+    let text = file("mixed-reality-vct.toml");
+    assert_eq!(
+        body(&file("mixed-reality.toml"))
+            .replacen("name = \"mixed-reality\"", "name = \"mixed-reality-vct\"", 1)
+            .replacen("-> light.impostor ->", "-> light.impostor, light.voxels ->", 1)
+            .replacen(
+                "kind = \"light.impostor\"\n",
+                "kind = \"light.impostor\"\n\n[[stage]]\nkind = \"light.voxels\"\n",
+                1
+            )
+            .replacen(
+                "kind = \"sample.path\"\n",
+                "kind = \"sample.path\"\nparams = { query = \"vct\", object_aware = true, candidates = 16, cache_size = 8 }\n",
+                1
+            ),
+        body(&text)
+    );
+    let p = Pipeline::parse(
+        &SourceFile {
+            name: "pipelines/mixed-reality-vct.toml".into(),
+            text: text.clone(),
+        },
+        &Registry::builtin(),
+    )
+    .unwrap();
+    let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
+    assert_eq!(path.inputs["voxels"], "voxels");
+    assert!(!path.inputs.contains_key("environment"));
+    // Without light.voxels the pipeline is refused when it loads.
+    let without = text.replacen("[[stage]]\nkind = \"light.voxels\"\n\n", "", 1);
+    let err = Pipeline::parse(
+        &SourceFile {
+            name: "p.toml".into(),
+            text: without,
+        },
+        &Registry::builtin(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("voxels") && err.contains("sample.path"),
+        "{err}"
+    );
+}
+
 /// The impostor queries read light.impostor's map: a pipeline where no stage makes
 /// it is refused when it loads, naming the missing product and the stage.
 #[test]
@@ -182,5 +235,57 @@ fn an_impostor_query_without_an_environment_map_is_refused_at_load_time() {
     assert!(
         err.contains("`environment`") && err.contains("sample.path"),
         "{err}"
+    );
+}
+
+/// `--set STAGE.PARAM=VALUE` changes a parameter as if the file said so, and a bad
+/// override is reported on its own line, with the file's checks.
+#[test]
+fn set_overrides_change_parameters_and_report_their_own_line() {
+    use relume::graph::ParamOverride;
+    let src = SourceFile {
+        name: "pipelines/mixed-reality-vct.toml".into(),
+        text: std::fs::read_to_string(format!(
+            "{}/pipelines/mixed-reality-vct.toml",
+            env!("CARGO_MANIFEST_DIR")
+        ))
+        .unwrap(),
+    };
+    let set =
+        |list: &[&str]| -> Vec<ParamOverride> { list.iter().map(|s| s.parse().unwrap()).collect() };
+    let p = Pipeline::parse_with(
+        &src,
+        &Registry::builtin(),
+        &set(&[
+            "sample.path.query=em",
+            "sample.path.direct=8",
+            "write.hdr.formats=[\"exr\"]",
+        ]),
+    )
+    .unwrap();
+    let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
+    assert_eq!(path.params.str("query"), "em");
+    assert_eq!(path.params.int("direct"), 8);
+    // The file's own value stays where it is not overridden.
+    assert_eq!(path.params.int("cache_size"), 8);
+    assert_eq!(path.inputs["environment"], "environment");
+    let err = |list: &[&str]| {
+        Pipeline::parse_with(&src, &Registry::builtin(), &set(list))
+            .unwrap_err()
+            .to_string()
+    };
+    let typo = err(&["sample.path.quer=vct"]);
+    assert!(
+        typo.contains("unknown parameter `quer`")
+            && typo.contains("# --set sample.path.quer = \"vct\"")
+            && typo.contains("did you mean `query`?"),
+        "{typo}"
+    );
+    let range = err(&["sample.path.direct=500"]);
+    assert!(range.contains("out of range (0 to 64)"), "{range}");
+    let stage = err(&["sample.paths.direct=5"]);
+    assert!(
+        stage.contains("no stage named `sample.paths`") && stage.contains("light.voxels"),
+        "{stage}"
     );
 }

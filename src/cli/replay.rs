@@ -36,6 +36,11 @@ pub struct RunArgs {
     /// Seed for stages that draw random numbers.
     #[arg(long, default_value_t = 1)]
     pub(super) seed: u64,
+    /// Change a stage's parameter for this run, as if the pipeline file said so:
+    /// STAGE.PARAM=VALUE, STAGE being the stage's name (its kind when it has none).
+    /// Repeatable. E.g. --set sample.path.query=vct --set sample.path.direct=8
+    #[arg(long = "set", value_name = "STAGE.PARAM=VALUE")]
+    pub(super) overrides: Vec<relume::graph::ParamOverride>,
 }
 
 #[derive(Parser, Debug)]
@@ -105,8 +110,8 @@ pub(super) struct Loaded {
 pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
     let registry = Registry::builtin();
     let pipeline = match &args.pipeline {
-        Some(p) => Pipeline::load(p, &registry)?,
-        None => Pipeline::builtin_default(&registry)?,
+        Some(p) => Pipeline::load_with(p, &registry, &args.overrides)?,
+        None => Pipeline::builtin_default_with(&registry, &args.overrides)?,
     };
     let path = match &args.recording {
         Some(p) => p.clone(),

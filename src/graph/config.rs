@@ -433,6 +433,33 @@ fn string_table(
         .collect()
 }
 
+/// `text` parsed as one TOML value, its span shifted by `offset` (where it stands in
+/// the text errors quote); the error is toml's message.
+pub fn raw_value(text: &str, offset: usize) -> Result<Located<RawValue>, String> {
+    let doc = format!("v = {text}");
+    let table =
+        DeTable::parse(&doc).map_err(|e| format!("invalid TOML value: {}", e.message().trim()))?;
+    let table = table.into_inner();
+    let v = table.get("v").ok_or("invalid TOML value")?;
+    if table.len() != 1 {
+        return Err("invalid TOML value: more than one value".into());
+    }
+    let mut located = raw(v);
+    shift(&mut located, offset as isize - 4);
+    Ok(located)
+}
+
+/// Moves a value's spans (and its elements') by `by` bytes.
+fn shift(v: &mut Located<RawValue>, by: isize) {
+    let at = |i: usize| (i as isize + by).max(0) as usize;
+    v.span = at(v.span.start)..at(v.span.end);
+    if let RawValue::Array(items) = &mut v.value {
+        for item in items {
+            shift(item, by);
+        }
+    }
+}
+
 /// Converts a TOML value to a [`RawValue`] with its span.
 fn raw(v: &Spanned<DeValue<'_>>) -> Located<RawValue> {
     let value = match v.get_ref() {

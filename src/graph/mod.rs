@@ -3,6 +3,7 @@
 pub mod config;
 pub mod frame;
 pub mod memory;
+pub mod overrides;
 pub mod params;
 pub mod pipeline;
 pub mod product;
@@ -13,6 +14,7 @@ pub mod timing;
 
 pub use config::{ConfigError, SourceFile};
 pub use frame::Frame;
+pub use overrides::ParamOverride;
 pub use params::{ParamDefault, ParamSpec, ParamValue, Params};
 pub use pipeline::{Feedback, Pipeline, ResolvedStage};
 pub use product::{Compensation, EnvCloud, PairCounts, Product, ProductKind};

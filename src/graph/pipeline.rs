@@ -61,26 +61,57 @@ pub struct Pipeline {
 impl Pipeline {
     /// Loads and checks the pipeline file at `path`.
     pub fn load(path: &Path, registry: &Registry) -> Result<Pipeline, ConfigError> {
+        Pipeline::load_with(path, registry, &[])
+    }
+
+    /// [`Pipeline::load`] with `--set` overrides.
+    pub fn load_with(
+        path: &Path,
+        registry: &Registry,
+        overrides: &[super::ParamOverride],
+    ) -> Result<Pipeline, ConfigError> {
         let name = path.display().to_string();
         let text = crate::files::read_regular_to_string(path).map_err(|e| {
             ConfigError::whole_file(&name, format!("cannot read the pipeline: {e}"))
         })?;
-        Pipeline::parse(&SourceFile { name, text }, registry)
+        Pipeline::parse_with(&SourceFile { name, text }, registry, overrides)
     }
 
     /// The built-in default pipeline.
     pub fn builtin_default(registry: &Registry) -> Result<Pipeline, ConfigError> {
+        Pipeline::builtin_default_with(registry, &[])
+    }
+
+    /// [`Pipeline::builtin_default`] with `--set` overrides.
+    pub fn builtin_default_with(
+        registry: &Registry,
+        overrides: &[super::ParamOverride],
+    ) -> Result<Pipeline, ConfigError> {
         let src = SourceFile {
             name: "<built-in pipelines/default.toml>".into(),
             text: DEFAULT_PIPELINE_TOML.into(),
         };
-        Pipeline::parse(&src, registry)
+        Pipeline::parse_with(&src, registry, overrides)
     }
 
     /// Parses and checks a pipeline from text.
     pub fn parse(src: &SourceFile, registry: &Registry) -> Result<Pipeline, ConfigError> {
-        let decl = config::parse(src)?;
-        Pipeline::resolve(&decl, src, registry)
+        Pipeline::parse_with(src, registry, &[])
+    }
+
+    /// [`Pipeline::parse`] with stages' parameters changed by `overrides` (`--set`;
+    /// see [`super::overrides`]), checked as if the file said so.
+    pub fn parse_with(
+        src: &SourceFile,
+        registry: &Registry,
+        overrides: &[super::ParamOverride],
+    ) -> Result<Pipeline, ConfigError> {
+        let mut decl = config::parse(src)?;
+        if overrides.is_empty() {
+            return Pipeline::resolve(&decl, src, registry);
+        }
+        let src = super::overrides::apply(&mut decl, src, overrides)?;
+        Pipeline::resolve(&decl, &src, registry)
     }
 
     /// Checks a parsed pipeline against the registry.

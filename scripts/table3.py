@@ -1,0 +1,60 @@
+#!/usr/bin/env python3
+"""Paper 000's Table 3 with `relume bench`: sample.path's median ms per frame for each
+radiance query (ssrt, em, dit, vct), N = 16, 32 and 64 samples per pixel and layer,
+with and without the objects' self-occlusion (visibility).
+
+    scripts/table3.py [RECORDING] [--frames 10..12] [--counts 16,32,64] [--relume PATH]
+
+Each cell is one `relume bench --isolated --json` of pipelines/mixed-reality-vct.toml
+(it makes both the distance impostor and the voxel volume, so every query can run)
+with `--set sample.path.query=... --set sample.path.direct=N/4 ...` (4 primaries);
+object-aware sampling off, as in the paper's table. Standard library only.
+"""
+
+import argparse
+import json
+import subprocess
+import sys
+
+QUERIES = ["ssrt", "em", "dit", "vct"]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("recording", nargs="?", help="default: the built-in recording")
+    ap.add_argument("--frames", default="10..12")
+    ap.add_argument("--counts", default="16,32,64")
+    ap.add_argument("--repeat", default="1")
+    ap.add_argument("--relume", default="target/release/relume")
+    a = ap.parse_args()
+    counts = [int(n) for n in a.counts.split(",")]
+    rows = []
+    for query in QUERIES:
+        row = [query]
+        for n in counts:
+            for visibility in ["true", "false"]:
+                per_primary = max(n // 4, 1)
+                cmd = [a.relume, "bench", "--isolated", "--json", "--repeat", a.repeat,
+                       "--frames", a.frames, "-p", "pipelines/mixed-reality-vct.toml"]
+                if a.recording:
+                    cmd.append(a.recording)
+                for key, value in [("query", query), ("visibility", visibility),
+                                   ("object_aware", "false"),
+                                   ("direct", per_primary), ("indirect", per_primary)]:
+                    cmd += ["--set", f"sample.path.{key}={value}"]
+                done = subprocess.run(cmd, capture_output=True, text=True)
+                if done.returncode != 0:
+                    sys.exit(f"{' '.join(cmd)}\n{done.stderr}")
+                ms = json.loads(done.stdout)["stages"]["sample.path"]["median_ms"]
+                row.append(f"{ms:.0f}")
+                print(f"{query} N={n} visibility={visibility}: {ms:.0f} ms", file=sys.stderr)
+        rows.append(row)
+    head = ["query"] + [f"N={n}{'' if v else ' novis'}" for n in counts for v in (True, False)]
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    for row in rows:
+        print("| " + " | ".join(row) + " |")
+
+
+if __name__ == "__main__":
+    main()

@@ -10,6 +10,7 @@
 //! cloud (the first frame when reading `cloud@prev`) gets an empty map: radiance 0,
 //! distances infinite.
 
+use super::per_cloud::PerCloud;
 use crate::graph::{
     BuildContext, EnvCloud, Frame, ParamDefault, ParamSpec, Port, Ports, Product, ProductKind,
     Stage, StageError, StageInfo,
@@ -18,7 +19,6 @@ use crate::light::EnvMap;
 use crate::light::impostor::{ImpostorBuilder, ImpostorParams};
 use crate::objects::MAX_TRANSLATION;
 use glam::{DVec3, Vec3};
-use std::sync::Arc;
 
 const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
@@ -101,7 +101,7 @@ pub const INFO: StageInfo = StageInfo {
             environment: ctx.output("environment"),
             center,
             builder: ImpostorBuilder::new(params).map_err(StageError::Failed)?,
-            last: None,
+            maps: PerCloud::new(),
         }))
     },
 };
@@ -148,33 +148,18 @@ struct Impostor {
     environment: String,
     center: Vec3,
     builder: ImpostorBuilder,
-    /// The last cloud and its map.
-    last: Option<(Option<Arc<EnvCloud>>, Arc<EnvMap>)>,
+    maps: PerCloud<EnvMap>,
 }
 
 impl Stage for Impostor {
     fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
-        let cloud = match frame.cloud(&self.cloud) {
-            Ok(c) => Some(Arc::clone(c)),
-            Err(StageError::MissingInput(_)) => None,
-            Err(e) => return Err(e),
-        };
-        let same = match (&self.last, &cloud) {
-            (Some((Some(a), _)), Some(b)) => Arc::ptr_eq(a, b),
-            (Some((None, _)), None) => true,
-            _ => false,
-        };
-        if !same {
-            let (map, _) = self
-                .builder
-                .build(
-                    cloud.as_deref().unwrap_or(&EnvCloud::default()),
-                    self.center,
-                )
-                .map_err(|e| StageError::Failed(format!("cloud `{}`: {e}", self.cloud)))?;
-            self.last = Some((cloud, Arc::new(map)));
-        }
-        let map = Arc::clone(&self.last.as_ref().expect("set above").1);
+        let (builder, center, name) = (&mut self.builder, self.center, &self.cloud);
+        let map = self.maps.get(frame, &self.cloud, |cloud| {
+            builder
+                .build(cloud.unwrap_or(&EnvCloud::default()), center)
+                .map(|(map, _)| map)
+                .map_err(|e| StageError::Failed(format!("cloud `{name}`: {e}")))
+        })?;
         frame.insert(&self.environment, Product::Environment(map));
         Ok(())
     }
@@ -188,6 +173,7 @@ mod tests {
     use crate::recording::{Header, Intrinsics, SceneTruth};
     use std::collections::BTreeMap;
     use std::path::Path;
+    use std::sync::Arc;
 
     fn build(
         header: &Header,

@@ -12,6 +12,7 @@
 
 pub mod importance;
 pub mod impostor;
+mod per_cloud;
 pub mod source;
 pub mod split;
 pub mod val;

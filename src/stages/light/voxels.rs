@@ -8,12 +8,11 @@
 //! changes (a new `Arc`); a frame without the cloud (the first frame when reading
 //! `cloud@prev`) gets an empty volume, through which every cone stays clear.
 
+use super::per_cloud::PerCloud;
 use crate::graph::{
-    EnvCloud, Frame, ParamDefault, ParamSpec, Port, Ports, Product, ProductKind, Stage, StageError,
-    StageInfo,
+    Frame, ParamDefault, ParamSpec, Port, Ports, Product, ProductKind, Stage, StageError, StageInfo,
 };
 use crate::light::voxels::VoxelVolume;
-use std::sync::Arc;
 
 const PARAMS: &[ParamSpec] = &[ParamSpec::new(
     "voxel_size",
@@ -36,7 +35,7 @@ pub const INFO: StageInfo = StageInfo {
             cloud: ctx.input("cloud"),
             voxels: ctx.output("voxels"),
             voxel_size: ctx.params.float("voxel_size") as f32,
-            last: None,
+            volumes: PerCloud::new(),
         }))
     },
 };
@@ -45,31 +44,17 @@ struct Voxels {
     cloud: String,
     voxels: String,
     voxel_size: f32,
-    /// The last cloud and its volume.
-    last: Option<(Option<Arc<EnvCloud>>, Arc<VoxelVolume>)>,
+    volumes: PerCloud<VoxelVolume>,
 }
 
 impl Stage for Voxels {
     fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
-        let cloud = match frame.cloud(&self.cloud) {
-            Ok(c) => Some(Arc::clone(c)),
-            Err(StageError::MissingInput(_)) => None,
-            Err(e) => return Err(e),
-        };
-        let same = match (&self.last, &cloud) {
-            (Some((Some(a), _)), Some(b)) => Arc::ptr_eq(a, b),
-            (Some((None, _)), None) => true,
-            _ => false,
-        };
-        if !same {
-            let volume = match &cloud {
-                Some(c) => VoxelVolume::from_points(&c.positions, &c.colors, self.voxel_size)
-                    .map_err(|e| StageError::Failed(format!("cloud `{}`: {e}", self.cloud)))?,
-                None => VoxelVolume::empty(),
-            };
-            self.last = Some((cloud, Arc::new(volume)));
-        }
-        let volume = Arc::clone(&self.last.as_ref().expect("set above").1);
+        let (voxel_size, name) = (self.voxel_size, &self.cloud);
+        let volume = self.volumes.get(frame, &self.cloud, |cloud| match cloud {
+            Some(c) => VoxelVolume::from_points(&c.positions, &c.colors, voxel_size)
+                .map_err(|e| StageError::Failed(format!("cloud `{name}`: {e}"))),
+            None => Ok(VoxelVolume::empty()),
+        })?;
         frame.insert(&self.voxels, Product::Voxels(volume));
         Ok(())
     }

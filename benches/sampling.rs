@@ -38,7 +38,6 @@ mod common;
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Affine3A;
 use relume::light::{ImpostorBuilder, ImpostorParams, LightTable, ValBuilder, ValParams};
-use relume::objects::voxelize::solid_volume;
 use relume::objects::{Triangle, VirtualScene};
 use relume::pinhole::Pinhole;
 use relume::stages::sample::path::sampling::{Basis, cosine_hemisphere};
@@ -353,9 +352,13 @@ fn bench_queries(
     let size = (inputs.depth.width, inputs.depth.height);
     let mut out = IrradianceLayers::new(size.0, size.1);
     // The stage builds the objects' solid volume once, not per frame.
-    let object_volume = solid_volume(inputs.objects, params.object_voxels);
+    let vct = PathParams {
+        query: QueryKind::Vct,
+        ..*params
+    };
+    let object_volume = vct.object_volume(inputs.objects);
     let inputs = &PathInputs {
-        object_voxels: Some(&object_volume),
+        object_voxels: object_volume.as_ref(),
         ..*inputs
     };
     for query in [

@@ -21,7 +21,6 @@
 use crate::graph::{Frame, ResolvedStage};
 use crate::light::voxels::VoxelVolume;
 use crate::objects::VirtualScene;
-use crate::objects::voxelize::solid_volume;
 use crate::pinhole::Pinhole;
 use crate::raster::{Image, Vec3Image};
 use crate::recording::Intrinsics;
@@ -98,10 +97,7 @@ impl PathRunner {
                 .map(|r| super::input(stage, r)),
             environment: stage.inputs.get("environment").cloned(),
             voxels: stage.inputs.get("voxels").cloned(),
-            object_voxels: params
-                .query
-                .needs_voxels()
-                .then(|| Arc::new(solid_volume(&objects, params.object_voxels))),
+            object_voxels: params.object_volume(&objects).map(Arc::new),
             params,
             objects,
             intrinsics,

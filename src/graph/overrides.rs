@@ -51,27 +51,31 @@ pub fn apply(
         text.push('\n');
     }
     for o in overrides {
-        let value = if toml_value(&o.value).is_some() {
-            o.value.clone()
-        } else {
-            // A bare word: a string parameter's value, as the shell passed it.
-            toml::Value::String(o.value.clone()).to_string()
-        };
         let line_start = text.len();
         let prefix = format!("# --set {}.", o.stage);
-        text.push_str(&format!("{prefix}{} = {value}\n", o.param));
         let key_start = line_start + prefix.len();
         let key_span = key_start..key_start + o.param.len();
         let value_start = key_span.end + 3;
-        let value_span = value_start..value_start + value.len();
-        let with_line = SourceFile {
-            name: src.name.clone(),
-            text: text.clone(),
+        let (written, raw) = match config::raw_value(&o.value, value_start) {
+            Ok(raw) => (o.value.clone(), raw),
+            // Not TOML (a bare word, as the shell passed it): a string.
+            Err(_) => {
+                let quoted = toml::Value::String(o.value.clone()).to_string();
+                let span = value_start..value_start + quoted.len();
+                let raw = Located {
+                    value: RawValue::Str(o.value.clone()),
+                    span,
+                };
+                (quoted, raw)
+            }
         };
-        let raw = config::raw_value(&value, value_start)
-            .map_err(|message| with_line.error(value_span.clone(), message, None))?;
-        let names: Vec<String> = decl.stages.iter().map(stage_name).collect();
+        text.push_str(&format!("{prefix}{} = {written}\n", o.param));
         let Some(stage) = decl.stages.iter_mut().find(|d| stage_name(d) == o.stage) else {
+            let names: Vec<String> = decl.stages.iter().map(stage_name).collect();
+            let with_line = SourceFile {
+                name: src.name.clone(),
+                text,
+            };
             return Err(with_line.error(
                 line_start + 8..key_start - 1,
                 format!("--set: no stage named `{}` in the pipeline", o.stage),
@@ -96,11 +100,6 @@ pub fn apply(
 /// A stage's name as `--set` and messages use it: its `name`, else its kind.
 fn stage_name(d: &config::StageDecl) -> String {
     d.name.as_ref().unwrap_or(&d.kind).value.clone()
-}
-
-/// `text` as one TOML value, if it is one.
-fn toml_value(text: &str) -> Option<RawValue> {
-    config::raw_value(text, 0).ok().map(|v| v.value)
 }
 
 #[cfg(test)]

@@ -31,6 +31,7 @@
 //! most [`MAX_DIM`] voxels a side, rather than a fixed 256^3 cube; levels are built
 //! on the CPU.
 
+use crate::objects::Aabb;
 use glam::{Vec3, Vec4};
 use thiserror::Error;
 
@@ -88,26 +89,36 @@ impl VoxelLevel {
         (z as usize * h as usize + y as usize) * w as usize + x as usize
     }
 
+    /// Where the values of the voxel at integer coordinates start in `voxels`; `None`
+    /// outside the level.
+    #[inline]
+    fn slot(&self, x: i64, y: i64, z: i64) -> Option<usize> {
+        let [w, h, d] = self.dims;
+        if x < 0 || y < 0 || z < 0 || x >= w as i64 || y >= h as i64 || z >= d as i64 {
+            return None;
+        }
+        Some(self.index(x as u32, y as u32, z as u32) * self.axes)
+    }
+
     /// The voxel at integer coordinates seen along axis `axis` (empty outside).
     #[inline]
     fn along(&self, x: i64, y: i64, z: i64, axis: usize) -> Vec4 {
-        let [w, h, d] = self.dims;
-        if x < 0 || y < 0 || z < 0 || x >= w as i64 || y >= h as i64 || z >= d as i64 {
-            return Vec4::ZERO;
-        }
-        let i = self.index(x as u32, y as u32, z as u32) * self.axes;
-        self.voxels[i + axis.min(self.axes - 1)]
+        self.slot(x, y, z)
+            .map_or(Vec4::ZERO, |i| self.voxels[i + axis.min(self.axes - 1)])
     }
 
     /// The voxel at integer coordinates seen along a direction whose squared
     /// components are `weights` (empty outside).
     #[inline]
     fn get(&self, x: i64, y: i64, z: i64, weights: Vec3) -> Vec4 {
-        let [w, h, d] = self.dims;
-        if x < 0 || y < 0 || z < 0 || x >= w as i64 || y >= h as i64 || z >= d as i64 {
-            return Vec4::ZERO;
-        }
-        let i = self.index(x as u32, y as u32, z as u32) * self.axes;
+        self.slot(x, y, z)
+            .map_or(Vec4::ZERO, |i| self.seen(i, weights))
+    }
+
+    /// The voxel whose values start at `i`, seen along a direction whose squared
+    /// components are `weights`.
+    #[inline(always)]
+    fn seen(&self, i: usize, weights: Vec3) -> Vec4 {
         if self.axes == 1 {
             return self.voxels[i];
         }
@@ -138,17 +149,7 @@ impl VoxelLevel {
             let sz = sy * h as usize;
             let i = self.index(x as u32, y as u32, z as u32) * axes;
             let corners = [0, sx, sy, sx + sy, sz, sz + sx, sz + sy, sz + sx + sy];
-            let mut c = [Vec4::ZERO; 8];
-            if axes == 1 {
-                for (c, o) in c.iter_mut().zip(corners) {
-                    *c = self.voxels[i + o];
-                }
-            } else {
-                for (c, o) in c.iter_mut().zip(corners) {
-                    let v = &self.voxels[i + o..i + o + 3];
-                    *c = v[0] * weights.x + v[1] * weights.y + v[2] * weights.z;
-                }
-            }
+            let c = corners.map(|o| self.seen(i + o, weights));
             let y0 = lerp(lerp(c[0], c[1], f.x), lerp(c[2], c[3], f.x), f.y);
             let y1 = lerp(lerp(c[4], c[5], f.x), lerp(c[6], c[7], f.x), f.y);
             return lerp(y0, y1, f.z);
@@ -302,11 +303,13 @@ impl VoxelVolume {
         }
     }
 
-    /// The volume's world bounds (min, max).
-    pub fn bounds(&self) -> (Vec3, Vec3) {
-        let d = self.dims();
-        let size = Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32) * self.voxel_size;
-        (self.origin, self.origin + size)
+    /// The volume's world bounds.
+    pub fn bounds(&self) -> Aabb {
+        let size = glam::UVec3::from(self.dims()).as_vec3() * self.voxel_size;
+        Aabb {
+            min: self.origin,
+            max: self.origin + size,
+        }
     }
 
     /// Quadrilinear sample at world point `p` for a footprint `lod` levels above the
@@ -342,14 +345,16 @@ impl VoxelVolume {
         if self.levels.is_empty() {
             return ConeMarch::CLEAR;
         }
-        let (lo, hi) = self.bounds();
         // The volume grown by a voxel: samples there still blend in its edge voxels.
+        let bounds = self.bounds();
         let margin = Vec3::splat(self.voxel_size);
-        let Some((enter, exit)) = slab(origin, dir, lo - margin, hi + margin) else {
+        let grown = Aabb {
+            min: bounds.min - margin,
+            max: bounds.max + margin,
+        };
+        let Some((mut t, end)) = grown.ray_span(origin, dir.recip(), t_start, t_end) else {
             return ConeMarch::CLEAR;
         };
-        let mut t = t_start.max(enter);
-        let end = t_end.min(exit);
         let mut march = ConeMarch::CLEAR;
         let spread = spread.max(0.0);
         while t <= end && march.opacity < OPAQUE {
@@ -385,18 +390,6 @@ fn grid_over(lo: Vec3, hi: Vec3, voxel_size: f32) -> Option<(Vec3, f32, [u32; 3]
     let size = dims.as_vec3() * voxel_size;
     let origin = (lo + hi) * 0.5 - size * 0.5;
     Some((origin, voxel_size, dims.to_array()))
-}
-
-/// The parameter span [enter, exit] of the ray `origin + t dir` inside box [lo, hi],
-/// `None` when it misses the box.
-#[inline]
-pub fn slab(origin: Vec3, dir: Vec3, lo: Vec3, hi: Vec3) -> Option<(f32, f32)> {
-    let inv = dir.recip();
-    let a = (lo - origin) * inv;
-    let b = (hi - origin) * inv;
-    let enter = a.min(b).max_element();
-    let exit = a.max(b).min_element();
-    (enter <= exit && exit >= 0.0).then_some((enter, exit))
 }
 
 #[cfg(test)]

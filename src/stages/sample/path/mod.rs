@@ -140,7 +140,6 @@ use crate::graph::{Frame, Port, Ports, ProductKind, Stage, StageError, StageInfo
 use crate::light::voxels::VoxelVolume;
 use crate::light::{EnvMap, LightTable};
 use crate::objects::VirtualScene;
-use crate::objects::voxelize::solid_volume;
 use crate::pinhole::Pinhole;
 use crate::raster::{DepthImage, Vec3Image};
 use crate::recording::Intrinsics;
@@ -196,10 +195,7 @@ pub const INFO: StageInfo = StageInfo {
             voxels: params.query.needs_voxels().then(|| ctx.input("voxels")),
             outputs: LAYER_OUTPUTS.map(|(role, _)| ctx.output(role)),
             // The objects do not move: their solid volume is built once.
-            object_voxels: params
-                .query
-                .needs_voxels()
-                .then(|| Arc::new(solid_volume(ctx.objects, params.object_voxels))),
+            object_voxels: params.object_volume(ctx.objects).map(Arc::new),
             params,
             intrinsics: ctx.header.depth_intrinsics,
             objects: Arc::clone(ctx.objects),
@@ -226,8 +222,8 @@ pub struct PathInputs<'a> {
     /// The scene's voxel volume the `vct` query reads (unused by the others).
     pub voxels: Option<&'a VoxelVolume>,
     pub objects: &'a VirtualScene,
-    /// `vct`: the objects' solid volume ([`solid_volume`] of `objects` at
-    /// `object_voxels`); built for the call when `None`.
+    /// `vct`: the objects' solid volume ([`PathParams::object_volume`]); built for
+    /// the call when `None`.
     pub object_voxels: Option<&'a VoxelVolume>,
     /// The frame index (a key of the random numbers).
     pub frame: u64,
@@ -298,11 +294,10 @@ pub(crate) fn sample_path_with_kernel(
     let built;
     let object_volume = match (params.query, inputs.object_voxels) {
         (QueryKind::Vct, Some(volume)) => Some(volume),
-        (QueryKind::Vct, None) => {
-            built = solid_volume(inputs.objects, params.object_voxels);
-            Some(&built)
+        _ => {
+            built = params.object_volume(inputs.objects);
+            built.as_ref()
         }
-        _ => None,
     };
     let tracer = ScreenTracer::with_pyramid(
         inputs.depth,

@@ -3,6 +3,9 @@
 
 use super::MAX_CANDIDATES;
 use crate::graph::{ParamDefault, ParamSpec, Params, StageError};
+use crate::light::voxels::VoxelVolume;
+use crate::objects::VirtualScene;
+use crate::objects::voxelize::solid_volume;
 use crate::stages::sample::query::{MAX_ITERATIONS, QueryKind};
 use crate::stages::sample::ssrt::TraceParams;
 
@@ -205,6 +208,15 @@ impl PathParams {
             occluder_threshold: p.float("occluder_threshold") as f32,
             pixel_stride: 1,
         }
+    }
+
+    /// The objects' solid volume the `vct` query marches for their shadows
+    /// (`object_voxels` a side); `None` for the other queries. Objects do not move:
+    /// callers build it once and pass it as [`PathInputs::object_voxels`](super::PathInputs::object_voxels).
+    pub fn object_volume(&self, objects: &VirtualScene) -> Option<VoxelVolume> {
+        self.query
+            .needs_voxels()
+            .then(|| solid_volume(objects, self.object_voxels))
     }
 
     /// Checks the counts and distances; the error names the bad value.

@@ -130,13 +130,12 @@ impl Kernel<'_> {
         } else {
             n
         });
-        // `vct`: the cones share the lobe (the Phong lobe's width when glossy).
-        let exponent = if surface.glossy {
-            hit.material.exponent
+        // `vct`: the cones share the lobe (narrowed to the Phong lobe when glossy).
+        let spread = if surface.glossy {
+            cone_spread(params.primary * params.indirect, hit.material.exponent)
         } else {
-            0.0
+            self.indirect_spread
         };
-        let spread = cone_spread(params.primary * params.indirect, exponent);
         for k in 0..params.indirect {
             let s = j * params.indirect + k;
             let (u1, u2) = indirect_stream.pair(s as u64);

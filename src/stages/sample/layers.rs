@@ -1,11 +1,12 @@
 //! The irradiance layers every renderer writes (`sample.path`, `sample.val`), so that
 //! `filter.axis_aligned` and `composite.differential` run on any of them unchanged:
-//! one type, one list of output roles, one way into the frame, and the rows a
-//! renderer fills in parallel.
+//! one type, one list of output roles, one way into the frame, and one driver that
+//! hands a renderer the rows to fill in parallel ([`shade_rows`]).
 
 use crate::graph::{Frame, Product, ProductKind};
 use crate::raster::{Image, LabelImage, ScalarImage, Vec3Image};
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// The output roles of a renderer, in [`IrradianceLayers`] order, with their kinds.
 /// A renderer that cannot say which pixels its objects touched writes all but the
@@ -197,9 +198,28 @@ impl LayerRow<'_> {
     }
 }
 
-/// The rows of every layer of `out` (rows of `width` pixels), top to bottom, for a
-/// renderer to fill in parallel.
-pub fn rows(out: &mut IrradianceLayers, width: usize) -> Vec<LayerRow<'_>> {
+/// The renderers' driver: shades the rows of `out` (`width` pixels each) whose index
+/// is a multiple of `stride`, in parallel on rayon's pool. `shade` gets the state
+/// `init` made for its worker (buffers reused from row to row), the row's index and
+/// the row to write. Each row is written by one call alone, so the layers do not
+/// depend on the thread count.
+pub fn shade_rows<S>(
+    out: &mut IrradianceLayers,
+    width: usize,
+    stride: usize,
+    init: impl Fn() -> S + Sync + Send,
+    shade: impl Fn(&mut S, usize, LayerRow<'_>) + Sync + Send,
+) {
+    let stride = stride.max(1);
+    rows(out, width)
+        .into_par_iter()
+        .enumerate()
+        .filter(|(y, _)| y % stride == 0)
+        .for_each_init(init, |state, (y, row)| shade(state, y, row));
+}
+
+/// The rows of every layer of `out` (rows of `width` pixels), top to bottom.
+fn rows(out: &mut IrradianceLayers, width: usize) -> Vec<LayerRow<'_>> {
     let width = width.max(1);
     let mut e_r_dir = out.e_r_dir.data.chunks_mut(width);
     let mut e_r_ind = out.e_r_ind.data.chunks_mut(width);

@@ -7,7 +7,14 @@
 //! | `sample.val` | [`val`] | shading from virtual area lights and SH9 (paper 004 Sec. 5) |
 //!
 //! [`query`] is the radiance query the renderers ask about the real scene (paper 000
-//! Fig. 5): screen-space marching, Environment Mapping or Distance Impostor Tracing.
+//! Fig. 5): screen-space marching, Environment Mapping, Distance Impostor Tracing or
+//! Voxel Cone Tracing.
+//!
+//! The seams a new renderer plugs into: it writes [`layers::IrradianceLayers`] (the
+//! roles of [`layers::LAYER_OUTPUTS`]), fills its rows through [`layers::shade_rows`]
+//! (rayon's pool, per-worker state, any stride), and takes one line in the contract
+//! test (`contract_tests`: pi L under a constant environment, E_RV == E_R without
+//! objects, the same bits at any thread count and on every SIMD path).
 
 pub mod layers;
 pub mod path;
@@ -15,6 +22,9 @@ pub mod pyramid;
 pub mod query;
 pub mod ssrt;
 pub mod val;
+
+#[cfg(test)]
+mod contract_tests;
 
 #[cfg(test)]
 mod tests {

@@ -132,7 +132,7 @@ pub use kernel::MAX_CANDIDATES;
 pub use params::{MAX_SAMPLES, PathParams};
 use params::{PARAMS, query_kind};
 
-use super::layers::{LAYER_OUTPUTS, rows};
+use super::layers::{LAYER_OUTPUTS, shade_rows};
 use super::pyramid::DepthPyramid;
 use super::query::{ImpostorQuery, QueryKind, VoxelQuery};
 use super::ssrt::ScreenTracer;
@@ -146,7 +146,6 @@ use crate::recording::Intrinsics;
 use crate::simd;
 use glam::Affine3A;
 use kernel::Kernel;
-use rayon::prelude::*;
 use rays::WorldQuery;
 use span::{SPAN_PIXELS, Span};
 use std::sync::Arc;
@@ -309,18 +308,17 @@ pub(crate) fn sample_path_with_kernel(
     let kernel = Kernel::new(inputs, params, tracer, world_query, object_volume, lanes);
     let stride = params.pixel_stride as usize;
     let xs: Vec<u32> = (0..w).step_by(stride).collect();
-    rows(out, w as usize)
-        .into_par_iter()
-        .enumerate()
-        .filter(|(y, _)| y % stride == 0)
-        .for_each_init(
-            || Span::new(&kernel, params),
-            |span, (y, mut row)| {
-                for xs in xs.chunks(SPAN_PIXELS) {
-                    kernel.shade_span(y as u32, xs, span, |x, r| row.set(x as usize, r));
-                }
-            },
-        );
+    shade_rows(
+        out,
+        w as usize,
+        params.pixel_stride as usize,
+        || Span::new(&kernel, params),
+        |span, y, mut row| {
+            for xs in xs.chunks(SPAN_PIXELS) {
+                kernel.shade_span(y as u32, xs, span, |x, r| row.set(x as usize, r));
+            }
+        },
+    );
     Ok(())
 }
 
@@ -409,4 +407,4 @@ mod query_tests;
 #[cfg(test)]
 mod stage_tests;
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -9,20 +9,20 @@ use crate::raster::Image;
 use glam::Vec3;
 use std::f32::consts::PI;
 
-pub(super) const W: u32 = 96;
-pub(super) const H: u32 = 72;
-pub(super) const SKY: Vec3 = Vec3::new(1.0, 0.5, 0.25);
-pub(super) const WALL: Vec3 = Vec3::new(0.2, 0.3, 0.4);
-pub(super) const SPHERE_CENTER: Vec3 = Vec3::new(0.0, 0.6, 1.0);
-pub(super) const SPHERE_RADIUS: f32 = 0.3;
+pub(crate) const W: u32 = 96;
+pub(crate) const H: u32 = 72;
+pub(crate) const SKY: Vec3 = Vec3::new(1.0, 0.5, 0.25);
+pub(crate) const WALL: Vec3 = Vec3::new(0.2, 0.3, 0.4);
+pub(crate) const SPHERE_CENTER: Vec3 = Vec3::new(0.0, 0.6, 1.0);
+pub(crate) const SPHERE_RADIUS: f32 = 0.3;
 
-pub(super) fn camera() -> Pinhole {
+pub(crate) fn camera() -> Pinhole {
     Pinhole::new(&Intrinsics::PRIMESENSE, W, H)
 }
 
 /// The camera 1.5 m above the floor (world y = 0) at z = -2, looking down 30 degrees
 /// along +z (camera x = world -x).
-pub(super) fn pose() -> Affine3A {
+pub(crate) fn pose() -> Affine3A {
     let (s, c) = (30f32.to_radians().sin(), 30f32.to_radians().cos());
     let forward = Vec3::new(0.0, -s, c);
     let right = Vec3::new(-1.0, 0.0, 0.0);
@@ -35,13 +35,13 @@ pub(super) fn pose() -> Affine3A {
 }
 
 /// A floor-only scene: depth, camera-space normals and a constant camera radiance.
-pub(super) struct Scene {
+pub(crate) struct Scene {
     pub depth: DepthImage,
     pub normals: Vec3Image,
     pub radiance: Vec3Image,
 }
 
-pub(super) fn floor_scene() -> Scene {
+pub(crate) fn floor_scene() -> Scene {
     let cam = camera();
     let pose = pose();
     let up_camera = pose.inverse().transform_vector3(Vec3::Y);
@@ -63,7 +63,7 @@ pub(super) fn floor_scene() -> Scene {
 }
 
 /// No real geometry at all.
-pub(super) fn void_scene() -> Scene {
+pub(crate) fn void_scene() -> Scene {
     Scene {
         depth: Image::filled(W, H, 0.0),
         normals: Image::filled(W, H, Vec3::ZERO),
@@ -73,7 +73,7 @@ pub(super) fn void_scene() -> Scene {
 
 /// A constant environment `SKY` sampled uniformly over the sphere, in stratified order:
 /// sample i lies in the i-th of N bands of equal solid angle from world +y down.
-pub(super) fn uniform_table(n: usize) -> LightTable {
+pub(crate) fn uniform_table(n: usize) -> LightTable {
     let golden = PI * (3.0 - 5f32.sqrt());
     LightTable {
         samples: (0..n)
@@ -92,7 +92,7 @@ pub(super) fn uniform_table(n: usize) -> LightTable {
 }
 
 /// A UV sphere with smooth normals.
-pub(super) fn sphere(center: Vec3, radius: f32, material: Material) -> VirtualScene {
+pub(crate) fn sphere(center: Vec3, radius: f32, material: Material) -> VirtualScene {
     let (nu, nv) = (16, 8);
     let at = |i: u32, j: u32| {
         let (theta, phi) = (PI * j as f32 / nv as f32, 2.0 * PI * i as f32 / nu as f32);
@@ -118,7 +118,7 @@ pub(super) fn sphere(center: Vec3, radius: f32, material: Material) -> VirtualSc
     VirtualScene::new(triangles, vec![material])
 }
 
-pub(super) fn run(
+pub(crate) fn run(
     scene: &Scene,
     objects: &VirtualScene,
     table: &LightTable,
@@ -127,7 +127,7 @@ pub(super) fn run(
     run_with_kernel(scene, objects, table, params, simd::Kernel::detect())
 }
 
-pub(super) fn run_with_kernel(
+pub(crate) fn run_with_kernel(
     scene: &Scene,
     objects: &VirtualScene,
     table: &LightTable,
@@ -139,7 +139,7 @@ pub(super) fn run_with_kernel(
 
 /// [`run_with_kernel`] with a distance impostor for the `em` and `dit` queries and a
 /// voxel volume for `vct`.
-pub(super) fn run_with_environment(
+pub(crate) fn run_with_environment(
     scene: &Scene,
     objects: &VirtualScene,
     table: &LightTable,
@@ -167,7 +167,7 @@ pub(super) fn run_with_environment(
 }
 
 /// The pixel where world point `p` is seen.
-pub(super) fn pixel_of(p: Vec3) -> usize {
+pub(crate) fn pixel_of(p: Vec3) -> usize {
     let (u, v) = camera()
         .pixel_of(pose().inverse().transform_point3(p))
         .unwrap();
@@ -175,7 +175,7 @@ pub(super) fn pixel_of(p: Vec3) -> usize {
 }
 
 /// Every output as bits, for exact comparisons (NaN included).
-pub(super) fn bits(out: &IrradianceLayers) -> Vec<u32> {
+pub(crate) fn bits(out: &IrradianceLayers) -> Vec<u32> {
     let mut b = Vec::new();
     for image in [
         &out.e_r_dir,
@@ -204,13 +204,13 @@ pub(super) fn bits(out: &IrradianceLayers) -> Vec<u32> {
     b
 }
 
-pub(super) fn same_bits(a: Vec3, b: Vec3) -> bool {
+pub(crate) fn same_bits(a: Vec3, b: Vec3) -> bool {
     a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)
 }
 
 /// E_RV equals E_R bit for bit (both parts) at every untouched pixel; returns how many
 /// pixels were touched.
-pub(super) fn assert_untouched_pixels_equal(out: &IrradianceLayers) -> usize {
+pub(crate) fn assert_untouched_pixels_equal(out: &IrradianceLayers) -> usize {
     let mut touched = 0;
     for i in 0..out.touched.data.len() {
         if out.touched.data[i] != 0 {
@@ -275,7 +275,7 @@ fn constant_environment_over_a_floor_gives_pi_l_and_no_indirect_light() {
 }
 
 /// The 3x3 block of pixels around the one that sees world point `p`.
-pub(super) fn block_around(p: Vec3) -> Vec<usize> {
+pub(crate) fn block_around(p: Vec3) -> Vec<usize> {
     let c = pixel_of(p) as i64;
     let w = W as i64;
     [-w - 1, -w, -w + 1, -1, 0, 1, w - 1, w, w + 1]
@@ -525,11 +525,50 @@ fn object_aware_sampling_is_unbiased_and_lowers_the_variance() {
     );
 }
 
-pub(super) fn mean(xs: &[f64]) -> f64 {
+pub(crate) fn mean(xs: &[f64]) -> f64 {
     xs.iter().sum::<f64>() / xs.len() as f64
 }
 
-pub(super) fn variance(xs: &[f64]) -> f64 {
+pub(crate) fn variance(xs: &[f64]) -> f64 {
     let m = mean(xs);
     xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (xs.len() - 1) as f64
+}
+
+/// A constant environment `SKY` at `radius` metres around a centre, as the distance
+/// impostor the impostor queries trace and as the voxel volume `vct` marches.
+pub(crate) struct Dome {
+    pub(crate) env: EnvMap,
+    pub(crate) voxels: VoxelVolume,
+}
+
+impl Dome {
+    pub(crate) fn world(&self) -> (Option<&EnvMap>, Option<&VoxelVolume>) {
+        (Some(&self.env), Some(&self.voxels))
+    }
+}
+
+pub(crate) fn dome(center: Vec3, radius: f32) -> Dome {
+    let mut env = EnvMap::constant(128, 64, SKY);
+    env.center = center;
+    env.distance = vec![radius; env.radiance.len()];
+    // Samples on the sphere about half a voxel apart.
+    let voxel = 0.1;
+    let rings = (std::f32::consts::PI * radius / (0.5 * voxel)) as u32;
+    let mut positions = Vec::new();
+    for ring in 0..=rings {
+        let theta = std::f32::consts::PI * ring as f32 / rings as f32;
+        let around = ((2.0 * rings as f32 * theta.sin()) as u32).max(1);
+        for k in 0..around {
+            let phi = 2.0 * PI * k as f32 / around as f32;
+            let d = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
+            positions.push(center + d * radius);
+        }
+    }
+    let radiances = vec![SKY; positions.len()];
+    let voxels = VoxelVolume::from_points(&positions, &radiances, voxel).unwrap();
+    Dome { env, voxels }
 }

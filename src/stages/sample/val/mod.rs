@@ -51,7 +51,7 @@ mod shadow;
 mod tests;
 mod virtual_maps;
 
-use super::layers::{IrradianceLayers, LAYER_OUTPUTS, rows};
+use super::layers::{IrradianceLayers, LAYER_OUTPUTS, shade_rows};
 use crate::graph::{Frame, ParamDefault, ParamSpec, ProductKind, Stage, StageError, StageInfo};
 use crate::light::AreaLights;
 use crate::objects::VirtualScene;
@@ -284,10 +284,12 @@ impl ValRenderer {
             sh,
             sampling: sampling_of(inputs),
         };
-        rows(out, wu)
-            .into_par_iter()
-            .enumerate()
-            .for_each(|(y, row)| {
+        shade_rows(
+            out,
+            wu,
+            1,
+            || (),
+            |_, y, row| {
                 let mut row = RowOut {
                     e_r_dir: row.e_r_dir,
                     e_r_ind: row.e_r_ind,
@@ -313,7 +315,8 @@ impl ValRenderer {
                     Kernel::Avx2Fma => unsafe { pixel::row_avx2(&context, y, &mut row) },
                     _ => context.row::<Portable>(y, &mut row),
                 }
-            });
+            },
+        );
         Ok(())
     }
 

@@ -1,12 +1,13 @@
 //! Solid voxelization of the virtual objects (paper 000 Sec. 6.2): the opacity tau of
 //! the object volume that `sample.path`'s `vct` query marches its visibility cones
 //! through. The paper voxelizes on the GPU (Eisemann and Décoret, ref. 8); here each
-//! voxel centre is tested against the meshes by ray parity, on the CPU, once when the
-//! stage is built.
+//! voxel centre is tested against the meshes by ray parity, on the CPU (a slice of
+//! the volume per rayon task), once when the stage is built.
 
 use super::VirtualScene;
 use crate::light::voxels::{VoxelLevel, VoxelVolume};
 use glam::{Vec3, Vec4};
+use rayon::prelude::*;
 
 /// Directions of the parity rays: off the axes, so that they rarely graze an edge or
 /// run along a face of a box-like mesh.
@@ -37,18 +38,21 @@ pub fn solid_volume(scene: &VirtualScene, voxels: u32) -> VoxelVolume {
     let origin = (bounds.min + bounds.max) * 0.5 - size * 0.5;
     let n = dims.iter().map(|&d| d as usize).product();
     let mut voxels = vec![Vec4::ZERO; n];
-    let mut i = 0;
-    for z in 0..dims[2] {
-        for y in 0..dims[1] {
-            for x in 0..dims[0] {
-                let centre = origin + (Vec3::new(x as f32, y as f32, z as f32) + 0.5) * voxel_size;
-                if inside(scene, centre) {
-                    voxels[i] = Vec4::W;
+    // A slice of constant z per task: each voxel is decided alone, so the volume does
+    // not depend on the thread count.
+    let slice = (dims[0] * dims[1]) as usize;
+    voxels
+        .par_chunks_mut(slice)
+        .enumerate()
+        .for_each(|(z, plane)| {
+            for (i, voxel) in plane.iter_mut().enumerate() {
+                let (x, y) = (i % dims[0] as usize, i / dims[0] as usize);
+                let cell = Vec3::new(x as f32, y as f32, z as f32);
+                if inside(scene, origin + (cell + 0.5) * voxel_size) {
+                    *voxel = Vec4::W;
                 }
-                i += 1;
             }
-        }
-    }
+        });
     VoxelVolume::with_levels(origin, voxel_size, VoxelLevel::isotropic(dims, voxels))
 }
 

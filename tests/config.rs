@@ -104,6 +104,38 @@ fn wrong_types_ranges_and_choices_are_located() {
     assert!(e.message.contains("no upstream stage produces it"), "{e}");
 }
 
+/// Two stages that read each other's products in one frame get a hint naming the
+/// cycle, not "move that stage up" (which would then be said of the other one).
+#[test]
+fn stages_reading_each_other_are_named_as_a_cycle() {
+    let e = error(
+        "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"depth.to_points\"\ninputs = { depth = \"refined\" }\n[[stage]]\nkind = \"normals.plane_fit\"\noutputs = { refined_depth = \"refined\" }\n",
+    );
+    assert_eq!(
+        e.message,
+        "stage `depth.to_points` reads `refined` as its `depth` input, but no upstream stage produces it"
+    );
+    assert_eq!(
+        e.hint.as_deref(),
+        Some(
+            "these stages form a cycle (`depth.to_points` reads `refined` from `normals.plane_fit`, `normals.plane_fit` reads `points` from `depth.to_points`): no order of them runs; one of them must read the other's product of the previous frame (`@prev`, on an input that can do without it at the first frame)"
+        )
+    );
+    // Through a third stage, and on an input that can do without: the previous
+    // frame's value is offered.
+    let e = error(
+        "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"gbuffer.splat\"\ninputs = { cloud = \"cloud\" }\n[[stage]]\nkind = \"depth.to_points\"\ninputs = { depth = \"reference_depth\" }\n[[stage]]\nkind = \"normals.plane_fit\"\n[[stage]]\nkind = \"cloud.samples\"\ninputs = { depth = \"refined_depth\" }\n",
+    );
+    let hint = e.hint.unwrap_or_default();
+    assert!(
+        hint.starts_with(
+            "these stages form a cycle (`gbuffer.splat` reads `cloud` from `cloud.samples`, "
+        ) && hint.contains("`depth.to_points` reads `reference_depth` from `gbuffer.splat`")
+            && hint.ends_with("read `cloud@prev` here for its previous-frame value"),
+        "{hint}"
+    );
+}
+
 #[test]
 fn inputs_must_be_produced_upstream() {
     let e = error(

@@ -1,6 +1,7 @@
 //! Pipelines: config files, the registry of stage kinds, the threaded runtime and timing.
 
 pub mod config;
+mod cycle;
 pub mod frame;
 pub mod memory;
 pub mod overrides;

@@ -246,7 +246,7 @@ impl Pipeline {
                         &stages,
                         &available[i],
                         &producers,
-                        stage,
+                        i,
                         port,
                         product,
                         previous,
@@ -341,13 +341,34 @@ fn missing_product(
     stages: &[ResolvedStage],
     upstream: &BTreeMap<String, (usize, ProductKind)>,
     all: &BTreeMap<String, (usize, ProductKind)>,
-    stage: &ResolvedStage,
+    reader: usize,
     port: &super::stage::Port,
     product: &str,
     previous: bool,
 ) -> ConfigError {
+    let stage = &stages[reader];
     let (role, optional) = (&port.role, port.optional);
+    // A producer that reads, through other stages, what this stage writes: moving it
+    // up cannot help.
+    let cycle = match all.get(product) {
+        Some(&(p, _)) if !previous && p < stages.len() => {
+            super::cycle::read_chain(stages, all, p, reader).map(|rest| {
+                let mut steps = vec![(reader, product.to_string(), p)];
+                steps.extend(rest);
+                super::cycle::describe(stages, &steps)
+            })
+        }
+        _ => None,
+    };
     let hint = match all.get(product) {
+        Some(_) if let Some(cycle) = &cycle => {
+            let way_out = if optional {
+                format!("read `{product}{PREVIOUS_SUFFIX}` here for its previous-frame value")
+            } else {
+                "one of them must read the other's product of the previous frame (`@prev`, on an input that can do without it at the first frame)".to_string()
+            };
+            format!("these stages form a cycle ({cycle}): no order of them runs; {way_out}")
+        }
         Some(&(p, _)) if !previous && optional => format!(
             "`{product}` is produced later, by stage `{}`: move that stage up, or read `{product}{PREVIOUS_SUFFIX}` for its previous-frame value",
             stages[p].name

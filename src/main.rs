@@ -4,6 +4,7 @@ mod cli;
 
 fn main() {
     relume::graph::memory::keep_freed_memory();
+    relume::graph::panics::quiet_in_stages();
     match cli::main() {
         Ok(code) => std::process::exit(code),
         Err(e) if cli::is_broken_pipe(&e) => std::process::exit(0),

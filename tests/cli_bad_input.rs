@@ -105,6 +105,8 @@ fn an_unwritable_output_folder_is_named_with_its_cause_once() {
         .find(|l| l.starts_with("error: "))
         .unwrap_or_default();
     let cause = std::fs::create_dir_all(d.join("a_file/out/depth")).unwrap_err();
+    // Nothing ran: no empty timing table before the error.
+    assert_eq!(stdout(&o), "", "{err}");
     assert_eq!(
         line,
         format!(
@@ -428,4 +430,31 @@ fn an_interrupted_synth_leaves_no_partial_file() {
         );
         assert_eq!(common::file_names(d), Vec::<String>::new(), "{signal}");
     }
+}
+
+/// A stage that panics is reported in one clean line, with where it panicked, and
+/// without Rust's raw panic output or a backtrace (the runtime caught the panic).
+#[test]
+fn a_stage_panic_is_one_clean_error_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 3);
+    let pipeline = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"debug.fail\"\nparams = { frame = 1, mode = \"panic\" }\n";
+    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_relume"))
+        .current_dir(d)
+        .args(["replay", "small.relume", "-p", "p.toml", "--out", "out"])
+        .env("RUST_BACKTRACE", "1")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(
+        lines[0].starts_with(
+            "error: replay of small.relume stopped: stage `debug.fail` (debug.fail) panicked at frame 1: debug.fail was asked to panic at frame 1 (at src/stages/debug.rs:"
+        ),
+        "{err}"
+    );
 }

@@ -348,8 +348,13 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
         loaded.pipeline.file,
         report.table()
     );
+    // A run that failed before any stage timed a frame (a stage that could not be set
+    // up) has no table to show: only its error.
+    let nothing_timed = report.stages.iter().all(|s| s.frames.is_empty());
     // A stdout error is reported last: the files asked for and a failed run come first.
-    let table_written = if a.hash {
+    let table_written = if failure.is_some() && nothing_timed {
+        Ok(())
+    } else if a.hash {
         eprint!("{table}");
         Ok(())
     } else {

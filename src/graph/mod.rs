@@ -5,6 +5,7 @@ mod cycle;
 pub mod frame;
 pub mod memory;
 pub mod overrides;
+pub mod panics;
 pub mod params;
 pub mod pipeline;
 pub mod product;

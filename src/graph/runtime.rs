@@ -405,7 +405,9 @@ fn stage_loop(
         first = false;
         let start = Instant::now();
         let index = frame.index;
-        let result = catch_unwind(AssertUnwindSafe(|| stage.process(&mut frame)));
+        let result = catch_unwind(AssertUnwindSafe(|| {
+            super::panics::in_stage(|| stage.process(&mut frame))
+        }));
         let processed = Instant::now();
         let error = match result {
             Ok(Ok(())) => None,
@@ -467,11 +469,15 @@ fn stage_loop(
 }
 
 fn panic_message(panic: Box<dyn std::any::Any + Send>) -> String {
-    if let Some(s) = panic.downcast_ref::<&str>() {
+    let message = if let Some(s) = panic.downcast_ref::<&str>() {
         s.to_string()
     } else if let Some(s) = panic.downcast_ref::<String>() {
         s.clone()
     } else {
         "unknown panic payload".into()
+    };
+    match super::panics::take_location() {
+        Some(at) => format!("{message} (at {at})"),
+        None => message,
     }
 }

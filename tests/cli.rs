@@ -453,3 +453,37 @@ fn the_main_job_generates_its_recording_and_writes_finished_frames() {
         "the same recording again"
     );
 }
+
+/// `relume -h` and `relume --help` open with the same description.
+#[test]
+fn short_and_long_help_open_alike() {
+    let tmp = tempfile::tempdir().unwrap();
+    let first = |flag: &str| {
+        let o = run_in(tmp.path(), &[flag]);
+        assert!(o.status.success(), "{flag}");
+        stdout(&o)
+            .lines()
+            .next()
+            .unwrap_or_default()
+            .trim_end_matches('.')
+            .to_string()
+    };
+    let short = first("-h");
+    assert!(
+        short.starts_with("relume replays recorded RGB-D sensor logs"),
+        "{short}"
+    );
+    assert_eq!(short, first("--help"));
+}
+
+/// `--save-format`'s help says what a depth PNG holds: it is not for viewing.
+#[test]
+fn save_format_help_says_depth_pngs_are_millimetres() {
+    let tmp = tempfile::tempdir().unwrap();
+    let o = run_in(tmp.path(), &["replay", "--help"]);
+    let help = stdout(&o).split_whitespace().collect::<Vec<_>>().join(" ");
+    assert!(
+        help.contains("depth PNGs hold 16-bit millimetres"),
+        "{help}"
+    );
+}

@@ -40,7 +40,7 @@ use std::path::{Path, PathBuf};
 /// virtual objects in the footage, lit by the room), writes the finished frames to
 /// out/final/ and prints a timing table per stage.
 #[derive(Parser, Debug)]
-#[command(name = "relume", version, about, long_about, max_term_width = 100, after_help = EXAMPLES)]
+#[command(name = "relume", version, long_about, max_term_width = 100, after_help = EXAMPLES)]
 struct Cli {
     /// With no command, `relume` runs `relume replay` with its defaults.
     #[command(subcommand)]

@@ -66,7 +66,9 @@ pub struct ReplayArgs {
     /// pipeline. `relume stages` says what each stage produces.
     #[arg(long, value_delimiter = ',', value_name = "PRODUCTS")]
     save: Vec<String>,
-    /// File formats for --save: png (for viewing), exr (f32 values), or both (png,exr).
+    /// File formats for --save: png, exr (f32 values), or both (png,exr). PNGs of
+    /// colors, normals and radiance are 8-bit for viewing; depth PNGs hold 16-bit
+    /// millimetres (exact, but a viewer shows them near-black: 1 m is 1000 of 65535).
     #[arg(long, value_delimiter = ',', default_value = "png", value_parser = ["png", "exr"])]
     save_format: Vec<String>,
     /// After the run, save the last frame's environment-sample cloud as a binary PLY

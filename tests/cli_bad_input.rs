@@ -458,3 +458,29 @@ fn a_stage_panic_is_one_clean_error_line() {
         "{err}"
     );
 }
+
+/// `validate` reads a light probe file as the run would: a missing or corrupt one is
+/// an error naming the stage's line, not "ok".
+#[test]
+fn validate_reads_the_light_probe_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let pipeline = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"light.envmap\"\nparams = { source = \"file\", path = \"probe.exr\" }\n";
+    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    let o = run_in(d, &["validate", "p.toml"]);
+    assert_eq!(o.status.code(), Some(1));
+    let cause = std::fs::read(d.join("probe.exr")).unwrap_err();
+    assert_eq!(
+        stderr(&o).trim_end(),
+        format!("error: p.toml:3: stage `light.envmap` could not be set up: probe.exr: {cause}")
+    );
+    // Not a map: refused with what it is not.
+    std::fs::write(d.join("probe.exr"), b"not an image").unwrap();
+    let o = run_in(d, &["validate", "p.toml"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("probe.exr: not an environment map relume reads"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -89,6 +89,22 @@ fn json_value(value: &ParamValue) -> serde_json::Value {
 
 pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
     let pipeline = Pipeline::load(&a.pipeline, &Registry::builtin())?;
+    // A light probe file is read when its stage is set up: read it now, so that a
+    // missing or corrupt one does not pass here and stop the run.
+    let probes = pipeline
+        .stages
+        .iter()
+        .filter(|s| s.kind == "light.envmap" && s.params.str("source") == "file");
+    for s in probes {
+        if let Err(e) = relume::light::load_envmap(s.params.str("path")) {
+            anyhow::bail!(
+                "{}:{}: stage `{}` could not be set up: {e}",
+                pipeline.file,
+                s.line,
+                s.name
+            );
+        }
+    }
     let chain: Vec<String> = pipeline
         .stages
         .iter()

@@ -99,6 +99,12 @@ fn load(ctx: &BuildContext) -> Result<Arc<EnvMap>, StageError> {
         _ => environment_from_header(ctx.header, p.str("attachment"))
             .map_err(|e| StageError::Failed(e.to_string()))?,
     };
+    if replaced_texels > 0 && replaced_texels == map.radiance.len() {
+        // Zeroed, it would light the frame as an all-black map does, without a word.
+        return Err(StageError::Failed(format!(
+            "every one of the map's {replaced_texels} texels is non-finite or negative: there is no light in it"
+        )));
+    }
     if replaced_texels > 0 {
         eprintln!(
             "stage `{stage}` (light.envmap): {replaced_texels} of {} texels were non-finite or negative and are 0",
@@ -210,6 +216,25 @@ mod tests {
         assert_eq!(first.radiance[0], Vec3::new(2.0, 2.0, 4.0));
         assert_eq!(first.radiance[7], Vec3::new(0.0, 2.0, 4.0));
         assert!(Arc::ptr_eq(&first, &environment(&mut stage)));
+    }
+
+    #[test]
+    fn a_map_with_no_finite_texel_is_refused() {
+        let mut header = header(true);
+        let samples = vec![f32::NAN; 8 * 4 * 3];
+        header.attachments[0].image = encode_floats(8, 4, 3, &samples, false);
+        let message = build(&header, &[]).err().unwrap().to_string();
+        assert_eq!(
+            message,
+            "every one of the map's 32 texels is non-finite or negative: there is no light in it"
+        );
+        // One finite texel is a map (the others are zeroed, with a warning).
+        let mut one = samples;
+        one[..3].copy_from_slice(&[1.0, 1.0, 1.0]);
+        header.attachments[0].image = encode_floats(8, 4, 3, &one, false);
+        let map = environment(&mut build(&header, &[]).unwrap());
+        assert_eq!(map.radiance[0], Vec3::ONE);
+        assert!(map.radiance[1..].iter().all(|&c| c == Vec3::ZERO));
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! The contract every renderer keeps, whatever way it computes the irradiance layers
-//! (paper 001's path sampling, paper 000's radiance queries, paper 004's area lights):
+//! (paper 001's path sampling, paper 000's radiance queries, paper 004's area lights,
+//! paper 002's virtual point lights):
 //!
 //! - a constant environment L over a floor, nothing else, gives E_R^dir + E_R^ind =
 //!   pi L on the floor (each renderer splits it between the layers its own way);
@@ -10,6 +11,7 @@
 //! A new renderer is one line in [`RENDERERS`]: a function that renders the shared
 //! floor scene under the environment `SKY` with given objects and lanes.
 
+use super::dir::{DirInputs, DirParams, sample_dir};
 use super::layers::IrradianceLayers;
 use super::path::tests::{
     SKY, SPHERE_CENTER, SPHERE_RADIUS, Scene, bits, camera, dome, floor_scene, pose, same_bits,
@@ -46,6 +48,7 @@ const RENDERERS: &[(&str, Render)] = &[
         path(QueryKind::Vct, s, o, k)
     }),
     ("sample.val", val),
+    ("sample.dir", dir),
 ];
 
 /// `sample.path` with `query`: the importance table of the constant environment, and
@@ -102,6 +105,23 @@ fn val(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> Irradiance
         .render(&inputs, &ValShadingParams::default(), &mut out)
         .unwrap();
     out
+}
+
+/// `sample.dir`: the importance table of the constant environment (it has no SIMD
+/// path: `lanes` changes nothing).
+fn dir(scene: &Scene, objects: &VirtualScene, _lanes: simd::Kernel) -> IrradianceLayers {
+    let table = uniform_table(4096);
+    let inputs = DirInputs {
+        depth: &scene.depth,
+        normals: &scene.normals,
+        radiance: &scene.radiance,
+        camera: camera(),
+        camera_to_world: pose(),
+        table: &table,
+        objects,
+        frame: 7,
+    };
+    sample_dir(&inputs, &DirParams::default()).unwrap()
 }
 
 #[test]

@@ -1,0 +1,460 @@
+//! One frame of Differential Instant Radiosity: the VPLs and their maps, then the
+//! interleaved gather and the blur (the order of paper 002 Fig. 2).
+
+use super::blur::blur_layers;
+use super::ism::{Projection, fill_holes, filled_rect, frame_about, splat};
+use super::points::{MeshPoints, RealSurface};
+use super::shade::{Gathered, LightSet, Receiver, gather};
+use super::vpl::{Candidate, Emitter, Vpl, environment_vpls, resample};
+use super::{DirInputs, DirParams};
+use crate::graph::StageError;
+use crate::light::split::luminance;
+use crate::objects::VirtualHit;
+use crate::rng;
+use crate::stages::sample::layers::{IrradianceLayers, PixelLayers, shade_rows};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+/// Shades frames with reusable buffers (real surface, VPLs, shadow maps, the
+/// un-blurred layers).
+#[derive(Default)]
+pub struct DirRenderer {
+    real: RealSurface,
+    vpls: Vec<Vpl>,
+    projections: Vec<[Projection; 2]>,
+    rects: Vec<[[u16; 4]; 2]>,
+    maps: Vec<f32>,
+    candidates: Vec<Candidate>,
+    /// Per interleaving class, the indices of its VPLs.
+    members: Vec<Vec<u32>>,
+    /// The environment VPLs' indices (0..n).
+    environment: Vec<u32>,
+    raw: Option<IrradianceLayers>,
+}
+
+impl DirRenderer {
+    /// Renders one frame into `out` (the depth map's size).
+    pub fn render(
+        &mut self,
+        inputs: &DirInputs,
+        params: &DirParams,
+        mesh: &MeshPoints,
+        out: &mut IrradianceLayers,
+    ) -> Result<(), StageError> {
+        let (w, h) = (inputs.depth.width, inputs.depth.height);
+        let sizes = [
+            ("normals", inputs.normals.width, inputs.normals.height),
+            ("radiance", inputs.radiance.width, inputs.radiance.height),
+            ("camera", inputs.camera.width, inputs.camera.height),
+        ];
+        for (what, ww, hh) in sizes {
+            if (ww, hh) != (w, h) {
+                return Err(StageError::Failed(format!(
+                    "sample.dir: {what} is {ww}x{hh}, depth is {w}x{h}"
+                )));
+            }
+        }
+        if out.size() != Some((w, h)) {
+            return Err(StageError::Failed(format!(
+                "sample.dir: output buffers are not all {w}x{h}"
+            )));
+        }
+        if !inputs.camera_to_world.is_finite() {
+            return Err(StageError::Failed(
+                "sample.dir: the camera pose is not finite".into(),
+            ));
+        }
+        params.check()?;
+        self.real.update(
+            inputs.depth,
+            inputs.normals,
+            inputs.camera,
+            inputs.camera_to_world,
+        );
+        let key = rng::hash(&[params.seed, inputs.frame, 0xD1_0001]);
+
+        // The primary light's VPLs and their maps.
+        let (center, object_radius) = objects_sphere(inputs, &self.real);
+        self.vpls.clear();
+        self.vpls
+            .extend(environment_vpls(inputs.table, params.environment_vpls, key));
+        let environment = self.vpls.len();
+        self.environment.clear();
+        self.environment.extend(0..environment as u32);
+        self.projections.clear();
+        for v in &self.vpls {
+            let Emitter::Direction(d) = v.emitter else {
+                unreachable!("environment VPLs are directions")
+            };
+            let frame = frame_about(d);
+            self.projections.push([
+                Projection::Orthographic {
+                    center,
+                    radius: object_radius + params.max_distance,
+                    frame,
+                },
+                Projection::Orthographic {
+                    center,
+                    radius: object_radius.max(1e-3),
+                    frame,
+                },
+            ]);
+        }
+        self.build_maps(0, params, mesh, key);
+
+        // One bounce: candidates lit by the environment VPLs, resampled into the slots,
+        // `virtual_share` of them for the objects' candidates.
+        self.candidates.clear();
+        self.real_candidates(inputs, params, key);
+        let real_count = self.candidates.len();
+        self.virtual_candidates(params, mesh, key);
+        let slots = (params.vpls as usize).saturating_sub(environment);
+        let (real, virtual_) = self.candidates.split_at(real_count);
+        let lit = |c: &[Candidate]| c.iter().any(|c| luminance(c.power) > 0.0);
+        let virtual_slots = match (lit(real), lit(virtual_)) {
+            (_, false) => 0,
+            (false, true) => slots,
+            (true, true) => (slots as f32 * params.virtual_share).round() as usize,
+        };
+        resample(
+            real,
+            slots - virtual_slots,
+            environment as u32,
+            key,
+            &mut self.vpls,
+        );
+        let next_slot = self
+            .vpls
+            .last()
+            .map_or(0, |v| v.slot + 1)
+            .max(environment as u32);
+        resample(
+            virtual_,
+            virtual_slots,
+            next_slot,
+            key ^ 0x7EA1,
+            &mut self.vpls,
+        );
+        for v in &self.vpls[environment..] {
+            if v.slot as usize == self.projections.len() {
+                let Emitter::Surface { position, normal } = v.emitter else {
+                    unreachable!("bounce VPLs are surfaces")
+                };
+                let p = Projection::Paraboloid {
+                    origin: position,
+                    frame: frame_about(normal),
+                };
+                self.projections.push([p, p]);
+            }
+        }
+        self.build_maps(environment, params, mesh, key);
+        let k = params.interleave as usize;
+        let classes = k * k;
+        for members in &mut self.members {
+            members.clear();
+        }
+        self.members.resize(classes, Vec::new());
+        for (i, v) in self.vpls.iter().enumerate() {
+            self.members[v.slot as usize % classes].push(i as u32);
+        }
+
+        // Interleaved gather, then the blur.
+        let raw = match &mut self.raw {
+            Some(raw) if raw.size() == Some((w, h)) => raw,
+            slot => slot.insert(IrradianceLayers::new(w, h)),
+        };
+        let lights = light_set(
+            &self.vpls,
+            &self.projections,
+            &self.rects,
+            &self.maps,
+            params,
+        );
+        let (real, members) = (&self.real, &self.members);
+        let scale = classes as f32;
+        shade_rows(
+            raw,
+            w as usize,
+            1,
+            || (),
+            |_, y, mut row| {
+                for x in 0..w as usize {
+                    let i = y * w as usize + x;
+                    let class = (y % k) * k + x % k;
+                    let (p, n) = (real.position[i], real.normal[i]);
+                    let real_here = n != Vec3::ZERO;
+                    let hit = primary_hit(inputs, x, y, real_here.then_some(p));
+                    let r =
+                        real_here.then(|| gather(&lights, &members[class], p, n, Receiver::Real));
+                    let out = match (&hit, r) {
+                        (Some(hit), r) => {
+                            let v = gather(
+                                &lights,
+                                &members[class],
+                                hit.position,
+                                hit.normal,
+                                Receiver::Virtual,
+                            );
+                            pixel(Some(hit), r.unwrap_or(NO_LIGHT), v, scale)
+                        }
+                        (None, Some(r)) => pixel(None, r, r, scale),
+                        (None, None) => {
+                            row.set(x, &NOTHING);
+                            continue;
+                        }
+                    };
+                    row.set(x, &out);
+                    if !real_here {
+                        // No real point behind the object: E_R has no estimate.
+                        row.e_r_dir[x] = Vec3::NAN;
+                        row.e_r_ind[x] = Vec3::NAN;
+                    }
+                    if hit.is_none() {
+                        row.world_position[x] = p;
+                        row.world_normal[x] = n;
+                    }
+                }
+            },
+        );
+        blur_layers(raw, &self.real, k, out);
+        Ok(())
+    }
+
+    /// Real candidates: one pixel per `real_grid` x `real_grid` cell (hashed within
+    /// it), standing for the cell's area; their direct light with and without the
+    /// objects from the environment VPLs.
+    fn real_candidates(&mut self, inputs: &DirInputs, params: &DirParams, key: u64) {
+        let (w, h) = (inputs.depth.width as usize, inputs.depth.height as usize);
+        let g = params.real_grid as usize;
+        let lights = light_set(
+            &self.vpls,
+            &self.projections,
+            &self.rects,
+            &self.maps,
+            params,
+        );
+        let cam = inputs.camera;
+        let (real, environment) = (&self.real, &self.environment[..]);
+        let found: Vec<Candidate> = (0..h.div_ceil(g))
+            .into_par_iter()
+            .flat_map_iter(|cy| {
+                let lights = &lights;
+                (0..w.div_ceil(g)).filter_map(move |cx| {
+                    let hsh = rng::hash(&[key, 0xCA4D, cx as u64, cy as u64]);
+                    let x = (cx * g + (rng::unit_f32(hsh) * g as f32) as usize).min(w - 1);
+                    let y =
+                        (cy * g + (rng::unit_f32(rng::mix64(hsh)) * g as f32) as usize).min(h - 1);
+                    let i = y * w + x;
+                    let (p, n) = (real.position[i], real.normal[i]);
+                    if n == Vec3::ZERO {
+                        return None;
+                    }
+                    let z = inputs.depth.data[i];
+                    let view =
+                        (p - Vec3::from(inputs.camera_to_world.translation)).normalize_or_zero();
+                    let area =
+                        (g * g) as f32 * z * z / (cam.fx * cam.fy) / n.dot(view).abs().max(0.2);
+                    let lit = gather(lights, environment, p, n, Receiver::Real);
+                    let (r, rv) = (luminance(lit.r_dir), luminance(lit.rv_dir));
+                    let unblocked = if r > 0.0 {
+                        (rv / r).clamp(0.0, 1.0)
+                    } else {
+                        1.0
+                    };
+                    let radiance = inputs.radiance.data[i];
+                    radiance.is_finite().then_some(Candidate {
+                        position: p,
+                        normal: n,
+                        power: radiance.max(Vec3::ZERO) * area,
+                        real: true,
+                        area,
+                        unblocked,
+                    })
+                })
+            })
+            .collect();
+        self.candidates.extend(found);
+    }
+
+    /// Virtual candidates: `points_per_vpl` mesh points (a subset that changes per
+    /// frame), each lit by the environment VPLs in the combined world.
+    fn virtual_candidates(&mut self, params: &DirParams, mesh: &MeshPoints, key: u64) {
+        let lights = light_set(
+            &self.vpls,
+            &self.projections,
+            &self.rects,
+            &self.maps,
+            params,
+        );
+        let picks: Vec<usize> =
+            super::points::strided(mesh.len(), params.points_per_vpl as usize, key ^ 0x71C7)
+                .collect();
+        let found: Vec<Candidate> = picks
+            .par_iter()
+            .map(|&j| {
+                let (p, n) = (mesh.position[j], mesh.normal[j]);
+                let lit = gather(&lights, &self.environment, p, n, Receiver::Virtual);
+                let area = mesh.area * mesh.len() as f32 / picks.len() as f32;
+                Candidate {
+                    position: p,
+                    normal: n,
+                    power: mesh.material[j].albedo * lit.rv_dir / PI * area,
+                    real: false,
+                    area,
+                    unblocked: 1.0,
+                }
+            })
+            .collect();
+        self.candidates.extend(found);
+    }
+
+    /// Splats and fills the maps of slots `first..`: `points_per_vpl` real points into
+    /// the real map, as many mesh points into the virtual one, each VPL its own subset.
+    fn build_maps(&mut self, first: usize, params: &DirParams, mesh: &MeshPoints, key: u64) {
+        let size = params.shadow_map_size as usize;
+        let texels = size * size;
+        let n = self.projections.len();
+        self.maps.resize(2 * n * texels, f32::INFINITY);
+        self.rects.resize(n, [[0; 4]; 2]);
+        let count = params.points_per_vpl as usize;
+        let (real, projections) = (&self.real, &self.projections);
+        let levels = params.fill_levels as usize;
+        self.maps[2 * first * texels..]
+            .par_chunks_mut(2 * texels)
+            .zip(self.rects[first..].par_iter_mut())
+            .enumerate()
+            .for_each_init(Vec::new, |scratch, (j, (maps, rects))| {
+                let i = first + j;
+                let (real_map, virtual_map) = maps.split_at_mut(texels);
+                let vpl_key = rng::hash(&[key, 0x15A, i as u64]);
+                real_map.fill(f32::INFINITY);
+                virtual_map.fill(f32::INFINITY);
+                splat(
+                    real_map,
+                    size,
+                    &projections[i][0],
+                    real.subset(count, vpl_key),
+                );
+                splat(
+                    virtual_map,
+                    size,
+                    &projections[i][1],
+                    mesh.subset(count, vpl_key ^ 1),
+                );
+                fill_holes(real_map, size, levels, scratch);
+                fill_holes(virtual_map, size, levels, scratch);
+                *rects = [filled_rect(real_map, size), filled_rect(virtual_map, size)];
+            });
+    }
+}
+
+fn light_set<'a>(
+    vpls: &'a [Vpl],
+    projections: &'a [[Projection; 2]],
+    rects: &'a [[[u16; 4]; 2]],
+    maps: &'a [f32],
+    params: &DirParams,
+) -> LightSet<'a> {
+    let n = projections.len().min(rects.len());
+    LightSet {
+        vpls,
+        projections: &projections[..n],
+        rects: &rects[..n],
+        maps,
+        size: params.shadow_map_size as usize,
+        bias: params.bias,
+        slope: params.slope_bias,
+        clamp_squared: params.clamp_distance * params.clamp_distance,
+        reach: params.max_distance,
+    }
+}
+
+/// The sphere around the objects (their bounding box's), or around the real points
+/// with radius 0 when there are none: the environment maps' discs are centred there.
+fn objects_sphere(inputs: &DirInputs, real: &RealSurface) -> (Vec3, f32) {
+    if !inputs.objects.is_empty() {
+        let b = inputs.objects.bounds();
+        return (b.center(), (b.max - b.min).length() * 0.5);
+    }
+    let mut sum = glam::DVec3::ZERO;
+    for &i in &real.valid {
+        sum += real.position[i as usize].as_dvec3();
+    }
+    let center = (sum / real.valid.len().max(1) as f64).as_vec3();
+    (
+        if center.is_finite() {
+            center
+        } else {
+            Vec3::ZERO
+        },
+        0.0,
+    )
+}
+
+/// The object the view ray through pixel (x, y) meets in front of the real point
+/// `real` (if any).
+fn primary_hit(inputs: &DirInputs, x: usize, y: usize, real: Option<Vec3>) -> Option<VirtualHit> {
+    if inputs.objects.is_empty() {
+        return None;
+    }
+    let origin: Vec3 = inputs.camera_to_world.translation.into();
+    let dir = inputs
+        .camera_to_world
+        .transform_vector3(inputs.camera.ray(x as f32, y as f32))
+        .normalize();
+    let t_max = real.map_or(f32::INFINITY, |p| p.distance(origin));
+    let (t0, t1) = inputs
+        .objects
+        .bounds()
+        .ray_span(origin, dir.recip(), 0.0, t_max)?;
+    inputs
+        .objects
+        .intersect(origin, dir, (t0 - 1e-4).max(0.0), t1 + 1e-4)
+}
+
+/// A pixel with neither a real point nor an object.
+const NOTHING: PixelLayers = PixelLayers {
+    e_r_dir: Vec3::NAN,
+    e_r_ind: Vec3::NAN,
+    e_rv_dir: Vec3::NAN,
+    e_rv_ind: Vec3::NAN,
+    mask: 1.0,
+    k_v: Vec3::ZERO,
+    exponent: 0.0,
+    world_position: Vec3::NAN,
+    world_normal: Vec3::ZERO,
+    direct_min_distance: f32::INFINITY,
+    indirect_min_distance: f32::INFINITY,
+    touched: false,
+};
+
+const NO_LIGHT: Gathered = Gathered {
+    r_dir: Vec3::NAN,
+    r_ind: Vec3::NAN,
+    rv_dir: Vec3::ZERO,
+    rv_ind: Vec3::ZERO,
+    touched: true,
+    direct_min_distance: f32::INFINITY,
+    indirect_min_distance: f32::INFINITY,
+};
+
+/// One pixel's un-blurred layers: E_R from the real point `r`, E_RV from `v` (the
+/// object's point where `hit`, else the same real point), both times the interleaving
+/// `scale`.
+fn pixel(hit: Option<&VirtualHit>, r: Gathered, v: Gathered, scale: f32) -> PixelLayers {
+    PixelLayers {
+        e_r_dir: r.r_dir * scale,
+        e_r_ind: r.r_ind * scale,
+        e_rv_dir: v.rv_dir * scale,
+        e_rv_ind: v.rv_ind * scale,
+        mask: if hit.is_some() { 0.0 } else { 1.0 },
+        k_v: hit.map_or(Vec3::ZERO, |h| h.material.albedo),
+        exponent: 0.0,
+        world_position: hit.map_or(Vec3::NAN, |h| h.position),
+        world_normal: hit.map_or(Vec3::ZERO, |h| h.normal),
+        direct_min_distance: r.direct_min_distance.min(v.direct_min_distance),
+        indirect_min_distance: r.indirect_min_distance.min(v.indirect_min_distance),
+        touched: hit.is_some() || r.touched,
+    }
+}

@@ -193,6 +193,43 @@ fn the_vct_pipeline_is_mixed_reality_with_voxel_cone_tracing() {
     );
 }
 
+/// The Differential Instant Radiosity pipelines are their sample.path twins with the
+/// renderer swapped and nothing else changed.
+#[test]
+fn the_dir_pipelines_are_their_twins_with_sample_dir_swapped_in() {
+    let file = |name: &str| {
+        std::fs::read_to_string(format!("{}/pipelines/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    };
+    let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
+    for (twin, name) in [
+        ("mixed-reality", "mixed-reality-dir"),
+        ("mixed-reality-livingroom1", "mixed-reality-dir-livingroom1"),
+    ] {
+        let text = file(&format!("{name}.toml"));
+        assert_eq!(
+            body(&file(&format!("{twin}.toml")))
+                .replacen(
+                    &format!("name = \"{twin}\""),
+                    &format!("name = \"{name}\""),
+                    1
+                )
+                .replacen("-> sample.path ->", "-> sample.dir ->", 1)
+                .replacen("kind = \"sample.path\"\n", "kind = \"sample.dir\"\n", 1),
+            body(&text),
+            "{name}"
+        );
+        let p = Pipeline::parse(
+            &SourceFile {
+                name: format!("pipelines/{name}.toml"),
+                text,
+            },
+            &Registry::builtin(),
+        )
+        .unwrap();
+        assert!(p.stages.iter().any(|s| s.kind == "sample.dir"), "{name}");
+    }
+}
+
 /// The impostor queries read light.impostor's map: a pipeline where no stage makes
 /// it is refused when it loads, naming the missing product and the stage.
 #[test]

@@ -23,6 +23,7 @@ mod depth;
 pub mod filter;
 pub mod light;
 mod normals;
+mod renderer;
 pub mod sampling;
 mod truth;
 
@@ -41,6 +42,7 @@ enum Scorer {
     Importance(light::ImportanceScorer),
     Val(light::ValScorer),
     Path(Box<sampling::PathScorer>),
+    Renderer(Box<renderer::RatioScorer>),
     Filter(Box<filter::FilterScorer>),
     Composite(Box<composite::CompositeScorer>),
 }
@@ -131,10 +133,19 @@ impl Evaluator {
             .iter()
             .find(|s| s.kind == "color.compensate")
             .map(|s| (output(s, "compensated"), input(s, "color")));
-        let sampler = pipeline.stages.iter().find(|s| s.kind == "sample.path");
-        let runner = sampler.map(|s| {
-            sampling::PathRunner::new(s, pipeline.objects.clone(), header.depth_intrinsics, seed)
+        // The renderer whose layers the filter and the composite get; its references
+        // are the default sample.path's on the same inputs, whichever renderer it is.
+        let sampler = pipeline
+            .stages
+            .iter()
+            .find(|s| matches!(s.kind, "sample.path" | "sample.dir"));
+        let (objects, k) = (pipeline.objects.clone(), header.depth_intrinsics);
+        let runner = sampler.map(|s| match s.kind {
+            "sample.path" => sampling::PathRunner::new(s, objects.clone(), k, seed),
+            _ => sampling::PathRunner::reference_for(s, objects.clone(), k, seed),
         });
+        // The filter's flicker scores re-run the sampler itself: sample.path only.
+        let resampler = sampler.filter(|s| s.kind == "sample.path");
         let mut scorers: Vec<_> = pipeline
             .stages
             .iter()
@@ -173,12 +184,16 @@ impl Evaluator {
                         header.depth_intrinsics,
                         seed,
                     ))),
+                    "sample.dir" => Scorer::Renderer(Box::new(renderer::RatioScorer::new(s))),
                     "filter.axis_aligned" => Scorer::Filter(Box::new(filter::FilterScorer::new(
                         s,
                         header,
                         pipeline.objects.clone(),
                         seed,
-                        runner.clone().zip(sampler.cloned()),
+                        runner
+                            .clone()
+                            .filter(|_| resampler.is_some())
+                            .zip(resampler.cloned()),
                     ))),
                     "composite.differential" => {
                         Scorer::Composite(Box::new(composite::CompositeScorer::new(s, sampler)))
@@ -235,7 +250,7 @@ impl Evaluator {
         let needs_references = scorers.iter().any(|(_, _, s)| {
             matches!(
                 s,
-                Scorer::Path(_) | Scorer::Filter(_) | Scorer::Composite(_)
+                Scorer::Path(_) | Scorer::Renderer(_) | Scorer::Filter(_) | Scorer::Composite(_)
             )
         });
         let references = runner.filter(|_| needs_references).map(|r| {
@@ -274,6 +289,7 @@ impl Evaluator {
                 Scorer::Importance(s) => s.observe(frame),
                 Scorer::Val(s) => s.observe(frame),
                 Scorer::Path(s) => s.observe(frame, reference.as_deref())?,
+                Scorer::Renderer(s) => s.observe(frame, reference.as_deref()),
                 Scorer::Filter(s) => s.observe(frame, reference.as_deref())?,
                 Scorer::Composite(s) => s.observe(frame, reference.as_deref())?,
             }
@@ -298,6 +314,7 @@ impl Evaluator {
                 Scorer::Importance(s) => s.report(),
                 Scorer::Val(s) => s.report(),
                 Scorer::Path(s) => s.report(),
+                Scorer::Renderer(s) => s.report(),
                 Scorer::Filter(s) => s.report(),
                 Scorer::Composite(s) => s.report(),
             };

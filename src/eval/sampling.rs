@@ -47,7 +47,7 @@ const BIAS_RUNS: u64 = 8;
 const REFERENCE_SALT: u64 = 0x5245_4645;
 const BIAS_SALT: u64 = 0x4249_4153;
 
-fn channel_mean(v: Vec3) -> f64 {
+pub(super) fn channel_mean(v: Vec3) -> f64 {
     ((v.x + v.y + v.z) / 3.0) as f64
 }
 
@@ -99,6 +99,30 @@ impl PathRunner {
             voxels: stage.inputs.get("voxels").cloned(),
             object_voxels: params.object_volume(&objects).map(Arc::new),
             params,
+            objects,
+            intrinsics,
+        }
+    }
+
+    /// A runner of the default `sample.path` (screen-space marching) on the inputs of
+    /// another renderer (`sample.dir` reads the same roles): the references that
+    /// renderer is scored against are the default's.
+    pub fn reference_for(
+        stage: &ResolvedStage,
+        objects: Arc<VirtualScene>,
+        intrinsics: Intrinsics,
+        seed: u64,
+    ) -> PathRunner {
+        PathRunner {
+            inputs: ["depth", "normals", "pose", "radiance", "light_table"]
+                .map(|r| super::input(stage, r)),
+            environment: None,
+            voxels: None,
+            object_voxels: None,
+            params: PathParams {
+                seed,
+                ..PathParams::default()
+            },
             objects,
             intrinsics,
         }

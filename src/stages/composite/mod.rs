@@ -14,6 +14,9 @@
 //! (`final_hdr`), and gamma encoding to 8 bits gives `final`, which looks like the
 //! camera's own image wherever the objects change nothing.
 //!
+//! `form = "difference"` composites by paper 002's tone-mapped difference instead
+//! (see `difference.rs` for the form and its trade-off against the ratio).
+//!
 //! The differential ratio E_RV / E_R is exactly 1 wherever the two estimates are equal
 //! (`sample.path` makes them equal bit for bit where no path met an object, and
 //! `filter.axis_aligned` keeps them so), so those pixels come back as the camera's
@@ -21,6 +24,7 @@
 //! [0, `max_ratio`]; where either estimate is missing (no real shading point) the
 //! camera pixel is kept (ratio 1).
 
+mod difference;
 mod encode;
 #[cfg(test)]
 mod tests;
@@ -44,6 +48,12 @@ const PARAMS: &[ParamSpec] = &[
          so that untouched pixels come back as the camera's own levels",
     )
     .range(1.0, 3.0),
+    ParamSpec::new(
+        "form",
+        ParamDefault::Str("ratio"),
+        "ratio = paper 001 eq. 2, the camera pixel scaled by E_RV / E_R; difference = paper 002 Sec. 3.1, TM(L_rv) - TM(L_r) added to the tone-mapped camera pixel, the camera's color as the real albedo (no division, but an absolute change that the albedo approximation sets)",
+    )
+    .choices(&["ratio", "difference"]),
     ParamSpec::new(
         "max_ratio",
         ParamDefault::Float(4.0),
@@ -106,6 +116,8 @@ pub const INFO: StageInfo = StageInfo {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CompositeParams {
     pub gamma: f32,
+    /// Paper 002's tone-mapped difference instead of the ratio.
+    pub difference: bool,
     pub max_ratio: f32,
     pub min_irradiance: f32,
 }
@@ -114,6 +126,7 @@ impl CompositeParams {
     pub fn from_params(p: &Params) -> CompositeParams {
         CompositeParams {
             gamma: p.float("gamma") as f32,
+            difference: p.str("form") == "difference",
             max_ratio: p.float("max_ratio") as f32,
             min_irradiance: p.float("min_irradiance") as f32,
         }
@@ -124,6 +137,7 @@ impl Default for CompositeParams {
     fn default() -> Self {
         CompositeParams {
             gamma: 2.2,
+            difference: false,
             max_ratio: 4.0,
             min_irradiance: 1e-4,
         }
@@ -297,6 +311,20 @@ pub fn composite<'a>(
             for x in 0..width {
                 let e_r = e_r_dir[x] + e_r_ind[x];
                 let e_rv = e_rv_dir[x] + e_rv_ind[x];
+                if params.difference {
+                    let display = difference::difference_pixel(
+                        e_r,
+                        e_rv,
+                        mask[x],
+                        k_v[x],
+                        radiance[x],
+                        inverse,
+                        params.gamma,
+                    );
+                    (color_row[x], hdr_row[x]) = difference::encode(display, params.gamma, encoder);
+                    ratio_row[x] = differential_ratio3(e_r, e_rv, params);
+                    continue;
+                }
                 let (reference, ratio) =
                     composite_pixel(e_r, e_rv, mask[x], k_v[x], radiance[x], params);
                 let camera = inverse * reference;

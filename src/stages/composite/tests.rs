@@ -2,6 +2,7 @@ use super::*;
 use crate::rng;
 use crate::stages::compensate::{apply_compensation, hsv::Linearize};
 use crate::stages::with_threads;
+use std::f32::consts::PI;
 
 const W: u32 = 64;
 const H: u32 = 48;
@@ -233,4 +234,85 @@ fn the_same_bits_with_one_and_three_threads() {
     };
     assert_eq!(bits(&one.final_hdr), bits(&three.final_hdr));
     assert_eq!(bits(&one.differential), bits(&three.differential));
+}
+
+fn run_with(s: &Scene, e_rv_dir: &Vec3Image, params: &CompositeParams) -> CompositeOutputs {
+    let inputs = CompositeInputs {
+        e_r_dir: &s.e_dir,
+        e_r_ind: &s.e_ind,
+        e_rv_dir,
+        e_rv_ind: &s.e_ind,
+        mask: &s.mask,
+        k_v: &s.k_v,
+        radiance: &s.radiance,
+        inverse_compensation: s.compensation.inverse(),
+    };
+    let mut out = CompositeOutputs::new(W, H);
+    composite(&inputs, params, &GammaEncoder::new(params.gamma), &mut out).unwrap();
+    out
+}
+
+/// Paper 002's tone-mapped difference: the camera's levels where the objects change
+/// nothing; TM(cam) + TM(a E_RV / pi) - TM(a E_R / pi) in a shadow, which equals the
+/// ratio form when the camera shows albedo times E_R / pi, and departs from it by an
+/// absolute amount where it does not.
+#[test]
+fn the_difference_form_adds_the_tone_mapped_difference_to_the_camera() {
+    let mut s = scene();
+    // Identity compensation, so that TM is the gamma alone.
+    s.compensation = Mat3::IDENTITY;
+    s.radiance = Image::from_vec(
+        W,
+        H,
+        s.color
+            .data
+            .iter()
+            .map(|&c| Linearize::new(2.2).rgb(c))
+            .collect(),
+    )
+    .unwrap();
+    let difference = CompositeParams {
+        difference: true,
+        ..CompositeParams::default()
+    };
+    let untouched = run_with(&s, &s.e_dir, &difference);
+    assert_eq!(untouched.final_color.data, s.color.data);
+    // Pixel 10: the camera shows albedo a = 0.4 lit by E_R = pi (L = a E_R / pi = a:
+    // the camera's color is the albedo, as the form assumes); the objects leave a
+    // quarter of the light.
+    let e_r = Vec3::splat(PI);
+    s.e_dir.data[10] = e_r - s.e_ind.data[10];
+    s.radiance.data[10] = 0.4 * e_r / PI;
+    let mut e_rv_dir = s.e_dir.clone();
+    e_rv_dir.data[10] = e_r / 4.0 - s.e_ind.data[10];
+    let by_difference = run_with(&s, &e_rv_dir, &difference);
+    let by_ratio = run_with(&s, &e_rv_dir, &CompositeParams::default());
+    let expected = 0.4 * e_r.x / 4.0 / PI;
+    for out in [&by_difference, &by_ratio] {
+        assert!(
+            (out.final_hdr.data[10].x - expected).abs() < 1e-4,
+            "{}",
+            out.final_hdr.data[10]
+        );
+    }
+    // A saturated camera pixel (its albedo clamps at 1): the difference form darkens it
+    // by TM(1 E_R / pi) - TM(E_R / 4 pi), not by the factor 4.
+    s.radiance.data[10] = Vec3::splat(1.5);
+    let by_difference = run_with(&s, &e_rv_dir, &difference);
+    let tm = |x: f32| x.powf(1.0 / 2.2);
+    let display = (tm(1.5).min(1.0) + tm(e_r.x / 4.0 / PI) - tm(e_r.x / PI)).clamp(0.0, 1.0);
+    assert!((by_difference.final_hdr.data[10].x - display.powf(2.2)).abs() < 1e-4);
+    assert!((by_difference.final_hdr.data[10].x - 1.5 / 4.0).abs() > 0.05);
+    // A virtual pixel shows the object, k_V E_RV / pi, whatever the camera saw there.
+    s.mask.data[20] = 0.0;
+    s.k_v.data[20] = Vec3::new(0.8, 0.4, 0.2);
+    let by_difference = run_with(&s, &e_rv_dir, &difference);
+    let e_rv = e_rv_dir.data[20] + s.e_ind.data[20];
+    let object = s.k_v.data[20] * e_rv / PI;
+    assert!(
+        (by_difference.final_hdr.data[20] - object.min(Vec3::ONE))
+            .abs()
+            .max_element()
+            < 1e-4
+    );
 }

@@ -1,119 +1,214 @@
 //! The geometry-aware blur that reassembles interleaved sampling (paper 002 Sec. 3.2,
 //! after Segovia et al.): each pixel gathered the VPLs of its class only (one of k x k,
-//! by its position in a k x k tile), so every k x k window holds every class once; a
-//! pixel's estimate is the mean over the window's pixels that show the same surface
-//! (normals within about 25 degrees, within `PLANE_TOLERANCE` of its tangent plane,
-//! same kind: real or virtual).
+//! by its position in a k x k tile), so every k x k window holds every class once. The
+//! blur averages a pixel with the neighbours of its k-wide window that show the same
+//! surface (normals within about 25 degrees, within `PLANE_TOLERANCE` of its tangent
+//! plane, same kind: real or virtual), along x and then along y (separably: 2k taps a
+//! pixel instead of k^2).
 //!
 //! E_R is blurred over the real surface, E_RV over the visible one. A pixel whose window
 //! holds neither a virtual pixel nor a touched one takes the same neighbours with the
-//! same values for both, so its E_RV equals its E_R bit for bit; `touched` is set
-//! wherever that is not so.
+//! same values for both, so its E_RV equals its E_R bit for bit (it is computed once and
+//! copied); `touched` is set wherever that is not so.
 
 use super::points::RealSurface;
 use super::shade::same_surface;
-use crate::stages::sample::layers::{IrradianceLayers, shade_rows};
+use crate::stages::sample::layers::{IrradianceLayers, LayerRow, shade_rows};
 use glam::Vec3;
 
 /// Metres a neighbour may lie off a pixel's tangent plane and still be averaged in.
 pub const PLANE_TOLERANCE: f32 = 0.03;
 
-/// Blurs `raw` (the interleaved estimates, `k` x `k` classes) into `out`.
+/// Blurs `raw` (the interleaved estimates, `k` x `k` classes) into `out`, through
+/// `between` (the pass along x), all of one size.
 pub fn blur_layers(
     raw: &IrradianceLayers,
     real: &RealSurface,
     k: usize,
+    between: &mut IrradianceLayers,
     out: &mut IrradianceLayers,
 ) {
     let (w, h) = (raw.mask.width as usize, raw.mask.height as usize);
     let (lo, hi) = ((k.max(1) - 1) / 2, k.max(1) / 2);
+    shade_rows(
+        between,
+        w,
+        1,
+        || (),
+        |_, y, row| pass_row(raw, real, y, w, lo, hi, row),
+    );
+    let between = &*between;
     shade_rows(
         out,
         w,
         1,
         || (),
         |_, y, row| {
-            let ys = y.saturating_sub(lo)..(y + hi + 1).min(h);
-            for x in 0..w {
-                let i = y * w + x;
-                let xs = x.saturating_sub(lo)..(x + hi + 1).min(w);
-                let virtual_here = raw.mask.data[i] < 1.0;
-                let (rp, rn) = (real.position[i], real.normal[i]);
-                let (vp, vn) = (raw.world_position.data[i], raw.world_normal.data[i]);
-                let (mut r_dir, mut r_ind, mut r_n) = (Vec3::ZERO, Vec3::ZERO, 0u32);
-                let (mut rv_dir, mut rv_ind, mut rv_n) = (Vec3::ZERO, Vec3::ZERO, 0u32);
-                let (mut touched, mut direct_min, mut indirect_min) =
-                    (false, f32::INFINITY, f32::INFINITY);
-                for qy in ys.clone() {
-                    for qx in xs.clone() {
-                        let j = qy * w + qx;
-                        touched |= raw.touched.data[j] != 0 || raw.mask.data[j] < 1.0;
-                        let (er_dir, er_ind) = (raw.e_r_dir.data[j], raw.e_r_ind.data[j]);
-                        if er_dir.is_finite()
-                            && er_ind.is_finite()
-                            && same_surface(
-                                rp,
-                                rn,
-                                real.position[j],
-                                real.normal[j],
-                                PLANE_TOLERANCE,
-                            )
-                        {
-                            r_dir += er_dir;
-                            r_ind += er_ind;
-                            r_n += 1;
-                        }
-                        let (erv_dir, erv_ind) = (raw.e_rv_dir.data[j], raw.e_rv_ind.data[j]);
-                        let same_kind = (raw.mask.data[j] < 1.0) == virtual_here;
-                        if same_kind
-                            && erv_dir.is_finite()
-                            && erv_ind.is_finite()
-                            && same_surface(
-                                vp,
-                                vn,
-                                raw.world_position.data[j],
-                                raw.world_normal.data[j],
-                                PLANE_TOLERANCE,
-                            )
-                        {
-                            rv_dir += erv_dir;
-                            rv_ind += erv_ind;
-                            rv_n += 1;
-                            direct_min = direct_min.min(raw.direct_min_distance.data[j]);
-                            indirect_min = indirect_min.min(raw.indirect_min_distance.data[j]);
-                        }
-                    }
-                }
-                let mean = |sum: Vec3, n: u32| if n > 0 { sum / n as f32 } else { Vec3::NAN };
-                row.e_r_dir[x] = if raw.e_r_dir.data[i].is_finite() {
-                    mean(r_dir, r_n)
-                } else {
-                    raw.e_r_dir.data[i]
-                };
-                row.e_r_ind[x] = if raw.e_r_ind.data[i].is_finite() {
-                    mean(r_ind, r_n)
-                } else {
-                    raw.e_r_ind.data[i]
-                };
-                row.e_rv_dir[x] = if raw.e_rv_dir.data[i].is_finite() {
-                    mean(rv_dir, rv_n)
-                } else {
-                    raw.e_rv_dir.data[i]
-                };
-                row.e_rv_ind[x] = if raw.e_rv_ind.data[i].is_finite() {
-                    mean(rv_ind, rv_n)
-                } else {
-                    raw.e_rv_ind.data[i]
-                };
-                row.mask[x] = raw.mask.data[i];
-                row.k_v[x] = raw.k_v.data[i];
-                row.exponent[x] = raw.exponent.data[i];
-                row.world_position[x] = vp;
-                row.world_normal[x] = vn;
-                row.direct_min_distance[x] = direct_min;
-                row.indirect_min_distance[x] = indirect_min;
-                row.touched[x] = touched as u8;
-            }
+            // Along y: pixel x of row y steps by w, within the image's height.
+            pass_column(raw, between, real, y, w, h, lo, hi, row)
         },
     );
+}
+
+/// One row of the pass along y: each pixel's taps are the pixels above and below.
+#[allow(clippy::too_many_arguments)]
+fn pass_column(
+    geometry: &IrradianceLayers,
+    input: &IrradianceLayers,
+    real: &RealSurface,
+    y: usize,
+    w: usize,
+    h: usize,
+    lo: usize,
+    hi: usize,
+    mut row: LayerRow<'_>,
+) {
+    let (first, last) = (y.saturating_sub(lo), (y + hi).min(h - 1));
+    for x in 0..w {
+        let taps = (first..=last).map(|qy| qy * w + x);
+        let px = blur_pixel(geometry, input, real, y * w + x, taps);
+        put(&mut row, x, geometry, y * w + x, px);
+    }
+}
+
+/// One row of the pass along x, from the raw layers.
+fn pass_row(
+    raw: &IrradianceLayers,
+    real: &RealSurface,
+    y: usize,
+    w: usize,
+    lo: usize,
+    hi: usize,
+    mut row: LayerRow<'_>,
+) {
+    let start = y * w;
+    for x in 0..w {
+        let (first, last) = (x.saturating_sub(lo), (x + hi).min(w - 1));
+        let px = blur_pixel(raw, raw, real, start + x, start + first..start + last + 1);
+        put_light(&mut row, x, &px);
+    }
+}
+
+/// A blurred pixel.
+struct Blurred {
+    e_r_dir: Vec3,
+    e_r_ind: Vec3,
+    e_rv_dir: Vec3,
+    e_rv_ind: Vec3,
+    touched: bool,
+    direct_min: f32,
+    indirect_min: f32,
+}
+
+/// Pixel `i` of `input` averaged over `taps` (see the module docs); `geometry` holds
+/// the visible surface and the mask (the raw layers).
+fn blur_pixel(
+    geometry: &IrradianceLayers,
+    input: &IrradianceLayers,
+    real: &RealSurface,
+    i: usize,
+    taps: impl Iterator<Item = usize> + Clone,
+) -> Blurred {
+    let mask = &geometry.mask.data;
+    let touched = taps
+        .clone()
+        .any(|j| input.touched.data[j] != 0 || mask[j] < 1.0);
+    let (rp, rn) = (real.position[i], real.normal[i]);
+    let mean = |sum: Vec3, n: u32| if n > 0 { sum / n as f32 } else { Vec3::NAN };
+    let keep_nan = |own: Vec3, blurred: Vec3| if own.is_finite() { blurred } else { own };
+    let (mut r_dir, mut r_ind, mut r_n) = (Vec3::ZERO, Vec3::ZERO, 0u32);
+    let (mut direct_min, mut indirect_min) = (f32::INFINITY, f32::INFINITY);
+    let real_taps = |j: usize| {
+        let (er_dir, er_ind) = (input.e_r_dir.data[j], input.e_r_ind.data[j]);
+        (er_dir.is_finite()
+            && er_ind.is_finite()
+            && same_surface(rp, rn, real.position[j], real.normal[j], PLANE_TOLERANCE))
+        .then_some((er_dir, er_ind))
+    };
+    if !touched {
+        // Every tap real and untouched: E_RV is E_R, tap for tap.
+        for j in taps {
+            if let Some((d, n)) = real_taps(j) {
+                r_dir += d;
+                r_ind += n;
+                r_n += 1;
+                direct_min = direct_min.min(input.direct_min_distance.data[j]);
+                indirect_min = indirect_min.min(input.indirect_min_distance.data[j]);
+            }
+        }
+        let e_r_dir = keep_nan(input.e_r_dir.data[i], mean(r_dir, r_n));
+        let e_r_ind = keep_nan(input.e_r_ind.data[i], mean(r_ind, r_n));
+        return Blurred {
+            e_r_dir,
+            e_r_ind,
+            e_rv_dir: e_r_dir,
+            e_rv_ind: e_r_ind,
+            touched,
+            direct_min,
+            indirect_min,
+        };
+    }
+    let virtual_here = mask[i] < 1.0;
+    let (vp, vn) = (
+        geometry.world_position.data[i],
+        geometry.world_normal.data[i],
+    );
+    let (mut rv_dir, mut rv_ind, mut rv_n) = (Vec3::ZERO, Vec3::ZERO, 0u32);
+    for j in taps {
+        if let Some((d, n)) = real_taps(j) {
+            r_dir += d;
+            r_ind += n;
+            r_n += 1;
+        }
+        let (erv_dir, erv_ind) = (input.e_rv_dir.data[j], input.e_rv_ind.data[j]);
+        if (mask[j] < 1.0) == virtual_here
+            && erv_dir.is_finite()
+            && erv_ind.is_finite()
+            && same_surface(
+                vp,
+                vn,
+                geometry.world_position.data[j],
+                geometry.world_normal.data[j],
+                PLANE_TOLERANCE,
+            )
+        {
+            rv_dir += erv_dir;
+            rv_ind += erv_ind;
+            rv_n += 1;
+            direct_min = direct_min.min(input.direct_min_distance.data[j]);
+            indirect_min = indirect_min.min(input.indirect_min_distance.data[j]);
+        }
+    }
+    Blurred {
+        e_r_dir: keep_nan(input.e_r_dir.data[i], mean(r_dir, r_n)),
+        e_r_ind: keep_nan(input.e_r_ind.data[i], mean(r_ind, r_n)),
+        e_rv_dir: keep_nan(input.e_rv_dir.data[i], mean(rv_dir, rv_n)),
+        e_rv_ind: keep_nan(input.e_rv_ind.data[i], mean(rv_ind, rv_n)),
+        touched,
+        direct_min,
+        indirect_min,
+    }
+}
+
+/// Writes the blurred values of pixel `x` of `row` (the pass along x: the surface
+/// layers are read from the raw layers, not from its output).
+fn put_light(row: &mut LayerRow<'_>, x: usize, px: &Blurred) {
+    row.e_r_dir[x] = px.e_r_dir;
+    row.e_r_ind[x] = px.e_r_ind;
+    row.e_rv_dir[x] = px.e_rv_dir;
+    row.e_rv_ind[x] = px.e_rv_ind;
+    row.direct_min_distance[x] = px.direct_min;
+    row.indirect_min_distance[x] = px.indirect_min;
+    row.touched[x] = px.touched as u8;
+}
+
+/// Writes pixel `x` of `row`: the blurred values, and pixel `i`'s surface and mask
+/// from `geometry`.
+fn put(row: &mut LayerRow<'_>, x: usize, geometry: &IrradianceLayers, i: usize, px: Blurred) {
+    put_light(row, x, &px);
+    row.mask[x] = geometry.mask.data[i];
+    row.k_v[x] = geometry.k_v.data[i];
+    row.exponent[x] = geometry.exponent.data[i];
+    row.world_position[x] = geometry.world_position.data[i];
+    row.world_normal[x] = geometry.world_normal.data[i];
 }

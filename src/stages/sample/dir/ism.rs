@@ -96,14 +96,16 @@ pub const MAX_SPLAT_RADIUS: i32 = 4;
 /// covers. A point stands for a disc of the surface of the radius given with it (metres:
 /// a sparse subset of a surface stands for all of it); the splat is the square of texels
 /// within that radius of its texel (at most [`MAX_SPLAT_RADIUS`]), one texel when the
-/// patch is smaller than a texel.
+/// patch is smaller than a texel. Returns the rectangle `[x0, y0, x1, y1)` of the
+/// texels written (empty: x1 <= x0).
 pub fn splat(
     map: &mut [f32],
     size: usize,
     projection: &Projection,
     points: impl Iterator<Item = (Vec3, f32)>,
-) {
+) -> [usize; 4] {
     let last = size as i32 - 1;
+    let mut written = [size, size, 0, 0];
     for (p, radius) in points {
         let Some((texel, depth)) = projection.project(p, size) else {
             continue;
@@ -115,6 +117,10 @@ pub fn splat(
             0
         };
         let (x, y) = ((texel % size) as i32, (texel / size) as i32);
+        written[0] = written[0].min((x - reach).max(0) as usize);
+        written[1] = written[1].min((y - reach).max(0) as usize);
+        written[2] = written[2].max((x + reach).min(last) as usize + 1);
+        written[3] = written[3].max((y + reach).min(last) as usize + 1);
         for ty in (y - reach).max(0)..=(y + reach).min(last) {
             for tx in (x - reach).max(0)..=(x + reach).min(last) {
                 let t = &mut map[ty as usize * size + tx as usize];
@@ -124,65 +130,86 @@ pub fn splat(
             }
         }
     }
+    written
 }
 
 /// Pull-push hole filling (Marroquim et al., as imperfect shadow maps use it): the map
 /// is averaged down `levels` times over the texels that hold a depth (a coarse texel
-/// holds one when any of its four children does), and every empty texel takes
-/// the value of its nearest filled ancestor. Filled texels keep their depth bit for
-/// bit; a hole wider than 2^levels texels stays empty, and a silhouette grows by less
-/// than 2^levels texels.
+/// holds one when any of its four children does), and every empty texel takes the
+/// value of its nearest filled ancestor. Filled texels keep their depth bit for bit; a
+/// hole wider than 2^levels texels stays empty, and a silhouette grows by less than
+/// 2^levels texels.
+///
+/// Only the blocks of 2^levels texels that meet `splatted` (the rectangle `[x0, y0,
+/// x1, y1)` holding every depth, from [`splat`]) are visited: nothing outside them can
+/// be filled. Returns the rectangle `[x0, y0, x1, y1)` that holds every depth
+/// afterwards (`[0; 4]` when none: lookups outside it need not read the map).
 /// `scratch` is reused between calls.
-pub fn fill_holes(map: &mut [f32], size: usize, levels: usize, scratch: &mut Vec<f32>) {
-    scratch.clear();
-    // Pull: level l (side size >> l) follows level l - 1 in `scratch`.
+pub fn fill_holes(
+    map: &mut [f32],
+    size: usize,
+    levels: usize,
+    splatted: [usize; 4],
+    scratch: &mut Vec<f32>,
+) -> [u16; 4] {
+    let [sx0, sy0, sx1, sy1] = splatted;
+    if sx1 <= sx0 || sy1 <= sy0 {
+        return [0; 4];
+    }
+    // Levels that halve the map exactly, and the splatted blocks at the coarsest.
+    let mut levels = levels;
+    while levels > 0 && size % (1 << levels) != 0 {
+        levels -= 1;
+    }
+    let block = 1usize << levels;
+    let region = [
+        sx0 / block * block,
+        sy0 / block * block,
+        sx1.div_ceil(block) * block,
+        sy1.div_ceil(block) * block,
+    ];
+    // Level l is (size >> l)^2 texels at offsets[l - 1] of `scratch`.
     let mut offsets = Vec::with_capacity(levels);
-    let mut side = size;
-    let mut from: Option<usize> = None; // None: the map itself
-    for _ in 0..levels {
-        if side < 2 {
-            break;
-        }
-        let half = side / 2;
-        let start = scratch.len();
-        scratch.resize(start + half * half, f32::INFINITY);
-        for y in 0..half {
-            for x in 0..half {
+    let mut total = 0;
+    for l in 1..=levels {
+        offsets.push(total);
+        total += (size >> l) * (size >> l);
+    }
+    scratch.resize(total.max(scratch.len()), f32::INFINITY);
+    // Pull.
+    for l in 1..=levels {
+        let (side, half) = (size >> (l - 1), size >> l);
+        let start = offsets[l - 1];
+        for y in region[1] >> l..region[3] >> l {
+            for x in region[0] >> l..region[2] >> l {
                 let (mut sum, mut n) = (0.0f32, 0u32);
                 for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                     let i = (2 * y + dy) * side + 2 * x + dx;
-                    let v = match from {
-                        None => map[i],
-                        Some(o) => scratch[o + i],
+                    let v = if l == 1 {
+                        map[i]
+                    } else {
+                        scratch[offsets[l - 2] + i]
                     };
                     if v.is_finite() {
                         sum += v;
                         n += 1;
                     }
                 }
-                if n > 0 {
-                    scratch[start + y * half + x] = sum / n as f32;
-                }
+                scratch[start + y * half + x] = if n > 0 { sum / n as f32 } else { f32::INFINITY };
             }
         }
-        offsets.push((start, half));
-        from = Some(start);
-        side = half;
     }
     // Push: coarse to fine, empty texels take their parent's value.
-    for l in (0..offsets.len()).rev() {
-        let (parent, half) = offsets[l];
-        let (child, side) = match l {
-            0 => (None, size),
-            _ => (Some(offsets[l - 1].0), offsets[l - 1].1),
-        };
-        for y in 0..side {
-            for x in 0..side {
-                let up = scratch[parent + (y / 2).min(half - 1) * half + (x / 2).min(half - 1)];
-                let i = y * side + x;
-                let v = match child {
-                    None => &mut map[y * size + x],
-                    Some(o) => &mut scratch[o + i],
+    for l in (1..=levels).rev() {
+        let (side, half) = (size >> (l - 1), size >> l);
+        let parent = offsets[l - 1];
+        for y in region[1] >> (l - 1)..region[3] >> (l - 1) {
+            for x in region[0] >> (l - 1)..region[2] >> (l - 1) {
+                let up = scratch[parent + (y / 2) * half + x / 2];
+                let v = if l == 1 {
+                    &mut map[y * size + x]
+                } else {
+                    &mut scratch[offsets[l - 2] + y * side + x]
                 };
                 if !v.is_finite() {
                     *v = up;
@@ -190,26 +217,19 @@ pub fn fill_holes(map: &mut [f32], size: usize, levels: usize, scratch: &mut Vec
             }
         }
     }
-}
-
-/// The texel rectangle `[x0, x1) x [y0, y1)` that holds every finite depth of `map`
-/// (empty when none): lookups outside it need not read the map.
-pub fn filled_rect(map: &[f32], size: usize) -> [u16; 4] {
-    let (mut x0, mut y0, mut x1, mut y1) = (size, size, 0, 0);
-    for (y, row) in map.chunks_exact(size.max(1)).enumerate() {
+    let mut rect = [u16::MAX, u16::MAX, 0, 0];
+    for y in region[1]..region[3] {
+        let row = &map[y * size + region[0]..y * size + region[2]];
         let Some(first) = row.iter().position(|v| v.is_finite()) else {
             continue;
         };
         let last = row.iter().rposition(|v| v.is_finite()).unwrap_or(first);
-        x0 = x0.min(first);
-        x1 = x1.max(last + 1);
-        y0 = y0.min(y);
-        y1 = y + 1;
+        rect[0] = rect[0].min((region[0] + first) as u16);
+        rect[1] = rect[1].min(y as u16);
+        rect[2] = rect[2].max((region[0] + last + 1) as u16);
+        rect[3] = y as u16 + 1;
     }
-    if x1 <= x0 {
-        return [0; 4];
-    }
-    [x0 as u16, y0 as u16, x1 as u16, y1 as u16]
+    if rect[2] <= rect[0] { [0; 4] } else { rect }
 }
 
 /// One light's map with where it sits and what it covers.
@@ -218,7 +238,7 @@ pub struct MapView<'a> {
     pub projection: &'a Projection,
     pub depth: &'a [f32],
     pub size: usize,
-    /// [`filled_rect`] of `depth`.
+    /// The rectangle of `depth` that holds every finite texel ([`fill_holes`]).
     pub rect: [u16; 4],
     /// Metres a point must lie behind the map's depth to be hidden, plus `slope`
     /// texel sizes times the tangent of the light's angle to the receiver's normal.
@@ -236,7 +256,23 @@ impl MapView<'_> {
     /// a texel's depth, averaged by the hole filling, varies that much over it).
     #[inline]
     pub fn visibility(&self, p: Vec3, cos: f32) -> (f32, f32) {
-        let Some((texel, depth)) = self.projection.project(p, self.size) else {
+        if self.is_empty() {
+            return (1.0, f32::INFINITY);
+        }
+        self.test(self.projection.project(p, self.size), cos)
+    }
+
+    /// True when the map holds no depth: everything is visible.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.rect[2] <= self.rect[0]
+    }
+
+    /// [`MapView::visibility`] of a point already projected (`projected`: its texel and
+    /// depth from this map's projection).
+    #[inline]
+    pub fn test(&self, projected: Option<(usize, f32)>, cos: f32) -> (f32, f32) {
+        let Some((texel, depth)) = projected else {
             return (1.0, f32::INFINITY);
         };
         let (x, y) = ((texel % self.size) as u16, (texel / self.size) as u16);

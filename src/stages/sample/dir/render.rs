@@ -2,7 +2,7 @@
 //! interleaved gather and the blur (the order of paper 002 Fig. 2).
 
 use super::blur::blur_layers;
-use super::ism::{Projection, fill_holes, filled_rect, frame_about, splat};
+use super::ism::{Projection, fill_holes, frame_about, splat};
 use super::points::{MeshPoints, RealSurface};
 use super::shade::{Gathered, LightSet, Receiver, gather};
 use super::vpl::{Candidate, Emitter, Vpl, environment_vpls, resample};
@@ -25,22 +25,45 @@ pub struct DirRenderer {
     projections: Vec<[Projection; 2]>,
     rects: Vec<[[u16; 4]; 2]>,
     maps: Vec<f32>,
+    /// Texels per side of `maps` (they are cleared where `rects` say, frame to frame).
+    map_size: usize,
     candidates: Vec<Candidate>,
     /// Per interleaving class, the indices of its VPLs.
     members: Vec<Vec<u32>>,
     /// The environment VPLs' indices (0..n).
     environment: Vec<u32>,
     raw: Option<IrradianceLayers>,
+    /// The blur's pass along x.
+    between: Option<IrradianceLayers>,
 }
 
 impl DirRenderer {
-    /// Renders one frame into `out` (the depth map's size).
+    /// Renders one frame into `out` (the depth map's size): [`DirRenderer::lights`],
+    /// then [`DirRenderer::shade`].
     pub fn render(
         &mut self,
         inputs: &DirInputs,
         params: &DirParams,
         mesh: &MeshPoints,
         out: &mut IrradianceLayers,
+    ) -> Result<(), StageError> {
+        if out.size() != Some((inputs.depth.width, inputs.depth.height)) {
+            return Err(StageError::Failed(format!(
+                "sample.dir: output buffers are not all {}x{}",
+                inputs.depth.width, inputs.depth.height
+            )));
+        }
+        self.lights(inputs, params, mesh)?;
+        self.shade(inputs, params, out);
+        Ok(())
+    }
+
+    /// The frame's VPLs and their shadow maps (steps 1-3 of the module docs).
+    pub fn lights(
+        &mut self,
+        inputs: &DirInputs,
+        params: &DirParams,
+        mesh: &MeshPoints,
     ) -> Result<(), StageError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
         let sizes = [
@@ -54,11 +77,6 @@ impl DirRenderer {
                     "sample.dir: {what} is {ww}x{hh}, depth is {w}x{h}"
                 )));
             }
-        }
-        if out.size() != Some((w, h)) {
-            return Err(StageError::Failed(format!(
-                "sample.dir: output buffers are not all {w}x{h}"
-            )));
         }
         if !inputs.camera_to_world.is_finite() {
             return Err(StageError::Failed(
@@ -149,8 +167,7 @@ impl DirRenderer {
             }
         }
         self.build_maps(environment, params, mesh, key);
-        let k = params.interleave as usize;
-        let classes = k * k;
+        let classes = (params.interleave * params.interleave) as usize;
         for members in &mut self.members {
             members.clear();
         }
@@ -158,8 +175,15 @@ impl DirRenderer {
         for (i, v) in self.vpls.iter().enumerate() {
             self.members[v.slot as usize % classes].push(i as u32);
         }
+        Ok(())
+    }
 
-        // Interleaved gather, then the blur.
+    /// The interleaved gather and the blur into `out` (steps 4-5), from the VPLs of the
+    /// last [`DirRenderer::lights`] on the same inputs.
+    pub fn shade(&mut self, inputs: &DirInputs, params: &DirParams, out: &mut IrradianceLayers) {
+        let (w, h) = (inputs.depth.width, inputs.depth.height);
+        let k = params.interleave as usize;
+        let classes = k * k;
         let raw = match &mut self.raw {
             Some(raw) if raw.size() == Some((w, h)) => raw,
             slot => slot.insert(IrradianceLayers::new(w, h)),
@@ -179,7 +203,10 @@ impl DirRenderer {
             1,
             || (),
             |_, y, mut row| {
-                for x in 0..w as usize {
+                // Class by class (the paper's split G-buffer): a class's VPLs and their
+                // maps stay in cache over its pixels.
+                let xs = (0..k).flat_map(|cx| (cx..w as usize).step_by(k));
+                for x in xs {
                     let i = y * w as usize + x;
                     let class = (y % k) * k + x % k;
                     let (p, n) = (real.position[i], real.normal[i]);
@@ -217,8 +244,11 @@ impl DirRenderer {
                 }
             },
         );
-        blur_layers(raw, &self.real, k, out);
-        Ok(())
+        let between = match &mut self.between {
+            Some(between) if between.size() == Some((w, h)) => between,
+            slot => slot.insert(IrradianceLayers::new(w, h)),
+        };
+        blur_layers(raw, &self.real, k, between, out);
     }
 
     /// Real candidates: one pixel per `real_grid` x `real_grid` cell (hashed within
@@ -315,6 +345,12 @@ impl DirRenderer {
         let size = params.shadow_map_size as usize;
         let texels = size * size;
         let n = self.projections.len();
+        if self.map_size != size {
+            // Another size: the rectangles no longer say where the old depths are.
+            self.maps.clear();
+            self.rects.clear();
+            self.map_size = size;
+        }
         self.maps.resize(2 * n * texels, f32::INFINITY);
         self.rects.resize(n, [[0; 4]; 2]);
         let count = params.points_per_vpl as usize;
@@ -328,24 +364,34 @@ impl DirRenderer {
                 let i = first + j;
                 let (real_map, virtual_map) = maps.split_at_mut(texels);
                 let vpl_key = rng::hash(&[key, 0x15A, i as u64]);
-                real_map.fill(f32::INFINITY);
-                virtual_map.fill(f32::INFINITY);
-                splat(
+                // Every depth the slot's maps held lies in last frame's rectangles.
+                clear(real_map, size, rects[0]);
+                clear(virtual_map, size, rects[1]);
+                let real_splats = splat(
                     real_map,
                     size,
                     &projections[i][0],
                     real.subset(count, vpl_key),
                 );
-                splat(
+                let virtual_splats = splat(
                     virtual_map,
                     size,
                     &projections[i][1],
                     mesh.subset(count, vpl_key ^ 1),
                 );
-                fill_holes(real_map, size, levels, scratch);
-                fill_holes(virtual_map, size, levels, scratch);
-                *rects = [filled_rect(real_map, size), filled_rect(virtual_map, size)];
+                *rects = [
+                    fill_holes(real_map, size, levels, real_splats, scratch),
+                    fill_holes(virtual_map, size, levels, virtual_splats, scratch),
+                ];
             });
+    }
+}
+
+/// Empties the rectangle `[x0, y0, x1, y1)` of a `size`-texel map.
+fn clear(map: &mut [f32], size: usize, rect: [u16; 4]) {
+    let [x0, y0, x1, y1] = rect.map(usize::from);
+    for y in y0..y1.min(size) {
+        map[y * size + x0..y * size + x1.min(size)].fill(f32::INFINITY);
     }
 }
 

@@ -136,11 +136,16 @@ pub fn gather(
         if transfer.is_nan() || transfer <= 0.0 {
             continue;
         }
-        let (st_r, behind_r) = lights.map(slot, 0).visibility(position, cos);
-        let (st_v, behind_v) = if for_combined {
-            lights.map(slot, 1).visibility(position, cos)
-        } else {
+        let (real_map, virtual_map) = (lights.map(slot, 0), lights.map(slot, 1));
+        let projected = real_map.projection.project(position, lights.size);
+        let (st_r, behind_r) = real_map.test(projected, cos);
+        let (st_v, behind_v) = if !for_combined || virtual_map.is_empty() {
             (1.0, f32::INFINITY)
+        } else if virtual_map.projection == real_map.projection {
+            // A surface VPL's two maps share their paraboloid.
+            virtual_map.test(projected, cos)
+        } else {
+            virtual_map.visibility(position, cos)
         };
         let light = vpl.power * transfer;
         let st_rv = st_r.min(st_v);

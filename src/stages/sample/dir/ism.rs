@@ -158,7 +158,7 @@ pub fn fill_holes(
     }
     // Levels that halve the map exactly, and the splatted blocks at the coarsest.
     let mut levels = levels;
-    while levels > 0 && size % (1 << levels) != 0 {
+    while levels > 0 && !size.is_multiple_of(1 << levels) {
         levels -= 1;
     }
     let block = 1usize << levels;

@@ -29,8 +29,9 @@ Scores (per stage, keyed by the stage's name):
                     every 15th frame from 14, at most two (14 and 29 from the start;
                     a replay with none: its last frame), each costing about 70 runs
   sample.dir        ratio_rmse (as sample.path's, against the same references: the default
-                    sample.path run with 1024 samples on sample.dir's inputs, same frames),
-                    ratio_rmse_all (over every real pixel, not only near the objects)
+                    sample.path run with 1024 samples on sample.dir's inputs, same frames;
+                    a pipeline that also has a sample.path: that stage's), ratio_rmse_all
+                    (over every real pixel, not only near the objects)
   filter.axis_aligned
                     mse_unfiltered, mse_filtered, mse_gaussian_same_radius (a plain image
                     Gaussian over the same window) against the same references, on the

@@ -133,12 +133,11 @@ impl Evaluator {
             .iter()
             .find(|s| s.kind == "color.compensate")
             .map(|s| (output(s, "compensated"), input(s, "color")));
-        // The renderer whose layers the filter and the composite get; its references
-        // are the default sample.path's on the same inputs, whichever renderer it is.
-        let sampler = pipeline
-            .stages
-            .iter()
-            .find(|s| matches!(s.kind, "sample.path" | "sample.dir"));
+        // The renderer whose references every score takes: a sample.path stage's own
+        // math with 1024 samples, or else (sample.dir alone) the default sample.path's
+        // on sample.dir's inputs.
+        let find = |kind: &str| pipeline.stages.iter().find(|s| s.kind == kind);
+        let sampler = find("sample.path").or_else(|| find("sample.dir"));
         let (objects, k) = (pipeline.objects.clone(), header.depth_intrinsics);
         let runner = sampler.map(|s| match s.kind {
             "sample.path" => sampling::PathRunner::new(s, objects.clone(), k, seed),

@@ -20,13 +20,13 @@
 //! shadow comes out too light or too dark, while the ratio form scales the camera's own
 //! pixel and keeps its texture and exposure exactly.
 
-use super::GammaEncoder;
 use glam::{Mat3, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
-/// The display value of one pixel by the difference form (0..1 per channel where the
-/// objects change it; the camera's own, unclamped, where they do not); `camera` is
-/// the compensated camera radiance.
+/// The linear camera value of one pixel by the difference form (`camera` is the
+/// compensated camera radiance, `inverse` the inverse compensation); `None` where the
+/// objects change nothing (a real pixel with E_RV == E_R, or with no estimate): the
+/// camera's own value, which the caller keeps exactly as the ratio form does.
 #[inline]
 pub fn difference_pixel(
     e_r: Vec3,
@@ -36,38 +36,37 @@ pub fn difference_pixel(
     camera: Vec3,
     inverse: Mat3,
     gamma: f32,
-) -> Vec3 {
-    let tone_map = |linear: Vec3| (inverse * linear).max(Vec3::ZERO).powf(1.0 / gamma);
-    let seen = tone_map(camera);
-    if !(e_r.is_finite() && e_rv.is_finite()) || (mask >= 1.0 && e_r == e_rv) {
-        return seen;
-    }
-    let albedo = camera.clamp(Vec3::ZERO, Vec3::ONE);
+) -> Option<Vec3> {
     let m = mask.clamp(0.0, 1.0);
-    let (e_r, e_rv) = (
-        e_r.max(Vec3::ZERO) * FRAC_1_PI,
-        e_rv.max(Vec3::ZERO) * FRAC_1_PI,
-    );
-    // The captured frame is low dynamic range: the difference lands on its displayed
-    // levels.
-    let real = (seen.min(Vec3::ONE) + tone_map(albedo * e_rv) - tone_map(albedo * e_r))
-        .clamp(Vec3::ZERO, Vec3::ONE);
-    if m >= 1.0 {
-        return real;
+    let real_unchanged = !(e_r.is_finite() && e_rv.is_finite()) || e_r == e_rv;
+    if m >= 1.0 && real_unchanged {
+        return None;
     }
-    (1.0 - m) * tone_map(k_v * e_rv).min(Vec3::ONE) + m * real
-}
-
-/// The 8-bit levels and the linear camera value of a display value.
-#[inline]
-pub fn encode(display: Vec3, gamma: f32, encoder: &GammaEncoder) -> ([u8; 3], Vec3) {
-    let linear = display.powf(gamma);
-    (
-        [
-            encoder.level(linear.x),
-            encoder.level(linear.y),
-            encoder.level(linear.z),
-        ],
-        linear,
-    )
+    let tone_map = |linear: Vec3| (inverse * linear).max(Vec3::ZERO).powf(1.0 / gamma);
+    let untone = |display: Vec3| display.powf(gamma);
+    let seen = inverse * camera;
+    let real = if real_unchanged {
+        seen
+    } else {
+        // The captured frame is low dynamic range: the difference lands on its
+        // displayed levels. The camera's color stands for the albedo.
+        let albedo = camera.clamp(Vec3::ZERO, Vec3::ONE);
+        let (e_r, e_rv) = (
+            e_r.max(Vec3::ZERO) * FRAC_1_PI,
+            e_rv.max(Vec3::ZERO) * FRAC_1_PI,
+        );
+        let display =
+            tone_map(camera).min(Vec3::ONE) + tone_map(albedo * e_rv) - tone_map(albedo * e_r);
+        untone(display.clamp(Vec3::ZERO, Vec3::ONE))
+    };
+    if m >= 1.0 {
+        return Some(real);
+    }
+    // The object's part, mixed linearly by the mask as in paper 001 eq. 2.
+    let object = if e_rv.is_finite() {
+        inverse * (k_v * e_rv.max(Vec3::ZERO) * FRAC_1_PI)
+    } else {
+        Vec3::ZERO
+    };
+    Some((1.0 - m) * object + m * real)
 }

@@ -311,8 +311,8 @@ pub fn composite<'a>(
             for x in 0..width {
                 let e_r = e_r_dir[x] + e_r_ind[x];
                 let e_rv = e_rv_dir[x] + e_rv_ind[x];
-                if params.difference {
-                    let display = difference::difference_pixel(
+                let difference = params.difference.then(|| {
+                    difference::difference_pixel(
                         e_r,
                         e_rv,
                         mask[x],
@@ -320,9 +320,16 @@ pub fn composite<'a>(
                         radiance[x],
                         inverse,
                         params.gamma,
-                    );
-                    (color_row[x], hdr_row[x]) = difference::encode(display, params.gamma, encoder);
+                    )
+                });
+                if let Some(Some(camera)) = difference {
+                    hdr_row[x] = camera;
                     ratio_row[x] = differential_ratio3(e_r, e_rv, params);
+                    color_row[x] = [
+                        encoder.level(camera.x),
+                        encoder.level(camera.y),
+                        encoder.level(camera.z),
+                    ];
                     continue;
                 }
                 let (reference, ratio) =

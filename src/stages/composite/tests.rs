@@ -303,16 +303,23 @@ fn the_difference_form_adds_the_tone_mapped_difference_to_the_camera() {
     let display = (tm(1.5).min(1.0) + tm(e_r.x / 4.0 / PI) - tm(e_r.x / PI)).clamp(0.0, 1.0);
     assert!((by_difference.final_hdr.data[10].x - display.powf(2.2)).abs() < 1e-4);
     assert!((by_difference.final_hdr.data[10].x - 1.5 / 4.0).abs() > 0.05);
-    // A virtual pixel shows the object, k_V E_RV / pi, whatever the camera saw there.
+    // A virtual pixel shows the object, k_V E_RV / pi, whatever the camera saw there,
+    // also with no real point behind it (E_R NaN).
     s.mask.data[20] = 0.0;
     s.k_v.data[20] = Vec3::new(0.8, 0.4, 0.2);
+    s.e_dir.data[20] = Vec3::NAN;
     let by_difference = run_with(&s, &e_rv_dir, &difference);
     let e_rv = e_rv_dir.data[20] + s.e_ind.data[20];
     let object = s.k_v.data[20] * e_rv / PI;
     assert!(
-        (by_difference.final_hdr.data[20] - object.min(Vec3::ONE))
+        (by_difference.final_hdr.data[20] - object)
             .abs()
             .max_element()
             < 1e-4
+    );
+    // Untouched real pixels keep the camera's linear values exactly.
+    assert_eq!(
+        by_difference.final_hdr.data[11],
+        untouched.final_hdr.data[11]
     );
 }

@@ -1,6 +1,7 @@
 //! Imperfect shadow maps (paper 002 Sec. 3.3, after Ritschel et al. 2008): per light,
-//! a small depth map splatted from a sparse set of points, one texel per point, with
-//! the holes between them filled by pull-push. Two projections: a paraboloid over the
+//! a small depth map splatted from a sparse set of points (each point a square of
+//! texels as wide as the patch of surface it stands for, one texel when that is
+//! smaller), with the holes between them filled by pull-push. Two projections: a paraboloid over the
 //! hemisphere of a surface VPL, and an orthographic disc for a light at infinity
 //! (paper 002 places the environment's VPLs on a far hemisphere; relume takes them as
 //! directions, see `vpl.rs`).
@@ -136,9 +137,10 @@ pub fn splat(
 /// Pull-push hole filling (Marroquim et al., as imperfect shadow maps use it): the map
 /// is averaged down `levels` times over the texels that hold a depth (a coarse texel
 /// holds one when any of its four children does), and every empty texel takes the
-/// value of its nearest filled ancestor. Filled texels keep their depth bit for bit; a
-/// hole wider than 2^levels texels stays empty, and a silhouette grows by less than
-/// 2^levels texels.
+/// value of its nearest filled ancestor. Filled texels keep their depth bit for bit;
+/// holes narrower than 2^levels texels close (wider ones close when the blocks they
+/// straddle hold depths; one that fills an aligned block of 2^levels stays open), and
+/// a silhouette grows by less than 2^levels texels.
 ///
 /// Only the blocks of 2^levels texels that meet `splatted` (the rectangle `[x0, y0,
 /// x1, y1)` holding every depth, from [`splat`]) are visited: nothing outside them can

@@ -27,7 +27,8 @@
 //!    VPLs make the bleeding the differential shows while real VPLs mostly cancel). Their maps are
 //!    paraboloids over their hemispheres, 128 x 128 by default.
 //! 4. **Interleaved gather** (`shade.rs`): the image is split into `interleave` x
-//!    `interleave` classes by pixel position; class c gathers VPLs c, c + k^2, ...
+//!    `interleave` classes by pixel position; class c gathers the VPLs of slots c,
+//!    c + k^2, ... (a real VPL and its ir = 1 twin share a slot)
 //!    (eqs. 1-8: L_r takes a VPL when its path is real, with the real visibility st_r;
 //!    L_rv takes it unless it is ir = 1, with st_rv = min(st_r, st_v); a virtual pixel
 //!    gathers L_rv at the object's surface without the ir = 1 VPLs, and L_r at the
@@ -35,10 +36,13 @@
 //! 5. **Geometry-aware blur** (`blur.rs`) over each k x k window.
 //!
 //! **The VPL singularity**: a surface VPL at distance d brings power cos cos / d^2,
-//! unbounded as d -> 0; the stage divides by max(d^2, `clamp_distance`^2), so one VPL
-//! brings at most power / clamp_distance^2. The bias is a loss of light within
-//! `clamp_distance` (10 cm) of the VPLs: corners and contact regions of the indirect
-//! layers come out darker than the path-traced reference. It is the same in E_R and
+//! unbounded as d -> 0; the stage divides by max(d^2, `clamp_distance`^2, A / pi),
+//! A the patch of surface the VPL stands for (its candidate's area, grown by the
+//! resampling as its power is: a dim candidate drawn once stands for much surface), so
+//! one VPL brings at most power / clamp_distance^2. The bias is a loss of light within
+//! `clamp_distance` (10 cm), or within the patch's radius when larger, of the VPLs:
+//! corners and contact regions of the indirect layers come out darker than the
+//! path-traced reference. It is the same in E_R and
 //! E_RV, so their ratio, which the composite uses on real pixels, keeps little of it.
 //!
 //! Where relume departs from paper 002: the environment's VPLs are directions with
@@ -78,6 +82,8 @@ use std::sync::Arc;
 pub const MAX_SHADOW_MAP_SIZE: u32 = 512;
 /// Most VPLs per frame.
 pub const MAX_VPLS: u32 = 4096;
+/// Most bytes of shadow maps a frame may hold (the defaults take 32 MiB).
+pub const MAX_MAP_BYTES: u64 = 1 << 30;
 
 const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
@@ -219,6 +225,17 @@ impl DirParams {
             return fail(format!(
                 "shadow_map_size must be 4 to {MAX_SHADOW_MAP_SIZE}, not {}",
                 self.shadow_map_size
+            ));
+        }
+        let bytes = 2 * self.vpls as u64 * (self.shadow_map_size as u64).pow(2) * 4;
+        if bytes > MAX_MAP_BYTES {
+            return fail(format!(
+                "{} VPLs with two {}x{} maps each need {} MiB of shadow maps; at most {} MiB: lower vpls or shadow_map_size",
+                self.vpls,
+                self.shadow_map_size,
+                self.shadow_map_size,
+                bytes >> 20,
+                MAX_MAP_BYTES >> 20
             ));
         }
         if self.interleave == 0 || self.real_grid == 0 || self.points_per_vpl == 0 {

@@ -252,7 +252,7 @@ impl DirRenderer {
     }
 
     /// Real candidates: one pixel per `real_grid` x `real_grid` cell (hashed within
-    /// it), standing for the cell's area; their direct light with and without the
+    /// it; cells are cut at the image's edge), standing for the cell's area; their direct light with and without the
     /// objects from the environment VPLs.
     fn real_candidates(&mut self, inputs: &DirInputs, params: &DirParams, key: u64) {
         let (w, h) = (inputs.depth.width as usize, inputs.depth.height as usize);
@@ -272,9 +272,11 @@ impl DirRenderer {
                 let lights = &lights;
                 (0..w.div_ceil(g)).filter_map(move |cx| {
                     let hsh = rng::hash(&[key, 0xCA4D, cx as u64, cy as u64]);
-                    let x = (cx * g + (rng::unit_f32(hsh) * g as f32) as usize).min(w - 1);
-                    let y =
-                        (cy * g + (rng::unit_f32(rng::mix64(hsh)) * g as f32) as usize).min(h - 1);
+                    // The cell, cut at the image's edge.
+                    let (gw, gh) = (g.min(w - cx * g), g.min(h - cy * g));
+                    let x = cx * g + ((rng::unit_f32(hsh) * gw as f32) as usize).min(gw - 1);
+                    let y = cy * g
+                        + ((rng::unit_f32(rng::mix64(hsh)) * gh as f32) as usize).min(gh - 1);
                     let i = y * w + x;
                     let (p, n) = (real.position[i], real.normal[i]);
                     if n == Vec3::ZERO {
@@ -284,7 +286,7 @@ impl DirRenderer {
                     let view =
                         (p - Vec3::from(inputs.camera_to_world.translation)).normalize_or_zero();
                     let area =
-                        (g * g) as f32 * z * z / (cam.fx * cam.fy) / n.dot(view).abs().max(0.2);
+                        (gw * gh) as f32 * z * z / (cam.fx * cam.fy) / n.dot(view).abs().max(0.2);
                     let lit = gather(lights, environment, p, n, Receiver::Real);
                     let (r, rv) = (luminance(lit.r_dir), luminance(lit.rv_dir));
                     let unblocked = if r > 0.0 {
@@ -351,14 +353,20 @@ impl DirRenderer {
             self.rects.clear();
             self.map_size = size;
         }
-        self.maps.resize(2 * n * texels, f32::INFINITY);
-        self.rects.resize(n, [[0; 4]; 2]);
+        // Only grown: slots past this frame's keep their maps and rectangles (what the
+        // next frame to use them clears).
+        if self.maps.len() < 2 * n * texels {
+            self.maps.resize(2 * n * texels, f32::INFINITY);
+        }
+        if self.rects.len() < n {
+            self.rects.resize(n, [[0; 4]; 2]);
+        }
         let count = params.points_per_vpl as usize;
         let (real, projections) = (&self.real, &self.projections);
         let levels = params.fill_levels as usize;
         self.maps[2 * first * texels..]
             .par_chunks_mut(2 * texels)
-            .zip(self.rects[first..].par_iter_mut())
+            .zip(self.rects[first..n].par_iter_mut())
             .enumerate()
             .for_each_init(Vec::new, |scratch, (j, (maps, rects))| {
                 let i = first + j;

@@ -1,5 +1,5 @@
-//! Shading a point from its share of the VPLs (paper 002 eqs. 1-8) and the
-//! geometry-aware blur that reassembles the interleaved shares (Secs. 3.2, 6).
+//! Shading a point from its share of the VPLs (paper 002 eqs. 1-8); `blur.rs`
+//! reassembles the interleaved shares.
 
 use super::ism::{MapView, Projection};
 use super::vpl::{Emitter, Vpl};
@@ -53,7 +53,8 @@ pub struct Gathered {
     /// Some VPL added differently to L_r and L_rv.
     pub touched: bool,
     /// The nearest occluder of a blocked environment VPL over the cosine (the filter's
-    /// z / cos^2, as `sample.path` records it), and the nearest surface VPL that lit it.
+    /// z / cos^2, as `sample.path` records it, but of every VPL: `sample.path` skips
+    /// the occluders of dim samples), and the nearest surface VPL that lit it.
     pub direct_min_distance: f32,
     pub indirect_min_distance: f32,
 }

@@ -423,3 +423,16 @@ fn a_reused_renderer_gives_the_bits_of_a_fresh_one() {
     let fresh = sample_dir(&inputs(2), &params).unwrap();
     assert!(bits(&out) == bits(&fresh));
 }
+
+#[test]
+fn shadow_maps_beyond_a_gibibyte_are_refused_before_allocating() {
+    let params = DirParams {
+        vpls: 4096,
+        shadow_map_size: 512,
+        ..DirParams::default()
+    };
+    assert_eq!(
+        params.check().unwrap_err().to_string(),
+        "sample.dir: 4096 VPLs with two 512x512 maps each need 8192 MiB of shadow maps; at most 1024 MiB: lower vpls or shadow_map_size"
+    );
+}

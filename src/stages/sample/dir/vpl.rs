@@ -23,8 +23,9 @@
 //!   The candidates (a grid of real pixels and a subset of the mesh points) are
 //!   importance-resampled by their luminance into the bounce slots (systematic
 //!   resampling: stronger candidates are drawn more often, each drawn VPL's power is
-//!   rescaled so the sum stays unbiased), which also distributes the slots between real
-//!   and virtual surfaces by their power, as Sec. 3.7 does by coverage.
+//!   rescaled so the sum stays unbiased). The real and the virtual candidates are
+//!   resampled apart, into the shares of the slots the caller gives each (Sec. 3.7
+//!   shares a light's slots between its real and virtual RSM by coverage).
 
 use crate::light::LightTable;
 use crate::light::split::luminance;

@@ -3,7 +3,7 @@
 //! one type, one list of output roles, one way into the frame, and one driver that
 //! hands a renderer the rows to fill in parallel ([`shade_rows`]).
 
-use crate::graph::{Frame, Product, ProductKind};
+use crate::graph::{Frame, Port, Product, ProductKind};
 use crate::raster::{Image, LabelImage, ScalarImage, Vec3Image};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -25,6 +25,32 @@ pub const LAYER_OUTPUTS: [(&str, &[ProductKind]); 12] = [
     ("indirect_min_distance", &[ProductKind::Scalar]),
     ("touched", &[ProductKind::Labels]),
 ];
+
+/// The inputs `sample.path` and `sample.dir` both read, in order: (role, default
+/// product, kinds). The same roles let one stand in for the other, and let `relume
+/// eval` run the path references on either's inputs.
+pub const RENDERER_INPUTS: [(&str, &str, &[ProductKind]); 5] = [
+    ("depth", "refined_depth", &[ProductKind::Depth]),
+    ("normals", "normals", &[ProductKind::Normals]),
+    ("pose", "pose", &[ProductKind::Pose]),
+    ("radiance", "compensated", &[ProductKind::Radiance]),
+    ("light_table", "light_table", &[ProductKind::LightTable]),
+];
+
+/// [`RENDERER_INPUTS`] as ports.
+pub fn renderer_input_ports() -> impl Iterator<Item = Port> {
+    RENDERER_INPUTS
+        .iter()
+        .map(|(role, product, kinds)| Port::new(role, product, kinds))
+}
+
+/// [`LAYER_OUTPUTS`] as ports, each writing the product of its role's name.
+pub fn layer_output_ports() -> Vec<Port> {
+    LAYER_OUTPUTS
+        .iter()
+        .map(|(role, kinds)| Port::new(role, role, kinds))
+        .collect()
+}
 
 /// One value per pixel of each layer a renderer writes.
 #[derive(Clone, Debug, PartialEq)]

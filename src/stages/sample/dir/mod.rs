@@ -25,7 +25,9 @@
 //!    them for the meshes (paper 002 shares a light's slots between its real and
 //!    virtual RSM by coverage; relume gives the objects a fixed share, since their
 //!    VPLs make the bleeding the differential shows while real VPLs mostly cancel). Their maps are
-//!    paraboloids over their hemispheres, 128 x 128 by default.
+//!    paraboloids over their hemispheres, 128 x 128 by default. With `bounces` > 1
+//!    the same candidates are lit again by the last bounce's VPLs and resampled into
+//!    the next bounce's share of the slots, their flags carried on (`bounce.rs`).
 //! 4. **Interleaved gather** (`shade.rs`): the image is split into `interleave` x
 //!    `interleave` classes by pixel position; class c gathers the VPLs of slots c,
 //!    c + k^2, ... (a real VPL and its ir = 1 twin share a slot)
@@ -48,13 +50,15 @@
 //! Where relume departs from paper 002: the environment's VPLs are directions with
 //! orthographic maps (the paper's fisheye probe places them on a far hemisphere); a
 //! real VPL's light is the camera's observed radiance rather than an albedo times
-//! its irradiance (what `sample.path` brings from a real hit too); a surface VPL lights
-//! only receivers within `max_distance`; multiple bounces (Sec. 3.6) are not built;
-//! glossy objects are shaded as diffuse (`exponent` stays 0). The random choices
+//! its irradiance (what `sample.path` brings from a real hit too), and from the second
+//! bounce on, the albedo the camera and the real solution imply; a surface VPL lights
+//! only receivers within `max_distance`; later bounces are placed on the first
+//! bounce's candidates, not by the paper's previous-frame VPL buffer; glossy objects are shaded as diffuse (`exponent` stays 0). The random choices
 //! (table strata, candidate pixels, map subsets, resampling) are hashed from (seed,
 //! frame, index), so the layers are the same at any thread count.
 
 mod blur;
+mod bounce;
 pub mod ism;
 pub mod points;
 mod render;
@@ -66,10 +70,10 @@ pub mod vpl;
 pub use points::MeshPoints;
 pub use render::DirRenderer;
 
-use super::layers::{IrradianceLayers, LAYER_OUTPUTS};
-use crate::graph::{
-    Frame, ParamDefault, ParamSpec, Params, Port, Ports, ProductKind, Stage, StageError, StageInfo,
+use super::layers::{
+    IrradianceLayers, LAYER_OUTPUTS, RENDERER_INPUTS, layer_output_ports, renderer_input_ports,
 };
+use crate::graph::{Frame, ParamDefault, ParamSpec, Params, Ports, Stage, StageError, StageInfo};
 use crate::light::LightTable;
 use crate::objects::VirtualScene;
 use crate::pinhole::Pinhole;
@@ -98,6 +102,12 @@ const PARAMS: &[ParamSpec] = &[
         "of them, importance samples of the environment (the direct light); the rest are one-bounce VPLs on real and virtual surfaces",
     )
     .range(0.0, MAX_VPLS as f64),
+    ParamSpec::new(
+        "bounces",
+        ParamDefault::Int(1),
+        "light bounces carried by VPLs (paper 002 Sec. 3.6): 1 = the environment's light reflected once; each further bounce takes an even share of the bounce VPLs, placed where the last bounce's light lands, with the paths' real/virtual flags carried on",
+    )
+    .range(1.0, 4.0),
     ParamSpec::new(
         "virtual_share",
         ParamDefault::Float(0.25),
@@ -171,6 +181,7 @@ const PARAMS: &[ParamSpec] = &[
 pub struct DirParams {
     pub vpls: u32,
     pub environment_vpls: usize,
+    pub bounces: u32,
     pub virtual_share: f32,
     pub points_per_vpl: u32,
     pub shadow_map_size: u32,
@@ -197,6 +208,7 @@ impl DirParams {
         DirParams {
             vpls: p.int("vpls") as u32,
             environment_vpls: p.int("environment_vpls") as usize,
+            bounces: p.int("bounces") as u32,
             virtual_share: p.float("virtual_share") as f32,
             points_per_vpl: p.int("points_per_vpl") as u32,
             shadow_map_size: p.int("shadow_map_size") as u32,
@@ -245,33 +257,19 @@ impl DirParams {
     }
 }
 
-const INPUTS: [(&str, &str, &[ProductKind]); 5] = [
-    ("depth", "refined_depth", &[ProductKind::Depth]),
-    ("normals", "normals", &[ProductKind::Normals]),
-    ("pose", "pose", &[ProductKind::Pose]),
-    ("radiance", "compensated", &[ProductKind::Radiance]),
-    ("light_table", "light_table", &[ProductKind::LightTable]),
-];
-
 pub const INFO: StageInfo = StageInfo {
     kind: "sample.dir",
     summary: "E_R / E_RV from virtual point lights with real/virtual flags, imperfect shadow maps and interleaved sampling (paper 002 Sec. 3)",
     params: PARAMS,
     ports: |_| Ports {
-        inputs: INPUTS
-            .iter()
-            .map(|(role, product, kinds)| Port::new(role, product, kinds))
-            .collect(),
-        outputs: LAYER_OUTPUTS
-            .iter()
-            .map(|(role, kinds)| Port::new(role, role, kinds))
-            .collect(),
+        inputs: renderer_input_ports().collect(),
+        outputs: layer_output_ports(),
     },
     build: |ctx| {
         let params = DirParams::from_params(ctx.params, ctx.seed);
         params.check()?;
         Ok(Box::new(DirStage {
-            inputs: INPUTS.map(|(role, _, _)| ctx.input(role)),
+            inputs: RENDERER_INPUTS.map(|(role, _, _)| ctx.input(role)),
             outputs: LAYER_OUTPUTS.map(|(role, _)| ctx.output(role)),
             // The objects do not move: their points are spread once.
             mesh: MeshPoints::new(ctx.objects, params.mesh_points as usize, params.seed),

@@ -5,33 +5,33 @@ use super::blur::blur_layers;
 use super::ism::{Projection, fill_holes, frame_about, splat};
 use super::points::{MeshPoints, RealSurface};
 use super::shade::{Gathered, LightSet, Receiver, gather};
-use super::vpl::{Candidate, Emitter, Vpl, environment_vpls, resample};
+use super::vpl::{Candidate, Emitter, Vpl, environment_vpls};
 use super::{DirInputs, DirParams};
 use crate::graph::StageError;
-use crate::light::split::luminance;
 use crate::objects::VirtualHit;
 use crate::rng;
 use crate::stages::sample::layers::{IrradianceLayers, PixelLayers, shade_rows};
 use glam::Vec3;
 use rayon::prelude::*;
-use std::f32::consts::PI;
 
 /// Shades frames with reusable buffers (real surface, VPLs, shadow maps, the
 /// un-blurred layers).
 #[derive(Default)]
 pub struct DirRenderer {
-    real: RealSurface,
-    vpls: Vec<Vpl>,
-    projections: Vec<[Projection; 2]>,
-    rects: Vec<[[u16; 4]; 2]>,
-    maps: Vec<f32>,
+    pub(super) real: RealSurface,
+    pub(super) vpls: Vec<Vpl>,
+    pub(super) projections: Vec<[Projection; 2]>,
+    pub(super) rects: Vec<[[u16; 4]; 2]>,
+    pub(super) maps: Vec<f32>,
     /// Texels per side of `maps` (they are cleared where `rects` say, frame to frame).
     map_size: usize,
-    candidates: Vec<Candidate>,
+    pub(super) candidates: Vec<Candidate>,
+    /// Per candidate, what its surface reflects (see `bounce.rs`).
+    pub(super) reflectors: Vec<super::bounce::Reflector>,
     /// Per interleaving class, the indices of its VPLs.
     members: Vec<Vec<u32>>,
     /// The environment VPLs' indices (0..n).
-    environment: Vec<u32>,
+    pub(super) environment: Vec<u32>,
     raw: Option<IrradianceLayers>,
     /// The blur's pass along x.
     between: Option<IrradianceLayers>,
@@ -121,52 +121,9 @@ impl DirRenderer {
         }
         self.build_maps(0, params, mesh, key);
 
-        // One bounce: candidates lit by the environment VPLs, resampled into the slots,
-        // `virtual_share` of them for the objects' candidates.
-        self.candidates.clear();
-        self.real_candidates(inputs, params, key);
-        let real_count = self.candidates.len();
-        self.virtual_candidates(params, mesh, key);
-        let slots = (params.vpls as usize).saturating_sub(environment);
-        let (real, virtual_) = self.candidates.split_at(real_count);
-        let lit = |c: &[Candidate]| c.iter().any(|c| luminance(c.power) > 0.0);
-        let virtual_slots = match (lit(real), lit(virtual_)) {
-            (_, false) => 0,
-            (false, true) => slots,
-            (true, true) => (slots as f32 * params.virtual_share).round() as usize,
-        };
-        resample(
-            real,
-            slots - virtual_slots,
-            environment as u32,
-            key,
-            &mut self.vpls,
-        );
-        let next_slot = self
-            .vpls
-            .last()
-            .map_or(0, |v| v.slot + 1)
-            .max(environment as u32);
-        resample(
-            virtual_,
-            virtual_slots,
-            next_slot,
-            key ^ 0x7EA1,
-            &mut self.vpls,
-        );
-        for v in &self.vpls[environment..] {
-            if v.slot as usize == self.projections.len() {
-                let Emitter::Surface { position, normal } = v.emitter else {
-                    unreachable!("bounce VPLs are surfaces")
-                };
-                let p = Projection::Paraboloid {
-                    origin: position,
-                    frame: frame_about(normal),
-                };
-                self.projections.push([p, p]);
-            }
-        }
-        self.build_maps(environment, params, mesh, key);
+        // The bounces (Secs. 3.6, 3.7): candidates lit by the last lights, resampled
+        // into the slots, and their maps.
+        self.bounces(inputs, params, mesh, key, environment);
         let classes = (params.interleave * params.interleave) as usize;
         for members in &mut self.members {
             members.clear();
@@ -251,99 +208,15 @@ impl DirRenderer {
         blur_layers(raw, &self.real, k, between, out);
     }
 
-    /// Real candidates: one pixel per `real_grid` x `real_grid` cell (hashed within
-    /// it; cells are cut at the image's edge), standing for the cell's area; their direct light with and without the
-    /// objects from the environment VPLs.
-    fn real_candidates(&mut self, inputs: &DirInputs, params: &DirParams, key: u64) {
-        let (w, h) = (inputs.depth.width as usize, inputs.depth.height as usize);
-        let g = params.real_grid as usize;
-        let lights = light_set(
-            &self.vpls,
-            &self.projections,
-            &self.rects,
-            &self.maps,
-            params,
-        );
-        let cam = inputs.camera;
-        let (real, environment) = (&self.real, &self.environment[..]);
-        let found: Vec<Candidate> = (0..h.div_ceil(g))
-            .into_par_iter()
-            .flat_map_iter(|cy| {
-                let lights = &lights;
-                (0..w.div_ceil(g)).filter_map(move |cx| {
-                    let hsh = rng::hash(&[key, 0xCA4D, cx as u64, cy as u64]);
-                    // The cell, cut at the image's edge.
-                    let (gw, gh) = (g.min(w - cx * g), g.min(h - cy * g));
-                    let x = cx * g + ((rng::unit_f32(hsh) * gw as f32) as usize).min(gw - 1);
-                    let y = cy * g
-                        + ((rng::unit_f32(rng::mix64(hsh)) * gh as f32) as usize).min(gh - 1);
-                    let i = y * w + x;
-                    let (p, n) = (real.position[i], real.normal[i]);
-                    if n == Vec3::ZERO {
-                        return None;
-                    }
-                    let z = inputs.depth.data[i];
-                    let view =
-                        (p - Vec3::from(inputs.camera_to_world.translation)).normalize_or_zero();
-                    let area =
-                        (gw * gh) as f32 * z * z / (cam.fx * cam.fy) / n.dot(view).abs().max(0.2);
-                    let lit = gather(lights, environment, p, n, Receiver::Real);
-                    let (r, rv) = (luminance(lit.r_dir), luminance(lit.rv_dir));
-                    let unblocked = if r > 0.0 {
-                        (rv / r).clamp(0.0, 1.0)
-                    } else {
-                        1.0
-                    };
-                    let radiance = inputs.radiance.data[i];
-                    radiance.is_finite().then_some(Candidate {
-                        position: p,
-                        normal: n,
-                        power: radiance.max(Vec3::ZERO) * area,
-                        real: true,
-                        area,
-                        unblocked,
-                    })
-                })
-            })
-            .collect();
-        self.candidates.extend(found);
-    }
-
-    /// Virtual candidates: `points_per_vpl` mesh points (a subset that changes per
-    /// frame), each lit by the environment VPLs in the combined world.
-    fn virtual_candidates(&mut self, params: &DirParams, mesh: &MeshPoints, key: u64) {
-        let lights = light_set(
-            &self.vpls,
-            &self.projections,
-            &self.rects,
-            &self.maps,
-            params,
-        );
-        let picks: Vec<usize> =
-            super::points::strided(mesh.len(), params.points_per_vpl as usize, key ^ 0x71C7)
-                .collect();
-        let found: Vec<Candidate> = picks
-            .par_iter()
-            .map(|&j| {
-                let (p, n) = (mesh.position[j], mesh.normal[j]);
-                let lit = gather(&lights, &self.environment, p, n, Receiver::Virtual);
-                let area = mesh.area * mesh.len() as f32 / picks.len() as f32;
-                Candidate {
-                    position: p,
-                    normal: n,
-                    power: mesh.material[j].albedo * lit.rv_dir / PI * area,
-                    real: false,
-                    area,
-                    unblocked: 1.0,
-                }
-            })
-            .collect();
-        self.candidates.extend(found);
-    }
-
     /// Splats and fills the maps of slots `first..`: `points_per_vpl` real points into
     /// the real map, as many mesh points into the virtual one, each VPL its own subset.
-    fn build_maps(&mut self, first: usize, params: &DirParams, mesh: &MeshPoints, key: u64) {
+    pub(super) fn build_maps(
+        &mut self,
+        first: usize,
+        params: &DirParams,
+        mesh: &MeshPoints,
+        key: u64,
+    ) {
         let size = params.shadow_map_size as usize;
         let texels = size * size;
         let n = self.projections.len();
@@ -403,7 +276,7 @@ fn clear(map: &mut [f32], size: usize, rect: [u16; 4]) {
     }
 }
 
-fn light_set<'a>(
+pub(super) fn light_set<'a>(
     vpls: &'a [Vpl],
     projections: &'a [[Projection; 2]],
     rects: &'a [[[u16; 4]; 2]],

@@ -233,10 +233,10 @@ fn a_real_vpl_whose_light_an_object_blocks_is_cancelled_in_the_combined_world() 
     let wall = Candidate {
         position: Vec3::new(0.0, 1.0, 0.0),
         normal: Vec3::NEG_Y,
-        power: Vec3::new(0.8, 0.4, 0.2),
+        power_r: Vec3::new(0.8, 0.4, 0.2),
+        power_rv: 0.25 * Vec3::new(0.8, 0.4, 0.2),
         real: true,
         area: 0.01,
-        unblocked: 0.25,
     };
     let mut vpls = Vec::new();
     resample(&[wall], 64, 0, 9, &mut vpls);
@@ -260,7 +260,7 @@ fn a_real_vpl_whose_light_an_object_blocks_is_cancelled_in_the_combined_world() 
     // A real floor point below: L_r gets all of the wall's light, L_rv a quarter (the
     // ir = 1 VPLs light L_r only, eqs. 6-7).
     let floor = gather(&lights, &all, Vec3::ZERO, Vec3::Y, Receiver::Real);
-    let expected = wall.power; // cos 1 * cos 1 / 1 m^2
+    let expected = wall.power_r; // cos 1 * cos 1 / 1 m^2
     assert!(
         (floor.r_ind - expected).abs().max_element() < 1e-5,
         "E_R {}",
@@ -284,7 +284,7 @@ fn a_real_vpl_whose_light_an_object_blocks_is_cancelled_in_the_combined_world() 
     let mut open = Vec::new();
     resample(
         &[Candidate {
-            unblocked: 1.0,
+            power_rv: wall.power_r,
             ..wall
         }],
         64,
@@ -434,5 +434,55 @@ fn shadow_maps_beyond_a_gibibyte_are_refused_before_allocating() {
     assert_eq!(
         params.check().unwrap_err().to_string(),
         "sample.dir: 4096 VPLs with two 512x512 maps each need 8192 MiB of shadow maps; at most 1024 MiB: lower vpls or shadow_map_size"
+    );
+}
+
+#[test]
+fn a_candidate_splits_into_the_light_both_worlds_share_and_what_only_one_has() {
+    let c = Candidate {
+        position: Vec3::ZERO,
+        normal: Vec3::Y,
+        power_r: Vec3::new(1.0, 1.0, 1.0),
+        power_rv: Vec3::new(0.5, 2.0, 1.0),
+        real: true,
+        area: 0.01,
+    };
+    let [both, r_only, rv_only] = super::vpl::split(&c);
+    assert_eq!(both, Vec3::new(0.5, 1.0, 1.0));
+    assert_eq!(r_only, Vec3::new(0.5, 0.0, 0.0));
+    assert_eq!(rv_only, Vec3::new(0.0, 1.0, 0.0));
+}
+
+/// A second bounce carries the flags on (eq. 9): the floor lit by the red sphere's VPLs
+/// sends that light on in the combined world only, so the real solution of the flat
+/// floor still has no indirect light, E_RV == E_R where nothing virtual is near, and
+/// the layers do not depend on the thread count.
+#[test]
+fn a_second_bounce_keeps_light_that_met_an_object_out_of_the_real_solution() {
+    let scene = floor_scene();
+    let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, RED);
+    let table = uniform_table(4096);
+    let params = DirParams {
+        bounces: 2,
+        ..DirParams::default()
+    };
+    let out = with_threads(1, || render(&scene, &objects, &table, &params));
+    let real_floor: Vec<usize> = (0..out.mask.data.len())
+        .filter(|&i| out.mask.data[i] == 1.0 && out.e_r_ind.data[i].is_finite())
+        .collect();
+    assert!(real_floor.len() > 1000);
+    for &i in &real_floor {
+        assert_eq!(out.e_r_ind.data[i], Vec3::ZERO, "pixel {i}");
+    }
+    assert_untouched_pixels_equal(&out);
+    let two = with_threads(2, || render(&scene, &objects, &table, &params));
+    assert!(
+        bits(&out) == bits(&two),
+        "1 and 2 threads differ with two bounces"
+    );
+    let one_bounce = render(&scene, &objects, &table, &DirParams::default());
+    assert!(
+        bits(&out) != bits(&one_bounce),
+        "the second bounce changed nothing"
     );
 }

@@ -111,23 +111,37 @@ pub fn environment_vpls(table: &LightTable, count: usize, key: u64) -> Vec<Vpl> 
 pub struct Candidate {
     pub position: Vec3,
     pub normal: Vec3,
-    /// Outgoing radiance times area in the real world (real candidates) or in the
-    /// combined world (virtual ones).
-    pub power: Vec3,
+    /// Outgoing radiance times area over the paths that count for L_r (real light over
+    /// real surfaces only; 0 on a virtual surface).
+    pub power_r: Vec3,
+    /// The same over the paths that count for L_rv (the combined world).
+    pub power_rv: Vec3,
     pub real: bool,
     /// Square metres of surface it stands for.
     pub area: f32,
-    /// Real candidates: the fraction of their direct light that the objects let
-    /// through (1 for virtual candidates).
-    pub unblocked: f32,
+}
+
+/// A VPL's share of a candidate's light: what counts for both worlds, for L_r alone
+/// (the ir = 1 kind: light the objects take away) and for L_rv alone (light the
+/// objects add), per channel, so that both + r_only = power_r and both + rv_only =
+/// power_rv.
+pub fn split(c: &Candidate) -> [Vec3; 3] {
+    let both = c.power_r.min(c.power_rv).max(Vec3::ZERO);
+    [
+        both,
+        (c.power_r - both).max(Vec3::ZERO),
+        (c.power_rv - both).max(Vec3::ZERO),
+    ]
 }
 
 /// The bounce VPLs drawn from `candidates` into `slots` slots numbered from
-/// `first_slot` (see the module docs). A real candidate in the objects' shadow fills
-/// its slot with two VPLs at its point: the light that still reaches it (r(VPL) = 1)
-/// and the light the objects block (ir = 1), so that L_r gets its whole light and L_rv
-/// the unblocked part from the same draw: their difference then has the variance of
-/// the blocked part alone.
+/// `first_slot` (see the module docs), by the luminance of the larger of their two
+/// powers. A drawn candidate fills its slot with up to three VPLs at its point
+/// ([`split`]): the light both worlds share (r(VPL) = 1, or a virtual surface's, which
+/// has none), the light only L_r has (ir = 1: a real surface in the objects' shadow,
+/// Sec. 3.3's "VPL 3") and the light only L_rv has (r(VPL) = 0 or x-bar = 0: an object
+/// lit it, Sec. 3.6). Keeping them in one slot makes L_r - L_rv carry only the
+/// variance of the difference.
 pub fn resample(
     candidates: &[Candidate],
     slots: usize,
@@ -136,7 +150,7 @@ pub fn resample(
     out: &mut Vec<Vpl>,
 ) {
     let weight = |c: &Candidate| {
-        let l = luminance(c.power);
+        let l = luminance(c.power_r.max(c.power_rv));
         if l.is_finite() && l > 0.0 {
             l as f64
         } else {
@@ -158,34 +172,26 @@ pub fn resample(
         let above = below + w;
         while next < above {
             let grow = (step / w) as f32;
-            let vpl = Vpl {
+            let [both, r_only, rv_only] = split(c);
+            let vpl = |power: Vec3, real_path: bool, real_only: bool| Vpl {
                 emitter: Emitter::Surface {
                     position: c.position,
                     normal: c.normal,
                 },
-                power: c.power * grow,
-                real_path: c.real,
-                real_only: false,
+                power: power * grow,
+                real_path,
+                real_only,
                 patch: c.area * grow,
                 slot,
             };
-            let f = if c.real {
-                c.unblocked.clamp(0.0, 1.0)
-            } else {
-                1.0
-            };
-            if f > 0.0 {
-                out.push(Vpl {
-                    power: vpl.power * f,
-                    ..vpl
-                });
-            }
-            if f < 1.0 {
-                out.push(Vpl {
-                    power: vpl.power * (1.0 - f),
-                    real_only: true,
-                    ..vpl
-                });
+            for (power, real_path, real_only) in [
+                (both, c.real, false),
+                (r_only, true, true),
+                (rv_only, false, false),
+            ] {
+                if power.max_element() > 0.0 {
+                    out.push(vpl(power, real_path, real_only));
+                }
             }
             slot += 1;
             next += step;

@@ -132,7 +132,9 @@ pub use kernel::MAX_CANDIDATES;
 pub use params::{MAX_SAMPLES, PathParams};
 use params::{PARAMS, query_kind};
 
-use super::layers::{LAYER_OUTPUTS, shade_rows};
+use super::layers::{
+    LAYER_OUTPUTS, RENDERER_INPUTS, layer_output_ports, renderer_input_ports, shade_rows,
+};
 use super::pyramid::DepthPyramid;
 use super::query::{ImpostorQuery, QueryKind, VoxelQuery};
 use super::ssrt::ScreenTracer;
@@ -150,22 +152,12 @@ use rays::WorldQuery;
 use span::{SPAN_PIXELS, Span};
 use std::sync::Arc;
 
-const INPUTS: [(&str, &str, &[ProductKind]); 5] = [
-    ("depth", "refined_depth", &[ProductKind::Depth]),
-    ("normals", "normals", &[ProductKind::Normals]),
-    ("pose", "pose", &[ProductKind::Pose]),
-    ("radiance", "compensated", &[ProductKind::Radiance]),
-    ("light_table", "light_table", &[ProductKind::LightTable]),
-];
-
 pub const INFO: StageInfo = StageInfo {
     kind: "sample.path",
     summary: "two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5)",
     params: PARAMS,
     ports: |p| Ports {
-        inputs: INPUTS
-            .iter()
-            .map(|(role, product, kinds)| Port::new(role, product, kinds))
+        inputs: renderer_input_ports()
             .chain(
                 query_kind(p)
                     .needs_environment()
@@ -177,16 +169,13 @@ pub const INFO: StageInfo = StageInfo {
                     .then(|| Port::new("voxels", "voxels", &[ProductKind::Voxels])),
             )
             .collect(),
-        outputs: LAYER_OUTPUTS
-            .iter()
-            .map(|(role, kinds)| Port::new(role, role, kinds))
-            .collect(),
+        outputs: layer_output_ports(),
     },
     build: |ctx| {
         let params = PathParams::from_params(ctx.params, ctx.seed);
         params.check()?;
         Ok(Box::new(PathStage {
-            inputs: INPUTS.map(|(role, _, _)| ctx.input(role)),
+            inputs: RENDERER_INPUTS.map(|(role, _, _)| ctx.input(role)),
             environment: params
                 .query
                 .needs_environment()

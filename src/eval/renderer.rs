@@ -8,7 +8,7 @@
 //! - `ratio_rmse_all`: the same over every real pixel with a reference (a renderer
 //!   whose ratio strays from 1 away from the objects pays for it here).
 
-use super::sampling::{ReferenceLayers, channel_mean};
+use super::sampling::{OwnLayers, ReferenceLayers, channel_mean};
 use crate::graph::{Frame, ResolvedStage};
 use serde_json::{Value, json};
 
@@ -39,14 +39,14 @@ impl RatioScorer {
         let Some(reference) = reference.filter(|r| r.frame == frame.index) else {
             return;
         };
-        let [e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask] = &self.outputs;
-        let (Ok(e_r_dir), Ok(e_r_ind), Ok(e_rv_dir), Ok(e_rv_ind), Ok(mask)) = (
-            frame.radiance(e_r_dir),
-            frame.radiance(e_r_ind),
-            frame.radiance(e_rv_dir),
-            frame.radiance(e_rv_ind),
-            frame.scalar(mask),
-        ) else {
+        let Some(OwnLayers {
+            e_r_dir,
+            e_r_ind,
+            e_rv_dir,
+            e_rv_ind,
+            mask,
+        }) = OwnLayers::of(frame, &self.outputs)
+        else {
             return;
         };
         for i in 0..reference.touched.len() {

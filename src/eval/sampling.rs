@@ -22,7 +22,7 @@ use crate::graph::{Frame, ResolvedStage};
 use crate::light::voxels::VoxelVolume;
 use crate::objects::VirtualScene;
 use crate::pinhole::Pinhole;
-use crate::raster::{Image, Vec3Image};
+use crate::raster::{Image, ScalarImage, Vec3Image};
 use crate::recording::Intrinsics;
 use crate::rng;
 use crate::stages::sample::path::{IrradianceLayers, PathInputs, PathParams, sample_path};
@@ -306,6 +306,30 @@ impl ReferenceSchedule {
     }
 }
 
+/// The layers a renderer wrote into a frame that its ratio is scored on.
+pub(super) struct OwnLayers<'a> {
+    pub e_r_dir: &'a Vec3Image,
+    pub e_r_ind: &'a Vec3Image,
+    pub e_rv_dir: &'a Vec3Image,
+    pub e_rv_ind: &'a Vec3Image,
+    pub mask: &'a ScalarImage,
+}
+
+impl<'a> OwnLayers<'a> {
+    /// The products `names` (e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask) of `frame`;
+    /// `None` when one is missing.
+    pub fn of(frame: &'a Frame, names: &[String; 5]) -> Option<OwnLayers<'a>> {
+        let [e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask] = names;
+        Some(OwnLayers {
+            e_r_dir: frame.radiance(e_r_dir).ok()?,
+            e_r_ind: frame.radiance(e_r_ind).ok()?,
+            e_rv_dir: frame.radiance(e_rv_dir).ok()?,
+            e_rv_ind: frame.radiance(e_rv_ind).ok()?,
+            mask: frame.scalar(mask).ok()?,
+        })
+    }
+}
+
 /// Scores a `sample.path` stage.
 pub struct PathScorer {
     runner: PathRunner,
@@ -348,14 +372,14 @@ impl PathScorer {
         let Some(reference) = reference.filter(|r| r.frame == frame.index) else {
             return Ok(());
         };
-        let [e_r_dir, e_r_ind, e_rv_dir, e_rv_ind, mask] = &self.outputs;
-        let (Ok(e_r_dir), Ok(e_r_ind), Ok(e_rv_dir), Ok(e_rv_ind), Ok(mask)) = (
-            frame.radiance(e_r_dir),
-            frame.radiance(e_r_ind),
-            frame.radiance(e_rv_dir),
-            frame.radiance(e_rv_ind),
-            frame.scalar(mask),
-        ) else {
+        let Some(OwnLayers {
+            e_r_dir,
+            e_r_ind,
+            e_rv_dir,
+            e_rv_ind,
+            mask,
+        }) = OwnLayers::of(frame, &self.outputs)
+        else {
             return Ok(());
         };
         let n = reference.touched.len();

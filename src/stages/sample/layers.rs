@@ -3,7 +3,7 @@
 //! one type, one list of output roles, one way into the frame, and one driver that
 //! hands a renderer the rows to fill in parallel ([`shade_rows`]).
 
-use crate::graph::{Frame, Port, Product, ProductKind};
+use crate::graph::{Frame, Port, Product, ProductKind, StageError};
 use crate::raster::{Image, LabelImage, ScalarImage, Vec3Image};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -50,6 +50,24 @@ pub fn layer_output_ports() -> Vec<Port> {
         .iter()
         .map(|(role, kinds)| Port::new(role, role, kinds))
         .collect()
+}
+
+/// Refuses a renderer's inputs whose sizes differ from the depth map's (`w` x `h`):
+/// `sizes` are (what, width, height); the error names `stage` and the first that
+/// differs.
+pub fn check_sizes(
+    stage: &str,
+    (w, h): (u32, u32),
+    sizes: &[(&str, u32, u32)],
+) -> Result<(), StageError> {
+    for &(what, ww, hh) in sizes {
+        if (ww, hh) != (w, h) {
+            return Err(StageError::Failed(format!(
+                "{stage}: {what} is {ww}x{hh}, depth is {w}x{h}"
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// One value per pixel of each layer a renderer writes.

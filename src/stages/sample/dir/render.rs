@@ -10,7 +10,7 @@ use super::{DirInputs, DirParams};
 use crate::graph::StageError;
 use crate::objects::VirtualHit;
 use crate::rng;
-use crate::stages::sample::layers::{IrradianceLayers, PixelLayers, shade_rows};
+use crate::stages::sample::layers::{IrradianceLayers, PixelLayers, check_sizes, shade_rows};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -66,18 +66,15 @@ impl DirRenderer {
         mesh: &MeshPoints,
     ) -> Result<(), StageError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
-        let sizes = [
-            ("normals", inputs.normals.width, inputs.normals.height),
-            ("radiance", inputs.radiance.width, inputs.radiance.height),
-            ("camera", inputs.camera.width, inputs.camera.height),
-        ];
-        for (what, ww, hh) in sizes {
-            if (ww, hh) != (w, h) {
-                return Err(StageError::Failed(format!(
-                    "sample.dir: {what} is {ww}x{hh}, depth is {w}x{h}"
-                )));
-            }
-        }
+        check_sizes(
+            "sample.dir",
+            (w, h),
+            &[
+                ("normals", inputs.normals.width, inputs.normals.height),
+                ("radiance", inputs.radiance.width, inputs.radiance.height),
+                ("camera", inputs.camera.width, inputs.camera.height),
+            ],
+        )?;
         if !inputs.camera_to_world.is_finite() {
             return Err(StageError::Failed(
                 "sample.dir: the camera pose is not finite".into(),

@@ -13,13 +13,14 @@ use crate::stages::sample::path::tests::{
 use crate::stages::with_threads;
 use glam::Vec3;
 
-fn render(
-    scene: &Scene,
-    objects: &VirtualScene,
-    table: &LightTable,
-    params: &DirParams,
-) -> IrradianceLayers {
-    let inputs = DirInputs {
+/// The shared floor scene's inputs with `objects` under `table`, at `frame`.
+fn inputs<'a>(
+    scene: &'a Scene,
+    objects: &'a VirtualScene,
+    table: &'a LightTable,
+    frame: u64,
+) -> DirInputs<'a> {
+    DirInputs {
         depth: &scene.depth,
         normals: &scene.normals,
         radiance: &scene.radiance,
@@ -27,9 +28,17 @@ fn render(
         camera_to_world: pose(),
         table,
         objects,
-        frame: 5,
-    };
-    sample_dir(&inputs, params).unwrap()
+        frame,
+    }
+}
+
+fn render(
+    scene: &Scene,
+    objects: &VirtualScene,
+    table: &LightTable,
+    params: &DirParams,
+) -> IrradianceLayers {
+    sample_dir(&inputs(scene, objects, table, 5), params).unwrap()
 }
 
 const RED: Material = Material {
@@ -371,16 +380,8 @@ fn settings_it_cannot_run_with_are_refused_with_the_reason() {
         "sample.dir: environment_vpls (32) is more than vpls (16)"
     );
     let scene = floor_scene();
-    let mut inputs = DirInputs {
-        depth: &scene.depth,
-        normals: &scene.normals,
-        radiance: &scene.radiance,
-        camera: camera(),
-        camera_to_world: pose(),
-        table: &uniform_table(64),
-        objects: &VirtualScene::default(),
-        frame: 0,
-    };
+    let (table, objects) = (uniform_table(64), VirtualScene::default());
+    let mut inputs = inputs(&scene, &objects, &table, 0);
     let small = crate::raster::Image::filled(4, 4, Vec3::ONE);
     inputs.radiance = &small;
     let err = sample_dir(&inputs, &DirParams::default())
@@ -402,16 +403,7 @@ fn a_reused_renderer_gives_the_bits_of_a_fresh_one() {
     let table = uniform_table(4096);
     let params = DirParams::default();
     let mesh = MeshPoints::new(&objects, params.mesh_points as usize, params.seed);
-    let inputs = |frame| DirInputs {
-        depth: &scene.depth,
-        normals: &scene.normals,
-        radiance: &scene.radiance,
-        camera: camera(),
-        camera_to_world: pose(),
-        table: &table,
-        objects: &objects,
-        frame,
-    };
+    let inputs = |frame| inputs(&scene, &objects, &table, frame);
     let mut renderer = DirRenderer::default();
     let mut out = IrradianceLayers::new(scene.depth.width, scene.depth.height);
     renderer

@@ -133,7 +133,8 @@ pub use params::{MAX_SAMPLES, PathParams};
 use params::{PARAMS, query_kind};
 
 use super::layers::{
-    LAYER_OUTPUTS, RENDERER_INPUTS, layer_output_ports, renderer_input_ports, shade_rows,
+    LAYER_OUTPUTS, RENDERER_INPUTS, check_sizes, layer_output_ports, renderer_input_ports,
+    shade_rows,
 };
 use super::pyramid::DepthPyramid;
 use super::query::{ImpostorQuery, QueryKind, VoxelQuery};
@@ -253,18 +254,15 @@ pub(crate) fn sample_path_with_kernel(
 ) -> Result<(), StageError> {
     params.check()?;
     let (w, h) = (inputs.depth.width, inputs.depth.height);
-    let sizes = [
-        ("normals", inputs.normals.width, inputs.normals.height),
-        ("radiance", inputs.radiance.width, inputs.radiance.height),
-        ("camera", inputs.camera.width, inputs.camera.height),
-    ];
-    for (what, ww, hh) in sizes {
-        if (ww, hh) != (w, h) {
-            return Err(StageError::Failed(format!(
-                "sample.path: {what} is {ww}x{hh}, depth is {w}x{h}"
-            )));
-        }
-    }
+    check_sizes(
+        "sample.path",
+        (w, h),
+        &[
+            ("normals", inputs.normals.width, inputs.normals.height),
+            ("radiance", inputs.radiance.width, inputs.radiance.height),
+            ("camera", inputs.camera.width, inputs.camera.height),
+        ],
+    )?;
     if out.size() != Some((w, h)) {
         return Err(StageError::Failed(format!(
             "sample.path: output buffers are not all {w}x{h}"

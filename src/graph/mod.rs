@@ -13,6 +13,7 @@ pub mod registry;
 pub mod runtime;
 pub mod stage;
 pub mod timing;
+pub mod tree;
 
 pub use config::{ConfigError, SourceFile};
 pub use frame::Frame;
@@ -21,6 +22,7 @@ pub use params::{ParamDefault, ParamSpec, ParamValue, Params};
 pub use pipeline::{Feedback, Pipeline, ResolvedStage};
 pub use product::{Compensation, EnvCloud, PairCounts, Product, ProductKind};
 pub use registry::Registry;
-pub use runtime::{FrameSource, PipelineError, RunFailure, RunOptions, run};
+pub use runtime::{Branch, FrameSource, PipelineError, RunFailure, RunOptions, run, run_graph};
 pub use stage::{BuildContext, Port, Ports, Stage, StageError, StageInfo};
 pub use timing::{FrameTiming, RunReport, StageTimings, Stats};
+pub use tree::{GraphFeedback, GraphNode, StageGraph};

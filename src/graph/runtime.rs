@@ -3,6 +3,13 @@
 //! producers; nothing is dropped), and the calling thread receives finished frames in
 //! order. Feedback edges carry a product of frame t-1 to a stage processing frame t.
 //!
+//! The stages form a [`StageGraph`]: a chain for a lone pipeline, a tree when several
+//! pipelines share their first stages. A stage with several children sends each a copy
+//! of the frame's product map; the products themselves are shared (`Arc`), never
+//! copied. The calling thread takes one finished frame from each branch per frame, so
+//! a slow branch holds back the shared stages, and through them every other branch:
+//! memory stays bounded by the channels.
+//!
 //! Failure: the first error or panic of any stage is recorded with the stage, frame
 //! and cause; that stage drops its channels, which stops its producers (their sends
 //! fail) and lets its consumers finish the frames already passed on. Nothing blocks
@@ -12,6 +19,7 @@ use super::frame::{Frame, Product};
 use super::pipeline::{PREVIOUS_SUFFIX, Pipeline};
 use super::stage::{Stage, StageError};
 use super::timing::{FrameTiming, RunReport, StageTimings};
+use super::tree::StageGraph;
 use crate::recording::{RecordingError, Replay};
 use crossbeam_channel::{Receiver, Sender, bounded};
 use std::ops::Range;
@@ -62,6 +70,20 @@ fn source_frame(n: usize, records: crate::recording::FrameRecords) -> Frame {
     frame
 }
 
+/// The branch a failing stage runs in, as errors print it: nothing for a shared stage
+/// or a lone pipeline, else "branch `label`: ".
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Branch(pub Option<String>);
+
+impl std::fmt::Display for Branch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.0 {
+            Some(label) => write!(f, "branch `{label}`: "),
+            None => Ok(()),
+        }
+    }
+}
+
 /// Why a run stopped early.
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
@@ -73,23 +95,26 @@ pub enum PipelineError {
         #[source]
         source: StageError,
     },
-    #[error("stage `{stage}` ({kind}) failed at frame {frame}: {source}")]
+    #[error("{branch}stage `{stage}` ({kind}) failed at frame {frame}: {source}")]
     Stage {
+        branch: Branch,
         stage: String,
         kind: String,
         frame: usize,
         #[source]
         source: StageError,
     },
-    #[error("stage `{stage}` ({kind}) panicked at frame {frame}: {message}")]
+    #[error("{branch}stage `{stage}` ({kind}) panicked at frame {frame}: {message}")]
     Panic {
+        branch: Branch,
         stage: String,
         kind: String,
         frame: usize,
         message: String,
     },
-    #[error("stage `{stage}` ({kind}) failed while finishing: {source}")]
+    #[error("{branch}stage `{stage}` ({kind}) failed while finishing: {source}")]
     Finish {
+        branch: Branch,
         stage: String,
         kind: String,
         #[source]
@@ -154,11 +179,22 @@ type FeedbackValue = Option<Arc<Product>>;
 /// The channels one stage thread owns.
 struct StageWiring {
     input: Receiver<Frame>,
-    output: Sender<Frame>,
+    /// Its children's inputs, then the sinks of the branches it ends: each gets the
+    /// frame (a copy of the product map, the products themselves shared).
+    outputs: Vec<Sender<Frame>>,
     /// (frame key `product@prev`, receiver) for previous-frame inputs.
     feedback_in: Vec<(String, Receiver<FeedbackValue>)>,
     /// (product, sender) for products this stage feeds back.
     feedback_out: Vec<(String, Sender<FeedbackValue>)>,
+}
+
+/// Sends `frame` to every output, moving it into the last; false when one of them is
+/// closed (its side of the run stopped on an error).
+fn send_all(outputs: &[Sender<Frame>], frame: Frame) -> bool {
+    let Some((last, rest)) = outputs.split_last() else {
+        return true;
+    };
+    rest.iter().all(|o| o.send(frame.clone()).is_ok()) && last.send(frame).is_ok()
 }
 
 /// Runs `stages` (built from `pipeline`) over `source`, handing each finished frame to
@@ -175,7 +211,26 @@ pub fn run(
         pipeline.stages.len(),
         "one built stage per config stage"
     );
-    let capacity = pipeline.channel_capacity;
+    let graph = StageGraph::linear(pipeline);
+    run_graph(&graph, stages, source, options, &mut |mut frames| {
+        sink(frames.pop().expect("one branch"))
+    })
+}
+
+/// Runs the stages of `graph` (one built stage per node) over `source`. For each frame,
+/// `sink` gets every branch's finished frame, in branch order, on the calling thread;
+/// frames come in order. A branch that fails stops the run: the sink gets no frame
+/// that some branch did not finish.
+pub fn run_graph(
+    graph: &StageGraph,
+    stages: Vec<Box<dyn Stage>>,
+    source: &dyn FrameSource,
+    options: &RunOptions,
+    sink: &mut dyn FnMut(Vec<Frame>),
+) -> Result<RunReport, Box<RunFailure>> {
+    assert_eq!(stages.len(), graph.nodes.len(), "one built stage per node");
+    assert!(graph.branch_count() > 0, "a graph has a branch");
+    let capacity = graph.channel_capacity;
     let frames = options.frames.start.min(source.len())..options.frames.end.min(source.len());
     let first_error: Mutex<Option<PipelineError>> = Mutex::new(None);
     let record_error = |e: PipelineError| {
@@ -184,29 +239,44 @@ pub fn run(
     };
     let skipped: Mutex<Vec<(usize, String)>> = Mutex::new(Vec::new());
 
-    // Channels: source -> stage 0 -> ... -> stage n-1 -> sink.
-    let (mut senders, mut receivers) = (Vec::new(), Vec::new());
-    for _ in 0..=stages.len() {
+    // Channels: one into each node, one out of each branch to the sink.
+    let (mut node_tx, mut node_rx) = (Vec::new(), Vec::new());
+    for _ in &graph.nodes {
         let (tx, rx) = bounded::<Frame>(capacity);
-        senders.push(tx);
-        receivers.push(rx);
+        node_tx.push(tx);
+        node_rx.push(rx);
     }
-    let source_tx = senders.remove(0);
-    let sink_rx = receivers.pop().expect("n+1 channels");
-    let mut wiring: Vec<StageWiring> = receivers
-        .into_iter()
-        .zip(senders)
-        .map(|(input, output)| StageWiring {
+    let (mut sink_tx, mut sink_rx) = (Vec::new(), Vec::new());
+    for _ in 0..graph.branch_count() {
+        let (tx, rx) = bounded::<Frame>(capacity);
+        sink_tx.push(tx);
+        sink_rx.push(rx);
+    }
+    let outputs_of = |parent: Option<usize>| -> Vec<Sender<Frame>> {
+        let children = graph.children(parent).map(|c| node_tx[c].clone());
+        let sinks = (0..graph.branch_count())
+            .filter(|&b| graph.branch_end(b) == parent)
+            .map(|b| sink_tx[b].clone());
+        children.chain(sinks).collect()
+    };
+    let source_outputs = outputs_of(None);
+    let mut wiring: Vec<StageWiring> = node_rx
+        .drain(..)
+        .enumerate()
+        .map(|(n, input)| StageWiring {
             input,
-            output,
+            outputs: outputs_of(Some(n)),
             feedback_in: Vec::new(),
             feedback_out: Vec::new(),
         })
         .collect();
+    // Only the threads hold senders: a channel closes when its writer ends.
+    node_tx.clear();
+    sink_tx.clear();
     // A producer can run ahead of its consumer by every buffered frame: size the
     // feedback channel so that sending never waits on the consumer.
     let feedback_capacity = capacity * (stages.len() + 2) + 2;
-    for fb in &pipeline.feedback {
+    for fb in &graph.feedback {
         let (tx, rx) = bounded::<FeedbackValue>(feedback_capacity);
         wiring[fb.producer]
             .feedback_out
@@ -240,7 +310,7 @@ pub fn run(
                     source,
                     frames,
                     options,
-                    (source_tx, token_rx),
+                    (source_outputs, token_rx),
                     t0,
                     &record_error,
                     &skipped,
@@ -248,40 +318,60 @@ pub fn run(
             })
             .expect("spawn source thread");
         let mut handles = Vec::new();
-        for ((stage, wires), cfg) in stages.into_iter().zip(wiring).zip(&pipeline.stages) {
+        for (n, (stage, wires)) in stages.into_iter().zip(wiring).enumerate() {
             let record_error = &record_error;
+            let node = StageNode {
+                name: &graph.nodes[n].stage.name,
+                kind: graph.nodes[n].stage.kind,
+                branch: graph.own_branch(n),
+            };
             let handle = std::thread::Builder::new()
-                .name(format!("relume-{}", cfg.name))
+                .name(format!("relume-{}", node.name))
                 .spawn_scoped(scope, move || {
-                    stage_loop(stage, wires, &cfg.name, cfg.kind, t0, record_error)
+                    stage_loop(stage, wires, &node, t0, record_error)
                 })
                 .expect("spawn stage thread");
             handles.push(handle);
         }
         let mut last_index = None;
-        for frame in sink_rx.iter() {
+        'frames: loop {
+            let mut done = Vec::with_capacity(sink_rx.len());
+            for rx in &sink_rx {
+                match rx.recv() {
+                    Ok(frame) => done.push(frame),
+                    // That branch ended: after its last frame, or on an error.
+                    Err(_) => break 'frames,
+                }
+            }
+            let index = done[0].index;
             debug_assert!(
-                last_index.is_none_or(|l| frame.index > l),
-                "frames leave in order"
+                last_index.is_none_or(|l| index > l) && done.iter().all(|f| f.index == index),
+                "frames leave in order, one per branch"
             );
-            last_index = Some(frame.index);
-            latencies.push(frame.entered.elapsed().as_nanos() as u64);
-            sink(frame);
+            last_index = Some(index);
+            let latency = done.iter().map(|f| f.entered.elapsed()).max();
+            latencies.push(latency.unwrap_or_default().as_nanos() as u64);
+            sink(done);
             if let Some(tokens) = &token_tx {
                 // Fails only when the source has ended.
                 let _ = tokens.send(());
             }
         }
+        // Branches still running stop at their next send.
+        drop(sink_rx);
         drop(token_tx);
         let (source_timing, was_interrupted) = source_handle
             .join()
             .expect("the source thread catches its panics");
         interrupted = was_interrupted;
         let mut all = vec![source_timing];
-        all.extend(handles.into_iter().zip(&pipeline.stages).map(|(h, cfg)| {
-            h.join()
+        all.extend(handles.into_iter().enumerate().map(|(n, h)| {
+            let mut timings = h
+                .join()
                 .expect("stage threads catch their panics")
-                .unwrap_or_else(|| StageTimings::new(&cfg.name, cfg.kind))
+                .unwrap_or_else(|| StageTimings::new("", graph.nodes[n].stage.kind));
+            timings.name = graph.row_name(n);
+            timings
         }));
         all
     });
@@ -297,12 +387,20 @@ pub fn run(
     }
 }
 
+/// What a stage thread says about itself in errors.
+struct StageNode<'a> {
+    name: &'a str,
+    kind: &'static str,
+    /// The branch it runs in alone (`None`: shared, or a lone pipeline).
+    branch: Option<&'a str>,
+}
+
 /// Reads frames and sends them on; returns its timings and whether it was interrupted.
 fn source_loop(
     source: &dyn FrameSource,
     frames: Range<usize>,
     options: &RunOptions,
-    (output, tokens): (Sender<Frame>, Option<Receiver<()>>),
+    (outputs, tokens): (Vec<Sender<Frame>>, Option<Receiver<()>>),
     t0: Instant,
     record_error: &dyn Fn(PipelineError),
     skipped: &Mutex<Vec<(usize, String)>>,
@@ -351,6 +449,7 @@ fn source_loop(
             }
             Err(panic) => {
                 record_error(PipelineError::Panic {
+                    branch: Branch::default(),
                     stage: "source".into(),
                     kind: "read".into(),
                     frame: n,
@@ -361,7 +460,7 @@ fn source_loop(
         };
         let processed = Instant::now();
         holding = false;
-        if output.send(frame).is_err() {
+        if !send_all(&outputs, frame) {
             break; // downstream stopped on an error
         }
         let sent = Instant::now();
@@ -380,11 +479,12 @@ fn source_loop(
 fn stage_loop(
     mut stage: Box<dyn Stage>,
     wires: StageWiring,
-    name: &str,
-    kind: &str,
+    node: &StageNode,
     t0: Instant,
     record_error: &dyn Fn(PipelineError),
 ) -> Option<StageTimings> {
+    let (name, kind) = (node.name, node.kind);
+    let branch = Branch(node.branch.map(str::to_string));
     let mut timings = StageTimings::new(name, kind);
     let mut first = true;
     let mut failed = false;
@@ -412,12 +512,14 @@ fn stage_loop(
         let error = match result {
             Ok(Ok(())) => None,
             Ok(Err(source)) => Some(PipelineError::Stage {
+                branch: branch.clone(),
                 stage: name.into(),
                 kind: kind.into(),
                 frame: index,
                 source,
             }),
             Err(panic) => Some(PipelineError::Panic {
+                branch: branch.clone(),
                 stage: name.into(),
                 kind: kind.into(),
                 frame: index,
@@ -436,7 +538,7 @@ fn stage_loop(
             // A send fails only when the consumer has stopped; the run is ending then.
             let _ = tx.send(frame.get_shared(product).cloned());
         }
-        if wires.output.send(frame).is_err() {
+        if !send_all(&wires.outputs, frame) {
             break;
         }
         let sent = Instant::now();
@@ -454,11 +556,13 @@ fn stage_loop(
         match catch_unwind(AssertUnwindSafe(|| stage.finish())) {
             Ok(Ok(())) => {}
             Ok(Err(source)) => record_error(PipelineError::Finish {
+                branch: branch.clone(),
                 stage: name.into(),
                 kind: kind.into(),
                 source,
             }),
             Err(panic) => record_error(PipelineError::Finish {
+                branch: branch.clone(),
                 stage: name.into(),
                 kind: kind.into(),
                 source: StageError::Failed(format!("panicked: {}", panic_message(panic))),

@@ -1,0 +1,216 @@
+//! The shape a run takes: a tree of stages rooted at the source. A lone pipeline is a
+//! chain (one branch); several pipelines replayed together (`relume compare`) share
+//! the longest run of identical leading stages, which then fans out into one branch
+//! per pipeline. Every leaf of the tree ends a branch, whose finished frames the
+//! runtime hands back per frame, in order.
+//!
+//! Two stages are identical when they have the same name, kind, parameters, product
+//! bindings and virtual objects, and, for a stage that reads a later stage's product of
+//! the previous frame (`@prev`), when every stage up to that producer is identical too
+//! (else the shared stage would need one feedback value per branch). `write` stages are
+//! never shared: each branch saves into its own folder.
+
+use super::pipeline::{Pipeline, ResolvedStage};
+use super::registry::Registry;
+use super::stage::{BuildContext, Stage, StageError};
+use crate::objects::VirtualScene;
+use crate::recording::Header;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// One stage of the tree.
+#[derive(Clone, Debug)]
+pub struct GraphNode {
+    pub stage: ResolvedStage,
+    /// The objects its builder receives (those of the first pipeline that has it).
+    pub objects: Arc<VirtualScene>,
+    /// The node whose frames it reads (`None`: the source).
+    pub parent: Option<usize>,
+    /// The branches (pipelines) that run it, in order; more than one for a shared stage.
+    pub branches: Vec<usize>,
+}
+
+/// A feedback edge between two nodes: `producer`'s `product` of frame t-1 goes to
+/// `consumer` at frame t.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct GraphFeedback {
+    pub producer: usize,
+    pub consumer: usize,
+    pub product: String,
+}
+
+/// Stages as a tree, with one branch per pipeline.
+#[derive(Clone, Debug)]
+pub struct StageGraph {
+    /// In an order where every parent comes before its children.
+    pub nodes: Vec<GraphNode>,
+    /// Per branch, its label (for errors and timing rows; empty for a lone pipeline).
+    pub labels: Vec<String>,
+    /// Per branch, the node of each of its pipeline's stages, in pipeline order.
+    pub branch_nodes: Vec<Vec<usize>>,
+    pub feedback: Vec<GraphFeedback>,
+    /// Frames buffered between two nodes: the largest of the pipelines'.
+    pub channel_capacity: usize,
+}
+
+impl StageGraph {
+    /// A lone pipeline: its stages in a chain.
+    pub fn linear(pipeline: &Pipeline) -> StageGraph {
+        StageGraph::shared(&[(String::new(), pipeline)])
+    }
+
+    /// Several pipelines over one recording, sharing their longest identical prefixes
+    /// (see the module docs). `branches` pairs each pipeline with its label.
+    pub fn shared(branches: &[(String, &Pipeline)]) -> StageGraph {
+        let mut graph = StageGraph {
+            nodes: Vec::new(),
+            labels: branches.iter().map(|(l, _)| l.clone()).collect(),
+            branch_nodes: Vec::new(),
+            feedback: Vec::new(),
+            channel_capacity: branches
+                .iter()
+                .map(|(_, p)| p.channel_capacity)
+                .max()
+                .unwrap_or(super::pipeline::DEFAULT_CHANNEL_CAPACITY),
+        };
+        for (b, (_, pipeline)) in branches.iter().enumerate() {
+            let mut parent = None;
+            let mut mine = Vec::new();
+            for d in 0..pipeline.stages.len() {
+                let shared = graph.nodes.iter().position(|n| {
+                    n.parent == parent && {
+                        let first = branches[n.branches[0]].1;
+                        shareable(first, pipeline, d)
+                    }
+                });
+                let node = match shared {
+                    Some(n) => {
+                        graph.nodes[n].branches.push(b);
+                        n
+                    }
+                    None => {
+                        graph.nodes.push(GraphNode {
+                            stage: pipeline.stages[d].clone(),
+                            objects: pipeline.objects.clone(),
+                            parent,
+                            branches: vec![b],
+                        });
+                        graph.nodes.len() - 1
+                    }
+                };
+                mine.push(node);
+                parent = Some(node);
+            }
+            for fb in &pipeline.feedback {
+                let edge = GraphFeedback {
+                    producer: mine[fb.producer],
+                    consumer: mine[fb.consumer],
+                    product: fb.product.clone(),
+                };
+                if !graph.feedback.contains(&edge) {
+                    graph.feedback.push(edge);
+                }
+            }
+            graph.branch_nodes.push(mine);
+        }
+        graph
+    }
+
+    /// Number of branches.
+    pub fn branch_count(&self) -> usize {
+        self.branch_nodes.len()
+    }
+
+    /// The last node of branch `b` (`None`: a pipeline without stages).
+    pub fn branch_end(&self, b: usize) -> Option<usize> {
+        self.branch_nodes[b].last().copied()
+    }
+
+    /// The nodes whose parent is `parent`, in order.
+    pub fn children(&self, parent: Option<usize>) -> impl Iterator<Item = usize> + '_ {
+        (0..self.nodes.len()).filter(move |&n| self.nodes[n].parent == parent)
+    }
+
+    /// The branch a node belongs to alone, in a graph of several branches (`None` for a
+    /// node that several branches share, and in a lone pipeline).
+    pub fn own_branch(&self, node: usize) -> Option<&str> {
+        match self.nodes[node].branches.as_slice() {
+            [b] if self.branch_count() > 1 => Some(&self.labels[*b]),
+            _ => None,
+        }
+    }
+
+    /// A node's name in timing rows: the stage's name, after its branch's label when
+    /// the node is one branch's alone.
+    pub fn row_name(&self, node: usize) -> String {
+        let name = &self.nodes[node].stage.name;
+        match self.own_branch(node) {
+            Some(label) => format!("{label}/{name}"),
+            None => name.clone(),
+        }
+    }
+
+    /// Builds every node's stage. `out_dirs` holds each branch's folder for the files
+    /// its stages write (a node writes into that of its first branch). On failure: the
+    /// node, and why.
+    pub fn build(
+        &self,
+        registry: &Registry,
+        header: &Header,
+        out_dirs: &[PathBuf],
+        seed: u64,
+    ) -> Result<Vec<Box<dyn Stage>>, (usize, StageError)> {
+        self.nodes
+            .iter()
+            .enumerate()
+            .map(|(i, node)| {
+                let s = &node.stage;
+                let info = registry.get(s.kind).ok_or_else(|| {
+                    let message = format!("stage kind `{}` is not registered", s.kind);
+                    (i, StageError::Failed(message))
+                })?;
+                let out_dir: &Path = &out_dirs[node.branches[0]];
+                let ctx = BuildContext {
+                    stage_name: &s.name,
+                    params: &s.params,
+                    inputs: &s.inputs,
+                    outputs: &s.outputs,
+                    header,
+                    out_dir,
+                    seed,
+                    objects: &node.objects,
+                };
+                (info.build)(&ctx).map_err(|e| (i, e))
+            })
+            .collect()
+    }
+}
+
+/// Whether stage `d` of `b` can run as stage `d` of `a` (their stages before `d` being
+/// shared already): see the module docs.
+fn shareable(a: &Pipeline, b: &Pipeline, d: usize) -> bool {
+    let same = |i: usize| match (a.stages.get(i), b.stages.get(i)) {
+        (Some(x), Some(y)) => same_stage(x, y),
+        _ => false,
+    };
+    if !same(d) || a.stages[d].kind == "write" {
+        return false;
+    }
+    if !(Arc::ptr_eq(&a.objects, &b.objects) || a.objects == b.objects) {
+        return false;
+    }
+    // A later producer feeding this stage back must be shared as well.
+    a.feedback
+        .iter()
+        .chain(&b.feedback)
+        .filter(|fb| fb.consumer == d && fb.producer > d)
+        .all(|fb| (d + 1..=fb.producer).all(same))
+}
+
+fn same_stage(x: &ResolvedStage, y: &ResolvedStage) -> bool {
+    x.name == y.name
+        && x.kind == y.kind
+        && x.params == y.params
+        && x.inputs == y.inputs
+        && x.outputs == y.outputs
+}

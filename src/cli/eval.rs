@@ -40,7 +40,8 @@ Scores (per stage, keyed by the stage's name):
                     without the temporal extension)
   composite.differential
                     psnr_db of the final image against the composite of the references;
-                    psnr_db_unfiltered (the composite of the unfiltered layers)
+                    psnr_db_unfiltered (the composite of the unfiltered layers);
+                    psnr_db_by_frame (psnr_db of each scored frame)
 
 The 1024-sample references cost most of an eval at 640x480: about 25 s per scored frame
 on 2 cores (the default pipeline's eval of the built-in recording takes 1 minute, its

@@ -21,6 +21,8 @@ macro_rules! out {
 
 mod bench;
 mod catalog;
+mod compare;
+mod diff;
 mod eval;
 mod inspect;
 mod interrupt;
@@ -60,6 +62,11 @@ enum Command {
     Replay(replay::ReplayArgs),
     /// Run a pipeline and score its stages against the recording's ground truth.
     Eval(eval::EvalArgs),
+    /// Replay several pipelines together (shared stages run once), score each as eval
+    /// does, and write a report: report.json, report.md and index.html.
+    Compare(compare::CompareArgs),
+    /// Compare two runs' saved products frame by frame; exit status 1 when they differ.
+    Diff(diff::DiffArgs),
     /// Benchmark each stage of a pipeline: medians over repeated runs after a warm-up.
     ///
     /// The pipeline's `write` stages write into a temporary folder, removed afterwards
@@ -181,6 +188,8 @@ pub fn main() -> anyhow::Result<i32> {
         Command::Inspect(a) => inspect::inspect(a),
         Command::Replay(a) => replay::replay(a),
         Command::Eval(a) => eval::eval(a),
+        Command::Compare(a) => compare::compare(a),
+        Command::Diff(a) => diff::diff(a),
         Command::Bench(a) => bench::bench(a),
         Command::Stages(a) => catalog::stages(a),
         Command::Validate(a) => catalog::validate(a),

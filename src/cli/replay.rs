@@ -77,7 +77,7 @@ pub struct ReplayArgs {
     export_cloud: Option<PathBuf>,
 }
 
-fn parse_frames(text: &str) -> Result<Range<usize>, String> {
+pub(super) fn parse_frames(text: &str) -> Result<Range<usize>, String> {
     let invalid = || format!("invalid frame range {text:?}: expected A..B, A.., ..B or N");
     let num = |s: &str, default: usize| {
         if s.is_empty() {
@@ -115,6 +115,19 @@ pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
         Some(p) => Pipeline::load_with(p, &registry, &args.overrides)?,
         None => Pipeline::builtin_default_with(&registry, &args.overrides)?,
     };
+    let (replay, frames) = open_recording(args)?;
+    Ok(Loaded {
+        replay,
+        pipeline,
+        registry,
+        frames,
+    })
+}
+
+/// The recording `args` names (the built-in one, generated on first use, when none)
+/// and the frames of it to replay: an error when it has none, or when `--frames`
+/// starts past its end.
+pub(super) fn open_recording(args: &RunArgs) -> anyhow::Result<(Replay, Range<usize>)> {
     let path = match &args.recording {
         Some(p) => p.clone(),
         None => {
@@ -165,12 +178,7 @@ pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
         );
     }
     let frames = frames.start..frames.end.min(replay.len());
-    Ok(Loaded {
-        replay,
-        pipeline,
-        registry,
-        frames,
-    })
+    Ok((replay, frames))
 }
 
 impl Loaded {

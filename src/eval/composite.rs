@@ -6,7 +6,8 @@
 //!   (peak 255, over all channels of the pixels that have a reference: all of them, or
 //!   the lattice of `relume eval --reference-stride`);
 //! - `psnr_db_unfiltered`: the same for a composite of the sampling's unfiltered layers
-//!   (what the filter buys; absent without a `sample.path`).
+//!   (what the filter buys; absent without a `sample.path`);
+//! - `psnr_db_by_frame`: `psnr_db` of each scored frame alone, in `scored_frames` order.
 //!
 //! There is no score against a ground-truth render with the objects really in the
 //! room: the synthetic generator renders the room without them.
@@ -32,6 +33,10 @@ pub struct CompositeScorer {
     squared: f64,
     squared_unfiltered: f64,
     values: u64,
+    /// `psnr_db` of each scored frame.
+    by_frame: Vec<f64>,
+    /// The reference composite of each scored frame (for viewing beside the stage's).
+    references: Vec<(usize, Rgb8Image)>,
 }
 
 impl CompositeScorer {
@@ -48,6 +53,8 @@ impl CompositeScorer {
             squared: 0.0,
             squared_unfiltered: 0.0,
             values: 0,
+            by_frame: Vec::new(),
+            references: Vec::new(),
         }
     }
 
@@ -100,7 +107,8 @@ impl CompositeScorer {
             ],
         )?;
         let scored = |i: usize| reference.has_pixel(i);
-        self.squared += squared_error(own, &truth, scored);
+        let squared = squared_error(own, &truth, scored);
+        self.squared += squared;
         if let Some(names) = &self.unfiltered {
             let layers: Vec<_> = names.iter().map(|n| frame.radiance(n)).collect();
             if let [Ok(a), Ok(b), Ok(c), Ok(d)] = layers.as_slice() {
@@ -110,9 +118,18 @@ impl CompositeScorer {
                 self.unfiltered = None;
             }
         }
-        self.values += (0..own.data.len()).filter(|&i| scored(i)).count() as u64 * 3;
+        let values = (0..own.data.len()).filter(|&i| scored(i)).count() as u64 * 3;
+        self.values += values;
+        self.by_frame.push(psnr_db(squared / values.max(1) as f64));
         self.scored_frames.push(frame.index);
+        self.references.push((frame.index, truth));
         Ok(())
+    }
+
+    /// The reference composite of each scored frame, as (frame, image). Off the
+    /// reference's pixel lattice (`--reference-stride` above 1) its pixels mean nothing.
+    pub fn references(&self) -> &[(usize, Rgb8Image)] {
+        &self.references
     }
 
     pub fn report(&self) -> Value {
@@ -127,6 +144,7 @@ impl CompositeScorer {
             "frames_scored": self.scored_frames.len(),
             "scored_frames": self.scored_frames,
             "psnr_db": psnr(self.squared),
+            "psnr_db_by_frame": self.by_frame,
         });
         if self.unfiltered.is_some() {
             report["psnr_db_unfiltered"] = json!(psnr(self.squared_unfiltered));

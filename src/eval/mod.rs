@@ -13,17 +13,19 @@
 //! | `light.val` | `sh_irradiance_rel_error`, `val_center_drift_m`, `environment_static`, `lights` | no |
 //! | `sample.path` | `ratio_rmse`, `ratio_rmse_alternative`, `object_aware`, `unbiased_p`, `frames_scored`, `scored_frames` (their indices), `region_pixels` (against 1024-sample references; see [`sampling`]) | no |
 //! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `mse_unfiltered_by_layer`, `mse_filtered_by_layer` (per layer: E_R^dir, E_R^ind, E_RV^dir, E_RV^ind), `temporal_flicker`, `temporal_flicker_spatial_only`, `frames_scored`, `scored_frames` (against the same references; see [`filter`]) | no |
-//! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `frames_scored`, `scored_frames` (against a composite of the references; see [`composite`]) | no |
+//! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `psnr_db_by_frame`, `frames_scored`, `scored_frames` (against a composite of the references; see [`composite`]) | no |
 //!
 //! Ground truth comes from the recording's truth stream (synthetic recordings).
 
 mod color;
 pub mod composite;
 mod depth;
+pub mod diff;
 pub mod filter;
 pub mod light;
 mod normals;
 mod renderer;
+pub mod report;
 pub mod sampling;
 mod truth;
 
@@ -261,6 +263,26 @@ impl Evaluator {
             frames: 0,
             frames_with_truth: 0,
         })
+    }
+
+    /// Shares the many-sample references with the other evaluators given `cache`
+    /// (see [`sampling::ReferenceCache`]): the scores do not change.
+    pub fn share_references(&mut self, cache: sampling::ReferenceCache) {
+        if let Some(schedule) = &mut self.references {
+            schedule.share(cache);
+        }
+    }
+
+    /// The reference composites of the scored frames of the first
+    /// `composite.differential` stage, as (frame, image).
+    pub fn reference_composites(&self) -> Vec<(usize, &crate::raster::Rgb8Image)> {
+        self.scorers
+            .iter()
+            .find_map(|(_, _, s)| match s {
+                Scorer::Composite(c) => Some(c.references().iter().map(|(f, i)| (*f, i)).collect()),
+                _ => None,
+            })
+            .unwrap_or_default()
     }
 
     /// True when no stage of the pipeline can be scored.

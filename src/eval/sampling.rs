@@ -202,19 +202,7 @@ impl ReferenceLayers {
     ) -> Option<Result<ReferenceLayers, String>> {
         let mut sums: Option<ReferenceLayers> = None;
         for k in 0..REFERENCE_RUNS {
-            // Every query is scored against the same reference: screen-space
-            // marching with self-occlusion, as `sample.path` runs by default.
-            let params = PathParams {
-                query: QueryKind::Ssrt,
-                visibility: true,
-                object_aware_direct: false,
-                direct: REFERENCE_SAMPLES,
-                indirect: REFERENCE_SAMPLES,
-                object_aware: false,
-                seed: rng::hash(&[runner.params.seed, REFERENCE_SALT, k]),
-                pixel_stride: stride,
-                ..runner.params
-            };
+            let params = runner.reference_params(k, stride);
             let out = match runner.run(frame, &params)? {
                 Ok(out) => out,
                 Err(e) => return Some(Err(e)),
@@ -278,6 +266,76 @@ pub struct ReferenceSchedule {
     stride: u32,
     fallback: Option<usize>,
     computed: usize,
+    shared: Option<ReferenceCache>,
+}
+
+/// References computed on the frames in flight, shared by the evaluators of several
+/// pipelines replayed together (`relume compare`): a reference is computed once for
+/// all the pipelines whose renderers read the same products (the same allocations,
+/// as the shared stages of one run hand them out) with the same settings. The owner
+/// clears it once every evaluator has seen the frame, so that an allocation's address
+/// is never taken for a later product's.
+#[derive(Clone, Default)]
+pub struct ReferenceCache(Arc<std::sync::Mutex<Vec<KeyedReference>>>);
+
+/// A reference and what it depends on ([`PathRunner::reference_key`]).
+type KeyedReference = (String, Arc<ReferenceLayers>);
+
+impl ReferenceCache {
+    /// Forgets every reference (call after each frame).
+    pub fn clear(&self) {
+        self.0.lock().unwrap_or_else(|p| p.into_inner()).clear();
+    }
+
+    /// How many references it holds.
+    pub fn len(&self) -> usize {
+        self.0.lock().unwrap_or_else(|p| p.into_inner()).len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl PathRunner {
+    /// The settings of reference run `k` (of [`REFERENCE_RUNS`]) on the lattice of
+    /// `stride`. Every query is scored against the same reference: screen-space
+    /// marching with self-occlusion, as `sample.path` runs by default.
+    fn reference_params(&self, k: u64, stride: u32) -> PathParams {
+        PathParams {
+            query: QueryKind::Ssrt,
+            visibility: true,
+            object_aware_direct: false,
+            direct: REFERENCE_SAMPLES,
+            indirect: REFERENCE_SAMPLES,
+            object_aware: false,
+            seed: rng::hash(&[self.params.seed, REFERENCE_SALT, k]),
+            pixel_stride: stride,
+            ..self.params
+        }
+    }
+
+    /// What a reference of `frame` depends on, as one string: the frame, the stride,
+    /// the settings, and the addresses of the products and objects it reads.
+    fn reference_key(&self, frame: &Frame, stride: u32) -> String {
+        let mut key = format!(
+            "{} {:?} {:?} {:p}",
+            frame.index,
+            self.reference_params(0, stride),
+            self.intrinsics,
+            Arc::as_ptr(&self.objects)
+        );
+        let names = self
+            .inputs
+            .iter()
+            .chain(&self.environment)
+            .chain(&self.voxels);
+        for name in names {
+            let at = frame.get_shared(name).map(Arc::as_ptr);
+            key.push_str(&format!(" {name}={at:?}"));
+        }
+        key
+    }
 }
 
 impl ReferenceSchedule {
@@ -288,7 +346,14 @@ impl ReferenceSchedule {
             stride: stride.max(1),
             fallback: fallback_frame(frames),
             computed: 0,
+            shared: None,
         }
+    }
+
+    /// Takes references from `cache` when another evaluator computed them, and leaves
+    /// those it computes there.
+    pub fn share(&mut self, cache: ReferenceCache) {
+        self.shared = Some(cache);
     }
 
     /// The reference layers of `frame` when it is a scored frame and holds the
@@ -298,11 +363,27 @@ impl ReferenceSchedule {
         if self.computed >= MAX_SCORED_FRAMES || !(scored || self.fallback == Some(frame.index)) {
             return Ok(None);
         }
+        let key = self
+            .shared
+            .as_ref()
+            .map(|_| self.runner.reference_key(frame, self.stride));
+        if let (Some(cache), Some(key)) = (&self.shared, &key) {
+            let held = cache.0.lock().unwrap_or_else(|p| p.into_inner());
+            if let Some((_, reference)) = held.iter().find(|(k, _)| k == key) {
+                self.computed += 1;
+                return Ok(Some(reference.clone()));
+            }
+        }
         let Some(reference) = ReferenceLayers::compute(&self.runner, frame, self.stride) else {
             return Ok(None);
         };
         self.computed += 1;
-        Ok(Some(Arc::new(reference?)))
+        let reference = Arc::new(reference?);
+        if let (Some(cache), Some(key)) = (&self.shared, key) {
+            let mut held = cache.0.lock().unwrap_or_else(|p| p.into_inner());
+            held.push((key, reference.clone()));
+        }
+        Ok(Some(reference))
     }
 }
 

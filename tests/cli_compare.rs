@@ -1,0 +1,273 @@
+//! `relume compare` and `relume diff` from the command line: the pipelines' shared
+//! acquisition runs once, each is scored as `relume eval` scores it alone, the report's
+//! three files are written and the page renders in a browser; a branch's products are
+//! the lone pipeline's, bit for bit, at 1 and 2 threads; diff's exit status and
+//! numbers.
+
+mod common;
+
+use common::{ok, pipeline, run_in, small_recording, stderr, stdout};
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+
+/// The renderers that exist: the default (sample.path), the fast one, and sample.dir.
+const VARIANTS: [&str; 3] = [
+    "default.toml",
+    "mixed-reality-fast.toml",
+    "mixed-reality-dir.toml",
+];
+
+fn eval_json(dir: &Path, pipeline_file: &str) -> Value {
+    let o = ok(run_in(
+        dir,
+        &[
+            "eval",
+            "small.relume",
+            "-p",
+            pipeline_file,
+            "--frames",
+            "0..16",
+            "--json",
+        ],
+    ));
+    serde_json::from_str(&stdout(&o)).unwrap()
+}
+
+#[test]
+fn compare_runs_acquisition_once_and_scores_each_pipeline_as_eval_does() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 16);
+    let files: Vec<String> = VARIANTS.iter().map(|f| pipeline(f)).collect();
+    let mut args = vec![
+        "compare",
+        "small.relume",
+        "--frames",
+        "0..16",
+        "--out",
+        "cmp",
+    ];
+    for f in &files {
+        args.extend(["-p", f.as_str()]);
+    }
+    let o = ok(run_in(d, &args));
+    let table = stdout(&o);
+    // One row for each shared stage, one per branch for the rest.
+    let rows = |name: &str| {
+        table
+            .lines()
+            .filter(|l| l.split_whitespace().next() == Some(name))
+            .count()
+    };
+    for shared in [
+        "decode",
+        "depth.fuse",
+        "normals.plane_fit",
+        "light.importance",
+    ] {
+        assert_eq!(rows(shared), 1, "{shared} runs once:\n{table}");
+    }
+    for label in ["default", "mixed-reality-fast"] {
+        assert_eq!(rows(&format!("{label}/sample.path")), 1, "{table}");
+    }
+    assert_eq!(rows("mixed-reality-dir/sample.dir"), 1, "{table}");
+
+    let out = d.join("cmp");
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let variants = report["variants"].as_array().unwrap();
+    assert_eq!(variants.len(), 3);
+    for (variant, file) in variants.iter().zip(&files) {
+        let alone = eval_json(d, file);
+        let label = variant["label"].as_str().unwrap();
+        let stages = alone["stages"].as_object().unwrap();
+        for (stage, scores) in stages {
+            assert_eq!(
+                &variant["scores"][stage], scores,
+                "{label}: {stage}'s scores equal eval's of the pipeline alone"
+            );
+        }
+        let psnr = &alone["stages"]["composite.differential"]["psnr_db"];
+        assert!(psnr.as_f64().is_some_and(|p| p > 20.0), "{label}: {psnr}");
+    }
+    let shared: Vec<&str> = report["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|s| s["variants"].as_array().unwrap().len() == 3)
+        .map(|s| s["name"].as_str().unwrap())
+        .collect();
+    assert!(shared.contains(&"cloud.samples"), "{shared:?}");
+
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("## composite.differential (composite.differential)"));
+    assert!(md.contains("## Stage times (median ms per frame)"));
+    assert!(md.contains("**"), "the best of a column is marked");
+    let page = std::fs::read_to_string(out.join("index.html")).unwrap();
+    for id in ["scatter", "quality-curve", "time-curve", "frame-14"] {
+        assert!(
+            page.contains(&format!("id=\"{id}\"")),
+            "{id} is on the page"
+        );
+    }
+    // Four images per variant and frame: composite and difference; one reference.
+    let frame = out.join("frames/000014");
+    assert!(frame.join("reference.png").is_file());
+    for v in variants {
+        let label = v["label"].as_str().unwrap();
+        for kind in ["composite", "difference"] {
+            assert!(frame.join(format!("{label}.{kind}.png")).is_file());
+        }
+    }
+    check_page_in_browser(&out.join("index.html"));
+}
+
+/// Loads the page in headless Chromium from the file system: every image decodes, no
+/// script error, and the elements the report promises are there.
+fn check_page_in_browser(page: &Path) {
+    let chromium = ["/usr/bin/chromium", "/usr/bin/chromium-browser"]
+        .into_iter()
+        .find(|p| Path::new(p).exists());
+    let Some(chromium) = chromium else {
+        if std::env::var_os("RELUME_SKIP_BROWSER").is_some() {
+            eprintln!("RELUME_SKIP_BROWSER is set: the page is not loaded in a browser");
+            return;
+        }
+        panic!(
+            "the report page is tested in headless Chromium, which is not installed: \
+             `apt-get install chromium` (.ci/run does), or set RELUME_SKIP_BROWSER=1 to \
+             skip this check"
+        );
+    };
+    let profile = tempfile::tempdir().unwrap();
+    let o = Command::new(chromium)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--enable-logging=stderr",
+            "--v=0",
+            "--virtual-time-budget=5000",
+            "--dump-dom",
+        ])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg(format!("file://{}", page.display()))
+        .output()
+        .expect("run chromium");
+    let dom = stdout(&o);
+    let log = stderr(&o);
+    assert!(o.status.success(), "chromium failed:\n{log}");
+    let console: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains("CONSOLE") || l.contains("Failed to load resource"))
+        .collect();
+    assert!(console.is_empty(), "console messages: {console:?}");
+    assert!(
+        dom.contains("data-images=\"ok\""),
+        "every image decodes: {}",
+        dom.lines().find(|l| l.contains("<body")).unwrap_or("")
+    );
+    assert!(dom.contains("data-errors=\"\""), "no script error");
+    assert_eq!(dom.matches("<svg").count(), 3, "three charts");
+    assert!(
+        dom.matches("<img").count() >= 7,
+        "reference and 2 images per variant"
+    );
+    assert!(dom.contains("id=\"summary\""));
+}
+
+#[test]
+fn a_branch_hashes_as_the_lone_pipeline_at_1_and_2_threads() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 4);
+    let (default, dir) = (pipeline("default.toml"), pipeline("mixed-reality-dir.toml"));
+    for threads in ["1", "2"] {
+        let alone = common::replay_hashes(d, "small.relume", &default, threads);
+        let o = common::relume()
+            .args(["compare", "small.relume", "-p", &default, "-p", &dir])
+            .args(["--no-scores", "--hash", "--out", "cmp"])
+            .current_dir(d)
+            .env("RAYON_NUM_THREADS", threads)
+            .output()
+            .unwrap();
+        let lines = stdout(&ok(o));
+        let branch: Vec<&str> = lines
+            .lines()
+            .filter_map(|l| l.strip_prefix("default "))
+            .collect();
+        assert_eq!(branch.len(), 4, "{lines}");
+        assert_eq!(
+            branch,
+            alone.lines().collect::<Vec<_>>(),
+            "{threads} threads"
+        );
+        assert_eq!(
+            lines
+                .lines()
+                .filter(|l| l.starts_with("mixed-reality-dir "))
+                .count(),
+            4
+        );
+    }
+}
+
+fn write_png(path: &Path, pixels: &[[u8; 3]]) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    let raw: Vec<u8> = pixels.iter().flatten().copied().collect();
+    image::save_buffer(path, &raw, pixels.len() as u32, 1, image::ColorType::Rgb8).unwrap();
+}
+
+#[test]
+fn diff_names_the_first_differing_frame_and_exits_by_tolerance() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let frame = [[10u8, 20, 30], [40, 50, 60]];
+    for run in ["a", "b"] {
+        write_png(&d.join(run).join("final/000000.png"), &frame);
+        std::fs::write(d.join(run).join("final/notes.json"), b"{}").unwrap();
+    }
+    let mut changed = frame;
+    changed[1][2] = 63;
+    write_png(&d.join("a/final/000001.png"), &frame);
+    write_png(&d.join("b/final/000001.png"), &changed);
+
+    let same = run_in(d, &["diff", "a", "a"]);
+    assert_eq!(same.status.code(), Some(0), "{}", stdout(&same));
+    assert!(stdout(&same).ends_with("the runs match\n"));
+
+    let differ = run_in(d, &["diff", "a", "b", "--json"]);
+    assert_eq!(differ.status.code(), Some(1));
+    let doc: Value = serde_json::from_str(&stdout(&differ)).unwrap();
+    let p = &doc["products"][0];
+    assert_eq!(p["product"], "final");
+    assert_eq!(p["frames"], 3);
+    assert_eq!(p["differing"], 1);
+    assert_eq!(p["first_differing"], "000001.png");
+    assert_eq!(p["max_abs"], 3.0);
+    // One value of 8 (RGBA: alpha is compared too) off by 3, peak 255.
+    let want = 10.0 * (255.0f64 * 255.0 / (9.0 / 8.0)).log10();
+    assert!((p["worst_psnr_db"].as_f64().unwrap() - want).abs() < 1e-9);
+
+    let tolerated = run_in(d, &["diff", "a", "b", "--tolerance", "3"]);
+    assert_eq!(tolerated.status.code(), Some(0), "{}", stdout(&tolerated));
+    let by_psnr = run_in(d, &["diff", "a", "b", "--min-psnr", "45"]);
+    assert_eq!(by_psnr.status.code(), Some(0), "{}", stdout(&by_psnr));
+    let strict = run_in(d, &["diff", "a", "b", "--min-psnr", "50"]);
+    assert_eq!(strict.status.code(), Some(1));
+
+    std::fs::remove_file(d.join("b/final/000000.png")).unwrap();
+    let missing = run_in(d, &["diff", "a", "b", "--tolerance", "3"]);
+    assert_eq!(missing.status.code(), Some(1));
+    assert!(stdout(&missing).contains("only in RUN_A: 000000.png"));
+
+    let unreadable = run_in(d, &["diff", "a", "nowhere"]);
+    assert_eq!(unreadable.status.code(), Some(2));
+    assert_eq!(stderr(&unreadable), "error: nowhere: not a folder\n");
+}

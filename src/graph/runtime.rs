@@ -70,8 +70,9 @@ fn source_frame(n: usize, records: crate::recording::FrameRecords) -> Frame {
     frame
 }
 
-/// The branch a failing stage runs in, as errors print it: nothing for a shared stage
-/// or a lone pipeline, else "branch `label`: ".
+/// The branch a failing stage runs in, as errors print it: nothing for a stage every
+/// branch runs (and in a lone pipeline), else "branch `label`: " (`a+b` for a stage
+/// that some branches share).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Branch(pub Option<String>);
 
@@ -323,7 +324,7 @@ pub fn run_graph(
             let node = StageNode {
                 name: &graph.nodes[n].stage.name,
                 kind: graph.nodes[n].stage.kind,
-                branch: graph.own_branch(n),
+                branch: graph.branch_label(n),
             };
             let handle = std::thread::Builder::new()
                 .name(format!("relume-{}", node.name))
@@ -391,8 +392,8 @@ pub fn run_graph(
 struct StageNode<'a> {
     name: &'a str,
     kind: &'static str,
-    /// The branch it runs in alone (`None`: shared, or a lone pipeline).
-    branch: Option<&'a str>,
+    /// The branches that run it, when not all of them do.
+    branch: Option<String>,
 }
 
 /// Reads frames and sends them on; returns its timings and whether it was interrupted.
@@ -484,7 +485,7 @@ fn stage_loop(
     record_error: &dyn Fn(PipelineError),
 ) -> Option<StageTimings> {
     let (name, kind) = (node.name, node.kind);
-    let branch = Branch(node.branch.map(str::to_string));
+    let branch = Branch(node.branch.clone());
     let mut timings = StageTimings::new(name, kind);
     let mut first = true;
     let mut failed = false;

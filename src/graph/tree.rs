@@ -131,20 +131,26 @@ impl StageGraph {
         (0..self.nodes.len()).filter(move |&n| self.nodes[n].parent == parent)
     }
 
-    /// The branch a node belongs to alone, in a graph of several branches (`None` for a
-    /// node that several branches share, and in a lone pipeline).
-    pub fn own_branch(&self, node: usize) -> Option<&str> {
-        match self.nodes[node].branches.as_slice() {
-            [b] if self.branch_count() > 1 => Some(&self.labels[*b]),
-            _ => None,
+    /// The branches that run a node, as its errors name them (`a`, or `a+b` for a
+    /// stage some branches share): `None` when every branch runs it.
+    pub fn branch_label(&self, node: usize) -> Option<String> {
+        let n = &self.nodes[node];
+        if n.branches.len() == self.branch_count() {
+            return None;
         }
+        let labels: Vec<&str> = n
+            .branches
+            .iter()
+            .map(|&b| self.labels[b].as_str())
+            .collect();
+        Some(labels.join("+"))
     }
 
-    /// A node's name in timing rows: the stage's name, after its branch's label when
-    /// the node is one branch's alone.
+    /// A node's name in timing rows: the stage's name, after the labels of the
+    /// branches that run it (`a/name`, `a+b/name`) unless every branch does.
     pub fn row_name(&self, node: usize) -> String {
         let name = &self.nodes[node].stage.name;
-        match self.own_branch(node) {
+        match self.branch_label(node) {
             Some(label) => format!("{label}/{name}"),
             None => name.clone(),
         }

@@ -104,7 +104,19 @@ fn identical_first_stages_run_once_and_fan_out() {
 #[test]
 fn shared_products_are_not_copied_and_every_branch_comes_back_in_order() {
     let (_, out) = run_branches(vec![variant(COPY), variant(COPY), variant(SLOW_COPY)], 20);
-    out.result.expect("the run succeeds");
+    let report = out.result.expect("the run succeeds");
+    let rows: Vec<&str> = report.stages.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(
+        rows,
+        [
+            "source",
+            "test.index",
+            "debug.noop",
+            "a+b/test.copy",
+            "c/test.copy"
+        ],
+        "a stage some branches share is named after them"
+    );
     assert_eq!(out.frames.len(), 20);
     for (i, per_branch) in out.frames.iter().enumerate() {
         assert_eq!(per_branch.len(), 3, "one frame per branch");

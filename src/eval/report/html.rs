@@ -16,7 +16,7 @@ table{border-collapse:collapse;margin:8px 0 20px}td,th{border:1px solid #ccc;pad
 text-align:right}th:first-child,td:first-child{text-align:left}.best{font-weight:bold;\
 background:#e8f4e8}figure{display:inline-block;margin:4px;vertical-align:top}figure img{\
 width:320px;image-rendering:pixelated;display:block}figcaption{font-size:12px}\
-.charts svg{margin:8px;border:1px solid #eee}.ramp{display:inline-block;width:200px;\
+.variant{display:inline-block;margin-right:16px}.charts svg{margin:8px;border:1px solid #eee}.ramp{display:inline-block;width:200px;\
 height:12px;vertical-align:middle}";
 
 const CHECK: &str = "<script>\
@@ -204,6 +204,7 @@ fn frames(h: &mut String, c: &Comparison) {
             escape(&f.reference),
             f.frame
         );
+        h.push_str("</div>");
         for v in &f.variants {
             let psnr = v
                 .psnr_db
@@ -211,24 +212,19 @@ fn frames(h: &mut String, c: &Comparison) {
                 .unwrap_or_default();
             let _ = write!(
                 h,
-                "<figure><img src=\"{}\" alt=\"{} composite\"><figcaption>{}{}</figcaption></figure>",
+                "<div class=\"variant\"><figure><img src=\"{}\" alt=\"{} composite\">\
+                 <figcaption>{}{}</figcaption></figure><figure><img src=\"{}\" \
+                 alt=\"{} difference\"><figcaption>{} − reference</figcaption></figure></div>",
                 escape(&v.composite),
                 escape(&v.label),
                 escape(&v.label),
-                psnr
-            );
-        }
-        h.push_str("</div><div><figure style=\"width:320px\"></figure>");
-        for v in &f.variants {
-            let _ = write!(
-                h,
-                "<figure><img src=\"{}\" alt=\"{} difference\"><figcaption>{} − reference</figcaption></figure>",
+                psnr,
                 escape(&v.difference),
                 escape(&v.label),
                 escape(&v.label)
             );
         }
-        h.push_str("</div></section>");
+        h.push_str("</section>");
     }
 }
 

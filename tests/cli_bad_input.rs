@@ -341,7 +341,7 @@ fn a_frame_range_past_the_end_is_cut_with_a_note() {
     };
     assert_eq!(
         run("1..100"),
-        "note: --frames ends at 100 but small.relume has 2 frames: replaying 1..2\n"
+        "warning: --frames ends at 100 but small.relume has 2 frames: replaying 1..2\n"
     );
     assert_eq!(run("1.."), "", "an open end is the last frame");
 }

@@ -409,3 +409,69 @@ fn raw_storage_decodes_to_the_same_pixels_as_compressed() {
     }
     assert_eq!(frames[0], frames[1]);
 }
+
+#[test]
+fn a_gap_in_redwood_numbering_is_a_warning_naming_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("rw");
+    let trajectory: String = (0..3)
+        .map(|k| format!("{k} {k} {}\n{IDENTITY_RECORD}", k + 1))
+        .collect();
+    write_redwood(&dir, 3, &trajectory);
+    let out = tmp.path().join("r.relume");
+    let summary = redwood::import(&dir, &out, &RedwoodOptions::default(), &mut |_, _| {}).unwrap();
+    assert!(summary.warnings.is_empty(), "{:?}", summary.warnings);
+    for (from, to) in [
+        ("color/00002.jpg", "color/00005.jpg"),
+        ("depth/00002.png", "depth/00005.png"),
+    ] {
+        std::fs::rename(dir.join(from), dir.join(to)).unwrap();
+    }
+    let summary = redwood::import(&dir, &out, &RedwoodOptions::default(), &mut |_, _| {}).unwrap();
+    assert_eq!(
+        summary.warnings.len(),
+        2,
+        "color and depth: {:?}",
+        summary.warnings
+    );
+    let color = summary.warnings[0].replace(&format!("{}/", dir.display()), "");
+    assert!(
+        color.starts_with(
+            "color: the file numbers jump from 1 to 5 (3 number(s) missing in all): frames are \
+             paired and stamped by position"
+        ),
+        "{color}"
+    );
+}
+
+#[test]
+fn an_import_where_nothing_associates_is_an_error_naming_the_offsets() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("tum");
+    write_tum(&dir);
+    // Every depth stamp 2 s after its color image: nothing within 20 ms.
+    let mut depth = String::new();
+    for i in 0..5u32 {
+        depth.push_str(&format!(
+            "{:.6} depth/{i}.png\n",
+            T0 + i as f64 / 30.0 + 2.0
+        ));
+    }
+    std::fs::write(dir.join("depth.txt"), depth).unwrap();
+    let o = common::run_in(
+        tmp.path(),
+        &["import", "tum", dir.to_str().unwrap(), "-o", "t.relume"],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        common::stderr(&o),
+        "error: no frames: none of the 5 color images has one of the 5 depth images within 20 \
+         ms; from each color image the nearest depth image is +1.867 s to +2.000 s away \
+         (median +1.933 s, positive: depth later); if the streams' clocks differ by a \
+         constant, fix the stamps in the dataset's lists; nothing was written\n"
+    );
+    assert!(
+        !tmp.path().join("t.relume").exists(),
+        "no 0-frame recording left"
+    );
+}

@@ -2,9 +2,9 @@
 
 use super::interrupt::PartialFile;
 use super::progress;
-use anyhow::Context;
+use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
-use relume::recording::association::AssociationStats;
+use relume::recording::association::{self, AssociationStats};
 use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, tum};
 use relume::recording::synth::{self, SynthConfig};
 use relume::recording::{Intrinsics, Recording, Replay, ReplayOptions};
@@ -212,6 +212,17 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         }
     };
     bar.finish_and_clear();
+    // A recording where no color image has a depth image near it replays nothing: an
+    // error naming how far apart the streams' stamps are, and no file.
+    let replay = Replay::open(out, ReplayOptions::default())?;
+    if replay.stats.frames == 0 && replay.stats.depth_records > 0 {
+        let offsets = association::depth_offsets(replay.recording.index());
+        let _ = std::fs::remove_file(out);
+        bail!("{}", no_association(&replay.stats, &offsets));
+    }
+    for warning in &summary.warnings {
+        eprintln!("warning: {warning}");
+    }
     let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     outln!(
         "wrote {} ({} color, {} depth, {} poses, {:.1} MB) in {:.2} s",
@@ -224,7 +235,6 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     )?;
     // What the recording lacks that most pipelines need, from its frames as replay
     // builds them. A dataset may lack it, so this warns rather than fails.
-    let replay = Replay::open(out, ReplayOptions::default())?;
     let mut warnings = missing_streams(&replay.stats);
     let header = replay.recording.header();
     let (color, depth) = (&header.color_intrinsics, &header.depth_intrinsics);
@@ -240,6 +250,33 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         eprintln!("warning: {}: {warning}", out.display());
     }
     Ok(0)
+}
+
+/// Why an import built no frame, with the offsets (ns, depth minus color) from each
+/// color stamp to the nearest depth stamp: their range and median say whether the two
+/// streams' clocks differ by a constant.
+fn no_association(stats: &AssociationStats, offsets: &[i64]) -> String {
+    let mut sorted = offsets.to_vec();
+    sorted.sort_unstable();
+    let s = |ns: i64| format!("{:+.3} s", ns as f64 * 1e-9);
+    let seen = match (sorted.first(), sorted.last()) {
+        (Some(&lo), Some(&hi)) => format!(
+            "; from each color image the nearest depth image is {} to {} away (median {}, \
+             positive: depth later)",
+            s(lo),
+            s(hi),
+            s(sorted[sorted.len() / 2])
+        ),
+        _ => String::new(),
+    };
+    format!(
+        "no frames: none of the {} color images has one of the {} depth images within {} ms{seen}; \
+         if the streams' clocks differ by a constant, fix the stamps in the dataset's \
+         lists; nothing was written",
+        stats.color_records,
+        stats.depth_records,
+        relume::recording::association::DEFAULT_TOLERANCE_NS / 1_000_000
+    )
 }
 
 /// Warnings for frames without depth (every stage after `decode` but the color ones

@@ -169,7 +169,7 @@ pub(super) fn open_recording(args: &RunArgs) -> anyhow::Result<(Replay, Range<us
     // An open end (`A..`) means the last frame; an explicit one past it is worth a word.
     if frames.end != usize::MAX && frames.end > replay.len() {
         eprintln!(
-            "note: --frames ends at {} but {} has {} frames: replaying {}..{}",
+            "warning: --frames ends at {} but {} has {} frames: replaying {}..{}",
             frames.end,
             path.display(),
             replay.len(),

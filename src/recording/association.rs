@@ -83,6 +83,29 @@ pub fn pose_at(poses: &[(i64, Pose)], t: i64) -> Option<Pose> {
     Some(Pose::interpolate(&p0, &p1, w))
 }
 
+/// For each color stamp of `index`, the signed distance (ns) to the nearest depth stamp
+/// (positive: the depth image comes later), whatever the tolerance: what an import
+/// where nothing associates reports. Empty when either stream is.
+pub fn depth_offsets(index: &[IndexEntry]) -> Vec<i64> {
+    let depths = stream(index, StreamKind::Depth);
+    if depths.is_empty() {
+        return Vec::new();
+    }
+    stream(index, StreamKind::Color)
+        .iter()
+        .map(|&(t, _)| {
+            let at = depths.partition_point(|&(s, _)| s < t);
+            [at.checked_sub(1), Some(at)]
+                .into_iter()
+                .flatten()
+                .filter_map(|i| depths.get(i))
+                .map(|&(s, _)| s.saturating_sub(t))
+                .min_by_key(|d| d.unsigned_abs())
+                .expect("a depth stamp exists")
+        })
+        .collect()
+}
+
 /// Builds frames at the color stamps of `index`. `poses` are the decoded pose records,
 /// sorted by stamp; `has_depth_stream` says whether frames must have depth.
 pub fn associate(

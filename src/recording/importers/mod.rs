@@ -120,6 +120,8 @@ pub struct ImportSummary {
     pub color: usize,
     pub depth: usize,
     pub poses: usize,
+    /// What the importer found odd but imported anyway, one sentence each.
+    pub warnings: Vec<String>,
 }
 
 /// An error unless `dir`, a dataset folder given by the user, is a directory.

@@ -67,6 +67,33 @@ fn list_images(dir: &Path, extensions: &[&str]) -> Result<Vec<PathBuf>, ImportEr
     Ok(files)
 }
 
+/// A sentence on the first gap in the numbers that end the file names of `files`
+/// (`000002.png`, `000004.png`: 000003 is missing), when every name ends in one.
+/// Frames are paired and stamped by position, so a gap shifts every later frame.
+pub fn numbering_gap(folder: &Path, files: &[PathBuf]) -> Option<String> {
+    let number = |p: &PathBuf| -> Option<u64> {
+        let stem = p.file_stem()?.to_str()?;
+        let digits = stem.len() - stem.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+        stem[stem.len() - digits..].parse().ok()
+    };
+    let mut numbers: Vec<u64> = files.iter().map(number).collect::<Option<_>>()?;
+    numbers.sort_unstable();
+    let missing: u64 = numbers
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]).saturating_sub(1))
+        .sum();
+    let first = numbers.windows(2).find(|w| w[1] > w[0] + 1)?;
+    Some(format!(
+        "{}: the file numbers jump from {} to {} ({missing} number(s) missing in all): \
+         frames are paired and stamped by position (frame k at k / fps, with the \
+         trajectory's k-th pose), so every frame after a gap is stamped early and may \
+         take another frame's pose",
+        folder.display(),
+        first[0],
+        first[1]
+    ))
+}
+
 /// Reads a Redwood `.log` trajectory: 5-line records of `i j k` and a row-major 4x4
 /// camera-to-world matrix. Record k is frame k's pose, so its `i` must be k: poses are
 /// paired with the images by their place in the file.
@@ -302,9 +329,14 @@ pub fn import(
         progress(k + 1, colors.len());
     }
     writer.finish()?;
+    let warnings = [(&color_dir, &colors), (&depth_dir, &depths)]
+        .into_iter()
+        .filter_map(|(folder, files)| numbering_gap(folder, files))
+        .collect();
     Ok(ImportSummary {
         color: colors.len(),
         depth: depths.len(),
         poses: poses.len(),
+        warnings,
     })
 }

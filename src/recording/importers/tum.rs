@@ -227,5 +227,6 @@ pub fn import(
         color: colors.len(),
         depth: depths.len(),
         poses: poses.len(),
+        warnings: Vec::new(),
     })
 }

@@ -238,6 +238,14 @@ fn diff_names_the_first_differing_frame_and_exits_by_tolerance() {
     write_png(&d.join("a/final/000001.png"), &frame);
     write_png(&d.join("b/final/000001.png"), &changed);
 
+    // An EXR holding NaN (an image's invalid pixels) in both runs, in a `write` stage's
+    // own folder: equal.
+    for run in ["a", "b"] {
+        let exr = d.join(run).join("x/final_hdr/000000.exr");
+        std::fs::create_dir_all(exr.parent().unwrap()).unwrap();
+        exr::prelude::write_rgb_file(&exr, 2, 1, |x, _| (x as f32, f32::NAN, 0.5)).unwrap();
+    }
+
     let same = run_in(d, &["diff", "a", "a"]);
     assert_eq!(same.status.code(), Some(0), "{}", stdout(&same));
     assert!(stdout(&same).ends_with("the runs match\n"));
@@ -247,12 +255,15 @@ fn diff_names_the_first_differing_frame_and_exits_by_tolerance() {
     let doc: Value = serde_json::from_str(&stdout(&differ)).unwrap();
     let p = &doc["products"][0];
     assert_eq!(p["product"], "final");
+    let hdr = &doc["products"][1];
+    assert_eq!(hdr["product"], "x/final_hdr");
+    assert_eq!((&hdr["frames"], &hdr["differing"]), (&1.into(), &0.into()));
     assert_eq!(p["frames"], 3);
     assert_eq!(p["differing"], 1);
     assert_eq!(p["first_differing"], "000001.png");
     assert_eq!(p["max_abs"], 3.0);
-    // One value of 8 (RGBA: alpha is compared too) off by 3, peak 255.
-    let want = 10.0 * (255.0f64 * 255.0 / (9.0 / 8.0)).log10();
+    // One value of the file's 6 (RGB) off by 3, peak 255: 46.4 dB.
+    let want = 10.0 * (255.0f64 * 255.0 / (9.0 / 6.0)).log10();
     assert!((p["worst_psnr_db"].as_f64().unwrap() - want).abs() < 1e-9);
 
     let tolerated = run_in(d, &["diff", "a", "b", "--tolerance", "3"]);

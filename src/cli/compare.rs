@@ -96,10 +96,12 @@ fn labels(pipelines: &[Pipeline]) -> Vec<String> {
                 _ => '-',
             })
             .collect();
+        // Not `.` or `..`, nor hidden: the label names a folder under runs/.
+        let base = base.trim_start_matches('.');
         let base = if base.trim_matches('-').is_empty() {
             "pipeline".to_string()
         } else {
-            base
+            base.to_string()
         };
         let mut label = base.clone();
         let mut n = 2;
@@ -181,6 +183,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     let stop = stop_on_interrupt();
     let bar = progress::bar(frames.len() as u64, "comparing");
     let mut images: Vec<FrameImages> = Vec::new();
+    let mut saved_references = SavedReferences::new();
     let mut sink_error: Option<anyhow::Error> = None;
     let stdout = std::io::stdout();
     let options = relume::graph::RunOptions {
@@ -212,7 +215,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
                     e,
                     frame,
                     stride,
-                    &mut images,
+                    (&mut images, &mut saved_references),
                 )?;
             }
             Ok(())
@@ -288,6 +291,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
             None => serde_json::json!({}),
         };
         comparison.variants.push(Variant {
+            composite_stage: composite_stage(p).map(|s| s.name.clone()),
             label: labels[b].clone(),
             pipeline: p.name.clone(),
             file: p.file.clone(),
@@ -301,7 +305,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     for f in &mut comparison.images {
         for v in &mut f.variants {
             let b = labels.iter().position(|l| *l == v.label).unwrap_or(0);
-            v.psnr_db = scored_psnr(&comparison.variants[b].scores, f.frame);
+            v.psnr_db = scored_psnr(&comparison.variants[b], f.frame);
         }
     }
     comparison.wall_s = started.elapsed().as_secs_f64();
@@ -358,6 +362,9 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     Ok(0)
 }
 
+/// The reference images saved so far: (frame, path in the report, image).
+type SavedReferences = Vec<(usize, String, Rgb8Image)>;
+
 /// `relume replay --hash`'s line for a frame.
 pub(super) fn hash_line(frame: &Frame) -> String {
     let mut line = format!("{:06} {}", frame.index, frame.stamp_ns);
@@ -367,12 +374,18 @@ pub(super) fn hash_line(frame: &Frame) -> String {
     line
 }
 
-/// The composite PSNR that `scores` hold for `frame`.
-fn scored_psnr(scores: &serde_json::Value, frame: usize) -> Option<f64> {
-    let composite = scores
-        .as_object()?
-        .values()
-        .find(|s| s["kind"] == "composite.differential")?;
+/// The first `composite.differential` stage of `pipeline`: the one whose image the
+/// report shows and whose scores it plots (eval scores it first too).
+fn composite_stage(pipeline: &Pipeline) -> Option<&relume::graph::ResolvedStage> {
+    pipeline
+        .stages
+        .iter()
+        .find(|s| s.kind == "composite.differential")
+}
+
+/// The composite PSNR that a variant's scores hold for `frame`.
+fn scored_psnr(variant: &Variant, frame: usize) -> Option<f64> {
+    let composite = &variant.scores[variant.composite_stage.as_deref()?];
     let frames = composite["scored_frames"].as_array()?;
     let at = frames
         .iter()
@@ -381,8 +394,8 @@ fn scored_psnr(scores: &serde_json::Value, frame: usize) -> Option<f64> {
 }
 
 /// On a frame the evaluator just scored against a reference composite: saves the
-/// reference (once per frame), the variant's composite and their difference, on the
-/// reference's pixel lattice, and lists them in `images`.
+/// reference (once per frame and distinct reference), the variant's composite and
+/// their difference, on the reference's pixel lattice, and lists them in `images`.
 fn save_images(
     out: &Path,
     label: &str,
@@ -390,17 +403,13 @@ fn save_images(
     evaluator: &Evaluator,
     frame: &Frame,
     stride: u32,
-    images: &mut Vec<FrameImages>,
+    (images, saved_references): (&mut Vec<FrameImages>, &mut SavedReferences),
 ) -> anyhow::Result<()> {
     let references = evaluator.reference_composites();
     let Some((_, reference)) = references.iter().find(|(f, _)| *f == frame.index) else {
         return Ok(());
     };
-    let Some(composite) = pipeline
-        .stages
-        .iter()
-        .find(|s| s.kind == "composite.differential")
-    else {
+    let Some(composite) = composite_stage(pipeline) else {
         return Ok(());
     };
     let final_name = composite
@@ -422,6 +431,8 @@ fn save_images(
     };
     let reference = report::images::on_lattice(reference, stride);
     let own = report::images::on_lattice(own, stride);
+    // Variants whose renderers read other products have other references: each is
+    // saved once, the first as `reference.png`.
     let entry = match images.iter().position(|f| f.frame == frame.index) {
         Some(i) => i,
         None => {
@@ -430,7 +441,20 @@ fn save_images(
                 reference: save("reference", &reference)?,
                 variants: Vec::new(),
             });
+            let path = images[images.len() - 1].reference.clone();
+            saved_references.push((frame.index, path, reference.clone()));
             images.len() - 1
+        }
+    };
+    let reference_path = match saved_references
+        .iter()
+        .find(|(f, _, image)| *f == frame.index && image.data == reference.data)
+    {
+        Some((_, path, _)) => path.clone(),
+        None => {
+            let path = save(&format!("{label}.reference"), &reference)?;
+            saved_references.push((frame.index, path.clone(), reference.clone()));
+            path
         }
     };
     let composite = save(&format!("{label}.composite"), &own)?;
@@ -440,6 +464,7 @@ fn save_images(
     )?;
     images[entry].variants.push(VariantImages {
         label: label.to_string(),
+        reference: reference_path,
         composite,
         difference,
         psnr_db: None,

@@ -1,13 +1,15 @@
 //! `relume diff`: two folders of saved products (`relume replay --out`, `--save`, or
 //! a `relume compare` run's `runs/LABEL/`) compared frame by frame, per product.
 //!
-//! A product is a sub-folder (`final/`, `depth/`, ...); its frames are the files in
-//! it, matched by name. Images are compared value by value: PNG on its own scale (0-255
-//! for 8-bit, 0-65535 for 16-bit: millimetres for depth), EXR in its linear values
-//! (PSNR peak: the largest magnitude in the first run's frame, at least 1). Any other
-//! file (JSON, PLY) is equal or not, byte for byte.
+//! A product is a folder holding files (`final/`, `depth/`, `x/final/` for a `write`
+//! stage with `dir = "x"`: paths relative to the run); its frames are the files in it,
+//! matched by name. Images are compared value by value over the file's own channels:
+//! PNG on its own scale (0-255 for 8-bit, 0-65535 for 16-bit: millimetres for depth),
+//! EXR in its linear values (PSNR peak: the largest finite magnitude in the first run's
+//! frame, at least 1; NaN in both counts as equal). Any other file (JSON, PLY) is equal
+//! or not, byte for byte. A frame that does not decode in one run differs.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// Why two runs could not be compared.
@@ -100,19 +102,37 @@ impl RunDiff {
     }
 }
 
-fn entries(dir: &Path, folders: bool) -> Result<BTreeSet<String>, DiffError> {
-    let read = std::fs::read_dir(dir).map_err(|e| file_error(dir, e))?;
-    let mut names = BTreeSet::new();
-    for entry in read {
-        let entry = entry.map_err(|e| file_error(dir, e))?;
-        let is_dir = entry.path().is_dir();
-        let name = entry.file_name().to_string_lossy().into_owned();
-        // Hidden files: a run's half-written `.partial` files, editors' droppings.
-        if is_dir == folders && !name.starts_with('.') {
-            names.insert(name);
+/// The files of `root`, by the folder (relative to `root`, `/`-separated; `.` for
+/// `root` itself) that holds them. Hidden entries (a killed run's `.partial` files) are
+/// left out.
+fn products(root: &Path) -> Result<BTreeMap<String, BTreeSet<String>>, DiffError> {
+    let mut out = BTreeMap::new();
+    let mut folders = vec![(root.to_path_buf(), String::from("."))];
+    while let Some((dir, name)) = folders.pop() {
+        let read = std::fs::read_dir(&dir).map_err(|e| file_error(&dir, e))?;
+        let mut files = BTreeSet::new();
+        for entry in read {
+            let entry = entry.map_err(|e| file_error(&dir, e))?;
+            let file = entry.file_name().to_string_lossy().into_owned();
+            if file.starts_with('.') {
+                continue;
+            }
+            if entry.path().is_dir() {
+                let sub = if name == "." {
+                    file
+                } else {
+                    format!("{name}/{file}")
+                };
+                folders.push((entry.path(), sub));
+            } else {
+                files.insert(file);
+            }
+        }
+        if !files.is_empty() {
+            out.insert(name, files);
         }
     }
-    Ok(names)
+    Ok(out)
 }
 
 /// Compares the runs in folders `a` and `b`.
@@ -122,11 +142,11 @@ pub fn diff_runs(a: &Path, b: &Path, tolerance: Tolerance) -> Result<RunDiff, Di
             return Err(file_error(dir, "not a folder"));
         }
     }
-    let (pa, pb) = (entries(a, true)?, entries(b, true)?);
-    let mut products = Vec::new();
-    for product in pa.intersection(&pb) {
+    let (pa, pb) = (products(a)?, products(b)?);
+    let mut diffs = Vec::new();
+    for (product, fa) in &pa {
+        let Some(fb) = pb.get(product) else { continue };
         let (da, db) = (a.join(product), b.join(product));
-        let (fa, fb) = (entries(&da, false)?, entries(&db, false)?);
         let mut p = ProductDiff {
             product: product.clone(),
             frames: 0,
@@ -134,10 +154,10 @@ pub fn diff_runs(a: &Path, b: &Path, tolerance: Tolerance) -> Result<RunDiff, Di
             first_differing: None,
             worst_psnr_db: f64::INFINITY,
             max_abs: 0.0,
-            only_in_a: fa.difference(&fb).cloned().collect(),
-            only_in_b: fb.difference(&fa).cloned().collect(),
+            only_in_a: fa.difference(fb).cloned().collect(),
+            only_in_b: fb.difference(fa).cloned().collect(),
         };
-        for file in fa.intersection(&fb) {
+        for file in fa.intersection(fb) {
             let f = diff_file(&da.join(file), &db.join(file))?;
             p.frames += 1;
             p.worst_psnr_db = p.worst_psnr_db.min(f.psnr_db);
@@ -147,12 +167,15 @@ pub fn diff_runs(a: &Path, b: &Path, tolerance: Tolerance) -> Result<RunDiff, Di
                 p.first_differing.get_or_insert_with(|| file.clone());
             }
         }
-        products.push(p);
+        diffs.push(p);
     }
+    let only = |x: &BTreeMap<String, BTreeSet<String>>, y: &BTreeMap<String, BTreeSet<String>>| {
+        x.keys().filter(|k| !y.contains_key(*k)).cloned().collect()
+    };
     Ok(RunDiff {
-        products,
-        only_in_a: pa.difference(&pb).cloned().collect(),
-        only_in_b: pb.difference(&pa).cloned().collect(),
+        products: diffs,
+        only_in_a: only(&pa, &pb),
+        only_in_b: only(&pb, &pa),
     })
 }
 
@@ -168,20 +191,22 @@ fn read_values(path: &Path) -> Result<Option<Values>, DiffError> {
     match extension.to_ascii_lowercase().as_str() {
         "png" => {
             let image = image::open(path).map_err(|e| file_error(path, e))?;
-            let shape = format!("{}x{} {:?}", image.width(), image.height(), image.color());
-            let sixteen = image.color().bytes_per_pixel() / image.color().channel_count() == 2;
-            let values: Vec<f64> = if sixteen {
-                let raw = image.into_rgba16();
-                raw.into_raw().into_iter().map(f64::from).collect()
-            } else {
-                image
-                    .into_rgba8()
-                    .into_raw()
-                    .into_iter()
-                    .map(f64::from)
-                    .collect()
+            let color = image.color();
+            let shape = format!("{}x{} {color:?}", image.width(), image.height());
+            // The file's own channels: an alpha added here would always match and
+            // dilute the error.
+            let bytes = image.as_bytes();
+            let sixteen = color.bytes_per_pixel() / color.channel_count().max(1) == 2;
+            let (peak, values) = match sixteen {
+                true => (
+                    65535.0,
+                    bytes
+                        .chunks_exact(2)
+                        .map(|b| u16::from_ne_bytes([b[0], b[1]]) as f64)
+                        .collect(),
+                ),
+                false => (255.0, bytes.iter().map(|&b| b as f64).collect()),
             };
-            let peak = if sixteen { 65535.0 } else { 255.0 };
             Ok(Some(Values {
                 shape,
                 peak,
@@ -201,7 +226,8 @@ fn read_values(path: &Path) -> Result<Option<Values>, DiffError> {
             let mut values = Vec::new();
             let mut shape = String::new();
             for layer in &image.layer_data {
-                shape.push_str(&format!("{:?}", layer.size));
+                let name = layer.attributes.layer_name.as_ref().map(|n| n.to_string());
+                shape.push_str(&format!("{name:?} {:?}", layer.size));
                 for channel in &layer.channel_data.list {
                     shape.push_str(&format!(" {}", channel.name));
                     match &channel.sample_data {
@@ -211,7 +237,10 @@ fn read_values(path: &Path) -> Result<Option<Values>, DiffError> {
                     }
                 }
             }
-            let peak = values.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            let peak = values
+                .iter()
+                .filter(|v| v.is_finite())
+                .fold(1.0f64, |m, v| m.max(v.abs()));
             Ok(Some(Values {
                 shape,
                 peak,
@@ -233,7 +262,12 @@ pub fn diff_file(a: &Path, b: &Path) -> Result<FrameDiff, DiffError> {
         psnr_db: f64::NEG_INFINITY,
         incomparable: Some(why),
     };
-    let (Some(va), Some(vb)) = (read_values(a)?, read_values(b)?) else {
+    let (va, vb) = match (read_values(a), read_values(b)) {
+        (Ok(va), Ok(vb)) => (va, vb),
+        // A frame that does not decode differs; the other frames are still compared.
+        (Err(e), _) | (_, Err(e)) => return Ok(incomparable(e.to_string())),
+    };
+    let (Some(va), Some(vb)) = (va, vb) else {
         let bytes = |p: &Path| std::fs::read(p).map_err(|e| file_error(p, e));
         return Ok(if bytes(a)? == bytes(b)? {
             FrameDiff {
@@ -251,7 +285,11 @@ pub fn diff_file(a: &Path, b: &Path) -> Result<FrameDiff, DiffError> {
     }
     let (mut max_abs, mut squared) = (0.0f64, 0.0f64);
     for (x, y) in va.values.iter().zip(&vb.values) {
-        let d = if x == y { 0.0 } else { (x - y).abs() };
+        let d = if x == y || (x.is_nan() && y.is_nan()) {
+            0.0
+        } else {
+            (x - y).abs()
+        };
         // NaN in one file only is as far apart as values get.
         let d = if d.is_nan() { f64::INFINITY } else { d };
         max_abs = max_abs.max(d);

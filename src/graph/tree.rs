@@ -4,11 +4,11 @@
 //! per pipeline. Every leaf of the tree ends a branch, whose finished frames the
 //! runtime hands back per frame, in order.
 //!
-//! Two stages are identical when they have the same name, kind, parameters, product
-//! bindings and virtual objects, and, for a stage that reads a later stage's product of
-//! the previous frame (`@prev`), when every stage up to that producer is identical too
-//! (else the shared stage would need one feedback value per branch). `write` stages are
-//! never shared: each branch saves into its own folder.
+//! Two pipelines share their first L stages: L is the length of their longest prefix
+//! of identical stages (same name, kind, parameters, product bindings and virtual
+//! objects; `write` stages never, as each branch saves into its own folder), cut back
+//! while a stage below L reads the previous-frame product (`@prev`) of a stage at or
+//! after L: a shared stage cannot take one feedback value per branch.
 
 use super::pipeline::{Pipeline, ResolvedStage};
 use super::registry::Registry;
@@ -76,13 +76,15 @@ impl StageGraph {
         for (b, (_, pipeline)) in branches.iter().enumerate() {
             let mut parent = None;
             let mut mine = Vec::new();
+            let depths: Vec<usize> = branches[..b]
+                .iter()
+                .map(|(_, earlier)| shared_depth(earlier, pipeline))
+                .collect();
             for d in 0..pipeline.stages.len() {
-                let shared = graph.nodes.iter().position(|n| {
-                    n.parent == parent && {
-                        let first = branches[n.branches[0]].1;
-                        shareable(first, pipeline, d)
-                    }
-                });
+                let shared = graph
+                    .nodes
+                    .iter()
+                    .position(|n| n.parent == parent && d < depths[n.branches[0]]);
                 let node = match shared {
                     Some(n) => {
                         graph.nodes[n].branches.push(b);
@@ -108,6 +110,13 @@ impl StageGraph {
                     product: fb.product.clone(),
                 };
                 if !graph.feedback.contains(&edge) {
+                    debug_assert!(
+                        !graph
+                            .feedback
+                            .iter()
+                            .any(|f| f.consumer == edge.consumer && f.product == edge.product),
+                        "one feedback value per shared stage and product"
+                    );
                     graph.feedback.push(edge);
                 }
             }
@@ -192,25 +201,31 @@ impl StageGraph {
     }
 }
 
-/// Whether stage `d` of `b` can run as stage `d` of `a` (their stages before `d` being
-/// shared already): see the module docs.
-fn shareable(a: &Pipeline, b: &Pipeline, d: usize) -> bool {
-    let same = |i: usize| match (a.stages.get(i), b.stages.get(i)) {
-        (Some(x), Some(y)) => same_stage(x, y),
-        _ => false,
-    };
-    if !same(d) || a.stages[d].kind == "write" {
-        return false;
+/// How many first stages `a` and `b` can share (see the module docs).
+fn shared_depth(a: &Pipeline, b: &Pipeline) -> usize {
+    let same_objects = Arc::ptr_eq(&a.objects, &b.objects) || a.objects == b.objects;
+    if !same_objects {
+        return 0;
     }
-    if !(Arc::ptr_eq(&a.objects, &b.objects) || a.objects == b.objects) {
-        return false;
-    }
-    // A later producer feeding this stage back must be shared as well.
-    a.feedback
+    let mut depth = a
+        .stages
+        .iter()
+        .zip(&b.stages)
+        .take_while(|(x, y)| same_stage(x, y) && x.kind != "write")
+        .count();
+    // A shared stage fed back from an unshared one: share only what comes before it
+    // (and again, for what that cut leaves unshared).
+    while let Some(cut) = a
+        .feedback
         .iter()
         .chain(&b.feedback)
-        .filter(|fb| fb.consumer == d && fb.producer > d)
-        .all(|fb| (d + 1..=fb.producer).all(same))
+        .filter(|fb| fb.consumer < depth && fb.producer >= depth)
+        .map(|fb| fb.consumer)
+        .min()
+    {
+        depth = cut;
+    }
+    depth
 }
 
 fn same_stage(x: &ResolvedStage, y: &ResolvedStage) -> bool {

@@ -227,3 +227,51 @@ outputs = {{ output = "late_value" }}
         assert_eq!(early, [want.max(-1.0); 2], "the previous frame's index");
     }
 }
+
+#[test]
+fn a_feedback_chain_through_an_unshared_stage_cuts_the_sharing_back() {
+    // s0 reads y@prev (from s2), s1 reads z@prev (from s3); the pipelines differ only
+    // in s3. s1 cannot be shared (its producer is not), so s2 is not, so s0 is not.
+    let chain = |sleep: f64| {
+        pipeline(&format!(
+            r#"
+[[stage]]
+name = "s0"
+kind = "test.copy"
+inputs = {{ input = "y@prev" }}
+outputs = {{ output = "x" }}
+[[stage]]
+name = "s1"
+kind = "test.copy"
+inputs = {{ input = "z@prev" }}
+outputs = {{ output = "a" }}
+[[stage]]
+name = "s2"
+kind = "test.copy"
+inputs = {{ input = "a" }}
+outputs = {{ output = "y" }}
+[[stage]]
+name = "s3"
+kind = "test.copy"
+inputs = {{ input = "x" }}
+params = {{ sleep_ms = {sleep:?} }}
+outputs = {{ output = "z" }}
+"#
+        ))
+    };
+    let (graph, out) = run_branches(vec![chain(0.0), chain(0.5)], 4);
+    assert_eq!(
+        graph.branch_nodes,
+        vec![vec![0, 1, 2, 3], vec![4, 5, 6, 7]],
+        "nothing shared"
+    );
+    out.result.expect("the run succeeds");
+    // Identical up to s2, with no feedback: s0..s2 shared.
+    let plain = |sleep: f64| {
+        variant(&format!(
+            "[[stage]]\nname = \"tail\"\nkind = \"test.copy\"\nparams = {{ sleep_ms = {sleep:?} }}\n"
+        ))
+    };
+    let (graph, _) = run_branches(vec![plain(0.0), plain(0.5)], 1);
+    assert_eq!(graph.branch_nodes, vec![vec![0, 1, 2], vec![0, 1, 3]]);
+}

@@ -116,11 +116,9 @@ fn charts(h: &mut String, c: &Comparison) {
     let quality: Vec<(String, Vec<(f64, f64)>)> = c
         .variants
         .iter()
-        .map(|v| {
-            let composite = v
-                .scores
-                .as_object()
-                .and_then(|s| s.values().find(|x| x["kind"] == "composite.differential"));
+        .enumerate()
+        .map(|(i, v)| {
+            let composite = c.composite_scores(i);
             let frames = composite.map(|x| &x["scored_frames"]);
             let values = composite.map(|x| &x["psnr_db_by_frame"]);
             let pairs = match (
@@ -210,9 +208,18 @@ fn frames(h: &mut String, c: &Comparison) {
                 .psnr_db
                 .map(|p| format!(", {:.2} dB", p))
                 .unwrap_or_default();
+            let own_reference = match v.reference != f.reference {
+                true => format!(
+                    "<figure><img src=\"{}\" alt=\"{} reference\"><figcaption>its reference \
+                     (its renderer reads other products)</figcaption></figure>",
+                    escape(&v.reference),
+                    escape(&v.label)
+                ),
+                false => String::new(),
+            };
             let _ = write!(
                 h,
-                "<div class=\"variant\"><figure><img src=\"{}\" alt=\"{} composite\">\
+                "<div class=\"variant\">{own_reference}<figure><img src=\"{}\" alt=\"{} composite\">\
                  <figcaption>{}{}</figcaption></figure><figure><img src=\"{}\" \
                  alt=\"{} difference\"><figcaption>{} − reference</figcaption></figure></div>",
                 escape(&v.composite),

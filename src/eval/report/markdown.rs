@@ -33,13 +33,24 @@ pub fn render(c: &Comparison) -> String {
     let _ = writeln!(md, "# relume compare: {}\n", labels.join(", "));
     let _ = writeln!(
         md,
-        "Recording `{}`, frames {}..{}, seed {}, references on every {} pixel(s) in x and \
+        "Recording {}, frames {}..{}, seed {}, references on every {} pixel(s) in x and \
          y. Run took {:.1} s.\n",
-        c.recording, c.frames[0], c.frames[1], c.seed, c.reference_stride, c.wall_s
+        cell_text(&c.recording),
+        c.frames[0],
+        c.frames[1],
+        c.seed,
+        c.reference_stride,
+        c.wall_s
     );
     let _ = writeln!(md, "| variant | pipeline | file |\n|---|---|---|");
     for v in &c.variants {
-        let _ = writeln!(md, "| {} | {} | `{}` |", v.label, v.pipeline, v.file);
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} |",
+            v.label,
+            cell_text(&v.pipeline),
+            cell_text(&v.file)
+        );
     }
     let _ = writeln!(
         md,
@@ -78,6 +89,13 @@ pub fn render(c: &Comparison) -> String {
     }
     md.push_str(&times(c));
     md
+}
+
+/// Text (a name, a path) that stays inside its table cell: `|` and backticks escaped.
+fn cell_text(text: &str) -> String {
+    text.replace('\\', "\\\\")
+        .replace('|', "\\|")
+        .replace('`', "\\`")
 }
 
 fn cell(value: Option<f64>, best: bool) -> String {

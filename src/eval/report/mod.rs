@@ -45,6 +45,9 @@ pub struct Variant {
     pub scores: Value,
     /// Indices into [`Comparison::stages`] of its stages, in pipeline order.
     pub stages: Vec<usize>,
+    /// The `composite.differential` stage whose image and scores the report shows (its
+    /// first).
+    pub composite_stage: Option<String>,
     /// Its cost per frame: the sum of its stages' median processing times, ms.
     pub cost_ms: f64,
     /// Per frame replayed: (frame, the sum of its stages' processing times, ms).
@@ -78,6 +81,9 @@ pub struct FrameImages {
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct VariantImages {
     pub label: String,
+    /// The reference its composite is scored against (the frame's `reference` unless
+    /// its renderer reads other products).
+    pub reference: String,
     pub composite: String,
     pub difference: String,
     pub psnr_db: Option<f64>,
@@ -113,14 +119,17 @@ impl Comparison {
         self.variants[v].scores.get(stage)?.get(key)?.as_f64()
     }
 
-    /// The composite's PSNR of variant `v`: that of its `composite.differential` stage.
+    /// The composite's PSNR of variant `v`: that of its
+    /// [`Variant::composite_stage`].
     pub fn composite_psnr(&self, v: usize) -> Option<f64> {
-        let scores = self.variants[v].scores.as_object()?;
-        scores
-            .values()
-            .find(|s| s["kind"] == "composite.differential")
-            .and_then(|s| s["psnr_db"].as_f64())
-            .filter(|p| p.is_finite())
+        let stage = self.variants[v].composite_stage.as_deref()?;
+        self.score(v, stage, "psnr_db").filter(|p| p.is_finite())
+    }
+
+    /// The scores of variant `v`'s composite stage.
+    pub fn composite_scores(&self, v: usize) -> Option<&Value> {
+        let stage = self.variants[v].composite_stage.as_deref()?;
+        self.variants[v].scores.get(stage)
     }
 
     /// The scored stages' names, in the order the variants list them, each once, with

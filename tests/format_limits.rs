@@ -352,3 +352,91 @@ fn replay_of_a_corrupt_pose_fails_at_open_unless_skipping() {
         replay.read_frame(n).unwrap();
     }
 }
+
+// ---------------------------------------------------- header values
+
+/// The sample with its header replaced by `edit`ed values (the body follows unchanged;
+/// its footer offsets may no longer match, which opening survives by a scan).
+fn with_header(s: &Sample, edit: impl Fn(&mut relume::recording::Header)) -> std::path::PathBuf {
+    let len = frame_header(&s.bytes, PREAMBLE_LEN).len as u64;
+    let payload_start = (PREAMBLE_LEN + FRAME_HEADER_LEN) as usize;
+    let mut h: relume::recording::Header =
+        rmp_serde::from_slice(&s.bytes[payload_start..payload_start + len as usize]).unwrap();
+    edit(&mut h);
+    let mut bytes = s.bytes[..PREAMBLE_LEN as usize].to_vec();
+    bytes.extend(frame(Tag::Header, 0, &rmp_serde::to_vec_named(&h).unwrap()));
+    bytes.extend_from_slice(&s.bytes[payload_start + len as usize..]);
+    s.variant("header.relume", &bytes)
+}
+
+#[test]
+fn header_values_that_no_stage_can_use_are_refused_on_open() {
+    let s = Sample::new();
+    type Edit = fn(&mut relume::recording::Header);
+    let cases: [(Edit, &str); 6] = [
+        (
+            |h| h.color_intrinsics.width = 100_000,
+            "color intrinsics: image size 100000x3 is not between 1 and 16384 on each side",
+        ),
+        (
+            |h| (h.depth_intrinsics.width, h.depth_intrinsics.height) = (16384, 16384),
+            "depth intrinsics: image size 16384x16384 is over 67108864 pixels",
+        ),
+        (
+            |h| h.depth_intrinsics.fx = 0.0,
+            "depth intrinsics: fx = 0 is not a finite positive focal length",
+        ),
+        (
+            |h| h.color_intrinsics.fy = f64::NAN,
+            "color intrinsics: fy = NaN is not a finite positive focal length",
+        ),
+        (
+            |h| h.depth_unit_m = -0.001,
+            "depth unit -0.001 m is not a finite positive length",
+        ),
+        (
+            |h| h.depth_unit_m = 0.0,
+            "depth unit 0 m is not a finite positive length",
+        ),
+    ];
+    for (edit, reason) in cases {
+        let path = with_header(&s, edit);
+        let Err(err) = quickly(|| Recording::open(&path)) else {
+            panic!("{reason}: the header opened");
+        };
+        assert_eq!(
+            err.to_string(),
+            format!("{}: the header is invalid: {reason}", path.display())
+        );
+    }
+    // The writer refuses them too.
+    let mut h = header();
+    h.depth_intrinsics.fx = -1.0;
+    let err =
+        relume::recording::writer::RecordingWriter::create(&s.path.with_file_name("w.relume"), &h)
+            .err()
+            .expect("refused");
+    assert!(err.to_string().ends_with("cannot write this header: depth intrinsics: fx = -1 is not a finite positive focal length"), "{err}");
+}
+
+#[test]
+fn an_image_whose_size_differs_from_the_header_names_its_frame() {
+    let s = Sample::new();
+    let path = with_header(&s, |h| {
+        h.color_intrinsics.width *= 2;
+        h.color_intrinsics.cx *= 2.0;
+    });
+    let replay = Replay::open(&path, ReplayOptions::default()).unwrap();
+    let err = replay.read_frame(0).unwrap_err().to_string();
+    assert!(
+        err.contains("(color) at byte")
+            && err.ends_with(&format!(
+                "cannot be decoded: frame 0's image is {}x{}, but the header gives {}x{}",
+                header().color_intrinsics.width,
+                header().color_intrinsics.height,
+                2 * header().color_intrinsics.width,
+                header().color_intrinsics.height
+            )),
+        "{err}"
+    );
+}

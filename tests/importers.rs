@@ -96,7 +96,7 @@ fn tum_import_associates_depth_and_interpolates_poses() {
     assert_eq!(replay.recording.header().depth_unit_m, 1.0 / 5000.0);
     // The settings as the command line takes them, so an import can be repeated.
     let settings = &replay.recording.header().provenance.settings;
-    assert_eq!(settings["intrinsics"], "525,525,319.5,239.5");
+    assert_eq!(settings["intrinsics"], "primesense");
     assert_eq!(settings["store"], "compressed");
     assert_eq!(
         relume::recording::importers::parse_intrinsics(&settings["intrinsics"]).unwrap(),
@@ -473,5 +473,52 @@ fn an_import_where_nothing_associates_is_an_error_naming_the_offsets() {
     assert!(
         !tmp.path().join("t.relume").exists(),
         "no 0-frame recording left"
+    );
+}
+
+#[test]
+fn given_intrinsics_are_for_the_images_own_size_and_a_rescaled_preset_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("tum");
+    write_tum(&dir);
+    let import = |intrinsics: &str| {
+        let o = common::run_in(
+            tmp.path(),
+            &[
+                "import",
+                "tum",
+                dir.to_str().unwrap(),
+                "-o",
+                "t.relume",
+                "--intrinsics",
+                intrinsics,
+            ],
+        );
+        let o = common::ok(o);
+        let replay = Replay::open(&tmp.path().join("t.relume"), ReplayOptions::default()).unwrap();
+        (common::stderr(&o), replay.recording.header().clone())
+    };
+    // The test's images are 8x6.
+    let (said, header) = import("5,6,4,3");
+    let k = header.color_intrinsics;
+    assert_eq!(
+        (k.width, k.height, k.fx, k.fy, k.cx, k.cy),
+        (8, 6, 5.0, 6.0, 4.0, 3.0)
+    );
+    assert!(!said.contains("note:"), "{said}");
+    let (said, header) = import("tum-fr1");
+    let k = header.color_intrinsics;
+    assert_eq!((k.width, k.fx), (8, 517.3 * 8.0 / 640.0));
+    assert!(
+        said.contains(
+            "note: the intrinsics preset `tum-fr1` is for 640x480 images; the color images \
+             are 8x6, so it is rescaled to fx,fy,cx,cy = "
+        ),
+        "{said}"
+    );
+    assert_eq!(
+        said.matches("note:").count(),
+        1,
+        "one note for one size: {said}"
     );
 }

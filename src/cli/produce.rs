@@ -7,7 +7,7 @@ use clap::{Args, Subcommand};
 use relume::recording::association::{self, AssociationStats};
 use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, tum};
 use relume::recording::synth::{self, SynthConfig};
-use relume::recording::{Intrinsics, Recording, Replay, ReplayOptions};
+use relume::recording::{Recording, Replay, ReplayOptions};
 use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
@@ -160,9 +160,11 @@ pub struct CommonImportArgs {
     /// Output recording (.relume).
     #[arg(short, long)]
     out: PathBuf,
-    /// Camera intrinsics: fx,fy,cx,cy (for 640x480) or a preset: primesense, tum-fr1, tum-fr2, tum-fr3.
+    /// Camera intrinsics: fx,fy,cx,cy in pixels of the images' own size, or a preset for
+    /// 640x480 images (rescaled, with a note, to other sizes): primesense, tum-fr1,
+    /// tum-fr2, tum-fr3.
     #[arg(long, default_value = "primesense", value_parser = importers::parse_intrinsics)]
-    intrinsics: Intrinsics,
+    intrinsics: importers::CameraIntrinsics,
     /// Keep images compressed as found (decoded on replay) or store raw pixels.
     #[arg(long, value_enum, default_value_t = StoreMode::Compressed)]
     store: StoreMode,
@@ -222,6 +224,26 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     }
     for warning in &summary.warnings {
         eprintln!("warning: {warning}");
+    }
+    let intrinsics = match &command {
+        ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => {
+            common.intrinsics
+        }
+    };
+    let header = replay.recording.header();
+    let sizes = [
+        ("color", &header.color_intrinsics),
+        ("depth", &header.depth_intrinsics),
+    ];
+    let mut noted = Vec::new();
+    for (stream, k) in sizes {
+        let size = (k.width, k.height);
+        if !noted.contains(&size)
+            && let Some(note) = intrinsics.rescale_note(stream, size)
+        {
+            eprintln!("note: {note}");
+            noted.push(size);
+        }
     }
     let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     outln!(

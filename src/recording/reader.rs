@@ -50,6 +50,14 @@ impl Recording {
         }
         rec.check_crc(&header_frame, &header_payload, 0, "header", PREAMBLE_LEN)?;
         rec.header = rec.decode(&header_payload, 0, "header", PREAMBLE_LEN)?;
+        // Values every stage trusts: refused here rather than met as a huge allocation
+        // or a frame of NaN.
+        rec.header
+            .check()
+            .map_err(|reason| RecordingError::Invalid {
+                path: path.to_path_buf(),
+                reason: format!("the header is invalid: {reason}"),
+            })?;
         let body_start = PREAMBLE_LEN + FRAME_HEADER_LEN + header_payload.len() as u64;
         match rec.read_footer(body_start) {
             Ok(index) => rec.index = index,

@@ -139,6 +139,34 @@ impl Replay {
             None => None,
             _ => unreachable!("read_record checks the kind against the index"),
         };
+        // A record whose image is not the size the header gives would be read past
+        // or short by every stage that trusts the header.
+        let header = self.recording.header();
+        let sized = [
+            (Some(f.color), Some(&color.image), &header.color_intrinsics),
+            (
+                f.depth,
+                depth.as_ref().map(|d| &d.image),
+                &header.depth_intrinsics,
+            ),
+        ];
+        for (record, image, k) in sized {
+            if let (Some(i), Some(image)) = (record, image)
+                && (image.width, image.height) != (k.width, k.height)
+            {
+                let entry = self.recording.index()[i];
+                return Err(RecordingError::Decode {
+                    path: self.recording.path().to_path_buf(),
+                    record: i,
+                    kind: entry.kind.name(),
+                    offset: entry.offset,
+                    reason: format!(
+                        "frame {n}'s image is {}x{}, but the header gives {}x{}",
+                        image.width, image.height, k.width, k.height
+                    ),
+                });
+            }
+        }
         let truth = match f.truth.map(|i| self.recording.read_record(i)).transpose()? {
             Some(Record::Truth(t)) => Some(t),
             None => None,

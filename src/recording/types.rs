@@ -104,7 +104,62 @@ pub struct Header {
     pub attachments: Vec<Attachment>,
 }
 
+/// The largest image side a recording may declare (pixels).
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+/// The most pixels a recording's images may declare (64 Mpx: 768 MiB of f32 RGB).
+pub const MAX_IMAGE_PIXELS: u64 = 64 << 20;
+
+impl Intrinsics {
+    /// Why these intrinsics cannot describe a camera, if they cannot: sizes of 0 or
+    /// over [`MAX_IMAGE_SIDE`] / [`MAX_IMAGE_PIXELS`], focal lengths that are not finite
+    /// and positive, a principal point that is not finite.
+    pub fn check(&self) -> Result<(), String> {
+        let (w, h) = (self.width, self.height);
+        if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
+            return Err(format!(
+                "image size {w}x{h} is not between 1 and {MAX_IMAGE_SIDE} on each side"
+            ));
+        }
+        if w as u64 * h as u64 > MAX_IMAGE_PIXELS {
+            return Err(format!(
+                "image size {w}x{h} is over {MAX_IMAGE_PIXELS} pixels"
+            ));
+        }
+        for (name, f) in [("fx", self.fx), ("fy", self.fy)] {
+            if !(f.is_finite() && f > 0.0) {
+                return Err(format!(
+                    "{name} = {f} is not a finite positive focal length"
+                ));
+            }
+        }
+        for (name, c) in [("cx", self.cx), ("cy", self.cy)] {
+            if !c.is_finite() {
+                return Err(format!("{name} = {c} is not finite"));
+            }
+        }
+        Ok(())
+    }
+}
+
 impl Header {
+    /// Why the header cannot describe a recording, if it cannot (see
+    /// [`Intrinsics::check`]; the depth unit must be finite and positive).
+    pub fn check(&self) -> Result<(), String> {
+        self.color_intrinsics
+            .check()
+            .map_err(|e| format!("color intrinsics: {e}"))?;
+        self.depth_intrinsics
+            .check()
+            .map_err(|e| format!("depth intrinsics: {e}"))?;
+        let unit = self.depth_unit_m;
+        if !(unit.is_finite() && unit > 0.0) {
+            return Err(format!(
+                "depth unit {unit} m is not a finite positive length"
+            ));
+        }
+        Ok(())
+    }
+
     /// A header for one camera with both sensors at `intrinsics`, and no provenance,
     /// streams, ground truth or attachments (for sources built in code).
     pub fn new(name: &str, intrinsics: Intrinsics, depth_unit_m: f64) -> Header {

@@ -23,6 +23,10 @@ pub struct RecordingWriter {
 impl RecordingWriter {
     /// Starts a recording at `path` with `header`.
     pub fn create(path: &Path, header: &Header) -> Result<Self, RecordingError> {
+        header.check().map_err(|reason| RecordingError::Invalid {
+            path: path.to_path_buf(),
+            reason: format!("cannot write this header: {reason}"),
+        })?;
         let (final_path, tmp_path) = output_paths(path).map_err(|e| RecordingError::io(path, e))?;
         // A missing folder is reported under the name the caller gave, not the
         // temporary one.

@@ -53,11 +53,77 @@ pub const INTRINSICS_PRESETS: &[(&str, Intrinsics)] = &[
     ),
 ];
 
-/// Parses `--intrinsics`: a preset name or `fx,fy,cx,cy` (pixels, for 640x480 unless the
-/// images say otherwise).
-pub fn parse_intrinsics(text: &str) -> Result<Intrinsics, String> {
-    if let Some((_, k)) = INTRINSICS_PRESETS.iter().find(|(n, _)| *n == text) {
-        return Ok(*k);
+/// The camera's intrinsics as `--intrinsics` gives them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CameraIntrinsics {
+    /// A named preset, for the image size it names; images of another size get it
+    /// rescaled (`relume import` prints a note saying so).
+    Preset(&'static str, Intrinsics),
+    /// fx, fy, cx, cy as the user gave them, in pixels of the images' own size: never
+    /// rescaled.
+    Given { fx: f64, fy: f64, cx: f64, cy: f64 },
+}
+
+impl Default for CameraIntrinsics {
+    fn default() -> Self {
+        CameraIntrinsics::Preset("primesense", Intrinsics::PRIMESENSE)
+    }
+}
+
+impl CameraIntrinsics {
+    /// The intrinsics of a stream whose images are `size` (`None`: a stream without
+    /// images, which takes `other`'s size, or the preset's).
+    pub fn for_size(&self, size: Option<ImageSize>, other: Option<ImageSize>) -> Intrinsics {
+        match *self {
+            CameraIntrinsics::Preset(_, k) => match size {
+                Some((w, h)) if (w, h) != (k.width, k.height) => k.scaled_to(w, h),
+                _ => k,
+            },
+            CameraIntrinsics::Given { fx, fy, cx, cy } => {
+                let (width, height) = size.or(other).unwrap_or((640, 480));
+                Intrinsics {
+                    width,
+                    height,
+                    fx,
+                    fy,
+                    cx,
+                    cy,
+                }
+            }
+        }
+    }
+
+    /// As `--intrinsics` takes it: the preset's name, or the four numbers.
+    pub fn setting(&self) -> String {
+        match self {
+            CameraIntrinsics::Preset(name, _) => name.to_string(),
+            CameraIntrinsics::Given { fx, fy, cx, cy } => format!("{fx},{fy},{cx},{cy}"),
+        }
+    }
+
+    /// A note when a preset is rescaled for images of `size`.
+    pub fn rescale_note(&self, stream: &str, size: ImageSize) -> Option<String> {
+        let CameraIntrinsics::Preset(name, k) = self else {
+            return None;
+        };
+        if size == (k.width, k.height) {
+            return None;
+        }
+        let r = self.for_size(Some(size), None);
+        Some(format!(
+            "the intrinsics preset `{name}` is for {}x{} images; the {stream} images are \
+             {}x{}, so it is rescaled to fx,fy,cx,cy = {},{},{},{} (give --intrinsics \
+             fx,fy,cx,cy in pixels of the images' own size to set them exactly)",
+            k.width, k.height, size.0, size.1, r.fx, r.fy, r.cx, r.cy
+        ))
+    }
+}
+
+/// Parses `--intrinsics`: a preset name (for the size it names, 640x480 for all of
+/// today's) or `fx,fy,cx,cy` (pixels of the images' own size).
+pub fn parse_intrinsics(text: &str) -> Result<CameraIntrinsics, String> {
+    if let Some((name, k)) = INTRINSICS_PRESETS.iter().find(|(n, _)| *n == text) {
+        return Ok(CameraIntrinsics::Preset(name, *k));
     }
     let values: Vec<f64> = text
         .split(',')
@@ -66,14 +132,7 @@ pub fn parse_intrinsics(text: &str) -> Result<Intrinsics, String> {
         .map_err(|_| intrinsics_hint(text))?;
     match values[..] {
         [fx, fy, cx, cy] if values.iter().all(|v| v.is_finite()) && fx > 0.0 && fy > 0.0 => {
-            Ok(Intrinsics {
-                width: 640,
-                height: 480,
-                fx,
-                fy,
-                cx,
-                cy,
-            })
+            Ok(CameraIntrinsics::Given { fx, fy, cx, cy })
         }
         _ => Err(intrinsics_hint(text)),
     }
@@ -101,14 +160,14 @@ pub enum StoreMode {
 /// Options shared by the importers.
 #[derive(Clone, Debug)]
 pub struct ImportOptions {
-    pub intrinsics: Intrinsics,
+    pub intrinsics: CameraIntrinsics,
     pub store: StoreMode,
 }
 
 impl Default for ImportOptions {
     fn default() -> Self {
         ImportOptions {
-            intrinsics: Intrinsics::PRIMESENSE,
+            intrinsics: CameraIntrinsics::default(),
             store: StoreMode::Compressed,
         }
     }
@@ -238,11 +297,7 @@ pub(crate) fn import_header(
         .map(|(k, v)| (k.to_string(), v.clone()))
         .collect();
     // As `--intrinsics` and `--store` take them, so the settings can be given again.
-    let k = &options.intrinsics;
-    settings.insert(
-        "intrinsics".into(),
-        format!("{},{},{},{}", k.fx, k.fy, k.cx, k.cy),
-    );
+    settings.insert("intrinsics".into(), options.intrinsics.setting());
     let store = match options.store {
         StoreMode::Compressed => "compressed",
         StoreMode::Raw => "raw",
@@ -258,8 +313,8 @@ pub(crate) fn import_header(
             source: dir.display().to_string(),
             settings,
         },
-        color_intrinsics: intrinsics_for(&options.intrinsics, color_size),
-        depth_intrinsics: intrinsics_for(&options.intrinsics, depth_size),
+        color_intrinsics: options.intrinsics.for_size(color_size, depth_size),
+        depth_intrinsics: options.intrinsics.for_size(depth_size, color_size),
         depth_unit_m,
         streams,
         ground_truth: None,
@@ -292,15 +347,6 @@ pub fn parse_stamp_ns(text: &str) -> Option<i64> {
     Some(if neg { -total } else { total })
 }
 
-/// The color/depth intrinsics for images of `size`: the given intrinsics, rescaled when
-/// the images are not the size the intrinsics are for.
-pub(crate) fn intrinsics_for(k: &Intrinsics, size: Option<(u32, u32)>) -> Intrinsics {
-    match size {
-        Some((w, h)) if (w, h) != (k.width, k.height) => k.scaled_to(w, h),
-        _ => *k,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -320,8 +366,21 @@ mod tests {
 
     #[test]
     fn intrinsics_presets_and_lists() {
-        assert_eq!(parse_intrinsics("tum-fr1").unwrap().fx, 517.3);
-        assert_eq!(parse_intrinsics("500, 501, 320, 240").unwrap().fy, 501.0);
+        let fr1 = parse_intrinsics("tum-fr1").unwrap();
+        assert_eq!(fr1.for_size(Some((640, 480)), None).fx, 517.3);
+        // A preset is rescaled to other sizes, with a note; given numbers never are.
+        assert_eq!(fr1.for_size(Some((320, 240)), None).fx, 517.3 / 2.0);
+        assert!(fr1.rescale_note("color", (320, 240)).is_some());
+        assert!(fr1.rescale_note("color", (640, 480)).is_none());
+        let given = parse_intrinsics("500, 501, 160, 120").unwrap();
+        let k = given.for_size(Some((320, 240)), None);
+        assert_eq!(
+            (k.width, k.height, k.fx, k.fy, k.cx, k.cy),
+            (320, 240, 500.0, 501.0, 160.0, 120.0)
+        );
+        assert!(given.rescale_note("color", (320, 240)).is_none());
+        assert_eq!(given.setting(), "500,501,160,120");
+        assert_eq!(fr1.setting(), "tum-fr1");
         let e = parse_intrinsics("500,501").unwrap_err();
         assert!(e.contains("fx,fy,cx,cy") && e.contains("tum-fr3"), "{e}");
     }

@@ -487,3 +487,32 @@ fn save_format_help_says_depth_pngs_are_millimetres() {
         "{help}"
     );
 }
+
+#[test]
+fn long_runs_without_a_terminal_say_how_far_they_are() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    // A line per frame here (every 5 s by default).
+    let run = |args: &[&str]| {
+        let o = common::relume()
+            .args(args)
+            .current_dir(d)
+            .env("RELUME_PROGRESS_SECONDS", "0")
+            .output()
+            .unwrap();
+        common::stderr(&common::ok(o))
+    };
+    let said = run(&[
+        "synth", "-o", "s.relume", "--frames", "3", "--size", "64x48",
+    ]);
+    assert!(said.contains("rendering: 3/3 frames, "), "{said}");
+    let pipeline = common::pipeline("geometry.toml");
+    let said = run(&["replay", "s.relume", "-p", &pipeline, "--out", "o"]);
+    for n in 1..=3 {
+        assert!(
+            said.contains(&format!("replaying: {n}/3 frames, ")),
+            "{said}"
+        );
+    }
+    assert!(said.contains("frames/s"), "{said}");
+}

@@ -36,7 +36,7 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
     };
     let result = (|| -> anyhow::Result<Vec<RunReport>> {
         let mut reports = Vec::new();
-        let bar = progress::bar(a.repeat as u64 + 1, "bench");
+        let bar = progress::bar(a.repeat as u64 + 1, "bench", "runs");
         for i in 0..=a.repeat {
             let report = loaded
                 .run_once(&scratch, &a.run, pacing, &stop, &mut |_| {})

@@ -181,7 +181,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
         })?;
 
     let stop = stop_on_interrupt();
-    let bar = progress::bar(frames.len() as u64, "comparing");
+    let bar = progress::bar(frames.len() as u64, "comparing", "frames");
     let mut images: Vec<FrameImages> = Vec::new();
     let mut saved_references = SavedReferences::new();
     let mut sink_error: Option<anyhow::Error> = None;

@@ -118,7 +118,7 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     let scratch = std::env::temp_dir().join(format!("relume-eval-{}", std::process::id()));
     let out_dir = a.out.clone().unwrap_or_else(|| scratch.clone());
     let stop = stop_on_interrupt();
-    let bar = progress::bar(loaded.frames.len() as u64, "evaluating");
+    let bar = progress::bar(loaded.frames.len() as u64, "evaluating", "frames");
     let mut truth_error = None;
     let result = loaded.run_once(&out_dir, &a.run, Pacing::Pipelined, &stop, &mut |f| {
         bar.inc(1);

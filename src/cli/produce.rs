@@ -124,7 +124,7 @@ pub fn ensure_default_recording(path: &Path) -> anyhow::Result<()> {
 
 /// Generates with a progress bar (shown on terminals only).
 fn generate(config: &SynthConfig, path: &Path) -> anyhow::Result<synth::SynthSummary> {
-    let bar = progress::bar(config.frames as u64, "rendering");
+    let bar = progress::bar(config.frames as u64, "rendering", "frames");
     let summary =
         synth::generate_with_progress(config, path, &mut |done, _| bar.set_position(done as u64));
     bar.finish_and_clear();
@@ -186,7 +186,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     };
     super::check_output_file("-o", out)?;
     let _partial = PartialFile::watch(out);
-    let bar = progress::bar(0, "importing");
+    let bar = progress::bar(0, "importing", "frames");
     let mut tick = |done: usize, total: usize| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);

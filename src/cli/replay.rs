@@ -309,7 +309,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
         );
     }
     let stop = stop_on_interrupt();
-    let bar = progress::bar(loaded.frames.len() as u64, "replaying");
+    let bar = progress::bar(loaded.frames.len() as u64, "replaying", "frames");
     let stdout = std::io::stdout();
     let mut hash_error = None;
     let mut save_error: Option<anyhow::Error> = None;

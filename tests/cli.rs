@@ -516,3 +516,49 @@ fn long_runs_without_a_terminal_say_how_far_they_are() {
     }
     assert!(said.contains("frames/s"), "{said}");
 }
+
+#[test]
+fn a_killed_runs_half_written_files_go_and_an_earlier_runs_frames_are_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 3);
+    let pipeline = common::pipeline("geometry.toml");
+    let replay = |extra: &[&str]| {
+        let mut args = vec![
+            "replay",
+            "small.relume",
+            "-p",
+            pipeline.as_str(),
+            "--out",
+            "o",
+        ];
+        args.extend(extra);
+        stderr(&ok(run_in(d, &args)))
+    };
+    replay(&[]);
+    let folder = d.join("o/normals");
+    let frames = || common::file_names(&folder);
+    assert_eq!(frames(), ["000000.png", "000001.png", "000002.png"]);
+    // What a killed run leaves: a hidden temporary of a process that no longer runs.
+    let stale = folder.join(".000001.png.999999999.partial");
+    std::fs::write(&stale, vec![0u8; 1000]).unwrap();
+    let said = replay(&["--frames", "0..2"]);
+    assert!(!stale.exists(), "the half-written file is removed");
+    assert!(
+        said.contains("removed 1 half-written file(s) (0.0 MB) that an interrupted run left in o"),
+        "{said}"
+    );
+    assert!(
+        said.contains(
+            "warning: o/normals holds 1 frame(s) of an earlier run that this run (frames 0..2) \
+             does not replace, 2 to 2: they stay beside its own (--clean-out removes them first)"
+        ),
+        "{said}"
+    );
+    let said = replay(&["--frames", "0..2", "--clean-out"]);
+    assert!(
+        said.contains("--clean-out: removed 3 frame file(s) from o/normals"),
+        "{said}"
+    );
+    assert_eq!(frames(), ["000000.png", "000001.png"]);
+}

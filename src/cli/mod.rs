@@ -26,6 +26,7 @@ mod diff;
 mod eval;
 mod inspect;
 mod interrupt;
+mod out_dir;
 mod produce;
 mod progress;
 mod replay;

@@ -72,6 +72,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
     };
     super::check_output_file("-o", &a.out)?;
     let start = std::time::Instant::now();
+    remove_stale_partials_beside(&a.out);
     let _partial = PartialFile::watch(&a.out);
     let summary = generate(&config, &a.out)?;
     outln!(
@@ -185,6 +186,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => &common.out,
     };
     super::check_output_file("-o", out)?;
+    remove_stale_partials_beside(out);
     let _partial = PartialFile::watch(out);
     let bar = progress::bar(0, "importing", "frames");
     let mut tick = |done: usize, total: usize| {
@@ -272,6 +274,15 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         eprintln!("warning: {}: {warning}", out.display());
     }
     Ok(0)
+}
+
+/// Removes the half-written files that interrupted runs left beside `out`.
+fn remove_stale_partials_beside(out: &Path) {
+    let folder = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    super::out_dir::remove_stale_partials(folder, 0);
 }
 
 /// Why an import built no frame, with the offsets (ns, depth minus color) from each

@@ -50,6 +50,10 @@ pub struct ReplayArgs {
     /// Directory that `write` stages save into.
     #[arg(short, long, default_value = "out")]
     out: PathBuf,
+    /// Remove the frames an earlier run left in the folders this run writes (else a
+    /// warning names those outside this run's frames, which it does not replace).
+    #[arg(long)]
+    clean_out: bool,
     /// Write per-frame timings of every stage (FILE.csv or FILE.json: the extension picks
     /// the format).
     #[arg(long, value_name = "FILE")]
@@ -308,6 +312,9 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             loaded.pipeline.name
         );
     }
+    super::out_dir::remove_stale_partials(&a.out, 3);
+    let folders = super::out_dir::frame_folders(&loaded.pipeline, &a.out, &a.save);
+    super::out_dir::earlier_frames(&folders, &loaded.frames, a.clean_out)?;
     let stop = stop_on_interrupt();
     let bar = progress::bar(loaded.frames.len() as u64, "replaying", "frames");
     let stdout = std::io::stdout();

@@ -206,6 +206,29 @@ pub fn temp_path_for(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.{}.partial", std::process::id()))
 }
 
+/// Whether `path` is a temporary file that [`temp_path_for`] named for a process that
+/// is no longer running (a killed run's half-written output). Only on systems with
+/// `/proc`; elsewhere nothing is known stale.
+pub fn is_stale_partial(path: &Path) -> bool {
+    let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+        return false;
+    };
+    let Some(rest) = name
+        .strip_prefix('.')
+        .and_then(|n| n.strip_suffix(".partial"))
+    else {
+        return false;
+    };
+    let Some(pid) = rest
+        .rsplit_once('.')
+        .and_then(|(_, p)| p.parse::<u32>().ok())
+    else {
+        return false;
+    };
+    let proc = Path::new("/proc");
+    proc.join("self").exists() && !proc.join(pid.to_string()).exists()
+}
+
 /// Writes `bytes` to `path` ([`output_target`]) atomically (temporary file, then
 /// rename): a process stopped midway leaves the old file or the new one, never half of
 /// one. No fsync: per-frame outputs guard against interruption, not power loss.

@@ -2,6 +2,10 @@
 //! positions, N(u, v) = (V(u+1, v) - V(u, v)) x (V(u, v+1) - V(u, v)) with forward
 //! differences as in the paper, or central differences; normalized and turned to face
 //! the camera. Invalid (zero) where a neighbour is missing or lies across a depth jump.
+//!
+//! It also writes `refined_depth`, as `normals.plane_fit` does, so that either stage
+//! drops into a pipeline whose later stages read it: here it is the depth of the
+//! points themselves (their z; 0 where a point is missing), nothing refined.
 
 use crate::graph::{
     Frame, ParamDefault, ParamSpec, Product, ProductKind, Stage, StageError, StageInfo,
@@ -38,7 +42,10 @@ pub const CROSS_INFO: StageInfo = StageInfo {
     ports: |_| {
         super::fixed_ports(
             &[("points", &[ProductKind::Points])],
-            &[("normals", &[ProductKind::Normals])],
+            &[
+                ("normals", &[ProductKind::Normals]),
+                ("refined_depth", &[ProductKind::Depth]),
+            ],
         )
     },
     build: |ctx| {
@@ -46,6 +53,7 @@ pub const CROSS_INFO: StageInfo = StageInfo {
         Ok(Box::new(CrossNormals {
             points: ctx.input("points"),
             normals: ctx.output("normals"),
+            refined_depth: ctx.output("refined_depth"),
             params: CrossParams {
                 step: p.int("step") as usize,
                 central: p.str("difference") == "central",
@@ -128,7 +136,26 @@ pub fn cross_normals(
 struct CrossNormals {
     points: String,
     normals: String,
+    refined_depth: String,
     params: CrossParams,
+}
+
+/// The depth of each point (its camera-space z), 0 where it is missing: what
+/// `normals.cross` writes as `refined_depth`.
+pub fn point_depth(points: &Vec3Image) -> Image<f32> {
+    let data = points
+        .data
+        .iter()
+        .map(|p| {
+            let z = p.z;
+            if p.is_finite() && crate::raster::depth_is_valid(z) {
+                z
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    Image::from_vec(points.width, points.height, data).expect("one depth per point")
 }
 
 impl Stage for CrossNormals {
@@ -136,7 +163,9 @@ impl Stage for CrossNormals {
         let points = frame.points(&self.points)?;
         let mut normals = Image::filled(points.width, points.height, Vec3::ZERO);
         cross_normals(points, &self.params, &mut normals)?;
+        let depth = point_depth(points);
         frame.insert(&self.normals, Product::Normals(normals));
+        frame.insert(&self.refined_depth, Product::Depth(depth));
         Ok(())
     }
 }

@@ -522,3 +522,69 @@ fn given_intrinsics_are_for_the_images_own_size_and_a_rescaled_preset_says_so() 
         "one note for one size: {said}"
     );
 }
+
+#[test]
+fn poses_are_not_interpolated_across_a_long_gap_and_the_frames_are_counted() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("tum");
+    write_tum(&dir);
+    // 100 Hz from -50 ms to 0, then a 400 ms hole, then 400 to 500 ms: frames 1, 2
+    // and 4 (33, 67, 133 ms; frame 3 has no depth) fall in the hole.
+    let mut gt = String::new();
+    for k in (-5..=0).chain(40..=50) {
+        let (p, q) = true_pose(k as f64 * 0.01);
+        gt.push_str(&format!(
+            "{:.6} {} {} {} {} {} {} {}\n",
+            T0 + k as f64 * 0.01,
+            p.x,
+            p.y,
+            p.z,
+            q.x,
+            q.y,
+            q.z,
+            q.w
+        ));
+    }
+    std::fs::write(dir.join("groundtruth.txt"), gt).unwrap();
+    let d = tmp.path();
+    common::ok(common::run_in(
+        d,
+        &["import", "tum", dir.to_str().unwrap(), "-o", "t.relume"],
+    ));
+    let inspect = |extra: &[&str]| {
+        let mut args = vec!["inspect", "t.relume", "--json"];
+        args.extend(extra);
+        let o = common::ok(common::run_in(d, &args));
+        serde_json::from_str::<serde_json::Value>(&common::stdout(&o)).unwrap()
+    };
+    let doc = inspect(&[]);
+    assert_eq!(doc["frames"], 4);
+    assert_eq!(doc["frames_with_pose"], 1);
+    assert_eq!(doc["association"]["frames_in_pose_gaps"], 3);
+    assert_eq!(doc["association"]["max_pose_gap_ns"], 50_000_000);
+    let text = common::stdout(&common::ok(common::run_in(d, &["inspect", "t.relume"])));
+    assert!(
+        text.contains("pose gaps 3 frames lie in gaps of the pose stream longer than 50 ms"),
+        "{text}"
+    );
+    // A limit above the hole bridges it, as before.
+    let doc = inspect(&["--max-pose-gap", "500"]);
+    assert_eq!(doc["frames_with_pose"], 4);
+    assert_eq!(doc["association"]["frames_in_pose_gaps"], 0);
+    // A replay says so before it starts.
+    let pipeline = common::pipeline("geometry.toml");
+    let o = common::run_in(
+        d,
+        &[
+            "replay", "t.relume", "-p", &pipeline, "--frames", "0", "--out", "o",
+        ],
+    );
+    assert!(
+        common::stderr(&o).contains(
+            "warning: t.relume: 3 of 4 frames lie in gaps of the pose stream longer than 50 ms \
+             and have no pose"
+        ),
+        "{}",
+        common::stderr(&o)
+    );
+}

@@ -138,6 +138,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
         skip_corrupt: a.skip_corrupt,
         seed: a.seed,
         overrides: Vec::new(),
+        max_pose_gap: None,
     };
     let (replay, frames) = open_recording(&run_args)?;
     let header = replay.recording.header();

@@ -16,6 +16,11 @@ pub struct InspectArgs {
     /// status is 1 when a record is corrupt or the file is damaged.
     #[arg(long)]
     verify: bool,
+    /// The largest gap between two pose samples that a frame's pose is interpolated
+    /// across, in milliseconds (default: five times the pose stream's median interval,
+    /// at least 50 ms); frames in longer gaps have no pose.
+    #[arg(long, value_name = "MS", value_parser = super::replay::parse_gap_ms)]
+    max_pose_gap: Option<i64>,
 }
 
 pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
@@ -23,6 +28,7 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
         &a.recording,
         ReplayOptions {
             skip_corrupt: true,
+            max_pose_gap_ns: a.max_pose_gap,
             ..Default::default()
         },
     )?;
@@ -129,6 +135,14 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
             relume::recording::association::DEFAULT_TOLERANCE_NS / 1_000_000,
             s.skipped_corrupt_poses
         )?;
+        if s.frames_in_pose_gaps > 0 {
+            outln!(
+                "  pose gaps {} frames lie in gaps of the pose stream longer than {:.0} ms: \
+                 they have no pose (--max-pose-gap sets the limit)",
+                s.frames_in_pose_gaps,
+                s.max_pose_gap_ns.unwrap_or(0) as f64 * 1e-6
+            )?;
+        }
         if let Some(gt) = &h.ground_truth {
             outln!(
                 "  truth     {} (object at {:?})",

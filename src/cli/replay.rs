@@ -41,6 +41,22 @@ pub struct RunArgs {
     /// Repeatable. E.g. --set sample.path.query=vct --set sample.path.direct=8
     #[arg(long = "set", value_name = "STAGE.PARAM=VALUE")]
     pub(super) overrides: Vec<relume::graph::ParamOverride>,
+    /// The largest gap between two pose samples that a frame's pose is interpolated
+    /// across, in milliseconds (default: five times the pose stream's median interval,
+    /// at least 50 ms). Frames in longer gaps have no pose: a stage that needs one stops
+    /// there, and the run says how many there are.
+    #[arg(long, value_name = "MS", value_parser = parse_gap_ms)]
+    pub(super) max_pose_gap: Option<i64>,
+}
+
+/// `--max-pose-gap`: milliseconds, positive and finite, as nanoseconds.
+pub(super) fn parse_gap_ms(text: &str) -> Result<i64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(ms) if ms.is_finite() && ms > 0.0 && ms < 1e12 => Ok((ms * 1e6).round() as i64),
+        _ => Err(format!(
+            "invalid gap {text:?}: expected milliseconds, a positive number"
+        )),
+    }
 }
 
 #[derive(Parser, Debug)]
@@ -144,9 +160,22 @@ pub(super) fn open_recording(args: &RunArgs) -> anyhow::Result<(Replay, Range<us
         &path,
         ReplayOptions {
             skip_corrupt: args.skip_corrupt,
+            max_pose_gap_ns: args.max_pose_gap,
             ..Default::default()
         },
     )?;
+    let stats = &replay.stats;
+    if stats.frames_in_pose_gaps > 0 {
+        eprintln!(
+            "warning: {}: {} of {} frames lie in gaps of the pose stream longer than {:.0} ms \
+             and have no pose: poses are not interpolated across such gaps (--max-pose-gap \
+             sets the limit)",
+            path.display(),
+            stats.frames_in_pose_gaps,
+            stats.frames,
+            stats.max_pose_gap_ns.unwrap_or(0) as f64 * 1e-6
+        );
+    }
     if let Some(damage) = replay.recording.damage() {
         eprintln!(
             "warning: {damage}; replaying the {} complete frames before it",

@@ -37,6 +37,11 @@ pub struct AssociationStats {
     pub skipped_no_depth: usize,
     /// Pose records skipped because they could not be read (with `--skip-corrupt`).
     pub skipped_corrupt_poses: usize,
+    /// Frames inside the pose stream that have no pose because the samples around them
+    /// are further apart than the largest interpolation gap.
+    pub frames_in_pose_gaps: usize,
+    /// That gap, ns (`None`: no pose stream to interpolate).
+    pub max_pose_gap_ns: Option<i64>,
 }
 
 /// Stamps and index positions of one stream, sorted by stamp.
@@ -65,9 +70,28 @@ fn nearest(sorted: &[(i64, usize)], t: i64, tolerance_ns: i64) -> Option<usize> 
         .map(|(_, i)| i)
 }
 
+/// The default largest gap between two pose samples that a frame's pose is
+/// interpolated across: five times the stream's median interval, at least 50 ms
+/// (100 Hz motion capture: 50 ms; poses per 30 Hz frame: 167 ms). `None` with fewer
+/// than two poses.
+pub fn default_max_pose_gap_ns(poses: &[(i64, Pose)]) -> Option<i64> {
+    let mut steps: Vec<i64> = poses
+        .windows(2)
+        .map(|w| w[1].0.saturating_sub(w[0].0))
+        .filter(|&d| d > 0)
+        .collect();
+    if steps.is_empty() {
+        return None;
+    }
+    let mid = steps.len() / 2;
+    let median = *steps.select_nth_unstable(mid).1;
+    Some(median.saturating_mul(5).max(50_000_000))
+}
+
 /// The pose at `t`, interpolated between the bracketing samples of `poses` (sorted by
-/// stamp); `None` outside the pose stream.
-pub fn pose_at(poses: &[(i64, Pose)], t: i64) -> Option<Pose> {
+/// stamp); `None` outside the pose stream, and inside a gap between two samples longer
+/// than `max_gap_ns`, where interpolation would invent the motion.
+pub fn pose_at(poses: &[(i64, Pose)], t: i64, max_gap_ns: i64) -> Option<Pose> {
     let (first, last) = (poses.first()?, poses.last()?);
     if t < first.0 || t > last.0 {
         return None;
@@ -78,6 +102,9 @@ pub fn pose_at(poses: &[(i64, Pose)], t: i64) -> Option<Pose> {
         return Some(p1);
     }
     let (s0, p0) = poses[at - 1];
+    if (s1 as i128 - s0 as i128) > max_gap_ns as i128 {
+        return None;
+    }
     // i128: stamps may span the whole i64 range (e.g. from a damaged file).
     let w = (t as i128 - s0 as i128) as f64 / (s1 as i128 - s0 as i128) as f64;
     Some(Pose::interpolate(&p0, &p1, w))
@@ -113,7 +140,11 @@ pub fn associate(
     poses: &[(i64, Pose)],
     has_depth_stream: bool,
     tolerance_ns: i64,
+    max_pose_gap_ns: Option<i64>,
 ) -> (Vec<FrameRef>, AssociationStats) {
+    let max_gap = max_pose_gap_ns
+        .or_else(|| default_max_pose_gap_ns(poses))
+        .unwrap_or(i64::MAX);
     let colors = stream(index, StreamKind::Color);
     let depths = stream(index, StreamKind::Depth);
     let truths = stream(index, StreamKind::Truth);
@@ -136,13 +167,17 @@ pub fn associate(
             color,
             depth,
             truth: nearest(&truths, stamp_ns, tolerance_ns),
-            pose: pose_at(poses, stamp_ns),
+            pose: pose_at(poses, stamp_ns, max_gap),
         };
+        if frame.pose.is_none() && pose_at(poses, stamp_ns, i64::MAX).is_some() {
+            stats.frames_in_pose_gaps += 1;
+        }
         stats.frames_with_pose += frame.pose.is_some() as usize;
         stats.frames_with_truth += frame.truth.is_some() as usize;
         frames.push(frame);
     }
     stats.frames = frames.len();
+    stats.max_pose_gap_ns = (poses.len() > 1).then_some(max_gap);
     (frames, stats)
 }
 
@@ -172,7 +207,7 @@ mod tests {
             entry(StreamKind::Depth, 225 * ms),
             entry(StreamKind::Depth, 318 * ms),
         ];
-        let (frames, stats) = associate(&index, &[], true, DEFAULT_TOLERANCE_NS);
+        let (frames, stats) = associate(&index, &[], true, DEFAULT_TOLERANCE_NS, None);
         assert_eq!(frames.len(), 2);
         assert_eq!(frames[0].depth, Some(3));
         assert_eq!(frames[1].stamp_ns, 300 * ms);
@@ -186,12 +221,32 @@ mod tests {
         let a = Pose::from_parts(DVec3::ZERO, DQuat::IDENTITY);
         let b = Pose::from_parts(DVec3::new(2.0, 0.0, 0.0), DQuat::from_rotation_y(1.0));
         let poses = vec![(0, a), (100, b)];
-        let mid = pose_at(&poses, 25).unwrap();
+        let mid = pose_at(&poses, 25, i64::MAX).unwrap();
         assert!((mid.translation() - DVec3::new(0.5, 0.0, 0.0)).length() < 1e-12);
         let angle = mid.rotation().angle_between(DQuat::IDENTITY);
         assert!((angle - 0.25).abs() < 1e-9, "angle {angle}");
-        assert_eq!(pose_at(&poses, 100), Some(b));
-        assert_eq!(pose_at(&poses, -1), None);
-        assert_eq!(pose_at(&poses, 101), None);
+        assert_eq!(pose_at(&poses, 100, i64::MAX), Some(b));
+        assert_eq!(pose_at(&poses, -1, i64::MAX), None);
+        assert_eq!(pose_at(&poses, 101, i64::MAX), None);
+        // Across a gap longer than allowed: no pose, but the samples themselves stay.
+        assert_eq!(pose_at(&poses, 25, 99), None);
+        assert_eq!(pose_at(&poses, 100, 99), Some(b));
+    }
+
+    #[test]
+    fn the_default_gap_is_five_median_intervals_and_at_least_50_ms() {
+        let p = Pose::IDENTITY;
+        let at = |stamps: &[i64]| -> Vec<(i64, Pose)> { stamps.iter().map(|&t| (t, p)).collect() };
+        let ms = 1_000_000;
+        // 100 Hz with one 300 ms hole: 5 x 10 ms = 50 ms.
+        let mocap: Vec<i64> = (0..50)
+            .map(|k| k * 10 * ms)
+            .chain((0..50).map(|k| 790 * ms + k * 10 * ms))
+            .collect();
+        assert_eq!(default_max_pose_gap_ns(&at(&mocap)), Some(50 * ms));
+        // A pose per 30 Hz frame: 5 x 33.3 ms.
+        let frames: Vec<i64> = (0..30).map(|k| k * 33_333_333).collect();
+        assert_eq!(default_max_pose_gap_ns(&at(&frames)), Some(5 * 33_333_333));
+        assert_eq!(default_max_pose_gap_ns(&at(&[0])), None);
     }
 }

@@ -15,6 +15,9 @@ pub struct ReplayOptions {
     pub tolerance_ns: i64,
     /// Skip (and count) records that fail their checksum or decoding instead of failing.
     pub skip_corrupt: bool,
+    /// The largest gap between pose samples a frame's pose is interpolated across
+    /// (`None`: [`super::association::default_max_pose_gap_ns`]).
+    pub max_pose_gap_ns: Option<i64>,
 }
 
 impl Default for ReplayOptions {
@@ -22,6 +25,7 @@ impl Default for ReplayOptions {
         ReplayOptions {
             tolerance_ns: super::association::DEFAULT_TOLERANCE_NS,
             skip_corrupt: false,
+            max_pose_gap_ns: None,
         }
     }
 }
@@ -66,8 +70,13 @@ impl Replay {
         }
         poses.sort_by_key(|p| p.0);
         let has_depth = recording.header().streams.contains(&StreamKind::Depth);
-        let (frames, mut stats) =
-            associate(recording.index(), &poses, has_depth, options.tolerance_ns);
+        let (frames, mut stats) = associate(
+            recording.index(),
+            &poses,
+            has_depth,
+            options.tolerance_ns,
+            options.max_pose_gap_ns,
+        );
         stats.skipped_corrupt_poses = skipped_corrupt_poses;
         Ok(Replay {
             recording,

@@ -251,3 +251,25 @@ fn a_run_with_every_frame_skipped_as_corrupt_fails() {
         assert!(err.ends_with(expected), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn a_corrupt_pose_skips_the_frames_that_take_their_pose_from_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let path = small_recording(d, 6);
+    // Frame 0's pose (nothing before it to interpolate from) and frame 3's (mid-run:
+    // it used to be interpolated from frames 2 and 4, silently).
+    corrupt_record(&path, StreamKind::Pose, 0);
+    corrupt_record(&path, StreamKind::Pose, 3);
+    let (frames, errors) = replay_skipping_corrupt(d);
+    assert_eq!(frames, ["000001", "000002", "000004", "000005"]);
+    assert!(
+        errors.contains("2 corrupt frame(s) skipped: 2 with a corrupt pose record"),
+        "{errors}"
+    );
+    assert!(errors.contains("skipped corrupt frame 3: "), "{errors}");
+    let o = ok(run_in(d, &["inspect", "small.relume", "--json"]));
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(doc["association"]["frames_with_corrupt_pose"], 2);
+    assert_eq!(doc["frames_with_pose"], 4);
+}

@@ -130,10 +130,12 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
             s.frames_with_truth
         )?;
         outln!(
-            "  skipped   {} color records without depth within {} ms, {} corrupt pose records",
+            "  skipped   {} color records without depth within {} ms, {} corrupt pose records \
+             ({} frames take their pose from one: a replay skips them)",
             s.skipped_no_depth,
             relume::recording::association::DEFAULT_TOLERANCE_NS / 1_000_000,
-            s.skipped_corrupt_poses
+            s.skipped_corrupt_poses,
+            s.frames_with_corrupt_pose
         )?;
         if s.frames_in_pose_gaps > 0 {
             outln!(

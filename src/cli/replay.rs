@@ -410,7 +410,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
         eprintln!("skipped corrupt frame {frame}: {cause}");
     }
     if !report.skipped_corrupt.is_empty() {
-        eprintln!("{} corrupt frame(s) skipped", report.skipped_corrupt.len());
+        eprintln!("{}", skipped_summary(&report.skipped_corrupt));
     }
     if let Some(path) = &a.timings {
         report
@@ -457,6 +457,36 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
     }
     some_frame_replayed(&loaded, &report)?;
     Ok(0)
+}
+
+/// "3 corrupt frame(s) skipped: 2 with a corrupt color record, 1 with a corrupt pose
+/// record", from the causes a run recorded (the kind of record each names).
+pub(super) fn skipped_summary(skipped: &[(usize, String)]) -> String {
+    let mut by_cause: Vec<(String, usize)> = Vec::new();
+    for (_, cause) in skipped {
+        // Record errors name the record as "record N (kind)".
+        let kind = cause
+            .split_once(") at byte")
+            .and_then(|(head, _)| head.rsplit_once('('))
+            .map(|(_, kind)| kind);
+        let what = match kind {
+            Some(k) => format!("a corrupt {k} record"),
+            None => "another cause".to_string(),
+        };
+        match by_cause.iter_mut().find(|(w, _)| *w == what) {
+            Some(entry) => entry.1 += 1,
+            None => by_cause.push((what, 1)),
+        }
+    }
+    let parts: Vec<String> = by_cause
+        .iter()
+        .map(|(w, n)| format!("{n} with {w}"))
+        .collect();
+    format!(
+        "{} corrupt frame(s) skipped: {}",
+        skipped.len(),
+        parts.join(", ")
+    )
 }
 
 /// An error when a run went through but replayed no frame: every frame in the range was

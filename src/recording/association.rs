@@ -19,6 +19,41 @@ pub struct FrameRef {
     pub depth: Option<usize>,
     pub truth: Option<usize>,
     pub pose: Option<Pose>,
+    /// A corrupt pose record (skipped under `--skip-corrupt`) that this frame's pose
+    /// would be interpolated from: reading the frame fails with that record's error, so
+    /// that the frame is skipped and counted rather than given an invented pose.
+    pub corrupt_pose: Option<usize>,
+}
+
+/// Marks the frames whose pose would come from a corrupt pose record: those for which
+/// a corrupt stamp lies between the valid samples around them (`poses` sorted by
+/// stamp; `corrupt` as (stamp, record)). Returns how many were marked.
+pub fn mark_corrupt_poses(
+    frames: &mut [FrameRef],
+    poses: &[(i64, Pose)],
+    corrupt: &[(i64, usize)],
+) -> usize {
+    let mut marked = 0;
+    for f in frames.iter_mut() {
+        let t = f.stamp_ns;
+        let at = poses.partition_point(|&(s, _)| s < t);
+        let exact = poses.get(at).is_some_and(|&(s, _)| s == t);
+        let before = if exact {
+            t
+        } else {
+            at.checked_sub(1).map_or(i64::MIN, |i| poses[i].0)
+        };
+        let after = poses.get(at).map_or(i64::MAX, |&(s, _)| s);
+        let hit = corrupt
+            .iter()
+            .find(|&&(c, _)| (before..=after).contains(&c));
+        if let Some(&(_, record)) = hit {
+            f.corrupt_pose = Some(record);
+            f.pose = None;
+            marked += 1;
+        }
+    }
+    marked
 }
 
 /// Counts of what association found.
@@ -37,6 +72,8 @@ pub struct AssociationStats {
     pub skipped_no_depth: usize,
     /// Pose records skipped because they could not be read (with `--skip-corrupt`).
     pub skipped_corrupt_poses: usize,
+    /// Frames whose pose would come from such a record: replay skips and counts them.
+    pub frames_with_corrupt_pose: usize,
     /// Frames inside the pose stream that have no pose because the samples around them
     /// are further apart than the largest interpolation gap.
     pub frames_in_pose_gaps: usize,
@@ -168,6 +205,7 @@ pub fn associate(
             depth,
             truth: nearest(&truths, stamp_ns, tolerance_ns),
             pose: pose_at(poses, stamp_ns, max_gap),
+            corrupt_pose: None,
         };
         if frame.pose.is_none() && pose_at(poses, stamp_ns, i64::MAX).is_some() {
             stats.frames_in_pose_gaps += 1;

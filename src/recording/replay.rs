@@ -57,6 +57,7 @@ impl Replay {
         let recording = Recording::open(path)?;
         let mut poses = Vec::new();
         let mut skipped_corrupt_poses = 0;
+        let mut corrupt_poses = Vec::new();
         for (i, e) in recording.index().iter().enumerate() {
             if e.kind != StreamKind::Pose {
                 continue;
@@ -64,7 +65,10 @@ impl Replay {
             match recording.read_record(i) {
                 Ok(Record::Pose(p)) => poses.push((p.stamp_ns, p.pose)),
                 Ok(_) => unreachable!("read_record checks the kind against the index"),
-                Err(_) if options.skip_corrupt => skipped_corrupt_poses += 1,
+                Err(_) if options.skip_corrupt => {
+                    skipped_corrupt_poses += 1;
+                    corrupt_poses.push((e.stamp_ns, i));
+                }
                 Err(e) => return Err(e),
             }
         }
@@ -78,6 +82,10 @@ impl Replay {
             options.max_pose_gap_ns,
         );
         stats.skipped_corrupt_poses = skipped_corrupt_poses;
+        let mut frames = frames;
+        stats.frames_with_corrupt_pose =
+            super::association::mark_corrupt_poses(&mut frames, &poses, &corrupt_poses);
+        stats.frames_with_pose = frames.iter().filter(|f| f.pose.is_some()).count();
         Ok(Replay {
             recording,
             frames,
@@ -139,6 +147,10 @@ impl Replay {
                 frame: n,
                 frames: self.frames.len(),
             })?;
+        if let Some(record) = f.corrupt_pose {
+            // The record's own error (it failed when the recording was opened).
+            self.recording.read_record(record)?;
+        }
         let color = match self.recording.read_record(f.color)? {
             Record::Color(c) => c,
             _ => unreachable!("read_record checks the kind against the index"),

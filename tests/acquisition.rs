@@ -157,7 +157,7 @@ kind = "decode"
 kind = "depth.to_points"
 [[stage]]
 kind = "normals.cross"
-outputs = { normals = "cross_normals" }
+outputs = { normals = "cross_normals", refined_depth = "cross_depth" }
 [[stage]]
 kind = "normals.plane_fit"
 outputs = { normals = "fit_normals" }

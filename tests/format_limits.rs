@@ -32,56 +32,53 @@ fn quickly<T>(f: impl FnOnce() -> T) -> T {
 fn a_record_declaring_4_gib_is_rejected_before_allocation() {
     let s = Sample::new();
     let victim = s.index[4];
-    for declared in [u32::MAX, MAX_PAYLOAD_LEN + 1, MAX_PAYLOAD_LEN, 1 << 30] {
+    for declared in [u32::MAX, MAX_PAYLOAD_LEN + 1, MAX_PAYLOAD_LEN, 1 << 30, 7] {
         let mut bytes = s.bytes.clone();
         set_len(&mut bytes, victim.offset, declared);
         let path = s.variant("huge.relume", &bytes);
         let rec = Recording::open(&path).unwrap();
         assert!(rec.damage().is_none());
-        let err = quickly(|| rec.read_record(4)).unwrap_err();
-        if declared > MAX_PAYLOAD_LEN {
-            match err {
-                RecordingError::Corrupt { offset, reason, .. } => {
-                    assert_eq!(offset, victim.offset);
-                    assert!(
-                        reason.contains(&format!("declares {declared} bytes, over the limit")),
-                        "{reason}"
-                    );
-                }
-                other => panic!("{declared}: {other:?}"),
+        // In a complete file the index knows the length: the damage is named as such,
+        // not taken for the file ending early.
+        match quickly(|| rec.read_record(4)).unwrap_err() {
+            RecordingError::Corrupt { offset, reason, .. } => {
+                assert_eq!(offset, victim.offset);
+                assert_eq!(
+                    reason,
+                    format!(
+                        "record 4 (depth) has a damaged length field: its frame declares \
+                         {declared} bytes, the index {}",
+                        victim.len
+                    )
+                );
             }
-        } else {
-            match err {
-                RecordingError::Truncated { offset, what, .. } => {
-                    assert_eq!(offset, s.len());
-                    assert!(
-                        what.contains(&format!("at byte {}", victim.offset)),
-                        "{what}"
-                    );
-                }
-                other => panic!("{declared}: {other:?}"),
-            }
+            other => panic!("{declared}: {other:?}"),
         }
         assert_eq!(rec.read_record(3).unwrap(), s.records[3]);
         assert_eq!(rec.read_record(5).unwrap(), s.records[5]);
 
-        // Without a footer the scan stops there, keeping the records before it.
+        // Without a footer the scan loses that record only: it resumes at the next
+        // record whose checksum holds.
         let cut = s.footer_at as usize;
         let path = s.variant("huge-cut.relume", &bytes[..cut]);
         let rec = quickly(|| Recording::open(&path)).unwrap();
-        assert_eq!(rec.index(), &s.index[..4]);
+        let mut expected = s.index.clone();
+        expected.remove(4);
+        assert_eq!(rec.index(), &expected[..], "{declared}");
         assert_all_records_read_back(&rec, &s);
         match rec.damage() {
-            Some(RecordingError::Corrupt { offset, .. }) => {
-                assert!(declared > MAX_PAYLOAD_LEN);
+            Some(RecordingError::Corrupt { offset, reason, .. }) => {
                 assert_eq!(*offset, victim.offset);
-            }
-            Some(RecordingError::Truncated { offset, what, .. }) => {
-                assert!(declared <= MAX_PAYLOAD_LEN);
-                assert_eq!(*offset, cut as u64);
+                let next = s.index[5].offset;
                 assert!(
-                    what.contains(&format!("record 4 at byte {}", victim.offset)),
-                    "{what}"
+                    reason
+                        .starts_with(&format!("a damaged length field at byte {}", victim.offset))
+                        && reason.ends_with(&format!(
+                            "the scan resumed at byte {next}, the next record whose checksum \
+                             holds, losing {} bytes",
+                            next - victim.offset
+                        )),
+                    "{reason}"
                 );
             }
             other => panic!("{declared}: {other:?}"),
@@ -346,10 +343,19 @@ fn replay_of_a_corrupt_pose_fails_at_open_unless_skipping() {
     let replay = Replay::open(&path, options).unwrap();
     assert_eq!(replay.stats.skipped_corrupt_poses, 1);
     assert_eq!(replay.len(), 3);
-    // Only frame 0 lies inside the remaining pose stream.
+    // Frames 1 and 2 would take their pose from the corrupt record (frame 2's own; frame
+    // 1 lies between frame 0's pose and it): reading them fails with that record's
+    // error, so --skip-corrupt skips them.
+    let marked: Vec<Option<usize>> = replay.frames.iter().map(|f| f.corrupt_pose).collect();
+    assert_eq!(marked, [None, Some(8), Some(8)]);
+    assert_eq!(replay.stats.frames_with_corrupt_pose, 2);
     assert_eq!(replay.stats.frames_with_pose, 1);
-    for n in 0..3 {
-        replay.read_frame(n).unwrap();
+    replay.read_frame(0).unwrap();
+    for n in 1..3 {
+        match replay.read_frame(n) {
+            Err(RecordingError::Checksum { record: 8, .. }) => {}
+            other => panic!("{other:?}"),
+        }
     }
 }
 

@@ -106,6 +106,23 @@ impl Recording {
             reason: format!("record {i} does not exist ({} records)", self.index.len()),
         })?;
         let what = entry.kind.name();
+        // A length field that disagrees with the index is damage in a complete file, not
+        // the file ending early: say so before following it.
+        if entry.offset + FRAME_HEADER_LEN <= self.file_len {
+            let mut b = [0u8; FRAME_HEADER_LEN as usize];
+            self.read_exact_at(&mut b, entry.offset)?;
+            let declared = FrameHeader::parse(&b).len;
+            if declared != entry.len {
+                return Err(self.corrupt(
+                    entry.offset,
+                    format!(
+                        "record {i} ({what}) has a damaged length field: its frame declares \
+                         {declared} bytes, the index {}",
+                        entry.len
+                    ),
+                ));
+            }
+        }
         let (frame, payload) = self.read_frame_at(entry.offset, what)?;
         if frame.len != entry.len || Tag::from_byte(frame.tag_byte) != Some(Tag::Stream(entry.kind))
         {
@@ -297,12 +314,49 @@ impl Recording {
     /// Rebuilds the index by walking frame headers from `start`. Returns the complete
     /// records and, if the walk stopped before a clean end, why.
     fn scan(&self, start: u64) -> (Vec<IndexEntry>, Option<RecordingError>) {
-        let mut index = Vec::new();
+        let mut index: Vec<IndexEntry> = Vec::new();
         let mut offset = start;
+        let mut damage = None;
         while offset < self.file_len {
             let frame = match self.frame_header_at(offset, &format!("record {}", index.len())) {
                 Ok(f) => f,
-                Err(e) => return (index, Some(e)),
+                Err(e) => {
+                    // A damaged length field sends the scan into the middle of a record
+                    // (or past the end). Where the last record's checksum fails, its
+                    // length was the damage: drop it and look for the next record whose
+                    // checksum holds from just after its frame header.
+                    let last_is_damaged = index
+                        .last()
+                        .is_some_and(|last| !self.payload_checks(last.offset, last.len));
+                    let (from, dropped) = match index.last() {
+                        Some(last) if last_is_damaged => (last.offset + FRAME_HEADER_LEN, true),
+                        _ => (offset + 1, false),
+                    };
+                    let lost_at = if dropped {
+                        index.last().map_or(offset, |l| l.offset)
+                    } else {
+                        offset
+                    };
+                    let Some(next) = self.next_valid_frame(from) else {
+                        return (index, damage.or(Some(e)));
+                    };
+                    if dropped {
+                        index.pop();
+                    }
+                    damage.get_or_insert_with(|| {
+                        self.corrupt(
+                            lost_at,
+                            format!(
+                                "a damaged length field at byte {lost_at} ({e}); the scan resumed \
+                                 at byte {next}, the next record whose checksum holds, losing \
+                                 {} bytes",
+                                next - lost_at
+                            ),
+                        )
+                    });
+                    offset = next;
+                    continue;
+                }
             };
             match Tag::from_byte(frame.tag_byte) {
                 Some(Tag::Stream(kind)) => index.push(IndexEntry {
@@ -312,18 +366,60 @@ impl Recording {
                     len: frame.len,
                 }),
                 // A footer that failed to read: everything before it is recovered.
-                Some(Tag::Index) => return (index, None),
+                Some(Tag::Index) => return (index, damage),
                 Some(Tag::Header) => {
                     return (
                         index,
-                        Some(self.corrupt(offset, "a second header inside the records".into())),
+                        damage.or_else(|| {
+                            Some(self.corrupt(offset, "a second header inside the records".into()))
+                        }),
                     );
                 }
                 None => unreachable!("frame_header_at checks the tag"),
             }
             offset += FRAME_HEADER_LEN + frame.len as u64;
         }
-        (index, None)
+        (index, damage)
+    }
+
+    /// Whether the stream record framed at `offset` with `len` payload bytes has a
+    /// checksum that holds.
+    fn payload_checks(&self, offset: u64, len: u32) -> bool {
+        let Ok((frame, payload)) = self.read_frame_at(offset, "a record") else {
+            return false;
+        };
+        frame.len == len
+            && FrameHeader::checksum(frame.tag_byte, frame.stamp_ns, &payload) == frame.crc
+    }
+
+    /// The first offset at or after `from` where a stream record (or the footer) starts
+    /// whose frame fits in the file and whose checksum holds.
+    fn next_valid_frame(&self, from: u64) -> Option<u64> {
+        const WINDOW: u64 = 1 << 20;
+        let mut at = from;
+        while at + FRAME_HEADER_LEN <= self.file_len {
+            let n = WINDOW.min(self.file_len - at) as usize;
+            let mut buf = vec![0u8; n];
+            self.read_exact_at(&mut buf, at).ok()?;
+            for i in 0..n.saturating_sub(FRAME_HEADER_LEN as usize - 1) {
+                let b: &[u8; FRAME_HEADER_LEN as usize] = buf[i..i + FRAME_HEADER_LEN as usize]
+                    .try_into()
+                    .expect("a header's length");
+                let frame = FrameHeader::parse(b);
+                let tag = Tag::from_byte(frame.tag_byte);
+                let offset = at + i as u64;
+                if frame.reserved == [0; 3]
+                    && matches!(tag, Some(Tag::Stream(_)) | Some(Tag::Index))
+                    && frame.len <= MAX_PAYLOAD_LEN
+                    && offset + FRAME_HEADER_LEN + frame.len as u64 <= self.file_len
+                    && self.payload_checks(offset, frame.len)
+                {
+                    return Some(offset);
+                }
+            }
+            at += (n as u64).saturating_sub(FRAME_HEADER_LEN - 1).max(1);
+        }
+        None
     }
 
     fn check_crc(

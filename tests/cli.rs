@@ -542,6 +542,14 @@ fn a_killed_runs_half_written_files_go_and_an_earlier_runs_frames_are_named() {
     // What a killed run leaves: a hidden temporary of a process that no longer runs.
     let stale = folder.join(".000001.png.999999999.partial");
     std::fs::write(&stale, vec![0u8; 1000]).unwrap();
+    // Untouched for two hours (a live writer on another machine keeps it fresh).
+    let two_hours_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(7200);
+    std::fs::File::options()
+        .write(true)
+        .open(&stale)
+        .unwrap()
+        .set_modified(two_hours_ago)
+        .unwrap();
     let said = replay(&["--frames", "0..2"]);
     assert!(!stale.exists(), "the half-written file is removed");
     assert!(

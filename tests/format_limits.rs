@@ -71,8 +71,7 @@ fn a_record_declaring_4_gib_is_rejected_before_allocation() {
                 assert_eq!(*offset, victim.offset);
                 let next = s.index[5].offset;
                 assert!(
-                    reason
-                        .starts_with(&format!("a damaged length field at byte {}", victim.offset))
+                    reason.starts_with(&format!("the record at byte {} is damaged", victim.offset))
                         && reason.ends_with(&format!(
                             "the scan resumed at byte {next}, the next record whose checksum \
                              holds, losing {} bytes",

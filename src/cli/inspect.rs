@@ -131,7 +131,7 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
         )?;
         outln!(
             "  skipped   {} color records without depth within {} ms, {} corrupt pose records \
-             ({} frames take their pose from one: a replay skips them)",
+             ({} frames take their pose from one: a replay with --skip-corrupt skips them)",
             s.skipped_no_depth,
             relume::recording::association::DEFAULT_TOLERANCE_NS / 1_000_000,
             s.skipped_corrupt_poses,

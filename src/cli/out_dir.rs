@@ -36,7 +36,9 @@ fn collect_partials(dir: &Path, depth: usize, found: &mut Vec<PathBuf>) {
     };
     for entry in entries.flatten() {
         let path = entry.path();
-        if path.is_dir() {
+        // Not through symbolic links: only what lies under the folder itself.
+        let is_dir = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir());
+        if is_dir {
             if depth > 0 {
                 collect_partials(&path, depth - 1, found);
             }

@@ -237,6 +237,20 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         ("color", &header.color_intrinsics),
         ("depth", &header.depth_intrinsics),
     ];
+    let (c, d) = (&header.color_intrinsics, &header.depth_intrinsics);
+    if matches!(intrinsics, importers::CameraIntrinsics::Given { .. })
+        && (c.width, c.height) != (d.width, d.height)
+    {
+        eprintln!(
+            "warning: {}: the given intrinsics apply to both the color ({}x{}) and the depth \
+             ({}x{}) images, as given: one of the two streams needs other values",
+            out.display(),
+            c.width,
+            c.height,
+            d.width,
+            d.height
+        );
+    }
     let mut noted = Vec::new();
     for (stream, k) in sizes {
         let size = (k.width, k.height);

@@ -28,7 +28,8 @@ struct Lines {
 
 /// A progress bar over `len` items of `unit` ("frames"), doing `what` ("replaying").
 pub fn bar(len: u64, what: &str, unit: &'static str) -> Progress {
-    let terminal = std::io::stdout().is_terminal();
+    // The bar draws on stderr: a terminal there gets the bar, a log the lines.
+    let terminal = std::io::stderr().is_terminal();
     let target = if terminal {
         ProgressDrawTarget::stderr()
     } else {
@@ -45,8 +46,8 @@ pub fn bar(len: u64, what: &str, unit: &'static str) -> Progress {
     let every = std::env::var("RELUME_PROGRESS_SECONDS")
         .ok()
         .and_then(|s| s.parse::<f64>().ok())
-        .filter(|s| s.is_finite() && *s >= 0.0)
-        .map_or(LINE_EVERY, Duration::from_secs_f64);
+        .and_then(|s| Duration::try_from_secs_f64(s).ok())
+        .unwrap_or(LINE_EVERY);
     let lines = (!terminal).then(|| Lines {
         every,
         what: what.to_string(),

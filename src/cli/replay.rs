@@ -52,7 +52,7 @@ pub struct RunArgs {
 /// `--max-pose-gap`: milliseconds, positive and finite, as nanoseconds.
 pub(super) fn parse_gap_ms(text: &str) -> Result<i64, String> {
     match text.trim().parse::<f64>() {
-        Ok(ms) if ms.is_finite() && ms > 0.0 && ms < 1e12 => Ok((ms * 1e6).round() as i64),
+        Ok(ms) if (1e-6..1e12).contains(&ms) => Ok((ms * 1e6).round() as i64),
         _ => Err(format!(
             "invalid gap {text:?}: expected milliseconds, a positive number"
         )),
@@ -178,7 +178,7 @@ pub(super) fn open_recording(args: &RunArgs) -> anyhow::Result<(Replay, Range<us
     }
     if let Some(damage) = replay.recording.damage() {
         eprintln!(
-            "warning: {damage}; replaying the {} complete frames before it",
+            "warning: {damage}; replaying the {} complete frames it holds",
             replay.len()
         );
     }

@@ -44,9 +44,14 @@ pub fn mark_corrupt_poses(
             at.checked_sub(1).map_or(i64::MIN, |i| poses[i].0)
         };
         let after = poses.get(at).map_or(i64::MAX, |&(s, _)| s);
-        let hit = corrupt
-            .iter()
-            .find(|&&(c, _)| (before..=after).contains(&c));
+        // Outside the valid samples only a corrupt stamp on the frame's far side would
+        // have given it a pose: at or before it when no valid sample precedes it, at or
+        // after it when none follows.
+        let hit = corrupt.iter().find(|&&(c, _)| {
+            (before..=after).contains(&c)
+                && (before != i64::MIN || c <= t)
+                && (after != i64::MAX || c >= t)
+        });
         if let Some(&(_, record)) = hit {
             f.corrupt_pose = Some(record);
             f.pose = None;

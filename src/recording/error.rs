@@ -67,6 +67,24 @@ pub enum RecordingError {
 }
 
 impl RecordingError {
+    /// The message without the file name in front (for an error quoted inside another).
+    pub fn reason(&self) -> String {
+        let text = self.to_string();
+        let path = match self {
+            RecordingError::Io { path, .. }
+            | RecordingError::BadMagic { path }
+            | RecordingError::UnsupportedVersion { path, .. }
+            | RecordingError::Truncated { path, .. }
+            | RecordingError::Checksum { path, .. }
+            | RecordingError::Corrupt { path, .. }
+            | RecordingError::Decode { path, .. }
+            | RecordingError::FrameOutOfRange { path, .. }
+            | RecordingError::Invalid { path, .. } => path,
+        };
+        let prefix = format!("{}: ", path.display());
+        text.strip_prefix(&prefix).unwrap_or(&text).to_string()
+    }
+
     pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
         RecordingError::Io {
             path: path.to_path_buf(),

@@ -347,9 +347,10 @@ impl Recording {
                         self.corrupt(
                             lost_at,
                             format!(
-                                "a damaged length field at byte {lost_at} ({e}); the scan resumed \
-                                 at byte {next}, the next record whose checksum holds, losing \
-                                 {} bytes",
+                                "the record at byte {lost_at} is damaged (a bad length field or \
+                                 frame header: {}); the scan resumed at byte {next}, the next \
+                                 record whose checksum holds, losing {} bytes",
+                                e.reason(),
                                 next - lost_at
                             ),
                         )
@@ -392,10 +393,30 @@ impl Recording {
             && FrameHeader::checksum(frame.tag_byte, frame.stamp_ns, &payload) == frame.crc
     }
 
+    /// Whether `offset` is the end of the file or holds what looks like a frame header
+    /// (a cheap test before a candidate's checksum is computed).
+    fn frame_starts_or_file_ends(&self, offset: u64) -> bool {
+        if offset == self.file_len {
+            return true;
+        }
+        if offset + FRAME_HEADER_LEN > self.file_len {
+            return false;
+        }
+        let mut b = [0u8; FRAME_HEADER_LEN as usize];
+        if self.read_exact_at(&mut b, offset).is_err() {
+            return false;
+        }
+        let frame = FrameHeader::parse(&b);
+        frame.reserved == [0; 3] && Tag::from_byte(frame.tag_byte).is_some()
+    }
+
     /// The first offset at or after `from` where a stream record (or the footer) starts
     /// whose frame fits in the file and whose checksum holds.
     fn next_valid_frame(&self, from: u64) -> Option<u64> {
         const WINDOW: u64 = 1 << 20;
+        // Payload bytes checksummed in the search at most: a crafted file full of
+        // plausible headers ends the search instead of reading for hours.
+        let mut budget: u64 = 1 << 30;
         let mut at = from;
         while at + FRAME_HEADER_LEN <= self.file_len {
             let n = WINDOW.min(self.file_len - at) as usize;
@@ -408,13 +429,20 @@ impl Recording {
                 let frame = FrameHeader::parse(b);
                 let tag = Tag::from_byte(frame.tag_byte);
                 let offset = at + i as u64;
-                if frame.reserved == [0; 3]
+                let end = offset + FRAME_HEADER_LEN + frame.len as u64;
+                let plausible = frame.reserved == [0; 3]
                     && matches!(tag, Some(Tag::Stream(_)) | Some(Tag::Index))
                     && frame.len <= MAX_PAYLOAD_LEN
-                    && offset + FRAME_HEADER_LEN + frame.len as u64 <= self.file_len
-                    && self.payload_checks(offset, frame.len)
-                {
-                    return Some(offset);
+                    && end <= self.file_len
+                    && self.frame_starts_or_file_ends(end);
+                if plausible {
+                    if budget < frame.len as u64 {
+                        return None;
+                    }
+                    budget -= frame.len as u64;
+                    if self.payload_checks(offset, frame.len) {
+                        return Some(offset);
+                    }
                 }
             }
             at += (n as u64).saturating_sub(FRAME_HEADER_LEN - 1).max(1);

@@ -82,7 +82,7 @@ pub fn numbering_gap(folder: &Path, files: &[PathBuf]) -> Option<String> {
         .windows(2)
         .map(|w| w[1].saturating_sub(w[0]).saturating_sub(1))
         .sum();
-    let first = numbers.windows(2).find(|w| w[1] > w[0] + 1)?;
+    let first = numbers.windows(2).find(|w| w[1] > w[0].saturating_add(1))?;
     Some(format!(
         "{}: the file numbers jump from {} to {} ({missing} number(s) missing in all): \
          frames are paired and stamped by position (frame k at k / fps, with the \

@@ -6,7 +6,7 @@ use super::config::{self, ConfigError, Located, PipelineDecl, RawValue, SourceFi
 use super::frame::ProductKind;
 use super::params::{ParamDefault, ParamSpec, ParamValue, Params, a, did_you_mean};
 use super::registry::Registry;
-use super::stage::{BuildContext, Stage, StageError};
+use super::stage::{Stage, StageError};
 use crate::recording::Header;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -291,7 +291,8 @@ impl Pipeline {
         })
     }
 
-    /// Builds every stage for a run over a recording with `header`.
+    /// Builds every stage for a run over a recording with `header` (the one-branch
+    /// case of [`super::tree::StageGraph::build`]).
     pub fn build(
         &self,
         registry: &Registry,
@@ -299,28 +300,9 @@ impl Pipeline {
         out_dir: &Path,
         seed: u64,
     ) -> Result<Vec<Box<dyn Stage>>, (String, StageError)> {
-        self.stages
-            .iter()
-            .map(|s| {
-                let info = registry.get(s.kind).ok_or_else(|| {
-                    (
-                        s.name.clone(),
-                        StageError::Failed(format!("stage kind `{}` is not registered", s.kind)),
-                    )
-                })?;
-                let ctx = BuildContext {
-                    stage_name: &s.name,
-                    params: &s.params,
-                    inputs: &s.inputs,
-                    outputs: &s.outputs,
-                    header,
-                    out_dir,
-                    seed,
-                    objects: &self.objects,
-                };
-                (info.build)(&ctx).map_err(|e| (s.name.clone(), e))
-            })
-            .collect()
+        super::tree::StageGraph::linear(self)
+            .build(registry, header, &[out_dir.to_path_buf()], seed)
+            .map_err(|(node, e)| (self.stages[node].name.clone(), e))
     }
 }
 

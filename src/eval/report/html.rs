@@ -249,21 +249,14 @@ fn scores(h: &mut String, c: &Comparison) {
             let _ = write!(h, "<th>{}</th>", escape(k));
         }
         h.push_str("</tr>");
-        let columns: Vec<Vec<Option<f64>>> = keys
-            .iter()
-            .map(|k| {
-                (0..c.variants.len())
-                    .map(|v| c.score(v, &stage, k))
-                    .collect()
-            })
-            .collect();
+        let columns = c.score_columns(&stage, &keys);
         for (v, variant) in c.variants.iter().enumerate() {
             if variant.scores.get(&stage).is_none() {
                 continue;
             }
             let _ = write!(h, "<tr><td>{}</td>", escape(&variant.label));
-            for (k, col) in keys.iter().zip(&columns) {
-                h.push_str(&td(col[v], Comparison::best(k, col).contains(&v)));
+            for col in &columns {
+                h.push_str(&td(col.values[v], col.best.contains(&v)));
             }
             h.push_str("</tr>");
         }

@@ -61,27 +61,14 @@ pub fn render(c: &Comparison) -> String {
         let _ = writeln!(md, "## {stage} ({kind})\n");
         let _ = writeln!(md, "| variant | {} |", keys.join(" | "));
         let _ = writeln!(md, "|---|{}", "---|".repeat(keys.len()));
-        let columns: Vec<Vec<Option<f64>>> = keys
-            .iter()
-            .map(|k| {
-                (0..c.variants.len())
-                    .map(|v| c.score(v, &stage, k))
-                    .collect()
-            })
-            .collect();
-        let best: Vec<Vec<usize>> = keys
-            .iter()
-            .zip(&columns)
-            .map(|(k, col)| Comparison::best(k, col))
-            .collect();
+        let columns = c.score_columns(&stage, &keys);
         for (v, variant) in c.variants.iter().enumerate() {
             if variant.scores.get(&stage).is_none() {
                 continue;
             }
             let cells: Vec<String> = columns
                 .iter()
-                .zip(&best)
-                .map(|(col, b)| cell(col[v], b.contains(&v)))
+                .map(|col| cell(col.values[v], col.best.contains(&v)))
                 .collect();
             let _ = writeln!(md, "| {} | {} |", variant.label, cells.join(" | "));
         }

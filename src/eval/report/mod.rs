@@ -89,6 +89,14 @@ pub struct VariantImages {
     pub psnr_db: Option<f64>,
 }
 
+/// One score across the variants, as the report tables show it.
+pub struct ScoreColumn {
+    /// Per variant, its value (`None` where it has none).
+    pub values: Vec<Option<f64>>,
+    /// The variants with the best value.
+    pub best: Vec<usize>,
+}
+
 /// Which way a score is better, by its key: `Some(true)` higher, `Some(false)` lower,
 /// `None` where neither is (counts, flags, frame lists).
 pub fn higher_is_better(key: &str) -> Option<bool> {
@@ -163,6 +171,20 @@ impl Comparison {
             }
         }
         tables
+    }
+
+    /// For each of `keys`, the score column of the stage named `stage` (one value per
+    /// variant) and the variants that are best in it ([`Comparison::best`]).
+    pub fn score_columns(&self, stage: &str, keys: &[String]) -> Vec<ScoreColumn> {
+        keys.iter()
+            .map(|k| {
+                let values: Vec<Option<f64>> = (0..self.variants.len())
+                    .map(|v| self.score(v, stage, k))
+                    .collect();
+                let best = Comparison::best(k, &values);
+                ScoreColumn { values, best }
+            })
+            .collect()
     }
 
     /// The indices among `values` of the best, by `key`'s direction: every one that

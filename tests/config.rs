@@ -450,7 +450,7 @@ fn object_errors_are_located_and_explained() {
     assert_eq!(
         e.hint.as_deref(),
         Some(
-            "did you mean `radius`? keys of a sphere: radius, segments; of every object: name, shape, translation, rotation_deg, scale, albedo, exponent"
+            "did you mean `radius`? keys of a sphere: radius, segments; of every object: name, shape, translation, rotation_deg, scale, albedo, exponent, anchor, at_pixel, frame"
         )
     );
     // A key of another shape is unknown too.

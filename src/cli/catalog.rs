@@ -1,4 +1,4 @@
-//! `relume stages` and `relume validate`.
+//! `relume stages`, `relume objects` and `relume validate`.
 
 use clap::Args;
 use relume::graph::{ParamValue, Params, Pipeline, Registry};
@@ -9,6 +9,14 @@ pub struct StagesArgs {
     /// Print JSON: a list of {kind, summary, inputs, outputs, params}; ports are {role,
     /// default (product name), kinds, optional}, parameters {name, type, default (a value
     /// of that type), min, max, choices, doc}.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct ObjectsArgs {
+    /// Print JSON: a list of {name, shape (null for keys every object takes), kind,
+    /// min, max, doc}.
     #[arg(long)]
     json: bool,
 }
@@ -76,6 +84,85 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
     Ok(0)
 }
 
+const OBJECTS_INTRO: &str = "\
+[[object]] tables in a pipeline file add virtual objects to its scene. Every key is
+checked when the pipeline loads (`relume validate FILE` says what is wrong, and where).
+A point p of the shape lands at
+
+    origin + axes (translation + R (scale p)),   R = Rz Ry Rx (rotation_deg),
+
+where origin and axes are the world's (the recording's poses, metres), or, with
+`anchor = \"floor\"` or `at_pixel`, a frame on a real surface found in the recording
+when it is opened: y along the surface's normal (up, from a floor), x the image's
+rightward direction in frame `frame`, z towards the camera. Built-in shapes are
+centred on their origin with y up, so translation = [0, half the height, 0] stands
+one on the surface. The run prints where each anchored object went.";
+
+const OBJECTS_EXAMPLE: &str = "\
+Example: a ball on the floor where the centre of frame 0 sees it, and a box on the
+surface seen at pixel (410, 300) of frame 12:
+
+  [[object]]
+  name = \"ball\"
+  shape = \"sphere\"
+  radius = 0.2
+  anchor = \"floor\"
+  translation = [0, 0.2, 0]
+
+  [[object]]
+  shape = \"box\"
+  size = [0.3, 0.2, 0.3]
+  at_pixel = [410, 300]
+  frame = 12
+  translation = [0, 0.1, 0]
+  rotation_deg = [0, 30, 0]
+  albedo = [0.8, 0.3, 0.2]";
+
+pub fn objects(a: ObjectsArgs) -> anyhow::Result<i32> {
+    let keys = relume::objects::config::key_docs();
+    if a.json {
+        outln!("{}", serde_json::to_string_pretty(&keys)?)?;
+        return Ok(0);
+    }
+    outln!("{OBJECTS_INTRO}\n")?;
+    let mut shape = None;
+    outln!("Keys of every object:")?;
+    for key in &keys {
+        if key.shape != shape {
+            shape = key.shape;
+            let name = shape.unwrap_or_default();
+            outln!("\nKeys of shape = \"{name}\":")?;
+        }
+        let bounds = match (key.min, key.max) {
+            (Some(lo), Some(hi)) => format!(", {lo} to {hi}"),
+            _ => String::new(),
+        };
+        outln!("  {} ({}{bounds})", key.name, key.kind)?;
+        for line in wrap(key.doc, 82) {
+            outln!("      {line}")?;
+        }
+    }
+    outln!("\n{OBJECTS_EXAMPLE}")?;
+    Ok(0)
+}
+
+/// `text` in lines of at most `width` characters, broken at spaces.
+fn wrap(text: &str, width: usize) -> Vec<String> {
+    let mut lines: Vec<String> = vec![String::new()];
+    for word in text.split_whitespace() {
+        let line = lines.last_mut().expect("never empty");
+        if !line.is_empty() && line.len() + 1 + word.len() > width {
+            lines.push(word.to_string());
+        } else {
+            if !line.is_empty() {
+                line.push(' ');
+            }
+            line.push_str(word);
+        }
+    }
+    lines
+}
+
 /// A parameter value as JSON of its own type (a float default stays a number).
 fn json_value(value: &ParamValue) -> serde_json::Value {
     match value {
@@ -128,6 +215,20 @@ pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
             fb.product,
             pipeline.stages[fb.producer].name,
             pipeline.stages[fb.consumer].name
+        )?;
+    }
+    for object in pipeline
+        .declared_objects
+        .iter()
+        .filter(|o| o.sites.is_some())
+    {
+        outln!(
+            "  object `{}`: anchored to the recording's {}, placed when a run opens it",
+            object.spec.name,
+            match object.spec.anchor {
+                relume::objects::anchor::Anchor::Floor { .. } => "floor",
+                _ => "surface at a pixel",
+            }
         )?;
     }
     let objects = &pipeline.objects;

@@ -2,6 +2,7 @@
 //! shared first stages run once, each scored as `relume eval` scores it alone, and one
 //! report (see `relume::eval::report`).
 
+use super::place_objects;
 use super::progress;
 use super::replay::{RunArgs, open_recording, stop_on_interrupt};
 use anyhow::{Context, bail};
@@ -121,12 +122,6 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     for path in &a.pipelines {
         pipelines.push(Pipeline::load(path, &registry)?);
     }
-    // Equal objects become one allocation, so that references can be shared.
-    for i in 1..pipelines.len() {
-        if let Some(j) = (0..i).find(|&j| pipelines[j].objects == pipelines[i].objects) {
-            pipelines[i].objects = pipelines[j].objects.clone();
-        }
-    }
     let labels = labels(&pipelines);
     if a.out.exists() && !a.out.is_dir() {
         bail!("--out {}: not a folder", a.out.display());
@@ -141,6 +136,15 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
         max_pose_gap: None,
     };
     let (replay, frames) = open_recording(&run_args)?;
+    for pipeline in &mut pipelines {
+        place_objects(pipeline, &replay)?;
+    }
+    // Equal objects become one allocation, so that references can be shared.
+    for i in 1..pipelines.len() {
+        if let Some(j) = (0..i).find(|&j| pipelines[j].objects == pipelines[i].objects) {
+            pipelines[i].objects = pipelines[j].objects.clone();
+        }
+    }
     let header = replay.recording.header();
     let stride = a.reference_stride;
     let (w, h) = (

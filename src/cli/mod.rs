@@ -78,6 +78,9 @@ enum Command {
     Stages(catalog::StagesArgs),
     /// Check a pipeline file without running it.
     Validate(catalog::ValidateArgs),
+    /// List every key of a pipeline's `[[object]]` tables: shapes, placement (in the
+    /// world, or on the recording's floor or a surface seen at a pixel), material.
+    Objects(catalog::ObjectsArgs),
 }
 
 const EXAMPLES: &str = "\
@@ -92,6 +95,7 @@ Examples:
   relume eval recordings/default.relume --json      scores of the default pipeline's stages
   relume bench lr.relume -p pipelines/mixed-reality-livingroom1.toml --frames 0..20
   relume stages                                    what a pipeline can use
+  relume objects                                   the keys of [[object]] tables
   relume validate my.toml";
 
 /// An error before any work (a replay, a synth, an import), rather than after it, when
@@ -194,7 +198,19 @@ pub fn main() -> anyhow::Result<i32> {
         Command::Bench(a) => bench::bench(a),
         Command::Stages(a) => catalog::stages(a),
         Command::Validate(a) => catalog::validate(a),
+        Command::Objects(a) => catalog::objects(a),
     }
+}
+
+/// Places `pipeline`'s objects anchored to the scene on `replay`, saying where.
+pub(crate) fn place_objects(
+    pipeline: &mut relume::graph::Pipeline,
+    replay: &relume::recording::Replay,
+) -> anyhow::Result<()> {
+    for placed in pipeline.place_objects(replay)? {
+        eprintln!("{placed}");
+    }
+    Ok(())
 }
 
 /// Where the built-in default recording is kept.

@@ -136,6 +136,8 @@ pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
         None => Pipeline::builtin_default_with(&registry, &args.overrides)?,
     };
     let (replay, frames) = open_recording(args)?;
+    let mut pipeline = pipeline;
+    super::place_objects(&mut pipeline, &replay)?;
     Ok(Loaded {
         replay,
         pipeline,

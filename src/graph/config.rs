@@ -94,6 +94,16 @@ pub struct ConfigError {
 }
 
 impl ConfigError {
+    /// An error at the same place as this one, with another message and hint: for
+    /// values found wrong later, against a recording, at the place they were written.
+    pub fn retold(&self, message: impl Into<String>, hint: Option<String>) -> ConfigError {
+        ConfigError {
+            message: message.into(),
+            hint,
+            ..self.clone()
+        }
+    }
+
     /// An error about a file as a whole (e.g. unreadable).
     pub fn whole_file(file: &str, message: impl Into<String>) -> ConfigError {
         ConfigError {

@@ -54,8 +54,11 @@ pub struct Pipeline {
     pub stages: Vec<ResolvedStage>,
     pub feedback: Vec<Feedback>,
     /// The virtual objects of the `[[object]]` tables, in world space, BVH built (empty
-    /// when the config has none).
+    /// when the config has none). Objects anchored to the scene join it when
+    /// [`Pipeline::place_objects`] places them against a recording.
     pub objects: std::sync::Arc<crate::objects::VirtualScene>,
+    /// Every `[[object]]` table as declared, in order.
+    pub declared_objects: Vec<crate::objects::config::DeclaredObject>,
 }
 
 impl Pipeline {
@@ -287,8 +290,35 @@ impl Pipeline {
             channel_capacity,
             stages,
             feedback,
-            objects: std::sync::Arc::new(objects),
+            objects: std::sync::Arc::new(objects.world_scene),
+            declared_objects: objects.declared,
         })
+    }
+
+    /// The names of the objects anchored to the scene that have not been placed yet.
+    pub fn unplaced_objects(&self) -> Vec<&str> {
+        self.declared_objects
+            .iter()
+            .filter(|d| d.spec.placement_frame().is_err())
+            .map(|d| d.spec.name.as_str())
+            .collect()
+    }
+
+    /// Places the objects anchored to the scene (`anchor = "floor"`, `at_pixel`) on
+    /// `replay`'s surfaces and rebuilds [`Pipeline::objects`] with every object; says
+    /// where each was placed. Nothing to do (and an empty list) when none is anchored.
+    /// Errors stand at the anchor's keys in the config.
+    pub fn place_objects(
+        &mut self,
+        replay: &crate::recording::Replay,
+    ) -> Result<Vec<crate::objects::anchor::Placement>, ConfigError> {
+        if self.declared_objects.iter().all(|d| d.sites.is_none()) {
+            return Ok(Vec::new());
+        }
+        let placements = crate::objects::anchor::place_objects(&mut self.declared_objects, replay)?;
+        let scene = crate::objects::anchor::place::scene_of(&self.declared_objects, &self.file)?;
+        self.objects = std::sync::Arc::new(scene);
+        Ok(placements)
     }
 
     /// Builds every stage for a run over a recording with `header` (the one-branch

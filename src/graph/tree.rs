@@ -28,6 +28,9 @@ pub struct GraphNode {
     pub parent: Option<usize>,
     /// The branches (pipelines) that run it, in order; more than one for a shared stage.
     pub branches: Vec<usize>,
+    /// An object of its pipeline anchored to the scene but not yet placed on a
+    /// recording ([`Pipeline::place_objects`]): building fails rather than run without it.
+    pub unplaced_object: Option<String>,
 }
 
 /// A feedback edge between two nodes: `producer`'s `product` of frame t-1 goes to
@@ -96,6 +99,10 @@ impl StageGraph {
                             objects: pipeline.objects.clone(),
                             parent,
                             branches: vec![b],
+                            unplaced_object: pipeline
+                                .unplaced_objects()
+                                .first()
+                                .map(|s| s.to_string()),
                         });
                         graph.nodes.len() - 1
                     }
@@ -180,6 +187,12 @@ impl StageGraph {
             .enumerate()
             .map(|(i, node)| {
                 let s = &node.stage;
+                if let Some(object) = &node.unplaced_object {
+                    let message = format!(
+                        "object `{object}` is anchored to the scene and has not been placed: Pipeline::place_objects places it on the recording"
+                    );
+                    return Err((i, StageError::Failed(message)));
+                }
                 let info = registry.get(s.kind).ok_or_else(|| {
                     let message = format!("stage kind `{}` is not registered", s.kind);
                     (i, StageError::Failed(message))

@@ -3,9 +3,11 @@
 //! and column of the offending value, and a hint (the keys a shape takes, the shapes
 //! there are, the closest spelling).
 
+use super::anchor::{Anchor, AnchorFrame};
 use super::{MAX_TRANSLATION, Material, ObjectError, ObjectSpec, Shape, VirtualScene};
 use crate::graph::config::{ConfigError, Located, ObjectDecl, RawValue, SourceFile};
 use crate::graph::params::{a, did_you_mean};
+use crate::recording::MAX_IMAGE_SIDE;
 use glam::{Vec2, Vec3};
 use std::ops::Range;
 
@@ -42,12 +44,12 @@ const COMMON: &[Key] = &[
     key(
         "translation",
         Type::Numbers(3, -(MAX_TRANSLATION as f64), MAX_TRANSLATION as f64),
-        "world position of the object's origin [x, y, z], metres; default [0, 0, 0]",
+        "position of the object's origin [x, y, z], metres, in the world or in the anchor's frame; default [0, 0, 0]",
     ),
     key(
         "rotation_deg",
         Type::Numbers(3, -3600.0, 3600.0),
-        "rotation about world x, then y, then z (R = Rz Ry Rx), degrees; default [0, 0, 0]",
+        "rotation about x, then y, then z (R = Rz Ry Rx) of the world or the anchor's frame, degrees; default [0, 0, 0]",
     ),
     key("scale", Type::Float(1e-4, 1e4), "uniform scale; default 1"),
     key(
@@ -60,7 +62,49 @@ const COMMON: &[Key] = &[
         Type::Float(0.0, 1e5),
         "Phong exponent, 0 = diffuse; default 0",
     ),
+    key(
+        "anchor",
+        Type::Str,
+        "what translation and rotation_deg are measured from: world (the recording's coordinates; the default), floor (the floor found in the recording's first frames) or surface (the surface seen at at_pixel; implied by at_pixel)",
+    ),
+    key(
+        "at_pixel",
+        Type::Numbers(2, 0.0, MAX_IMAGE_SIDE as f64),
+        "[u, v], a pixel of frame `frame`'s color image: the object stands on the surface seen there, or with anchor = \"floor\" where its view ray meets the floor (default: the image centre)",
+    ),
+    key(
+        "frame",
+        Type::Int(0, 1_000_000_000),
+        "the frame at_pixel is a pixel of, and the first of the 5 frames the floor is found in; default 0",
+    ),
 ];
+
+/// An object as declared, with where its anchor keys were written (for errors found
+/// when it is placed against a recording).
+#[derive(Clone, Debug)]
+pub struct DeclaredObject {
+    pub spec: ObjectSpec,
+    /// `None` for objects in world coordinates.
+    pub sites: Option<AnchorSites>,
+}
+
+/// Where an anchored object's keys stand in its config: each is an error at that
+/// place, to be [`ConfigError::retold`] with what went wrong.
+#[derive(Clone, Debug)]
+pub struct AnchorSites {
+    /// `anchor` (or `at_pixel` when it implies the anchor).
+    pub anchor: ConfigError,
+    pub at_pixel: Option<ConfigError>,
+    pub frame: Option<ConfigError>,
+}
+
+/// The `[[object]]` tables of a config: every object as declared, and the scene of
+/// those in world coordinates (anchored ones join it when placed).
+#[derive(Clone, Debug, Default)]
+pub struct Objects {
+    pub declared: Vec<DeclaredObject>,
+    pub world_scene: VirtualScene,
+}
 
 /// Keys of each shape, in the order of [`Shape::NAMES`].
 const SHAPE_KEYS: [&[Key]; 5] = [
@@ -103,6 +147,47 @@ const SHAPE_KEYS: [&[Key]; 5] = [
     )],
 ];
 
+/// One key of `[[object]]` tables, for help pages (`relume objects`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct KeyDoc {
+    pub name: &'static str,
+    /// The shape that takes it, or `None` for keys every object takes.
+    pub shape: Option<&'static str>,
+    /// "string", "number", "integer", or "array of N numbers".
+    pub kind: String,
+    /// Inclusive bounds of numbers (of each number of an array).
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    /// What it means, and its default.
+    pub doc: &'static str,
+}
+
+/// Every key `[[object]]` tables take: those of every object, then each shape's.
+pub fn key_docs() -> Vec<KeyDoc> {
+    let doc = |shape: Option<&'static str>, k: &Key| {
+        let (kind, min, max) = match k.ty {
+            Type::Float(lo, hi) => ("number".to_string(), Some(lo), Some(hi)),
+            Type::Int(lo, hi) => ("integer".to_string(), Some(lo as f64), Some(hi as f64)),
+            Type::Numbers(n, lo, hi) => (format!("array of {n} numbers"), Some(lo), Some(hi)),
+            Type::Str => ("string".to_string(), None, None),
+        };
+        KeyDoc {
+            name: k.name,
+            shape,
+            kind,
+            min,
+            max,
+            doc: k.doc,
+        }
+    };
+    let common = COMMON.iter().map(|k| doc(None, k));
+    let shapes = Shape::NAMES
+        .iter()
+        .zip(SHAPE_KEYS)
+        .flat_map(|(&shape, keys)| keys.iter().map(move |k| doc(Some(shape), k)));
+    common.chain(shapes).collect()
+}
+
 /// A checked value.
 enum Value {
     Number(f64),
@@ -110,13 +195,16 @@ enum Value {
     Str(String),
 }
 
-/// Checks the `[[object]]` tables of the config `src` and builds the scene (empty when
-/// there are none). Mesh paths resolve against the directory of `src.name`.
-pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<VirtualScene, ConfigError> {
+/// Checks the `[[object]]` tables of the config `src` and builds the scene of those in
+/// world coordinates (empty when there are none); anchored objects are checked the
+/// same way, built in the world frame and set aside. Mesh paths resolve against the
+/// directory of `src.name`.
+pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<Objects, ConfigError> {
     let base = src.base_dir();
     let mut names: Vec<(String, usize)> = Vec::new();
     let mut triangles = Vec::new();
     let mut materials = Vec::new();
+    let mut declared = Vec::new();
     for decl in decls {
         let get = |name: &str| decl.entries.iter().find(|(k, _)| k.value == name);
         let line = src.line_col(decl.span.start).0;
@@ -267,7 +355,10 @@ pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<VirtualScene, C
                 Shape::Mesh { path: base.join(p) }
             }
         };
+        let (anchor, sites) = anchor(src, decl, &name, &values)?;
         let spec = ObjectSpec {
+            anchor,
+            anchor_frame: None,
             name: name.clone(),
             shape,
             translation: vec3(numbers("translation", &[0.0; 3])),
@@ -278,7 +369,8 @@ pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<VirtualScene, C
                 exponent: number("exponent", 0.0) as f32,
             },
         };
-        let built = spec.world_triangles(materials.len() as u32).map_err(|e| {
+        let built = spec.triangles_in(&AnchorFrame::WORLD, materials.len() as u32);
+        let built = built.map_err(|e| {
             let span = match e {
                 ObjectError::InvalidSpec { .. } => decl.span.clone(),
                 _ => path_span.clone().unwrap_or(decl.span.clone()),
@@ -299,10 +391,85 @@ pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<VirtualScene, C
             });
             src.error(span, message, hint)
         })?;
-        triangles.extend(built);
-        materials.push(spec.material);
+        if sites.is_none() {
+            triangles.extend(built);
+            materials.push(spec.material);
+        }
+        declared.push(DeclaredObject { spec, sites });
     }
-    Ok(VirtualScene::new(triangles, materials))
+    Ok(Objects {
+        declared,
+        world_scene: VirtualScene::new(triangles, materials),
+    })
+}
+
+/// The anchor an object's `anchor`, `at_pixel` and `frame` keys ask for, and where they
+/// stand (`None` for world coordinates); errors for combinations that say nothing.
+fn anchor(
+    src: &SourceFile,
+    decl: &ObjectDecl,
+    name: &str,
+    values: &[(&'static str, Value, Range<usize>)],
+) -> Result<(Anchor, Option<AnchorSites>), ConfigError> {
+    let find = |key: &str| values.iter().find(|(n, _, _)| *n == key);
+    let site = |key: &str| find(key).map(|(_, _, span)| src.error(span.clone(), "", None));
+    let at_pixel = match find("at_pixel") {
+        Some((_, Value::Numbers(x), _)) => Some(Vec2::new(x[0] as f32, x[1] as f32)),
+        _ => None,
+    };
+    let frame = match find("frame") {
+        Some((_, Value::Number(x), _)) => Some(*x as usize),
+        _ => None,
+    };
+    let named = match find("anchor") {
+        Some((_, Value::Str(s), span)) => Some((s.as_str(), span.clone())),
+        _ => None,
+    };
+    let anchor = match (named.as_ref().map(|(s, _)| *s), at_pixel) {
+        (None, None) | (Some("world"), _) => {
+            let stray = ["at_pixel", "frame"].into_iter().find_map(find);
+            if let Some((key, _, span)) = stray {
+                return Err(src.error(
+                    span.clone(),
+                    format!("`{key}` of object `{name}` applies only to an object anchored to the scene"),
+                    Some("add `anchor = \"floor\"`, or `at_pixel = [u, v]` to stand it on the surface seen there".into()),
+                ));
+            }
+            return Ok((Anchor::World, None));
+        }
+        (Some("floor"), at_pixel) => Anchor::Floor {
+            at_pixel,
+            frame: frame.unwrap_or(0),
+        },
+        (Some("surface") | None, Some(at_pixel)) => Anchor::Surface {
+            at_pixel,
+            frame: frame.unwrap_or(0),
+        },
+        (Some("surface"), None) => {
+            let span = named.map_or(decl.span.clone(), |(_, span)| span);
+            return Err(src.error(
+                span,
+                format!("object `{name}` is anchored to a surface but has no `at_pixel`"),
+                Some("at_pixel = [u, v] names the pixel of frame `frame` (default 0) where that surface is seen".into()),
+            ));
+        }
+        (Some(other), _) => {
+            let list = Anchor::NAMES.join(", ");
+            let hint = match did_you_mean(other, Anchor::NAMES.iter().copied()) {
+                Some(s) => format!("did you mean `{s}`? anchors: {list}"),
+                None => format!("anchors: {list}"),
+            };
+            let span = named.map_or(decl.span.clone(), |(_, span)| span);
+            return Err(src.error(span, format!("unknown anchor `{other}`"), Some(hint)));
+        }
+    };
+    let anchor_site = site("anchor").or_else(|| site("at_pixel"));
+    let sites = AnchorSites {
+        anchor: anchor_site.expect("an anchored object has `anchor` or `at_pixel`"),
+        at_pixel: site("at_pixel"),
+        frame: site("frame"),
+    };
+    Ok((anchor, Some(sites)))
 }
 
 /// Checks one value against its key's type and bounds.

@@ -23,8 +23,16 @@
 //! exponent = 0                   # Phong exponent; 0 = diffuse (default)
 //! ```
 //!
-//! A point p of the shape lands at `translation + R (scale p)`. Shapes are centred on
-//! their origin with y up (meshes keep the file's origin):
+//! A point p of the shape lands at `translation + R (scale p)`, in world coordinates,
+//! or in an anchor's frame on a real surface of the recording ([`anchor`]):
+//!
+//! ```toml
+//! anchor = "floor"               # on the floor found in frames `frame`..`frame`+5
+//! at_pixel = [410, 300]          # where this color pixel of frame `frame` sees it
+//! frame = 0                      # (at_pixel alone: the surface seen at that pixel)
+//! ```
+//!
+//! Shapes are centred on their origin with y up (meshes keep the file's origin):
 //!
 //! | shape | keys (defaults) | triangles |
 //! |---|---|---|
@@ -38,9 +46,13 @@
 //! spelling), unknown shapes, wrong types, values out of range, a torus whose tube is
 //! wider than its ring, duplicate names, and mesh files that cannot be read or hold no
 //! valid triangles are errors with the file, line and column of the offending value.
-//! The same objects can be built in code with [`ObjectSpec`] and
-//! [`VirtualScene::from_specs`].
+//! Anchored objects are placed when a run opens its recording
+//! ([`crate::graph::Pipeline::place_objects`]); a pixel outside the images, a frame
+//! past the end, no floor, or no surface at the pixel is an error at the key that asked.
+//! `relume objects` lists every key. The same objects can be built in code with
+//! [`ObjectSpec`] and [`VirtualScene::from_specs`].
 
+pub mod anchor;
 pub mod bvh;
 pub mod config;
 pub mod mesh;

@@ -5,6 +5,7 @@
 //! translated: p_world = translation + R (scale p). Normals go through the inverse
 //! transpose of the linear part and are renormalized.
 
+use super::anchor::{Anchor, AnchorFrame};
 use super::{Material, Triangle, VirtualScene, mesh, shapes};
 use glam::{Mat3, Vec2, Vec3};
 use std::path::PathBuf;
@@ -133,6 +134,12 @@ pub struct ObjectSpec {
     pub scale: f32,
     /// Diffuse albedo k_V and Phong exponent (paper 001 Sec. 3).
     pub material: Material,
+    /// What `translation` and `rotation_deg` are measured from: the world, or a frame on
+    /// a real surface found in the recording (see [`super::anchor`]).
+    pub anchor: Anchor,
+    /// The anchor's frame once placed against a recording ([`super::anchor::place_objects`]);
+    /// `None` for world objects and for anchored ones not placed yet.
+    pub anchor_frame: Option<AnchorFrame>,
 }
 
 impl ObjectSpec {
@@ -145,6 +152,27 @@ impl ObjectSpec {
             rotation_deg: Vec3::ZERO,
             scale: 1.0,
             material: Material::DIFFUSE_GRAY,
+            anchor: Anchor::World,
+            anchor_frame: None,
+        }
+    }
+
+    /// The frame the placement is measured in: the world's, or the anchor's once
+    /// placed; an error for an anchored object that has not been placed.
+    pub fn placement_frame(&self) -> Result<AnchorFrame, ObjectError> {
+        match (self.anchor, self.anchor_frame) {
+            (Anchor::World, _) => Ok(AnchorFrame::WORLD),
+            (_, Some(frame)) => Ok(frame),
+            (anchor, None) => Err(ObjectError::InvalidSpec {
+                object: self.name.clone(),
+                message: format!(
+                    "it is anchored to the {} of a recording and has not been placed on one yet",
+                    match anchor {
+                        Anchor::Floor { .. } => "floor",
+                        _ => "surface at a pixel",
+                    }
+                ),
+            }),
         }
     }
 
@@ -157,8 +185,19 @@ impl ObjectSpec {
             * Mat3::from_diagonal(Vec3::splat(self.scale))
     }
 
-    /// The object's triangles in world space with material index `material`.
+    /// The object's triangles in world space with material index `material`: its
+    /// placement applied in [`ObjectSpec::placement_frame`].
     pub fn world_triangles(&self, material: u32) -> Result<Vec<Triangle>, ObjectError> {
+        self.triangles_in(&self.placement_frame()?, material)
+    }
+
+    /// The object's triangles with its placement applied in `frame`:
+    /// p = frame.origin + frame.axes (translation + R (scale p_local)).
+    pub fn triangles_in(
+        &self,
+        frame: &AnchorFrame,
+        material: u32,
+    ) -> Result<Vec<Triangle>, ObjectError> {
         let invalid = |message: String| ObjectError::InvalidSpec {
             object: self.name.clone(),
             message,
@@ -169,12 +208,13 @@ impl ObjectSpec {
             Shape::Mesh { path } => mesh::load_obj(path)?,
             shape => shape.local_triangles().map_err(invalid)?,
         };
-        let linear = self.linear();
+        let linear = frame.axes * self.linear();
+        let translation = frame.origin + frame.axes * self.translation;
         let normal_matrix = linear.inverse().transpose();
         let world: Vec<Triangle> = local
             .into_iter()
             .map(|t| Triangle {
-                vertices: t.vertices.map(|v| linear * v + self.translation),
+                vertices: t.vertices.map(|v| linear * v + translation),
                 normals: t.normals.map(|n| (normal_matrix * n).normalize_or_zero()),
                 material,
             })

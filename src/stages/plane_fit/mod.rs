@@ -19,7 +19,7 @@
 //! sample visited plus 25 ns per pixel for the fit (about 22 ms of one core per 640x480
 //! frame with the defaults, so about 11 ms on two).
 
-mod fit;
+pub mod fit;
 mod gather;
 #[cfg(test)]
 mod synth_tests;

@@ -570,3 +570,24 @@ fn a_killed_runs_half_written_files_go_and_an_earlier_runs_frames_are_named() {
     );
     assert_eq!(frames(), ["000000.png", "000001.png"]);
 }
+
+#[test]
+fn a_synthetic_recording_too_short_for_color_compensation_says_so() {
+    // Issue 36 item 14: the filter's gain fell on 10-frame recordings because their
+    // camera's exposure sweeps faster than color.compensate follows.
+    let tmp = tempfile::tempdir().unwrap();
+    let synth = |frames: &str| {
+        let args = [
+            "synth", "-o", "s.relume", "--frames", frames, "--size", "32x24",
+        ];
+        common::stderr(&common::ok(run_in(tmp.path(), &args)))
+    };
+    let said = synth("10");
+    assert!(
+        said.contains("warning: the camera's exposure sweeps 0.5x to 2x and back over any recording: over 10 frames it changes faster than color.compensate follows"),
+        "{said}"
+    );
+    assert!(said.contains("give --frames 15 or more"), "{said}");
+    assert_eq!(synth("15"), "");
+    assert_eq!(synth("1"), "", "one frame has no sweep");
+}

@@ -29,6 +29,11 @@
 //!    p(x, y) as in eq. 24). A first frame, a size change, or a pixel behind the
 //!    previous camera or off its image, uses the spatial filter alone.
 //!
+//! Recording length: the filter needs only its one previous frame. Its gain drops on
+//! short synthetic recordings for another reason: their camera's color changes faster
+//! than `color.compensate` follows, and the captured light inherits the error (see
+//! [`crate::recording::synth::camera::STEADY_COLOR_FRAMES`] for the measurements).
+//!
 //! B_e (`environment_bandwidth` = 0): the 99 %-energy radius of the environment map's
 //! lat-long spectrum ([`environment_bandwidth`]), computed once per map (cached on the
 //! `Arc` of the map: `light.envmap` reuses one map, `light.impostor` makes a new one per

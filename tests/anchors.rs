@@ -323,6 +323,13 @@ fn an_anchored_object_not_placed_stops_the_build_instead_of_vanishing() {
             .contains("object `ball` is anchored to the scene and has not been placed"),
         "{e}"
     );
+    // Beside a pipeline with the same (empty) world scene and the same stages, it shares
+    // none of them, so the guard still stands.
+    let plain = parse("").unwrap();
+    let branches = [("a".to_string(), &plain), ("b".to_string(), &pipeline)];
+    let graph = relume::graph::tree::StageGraph::shared(&branches);
+    let dirs = [dir.path().join("a"), dir.path().join("b")];
+    assert!(graph.build(&Registry::builtin(), &header, &dirs, 0).is_err());
 }
 
 #[test]

@@ -94,7 +94,8 @@ A point p of the shape lands at
 where origin and axes are the world's (the recording's poses, metres), or, with
 `anchor = \"floor\"` or `at_pixel`, a frame on a real surface found in the recording
 when it is opened: y along the surface's normal (up, from a floor), x the image's
-rightward direction in frame `frame`, z towards the camera. Built-in shapes are
+rightward direction in frame `frame`, z = x cross y (towards the camera, on a
+floor). Built-in shapes are
 centred on their origin with y up, so translation = [0, half the height, 0] stands
 one on the surface. The run prints where each anchored object went.";
 

@@ -137,7 +137,8 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     };
     let (replay, frames) = open_recording(&run_args)?;
     for pipeline in &mut pipelines {
-        place_objects(pipeline, &replay)?;
+        let prefix = format!("{}: ", pipeline.file);
+        place_objects(pipeline, &replay, &prefix)?;
     }
     // Equal objects become one allocation, so that references can be shared.
     for i in 1..pipelines.len() {

@@ -202,13 +202,15 @@ pub fn main() -> anyhow::Result<i32> {
     }
 }
 
-/// Places `pipeline`'s objects anchored to the scene on `replay`, saying where.
+/// Places `pipeline`'s objects anchored to the scene on `replay`, saying where (each
+/// line after `prefix`, which names the pipeline where several run).
 pub(crate) fn place_objects(
     pipeline: &mut relume::graph::Pipeline,
     replay: &relume::recording::Replay,
+    prefix: &str,
 ) -> anyhow::Result<()> {
     for placed in pipeline.place_objects(replay)? {
-        eprintln!("{placed}");
+        eprintln!("{prefix}{placed}");
     }
     Ok(())
 }

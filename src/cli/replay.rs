@@ -137,7 +137,7 @@ pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
     };
     let (replay, frames) = open_recording(args)?;
     let mut pipeline = pipeline;
-    super::place_objects(&mut pipeline, &replay)?;
+    super::place_objects(&mut pipeline, &replay, "")?;
     Ok(Loaded {
         replay,
         pipeline,

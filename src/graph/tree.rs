@@ -217,7 +217,10 @@ impl StageGraph {
 /// How many first stages `a` and `b` can share (see the module docs).
 fn shared_depth(a: &Pipeline, b: &Pipeline) -> usize {
     let same_objects = Arc::ptr_eq(&a.objects, &b.objects) || a.objects == b.objects;
-    if !same_objects {
+    // Unplaced objects are not in `objects` yet: such a pipeline shares nothing, so
+    // that each of its nodes carries the flag that stops the build.
+    let placed = a.unplaced_objects().is_empty() && b.unplaced_objects().is_empty();
+    if !same_objects || !placed {
         return 0;
     }
     let mut depth = a

@@ -2,8 +2,9 @@
 //!
 //! 1. The cameras' up (the mean of their image-up directions) is only a hint: a hand-held
 //!    camera rolls and pitches. Samples whose normal lies within [`MAX_TILT_DEG`] of it
-//!    face upwards; the mean of their normals is a better up, and the samples within
-//!    [`LEVEL_DEG`] of that are the level ones (floor, table tops, seats).
+//!    face upwards; the normal most of them share (within [`MODE_DEG`]) is a better up,
+//!    and the samples within [`LEVEL_DEG`] of their mean normal are the level ones
+//!    (floor, table tops, seats).
 //! 2. Heights along that up are sorted and scanned for horizontal planes: the densest
 //!    window [`BAND_M`] thick is a plane, its samples (and those within
 //!    [`SEPARATION_M`]) are set aside, and the scan repeats.
@@ -14,16 +15,20 @@
 //! 4. The floor's samples are refitted by least squares (the plane fit of paper 000
 //!    Sec. 5, [`crate::stages::plane_fit::fit::fit_plane`]).
 //!
-//! The hint fails for a camera rolled more than about [`MAX_TILT_DEG`] from upright, and
-//! the floor must be visible in the frames used: both are reported as errors, not
-//! guessed.
+//! The hint fails for a camera pitched or rolled more than about [`MAX_TILT_DEG`] from
+//! upright, and the floor must be visible in the frames used: both are reported as
+//! errors, not guessed.
 
 use crate::stages::plane_fit::fit::fit_plane;
 use glam::Vec3;
 
-/// How far (degrees) a sample's normal may lean from the cameras' up to count as
-/// facing upwards.
-pub const MAX_TILT_DEG: f32 = 35.0;
+/// How far (degrees) a sample's normal may lean from the cameras' image-up to count as
+/// facing upwards: a camera pitched down at a desk or rolled this far still finds the
+/// floor, while walls (90 degrees from the up of a camera that is not rolled) do not
+/// count.
+pub const MAX_TILT_DEG: f32 = 70.0;
+/// Samples this close (degrees) to the most shared upward normal give the first up.
+pub const MODE_DEG: f32 = 15.0;
 /// How far (degrees) a sample's normal may lean from the refined up to count as level.
 pub const LEVEL_DEG: f32 = 12.0;
 /// The thickness (metres) of the height window that finds a plane.
@@ -71,17 +76,24 @@ impl Floor {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum FloorError {
     #[error(
-        "only {found} of {total} depth samples lie on level, upward-facing surfaces (within {MAX_TILT_DEG} degrees of the cameras' up); at least {needed} are needed"
+        "only {found} of {total} depth samples lie on level, upward-facing surfaces (within {within_deg} degrees of {of}); at least {needed} are needed"
     )]
     TooFewLevel {
         found: usize,
         total: usize,
         needed: usize,
+        within_deg: f32,
+        /// "the cameras' up" or "the level surfaces' mean normal".
+        of: &'static str,
     },
     #[error(
-        "no level surface at least {CLEARANCE_M} m below the cameras holds {needed} depth samples (the best holds {best})"
+        "no level surface at least {CLEARANCE_M} m below the cameras holds {needed} depth samples (the largest below them holds {best_below}, the largest anywhere {best})"
     )]
-    NoneBelowCameras { best: usize, needed: usize },
+    NoneBelowCameras {
+        best_below: usize,
+        best: usize,
+        needed: usize,
+    },
 }
 
 /// The fewest samples a floor may hold: 1 % of all samples, and at least 100.
@@ -98,25 +110,41 @@ pub fn fit_floor(
 ) -> Result<Floor, FloorError> {
     let needed = needed_samples(points.len());
     let hint = up_hint.normalize();
+    let too_few = |found: usize, within_deg: f32, of: &'static str| FloorError::TooFewLevel {
+        found,
+        total: points.len(),
+        needed,
+        within_deg,
+        of,
+    };
     let upward: Vec<&SurfacePoint> = points
         .iter()
         .filter(|p| p.normal.dot(hint) >= MAX_TILT_DEG.to_radians().cos())
         .collect();
-    let too_few = |found: usize| FloorError::TooFewLevel {
-        found,
-        total: points.len(),
-        needed,
-    };
     if upward.len() < needed {
-        return Err(too_few(upward.len()));
+        return Err(too_few(upward.len(), MAX_TILT_DEG, "the cameras' up"));
     }
-    let up = mean_normal(&upward);
+    // The directions many upward normals share (a wall seen by a pitched and rolled
+    // camera may be in the cone too, with more samples than the floor; a mean would
+    // lean towards it): the one nearest the cameras' up, then the level samples about it.
+    let shared = nearest_shared_normal(&upward, hint, needed);
+    let near = |p: &&SurfacePoint, deg: f32| p.normal.dot(shared) >= deg.to_radians().cos();
+    let around: Vec<&SurfacePoint> = upward
+        .iter()
+        .copied()
+        .filter(|p| near(p, MODE_DEG))
+        .collect();
+    let up = mean_normal(&around);
     let level: Vec<&SurfacePoint> = upward
         .into_iter()
         .filter(|p| p.normal.dot(up) >= LEVEL_DEG.to_radians().cos())
         .collect();
     if level.len() < needed {
-        return Err(too_few(level.len()));
+        return Err(too_few(
+            level.len(),
+            LEVEL_DEG,
+            "the level surfaces' mean normal",
+        ));
     }
     let up = mean_normal(&level);
     let mut heights: Vec<f32> = level.iter().map(|p| p.position.dot(up)).collect();
@@ -126,17 +154,23 @@ pub fn fit_floor(
         .map(|c| c.dot(up))
         .fold(f32::INFINITY, f32::min)
         - CLEARANCE_M;
-    let planes: Vec<(f32, usize)> = horizontal_planes(heights)
+    let all_planes = horizontal_planes(heights);
+    let best_anywhere = all_planes.iter().map(|&(_, c)| c).max().unwrap_or(0);
+    let below: Vec<(f32, usize)> = all_planes
         .into_iter()
-        .filter(|&(h, count)| h < ceiling && count >= needed)
+        .filter(|&(h, _)| h < ceiling)
         .collect();
-    let best = planes.iter().map(|&(_, c)| c).max().unwrap_or(0);
-    let Some(&(height, _)) = planes
+    let best_below = below.iter().map(|&(_, c)| c).max().unwrap_or(0);
+    let Some(&(height, _)) = below
         .iter()
-        .filter(|&&(_, c)| c as f32 >= MIN_SHARE * best as f32)
+        .filter(|&&(_, c)| c >= needed && c as f32 >= MIN_SHARE * best_below as f32)
         .min_by(|a, b| a.0.total_cmp(&b.0))
     else {
-        return Err(FloorError::NoneBelowCameras { best, needed });
+        return Err(FloorError::NoneBelowCameras {
+            best_below,
+            best: best_anywhere,
+            needed,
+        });
     };
     let on_floor: Vec<Vec3> = level
         .iter()
@@ -162,6 +196,50 @@ pub fn fit_floor(
         samples: on_floor.len(),
         tilt_from_cameras_deg: normal.dot(hint).clamp(-1.0, 1.0).acos().to_degrees(),
     })
+}
+
+/// Of the directions that many normals share, the nearest to `hint`. The directions:
+/// repeatedly, of about 400 samples taken evenly, the normal with the most of about
+/// 4000 others within [`MODE_DEG`] (the first on a tie), its samples then set aside;
+/// those with at least `needed` samples (scaled to the subsample) and [`MIN_SHARE`] of
+/// the best-supported one compete. A floor seen by a camera pitched by p is nearer the
+/// camera's up than a wall beside it while the roll r keeps tan r < cos p (p = 60
+/// degrees: r up to 26 degrees).
+fn nearest_shared_normal(points: &[&SurfacePoint], hint: Vec3, needed: usize) -> Vec3 {
+    let every = |n: usize| (points.len() / n).max(1);
+    let cos = MODE_DEG.to_radians().cos();
+    let mut sample: Vec<Vec3> = points
+        .iter()
+        .step_by(every(4000))
+        .map(|p| p.normal)
+        .collect();
+    let needed = (needed * sample.len()).div_ceil(points.len());
+    let candidates: Vec<Vec3> = points
+        .iter()
+        .step_by(every(400))
+        .map(|p| p.normal)
+        .collect();
+    let mut directions: Vec<(usize, Vec3)> = Vec::new();
+    while directions.len() < 4 {
+        let mut best = (0, Vec3::ZERO);
+        for &candidate in &candidates {
+            let support = sample.iter().filter(|n| n.dot(candidate) >= cos).count();
+            if support > best.0 {
+                best = (support, candidate);
+            }
+        }
+        if best.0 == 0 || best.0 < needed {
+            break;
+        }
+        sample.retain(|n| n.dot(best.1) < cos);
+        directions.push(best);
+    }
+    let most = directions.iter().map(|d| d.0).max().unwrap_or(0);
+    directions
+        .iter()
+        .filter(|d| d.0 as f32 >= MIN_SHARE * most as f32)
+        .max_by(|a, b| a.1.dot(hint).total_cmp(&b.1.dot(hint)))
+        .map_or(hint, |d| d.1)
 }
 
 /// The normalized mean of the samples' normals.
@@ -266,6 +344,30 @@ mod tests {
     }
 
     #[test]
+    fn a_camera_pitched_at_a_desk_and_rolled_towards_a_wall_finds_the_floor() {
+        // A camera looking along -z, pitched down 60 degrees and rolled 20 towards
+        // +x: its image-up lies 62 degrees from the true up and 70 from the normal of
+        // the wall at its left, inside the 70-degree cone; the wall has more samples
+        // there than the floor.
+        let (pitch, roll) = (60f32.to_radians(), 20f32.to_radians());
+        let level_up = Vec3::new(0.0, pitch.cos(), -pitch.sin());
+        let hint = level_up * roll.cos() + Vec3::X * roll.sin() * 1.001;
+        let mut points = patch(Vec2::ZERO, 2.0, 0.0, 40);
+        points.extend((0..2500).map(|k| SurfacePoint {
+            position: Vec3::new(-1.5, (k / 50) as f32 * 0.04, (k % 50) as f32 * 0.04 - 1.0),
+            normal: Vec3::X,
+        }));
+        assert!(angle_between(Vec3::X, hint) < 70.0);
+        let floor = fit_floor(&points, &[Vec3::new(0.0, 1.2, 1.0)], hint).unwrap();
+        assert!(floor.normal.abs_diff_eq(Vec3::Y, 1e-3), "{floor:?}");
+        assert_eq!(floor.samples, 1600);
+    }
+
+    fn angle_between(a: Vec3, b: Vec3) -> f32 {
+        a.normalize().dot(b.normalize()).acos().to_degrees()
+    }
+
+    #[test]
     fn a_plane_above_the_cameras_or_too_few_samples_is_no_floor() {
         // Only a level surface at the cameras' own height (a shelf they look along).
         let points = patch(Vec2::ZERO, 2.0, 1.4, 30);
@@ -273,7 +375,8 @@ mod tests {
         assert_eq!(
             e,
             FloorError::NoneBelowCameras {
-                best: 0,
+                best_below: 0,
+                best: 900,
                 needed: 100
             }
         );
@@ -284,12 +387,14 @@ mod tests {
             FloorError::TooFewLevel {
                 found: 0,
                 total: 1600,
-                needed: 100
+                needed: 100,
+                within_deg: 70.0,
+                of: "the cameras' up"
             }
         );
         assert_eq!(
             e.to_string(),
-            "only 0 of 1600 depth samples lie on level, upward-facing surfaces (within 35 \
+            "only 0 of 1600 depth samples lie on level, upward-facing surfaces (within 70 \
              degrees of the cameras' up); at least 100 are needed"
         );
     }

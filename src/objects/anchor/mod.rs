@@ -7,8 +7,8 @@
 //!
 //! An anchor frame has its origin on the surface, its y axis along the surface normal
 //! (pointing towards the camera, so up from a floor), its x axis along the image's
-//! rightward direction in frame `frame` as it lies in the surface, and z = x cross y,
-//! towards the camera side. A shape centred on its origin with y up (every built-in
+//! rightward direction in frame `frame` as it lies in the surface, and z = x cross y:
+//! on a floor or a table, towards the camera; on a wall, down. A shape centred on its origin with y up (every built-in
 //! shape) therefore stands on the surface when its `translation` lifts it by half its
 //! height, as it would on the synthetic room's floor at y = 0.
 //!

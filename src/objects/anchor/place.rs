@@ -128,12 +128,19 @@ pub fn place_objects(
                         hint.clone(),
                     ));
                 };
-                // The floor's plane runs on behind walls and furniture: the pixel must
-                // see the floor itself, not something in front of where it would be.
+                // The floor's plane runs on behind walls and furniture, and a plane
+                // found in a few frames may be a table's: the pixel must see the floor
+                // itself, at the plane's depth.
                 let floor_depth = (view.rotation.transpose() * (origin - view.position)).z;
-                if let Some(seen) = view.depth_near(ray)
-                    && floor_depth > seen * (1.0 + SEEN_TOLERANCE) + SEEN_TOLERANCE_M
-                {
+                let Some(seen) = view.depth_near(ray) else {
+                    return Err(pixel_site.retold(
+                        format!(
+                            "object `{name}`: pixel ({u}, {v}) of frame {frame} has no depth, so nothing shows that it sees the floor (its plane lies {floor_depth:.2} m away along the pixel's ray)"
+                        ),
+                        hint,
+                    ));
+                };
+                if (floor_depth - seen).abs() > seen * SEEN_TOLERANCE + SEEN_TOLERANCE_M {
                     return Err(pixel_site.retold(
                         format!(
                             "object `{name}`: pixel ({u}, {v}) of frame {frame} does not see the floor: it sees a surface {seen:.2} m away, and the floor's plane lies {floor_depth:.2} m away along its ray"

@@ -329,7 +329,11 @@ fn an_anchored_object_not_placed_stops_the_build_instead_of_vanishing() {
     let branches = [("a".to_string(), &plain), ("b".to_string(), &pipeline)];
     let graph = relume::graph::tree::StageGraph::shared(&branches);
     let dirs = [dir.path().join("a"), dir.path().join("b")];
-    assert!(graph.build(&Registry::builtin(), &header, &dirs, 0).is_err());
+    assert!(
+        graph
+            .build(&Registry::builtin(), &header, &dirs, 0)
+            .is_err()
+    );
 }
 
 #[test]

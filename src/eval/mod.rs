@@ -6,6 +6,7 @@
 //! | `depth.fuse` | `rmse_raw_m`, `rmse_fused_m`, `holes_raw`, `holes_fused` | yes |
 //! | `depth.fuse` | `warp_rmse_raw_m`, `warp_rmse_fused_m`, `warp_overlap_raw`, `warp_overlap_fused` (frame t-1 forward-warped into frame t against raw depth t; null where no two consecutive frames were compared) | no |
 //! | `normals.*` | `mean_angle_deg`, `median_angle_deg`, `valid_fraction` | yes |
+//! | `material.estimate` | `albedo_rel_error_median`, `albedo_rmse`, `albedo_ratio_mean`, `coverage`, `pixels_scored` (rho against the true albedo of recordings made by `relume synth`; see [`material`]) | yes |
 //! | `color.compensate` | `transform_rel_error_median` (relative Frobenius error of c_t against `M_0 M_t^-1`), `gain_transform_rel_error_median` (the same for A_t), `image_rel_error_median`, `gain_image_rel_error_median` (relative RMS error of the compensated image, and of A_t applied instead, against the true reference image) | yes |
 //! | `color.compensate` | `frames`, `approximate_frames`, `pairs_kept_median` | no |
 //! | `gbuffer.splat` | `reference_psnr_db` (reference against the compensated camera image where both exist and the camera pixel is not clipped, peak 1), `coverage` | no |
@@ -23,6 +24,7 @@ mod depth;
 pub mod diff;
 pub mod filter;
 pub mod light;
+pub mod material;
 mod normals;
 mod renderer;
 pub mod report;
@@ -39,6 +41,7 @@ use serde_json::{Map, Value, json};
 enum Scorer {
     Depth(depth::DepthScorer),
     Normals(normals::NormalsScorer),
+    Material(material::MaterialScorer),
     Compensation(color::CompensationScorer),
     Reference(color::ReferenceScorer),
     Importance(light::ImportanceScorer),
@@ -51,9 +54,17 @@ enum Scorer {
 
 impl Scorer {
     /// True for a scorer with nothing to report without ground truth (see the module
-    /// table): the normals, compared with the true normals alone.
+    /// table): the normals and the real albedo, compared with the truth alone.
     fn needs_truth(&self) -> bool {
-        matches!(self, Scorer::Normals(_))
+        matches!(self, Scorer::Normals(_) | Scorer::Material(_))
+    }
+
+    /// What a scorer that needs ground truth compares with, for messages.
+    fn truth_name(&self) -> &'static str {
+        match self {
+            Scorer::Material(_) => "the true albedo",
+            _ => "the true normals",
+        }
     }
 }
 
@@ -161,6 +172,10 @@ impl Evaluator {
                     k if k.starts_with("normals.") => {
                         Scorer::Normals(normals::NormalsScorer::new(output(s, "normals")))
                     }
+                    "material.estimate" => Scorer::Material(material::MaterialScorer::new(
+                        output(s, "real_albedo"),
+                        header,
+                    )),
                     "color.compensate" => Scorer::Compensation(color::CompensationScorer::new(
                         input(s, "color"),
                         output(s, "compensated"),
@@ -222,7 +237,7 @@ impl Evaluator {
         // to report nothing.
         let has_truth = header.streams.contains(&StreamKind::Truth);
         if !has_truth
-            && let Some((name, kind, _)) = scorers
+            && let Some((name, kind, scorer)) = scorers
                 .iter()
                 .find(|(n, _, s)| options.stages.contains(n) && s.needs_truth())
         {
@@ -233,8 +248,9 @@ impl Evaluator {
                     .map(|(n, _, _)| n.as_str()),
             );
             return Err(format!(
-                "stage `{name}` ({kind}) is scored against the true normals, and the recording \
-                 has no ground truth; the stages eval can score on it: {scorable}"
+                "stage `{name}` ({kind}) is scored against {}, and the recording \
+                 has no ground truth; the stages eval can score on it: {scorable}",
+                scorer.truth_name()
             ));
         }
         if !options.stages.is_empty() {
@@ -242,10 +258,13 @@ impl Evaluator {
         }
         if !has_truth && !scorers.is_empty() && scorers.iter().all(|(_, _, s)| s.needs_truth()) {
             let names: Vec<String> = scorers.iter().map(|(n, _, _)| format!("`{n}`")).collect();
+            let mut truths: Vec<&str> = scorers.iter().map(|(_, _, s)| s.truth_name()).collect();
+            truths.dedup();
             return Err(format!(
-                "the pipeline's only stages to score, {}, are scored against the true \
-                 normals, and the recording has no ground truth",
-                names.join(", ")
+                "the pipeline's only stages to score, {}, are scored against {}, and the \
+                 recording has no ground truth",
+                names.join(", "),
+                truths.join(" and ")
             ));
         }
         let needs_references = scorers.iter().any(|(_, _, s)| {
@@ -305,6 +324,7 @@ impl Evaluator {
             match scorer {
                 Scorer::Depth(s) => s.observe(frame, truth.as_ref()),
                 Scorer::Normals(s) => s.observe(frame, truth.as_ref()),
+                Scorer::Material(s) => s.observe(frame, truth.as_ref()),
                 Scorer::Compensation(s) => s.observe(frame, truth.as_ref()),
                 Scorer::Reference(s) => s.observe(frame),
                 Scorer::Importance(s) => s.observe(frame),
@@ -330,6 +350,7 @@ impl Evaluator {
             let scores = match scorer {
                 Scorer::Depth(s) => s.report(),
                 Scorer::Normals(s) => s.report().unwrap_or_else(|| json!({})),
+                Scorer::Material(s) => s.report().unwrap_or_else(|| json!({})),
                 Scorer::Compensation(s) => s.report(),
                 Scorer::Reference(s) => s.report(),
                 Scorer::Importance(s) => s.report(),

@@ -308,3 +308,37 @@ fn eval_scores_the_estimated_albedo_against_the_true_one() {
         "{probe_error} vs {cloud_error}"
     );
 }
+
+/// The area-light pipeline (paper 004) is scored as the path-traced one is: its
+/// composite against the composite of the same 1024-sample references, and sample.val's
+/// E_RV / E_R against theirs.
+#[test]
+fn eval_scores_the_area_light_pipeline_against_the_path_traced_references() {
+    let tmp = tempfile::tempdir().unwrap();
+    small_recording(tmp.path(), 15);
+    let p = pipeline("mixed-reality-val.toml");
+    let args = [
+        "eval",
+        "s.relume",
+        "-p",
+        &p,
+        "--json",
+        "--reference-stride",
+        "2",
+    ];
+    let report: Value = serde_json::from_str(&stdout(&ok(run_in(tmp.path(), &args)))).unwrap();
+    let composite = &report["stages"]["composite.differential"];
+    assert_eq!(
+        composite["scored_frames"],
+        serde_json::json!([14]),
+        "{composite}"
+    );
+    let psnr = composite["psnr_db"].as_f64().unwrap();
+    assert!((20.0..45.0).contains(&psnr), "{composite}");
+    // No filter: the composite of the unfiltered layers is the composite itself.
+    assert_eq!(composite["psnr_db_unfiltered"], composite["psnr_db"]);
+    let val = &report["stages"]["sample.val"];
+    assert_eq!(val["frames_scored"], 1, "{val}");
+    let ratio_rmse = val["ratio_rmse"].as_f64().unwrap();
+    assert!(ratio_rmse > 0.0 && ratio_rmse < 0.3, "{val}");
+}

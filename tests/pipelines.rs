@@ -230,6 +230,55 @@ fn the_dir_pipelines_are_their_twins_with_sample_dir_swapped_in() {
     }
 }
 
+/// The area-light pipelines (paper 004) are their sample.path twins with the light model,
+/// sample.val and an unfiltered composite swapped in for sampling and filtering.
+#[test]
+fn the_val_pipelines_are_their_twins_with_area_lights_swapped_in() {
+    let file = |name: &str| {
+        std::fs::read_to_string(format!("{}/pipelines/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    };
+    let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
+    let sampling = "[[stage]]\nkind = \"sample.path\"\n\n[[stage]]\nkind = \"filter.axis_aligned\"\n\n[[stage]]\nkind = \"composite.differential\"\n";
+    let area_lights = "[[stage]]\nkind = \"light.split\"\n\n[[stage]]\nkind = \"light.val\"\n\n[[stage]]\nkind = \"sample.val\"\n\n[[stage]]\nkind = \"composite.differential\"\ninputs = { e_r_dir = \"e_r_dir\", e_r_ind = \"e_r_ind\", e_rv_dir = \"e_rv_dir\", e_rv_ind = \"e_rv_ind\" }\n";
+    for (twin, name) in [
+        ("mixed-reality", "mixed-reality-val"),
+        ("mixed-reality-livingroom1", "mixed-reality-val-livingroom1"),
+    ] {
+        let text = file(&format!("{name}.toml"));
+        assert_eq!(
+            body(&file(&format!("{twin}.toml")))
+                .replacen(
+                    &format!("name = \"{twin}\""),
+                    &format!("name = \"{name}\""),
+                    1
+                )
+                .replacen(
+                    "-> sample.path -> filter.axis_aligned ->",
+                    "-> light.split -> light.val -> sample.val ->",
+                    1
+                )
+                .replacen(
+                    "# --- Sampling, filtering, compositing. ---",
+                    "# --- Area lights and SH (paper 004 Sec. 4), shading, compositing. ---",
+                    1
+                )
+                .replacen(sampling, area_lights, 1),
+            body(&text),
+            "{name}"
+        );
+        let p = Pipeline::parse(
+            &SourceFile {
+                name: format!("pipelines/{name}.toml"),
+                text,
+            },
+            &Registry::builtin(),
+        )
+        .unwrap();
+        assert!(p.stages.iter().any(|s| s.kind == "sample.val"), "{name}");
+        assert!(!p.stages.iter().any(|s| s.kind == "sample.path"), "{name}");
+    }
+}
+
 /// The impostor queries read light.impostor's map: a pipeline where no stage makes
 /// it is refused when it loads, naming the missing product and the stage.
 #[test]

@@ -13,6 +13,7 @@
 //! | `light.importance` | `pdf_integral`, `irradiance_rel_error`, `maps_scored` (against brute-force integration of each map; see [`light`]) | no |
 //! | `light.val` | `sh_irradiance_rel_error`, `val_center_drift_m`, `environment_static`, `lights` | no |
 //! | `sample.path` | `ratio_rmse`, `ratio_rmse_alternative`, `object_aware`, `unbiased_p`, `frames_scored`, `scored_frames` (their indices), `region_pixels` (against 1024-sample references; see [`sampling`]) | no |
+//! | `sample.dir`, `sample.val` | `ratio_rmse`, `ratio_rmse_all`, `frames_scored`, `scored_frames`, `region_pixels` (against the default `sample.path`'s 1024-sample references on the renderer's inputs; see [`renderer`]) | no |
 //! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `mse_unfiltered_by_layer`, `mse_filtered_by_layer` (per layer: E_R^dir, E_R^ind, E_RV^dir, E_RV^ind), `temporal_flicker`, `temporal_flicker_spatial_only`, `frames_scored`, `scored_frames` (against the same references; see [`filter`]) | no |
 //! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `psnr_db_by_frame`, `frames_scored`, `scored_frames` (against a composite of the references; see [`composite`]) | no |
 //!
@@ -26,7 +27,7 @@ pub mod filter;
 pub mod light;
 pub mod material;
 mod normals;
-mod renderer;
+pub mod renderer;
 pub mod report;
 pub mod sampling;
 mod truth;
@@ -147,10 +148,12 @@ impl Evaluator {
             .find(|s| s.kind == "color.compensate")
             .map(|s| (output(s, "compensated"), input(s, "color")));
         // The renderer whose references every score takes: a sample.path stage's own
-        // math with 1024 samples, or else (sample.dir alone) the default sample.path's
-        // on sample.dir's inputs.
+        // math with 1024 samples, or else (sample.dir or sample.val alone) the default
+        // sample.path's on that renderer's inputs.
         let find = |kind: &str| pipeline.stages.iter().find(|s| s.kind == kind);
-        let sampler = find("sample.path").or_else(|| find("sample.dir"));
+        let sampler = find("sample.path")
+            .or_else(|| find("sample.dir"))
+            .or_else(|| find("sample.val"));
         let (objects, k) = (pipeline.objects.clone(), header.depth_intrinsics);
         let runner = sampler.map(|s| match s.kind {
             "sample.path" => sampling::PathRunner::new(s, objects.clone(), k, seed),
@@ -200,7 +203,9 @@ impl Evaluator {
                         header.depth_intrinsics,
                         seed,
                     ))),
-                    "sample.dir" => Scorer::Renderer(Box::new(renderer::RatioScorer::new(s))),
+                    "sample.dir" | "sample.val" => {
+                        Scorer::Renderer(Box::new(renderer::RatioScorer::new(s)))
+                    }
                     "filter.axis_aligned" => Scorer::Filter(Box::new(filter::FilterScorer::new(
                         s,
                         header,

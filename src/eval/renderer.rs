@@ -1,4 +1,4 @@
-//! Scores of a renderer other than `sample.path` (`sample.dir`) against the same
+//! Scores of a renderer other than `sample.path` (`sample.dir`, `sample.val`) against the same
 //! 1024-sample references (`super::sampling::ReferenceLayers`: the default
 //! `sample.path` run on the renderer's own inputs), on the same frames:
 //!

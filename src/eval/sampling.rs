@@ -105,17 +105,28 @@ impl PathRunner {
     }
 
     /// A runner of the default `sample.path` (screen-space marching) on the inputs of
-    /// another renderer (`sample.dir` reads the same roles): the references that
-    /// renderer is scored against are the default's.
+    /// another renderer (`sample.dir` reads the same roles; `sample.val` reads the
+    /// geometry and pose, and the camera radiance and light table are then the products
+    /// `sample.path` would read by default): the references that renderer is scored
+    /// against are the default's.
     pub fn reference_for(
         stage: &ResolvedStage,
         objects: Arc<VirtualScene>,
         intrinsics: Intrinsics,
         seed: u64,
     ) -> PathRunner {
+        let path = &crate::stages::sample::path::INFO;
+        let defaults = (path.ports)(&crate::graph::Params::defaults(path.params));
+        let input = |role: &str| match stage.inputs.get(role) {
+            Some(bound) => bound.clone(),
+            None => defaults
+                .inputs
+                .iter()
+                .find(|p| p.role == role)
+                .map_or(role.to_string(), |p| p.default_product.clone()),
+        };
         PathRunner {
-            inputs: ["depth", "normals", "pose", "radiance", "light_table"]
-                .map(|r| super::input(stage, r)),
+            inputs: ["depth", "normals", "pose", "radiance", "light_table"].map(input),
             environment: None,
             voxels: None,
             object_voxels: None,

@@ -183,7 +183,7 @@ fn objects_anchored_to_the_floor_stand_on_the_true_floor() {
     assert!(
         placed[0]
             .to_string()
-            .starts_with("object `ball`: anchored on the floor (fitted to "),
+            .starts_with("object `ball`: anchored on the floor (a plane through "),
         "{}",
         placed[0]
     );
@@ -290,6 +290,12 @@ fn anchor_keys_that_say_nothing_are_config_errors() {
         e.message,
         "`at_pixel` of object `box` applies only to an object anchored to the scene"
     );
+    assert!(
+        e.hint.as_deref().unwrap().starts_with(
+            "`anchor = \"world\"` places it in world coordinates: make it \"floor\" or \"surface\""
+        ),
+        "{e}"
+    );
     let e = object("anchor = \"surface\"\n");
     assert_eq!(
         e.message,
@@ -370,9 +376,16 @@ fn runs_say_where_anchored_objects_went_and_validate_says_they_will_be() {
     ));
     let line = stderr(&o)
         .lines()
-        .find(|l| l.starts_with("object `ball`: anchored on the floor (fitted to "))
+        .find(|l| l.starts_with("object `ball`: anchored on the floor (a plane through "))
         .map(str::to_string);
     assert!(line.is_some(), "{}", stderr(&o));
+    // Where the object itself went: a ball of radius 0.1 lifted by 0.1 spans 0.2 in y
+    // from the floor.
+    let line = line.unwrap();
+    let spans = &line[line
+        .find("; the object spans [")
+        .expect("the object's bounds")..];
+    assert!(spans.ends_with(" m"), "{line}");
     // The same error a library user gets, with the caret under the key.
     std::fs::write(
         dir.path().join("bad.toml"),

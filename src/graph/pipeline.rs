@@ -317,6 +317,23 @@ impl Pipeline {
         }
         let placements = crate::objects::anchor::place_objects(&mut self.declared_objects, replay)?;
         let scene = crate::objects::anchor::place::scene_of(&self.declared_objects, &self.file)?;
+        let mut placements = placements;
+        for placed in &mut placements {
+            // Object k has material k (VirtualScene::from_specs).
+            let k = self
+                .declared_objects
+                .iter()
+                .position(|d| d.spec.name == placed.object);
+            let corners = scene
+                .triangles
+                .iter()
+                .filter(|t| Some(t.material as usize) == k)
+                .flat_map(|t| t.vertices);
+            placed.bounds = corners.fold(None, |b, p| match b {
+                None => Some((p, p)),
+                Some((lo, hi)) => Some((p.min(lo), p.max(hi))),
+            });
+        }
         self.objects = std::sync::Arc::new(scene);
         Ok(placements)
     }

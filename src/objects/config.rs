@@ -65,7 +65,7 @@ const COMMON: &[Key] = &[
     key(
         "anchor",
         Type::Str,
-        "what translation and rotation_deg are measured from: world (the recording's coordinates; the default), floor (the floor found in the recording's first frames) or surface (the surface seen at at_pixel; implied by at_pixel)",
+        "what translation and rotation_deg are measured from: world (the recording's coordinates; the default), floor (the floor found in frames `frame` to `frame` + 4) or surface (the surface seen at at_pixel; implied by at_pixel)",
     ),
     key(
         "at_pixel",
@@ -432,7 +432,11 @@ fn anchor(
                 return Err(src.error(
                     span.clone(),
                     format!("`{key}` of object `{name}` applies only to an object anchored to the scene"),
-                    Some("add `anchor = \"floor\"`, or `at_pixel = [u, v]` to stand it on the surface seen there".into()),
+                    Some(if named.is_some() {
+                        "`anchor = \"world\"` places it in world coordinates: make it \"floor\" or \"surface\", or leave `anchor` out with `at_pixel` to stand it on the surface seen there".into()
+                    } else {
+                        "add `anchor = \"floor\"`, or `at_pixel = [u, v]` to stand it on the surface seen there".into()
+                    }),
                 ));
             }
             return Ok((Anchor::World, None));

@@ -29,6 +29,9 @@ pub struct Placement {
     pub up: Vec3,
     /// How the surface was found, in words.
     pub how: String,
+    /// The object's world bounds once built (min, max), so that one placed off-screen
+    /// or under the floor by its translation shows; `None` until then.
+    pub bounds: Option<(Vec3, Vec3)>,
 }
 
 impl std::fmt::Display for Placement {
@@ -38,7 +41,15 @@ impl std::fmt::Display for Placement {
             f,
             "object `{}`: anchored {}: its frame's origin is [{:.3}, {:.3}, {:.3}] m, its up [{:.3}, {:.3}, {:.3}]",
             self.object, self.how, o.x, o.y, o.z, n.x, n.y, n.z
-        )
+        )?;
+        if let Some((a, b)) = self.bounds {
+            write!(
+                f,
+                "; the object spans [{:.3}, {:.3}, {:.3}] .. [{:.3}, {:.3}, {:.3}] m",
+                a.x, a.y, a.z, b.x, b.y, b.z
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -68,6 +79,14 @@ pub fn place_objects(
             Anchor::Floor { at_pixel, frame } => (frame, at_pixel),
             Anchor::Surface { at_pixel, frame } => (frame, Some(at_pixel)),
         };
+        if replay.stats.frames_with_pose == 0 {
+            return Err(sites.anchor.retold(
+                format!(
+                    "object `{name}`: `{path}` has no camera poses, so no surface it shows has a place in the world"
+                ),
+                Some("anchored objects need a recording with poses (a TUM folder's groundtruth.txt, a Redwood trajectory.log)".into()),
+            ));
+        }
         let frame_site = sites.frame.as_ref().unwrap_or(&sites.anchor);
         let pixel_site = sites.at_pixel.as_ref().unwrap_or(&sites.anchor);
         if frame >= replay.len() {
@@ -155,7 +174,7 @@ pub fn place_objects(
                     view.rotation.z_axis,
                 );
                 let how = format!(
-                    "on the floor (fitted to {} depth samples of frames {}..{}, {:.1} degrees from the cameras' up), where pixel ({u}, {v}) of frame {frame} sees it",
+                    "on the floor (a plane through {} depth samples of frames {}..{}, its normal {:.1} degrees from the cameras' mean image-up), where pixel ({u}, {v}) of frame {frame} sees it",
                     floor.samples, frames.start, frames.end, floor.tilt_from_cameras_deg
                 );
                 (placed, how)
@@ -189,6 +208,7 @@ pub fn place_objects(
             origin: anchor_frame.origin,
             up: anchor_frame.axes.y_axis,
             how,
+            bounds: None,
         });
     }
     Ok(placements)

@@ -17,6 +17,8 @@
 //!                                  # frame's value (optional inputs only: the first
 //!                                  # frame has none)
 //! outputs = { normals = "normals" }
+//! every = 1                     # run on every k-th frame and lend the last products
+//!                               # to the frames between (see `super::every`)
 //!
 //! [[object]]                    # virtual objects, see `crate::objects`
 //! shape = "torus"
@@ -192,6 +194,8 @@ pub struct StageDecl {
     pub params: Vec<(Located<String>, Located<RawValue>)>,
     pub inputs: RolePairs,
     pub outputs: RolePairs,
+    /// `every = k`: the stage runs on every k-th frame (checked in the pipeline).
+    pub every: Option<Located<RawValue>>,
     /// Span of the whole stage table.
     pub span: Range<usize>,
 }
@@ -320,7 +324,7 @@ fn parse_stage(src: &SourceFile, item: &Spanned<DeValue<'_>>) -> Result<StageDec
     check_keys(
         src,
         table,
-        &["name", "kind", "params", "inputs", "outputs"],
+        &["name", "kind", "params", "inputs", "outputs", "every"],
         "key in [[stage]]",
     )?;
     let kind = opt_string(src, table, "kind")?.ok_or_else(|| {
@@ -343,6 +347,7 @@ fn parse_stage(src: &SourceFile, item: &Spanned<DeValue<'_>>) -> Result<StageDec
         params,
         inputs: string_table(src, table, "inputs")?,
         outputs: string_table(src, table, "outputs")?,
+        every: table.get("every").map(raw),
         span: item.span(),
     })
 }

@@ -2,6 +2,7 @@
 
 pub mod config;
 mod cycle;
+pub mod every;
 pub mod frame;
 pub mod memory;
 pub mod overrides;

@@ -33,6 +33,9 @@ pub struct ResolvedStage {
     pub outputs: BTreeMap<String, String>,
     /// Line of the stage in its file.
     pub line: usize,
+    /// The stage runs on every `every`-th frame and lends its last products to the
+    /// frames between (see [`super::every`]); 1 = every frame.
+    pub every: u32,
 }
 
 /// A feedback edge: `producer`'s `product` of frame t-1 goes to `consumer` at frame t.
@@ -185,6 +188,24 @@ impl Pipeline {
             let ports = (info.ports)(&params);
             let inputs = bind_ports(src, &d.inputs, &ports.inputs, &name, "input")?;
             let outputs = bind_ports(src, &d.outputs, &ports.outputs, &name, "output")?;
+            let every = match &d.every {
+                None => 1,
+                Some(v) => match v.value {
+                    RawValue::Int(k) if (1..=super::every::MAX_EVERY as i64).contains(&k) => {
+                        k as u32
+                    }
+                    _ => {
+                        return Err(src.error(
+                            v.span.clone(),
+                            format!(
+                                "`every` of stage `{name}` must be an integer from 1 to {}",
+                                super::every::MAX_EVERY
+                            ),
+                            Some("every = 8 runs the stage on frames 0, 8, 16, ...; the frames between reuse its products".into()),
+                        ));
+                    }
+                },
+            };
             stages.push(ResolvedStage {
                 name,
                 kind: info.kind,
@@ -192,6 +213,7 @@ impl Pipeline {
                 inputs,
                 outputs,
                 line: src.line_col(d.span.start).0,
+                every,
             });
             port_sets.push(ports);
         }

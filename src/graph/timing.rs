@@ -52,6 +52,8 @@ pub struct Stats {
     pub median_ms: f64,
     pub p95_ms: f64,
     pub max_ms: f64,
+    /// The mean: a stage with `every = k` costs this per frame, amortized.
+    pub mean_ms: f64,
 }
 
 impl Stats {
@@ -67,6 +69,7 @@ impl Stats {
             median_ms: ms(percentile(&v, 0.5)),
             p95_ms: ms(percentile(&v, 0.95)),
             max_ms: ms(*v.last().expect("non-empty") as f64),
+            mean_ms: ms(v.iter().map(|&ns| ns as f64).sum::<f64>() / v.len() as f64),
         }
     }
 }

@@ -208,7 +208,8 @@ impl StageGraph {
                     seed,
                     objects: &node.objects,
                 };
-                (info.build)(&ctx).map_err(|e| (i, e))
+                let built = (info.build)(&ctx).map_err(|e| (i, e))?;
+                Ok(super::every::every_k(built, s))
             })
             .collect()
     }
@@ -247,6 +248,7 @@ fn shared_depth(a: &Pipeline, b: &Pipeline) -> usize {
 fn same_stage(x: &ResolvedStage, y: &ResolvedStage) -> bool {
     x.name == y.name
         && x.kind == y.kind
+        && x.every == y.every
         && x.params == y.params
         && x.inputs == y.inputs
         && x.outputs == y.outputs

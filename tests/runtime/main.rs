@@ -2,4 +2,5 @@
 
 mod graph;
 mod linear;
+mod rates;
 mod stages;

@@ -1,0 +1,126 @@
+//! Stages at their own rate: `every = k` (paper 004 Sec. 3.2's light model at a lower
+//! rate than the frames), through `relume replay --hash`.
+
+use std::path::Path;
+use std::process::Command;
+
+fn relume(dir: &Path, args: &[&str], threads: &str) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(args)
+        .current_dir(dir)
+        .env("RAYON_NUM_THREADS", threads)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8(o.stdout).unwrap()
+}
+
+/// `--hash` lines of `pipeline` (written to `dir/p.toml`) over `frames` of a small
+/// synthetic recording: per frame, product name -> digest.
+fn digests(dir: &Path, pipeline: &str, frames: &str, threads: &str) -> Vec<Vec<(String, String)>> {
+    std::fs::write(dir.join("p.toml"), pipeline).unwrap();
+    let args = [
+        "replay", "s.relume", "-p", "p.toml", "--hash", "--frames", frames, "--out", "o",
+    ];
+    relume(dir, &args, threads)
+        .lines()
+        .map(|line| {
+            line.split_whitespace()
+                .skip(2)
+                .map(|kv| {
+                    let (k, v) = kv.split_once('=').unwrap();
+                    (k.to_string(), v.to_string())
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn digest(frame: &[(String, String)], product: &str) -> String {
+    frame.iter().find(|(k, _)| k == product).unwrap().1.clone()
+}
+
+fn recording() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "synth", "-o", "s.relume", "--frames", "8", "--size", "32x24",
+    ];
+    relume(dir.path(), &args, "2");
+    dir
+}
+
+const PROBE: &str = "[[stage]]\nkind = \"decode\"\n\n[[stage]]\nkind = \"light.envmap\"\n\n[[stage]]\nkind = \"light.importance\"\n";
+
+#[test]
+fn every_k_on_unchanging_inputs_gives_the_products_of_every_frame() {
+    let dir = recording();
+    let d = dir.path();
+    let each = digests(d, PROBE, "0..8", "2");
+    let fourth = digests(d, &format!("{PROBE}every = 4\n"), "0..8", "2");
+    assert_eq!(each.len(), 8);
+    assert_eq!(each, fourth);
+}
+
+#[test]
+fn frames_between_runs_carry_the_last_runs_products_whatever_the_threads() {
+    let dir = recording();
+    let d = dir.path();
+    let every3 = "[[stage]]\nkind = \"decode\"\nevery = 3\n";
+    let each = digests(d, "[[stage]]\nkind = \"decode\"\n", "0..8", "2");
+    let runs = digests(d, every3, "0..8", "2");
+    // Runs on frames 0, 3, 6; the frames between show the last run's color.
+    for (frame, ran) in [
+        (0, 0),
+        (1, 0),
+        (2, 0),
+        (3, 3),
+        (4, 3),
+        (5, 3),
+        (6, 6),
+        (7, 6),
+    ] {
+        assert_eq!(
+            digest(&runs[frame], "color"),
+            digest(&each[ran], "color"),
+            "frame {frame}"
+        );
+        // The source's own record is the frame's.
+        assert_eq!(digest(&runs[frame], "record"), digest(&each[frame], "record"));
+    }
+    // A run that starts between multiples runs the stage on its first frame.
+    let late = digests(d, every3, "1..5", "2");
+    let shown: Vec<String> = late.iter().map(|f| digest(f, "color")).collect();
+    let expected: Vec<String> = [1, 1, 3, 3]
+        .iter()
+        .map(|&i| digest(&each[i], "color"))
+        .collect();
+    assert_eq!(shown, expected);
+    // Which frames run depends on the frame indices alone.
+    assert_eq!(digests(d, every3, "0..8", "1"), runs);
+}
+
+#[test]
+fn every_must_be_a_positive_integer() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for bad in ["0", "1.5", "\"4\""] {
+        std::fs::write(
+            d.join("p.toml"),
+            format!("[[stage]]\nkind = \"decode\"\nevery = {bad}\n"),
+        )
+        .unwrap();
+        let o = Command::new(env!("CARGO_BIN_EXE_relume"))
+            .args(["validate", "p.toml"])
+            .current_dir(d)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(1), "{bad}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(
+                "p.toml:3:9: `every` of stage `decode` must be an integer from 1 to 100000"
+            ),
+            "{err}"
+        );
+    }
+}

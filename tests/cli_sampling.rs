@@ -342,3 +342,22 @@ fn eval_scores_the_area_light_pipeline_against_the_path_traced_references() {
     let ratio_rmse = val["ratio_rmse"].as_f64().unwrap();
     assert!(ratio_rmse > 0.0 && ratio_rmse < 0.3, "{val}");
 }
+
+/// sample.val reads no light table, but its references do: a val pipeline without
+/// light.importance is told so, not scored with empty references.
+#[test]
+fn eval_of_a_renderer_whose_references_lack_an_input_says_which() {
+    let tmp = tempfile::tempdir().unwrap();
+    small_recording(tmp.path(), 3);
+    let text = std::fs::read_to_string(pipeline("mixed-reality-val.toml")).unwrap();
+    let without = text.replace("[[stage]]\nkind = \"light.importance\"\n", "");
+    assert_ne!(without, text);
+    std::fs::write(tmp.path().join("p.toml"), without).unwrap();
+    let o = run_in(tmp.path(), &["eval", "s.relume", "-p", "p.toml"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("the 1024-sample references that `sample.val` (sample.val) and the stages after it are scored against read `light_table`, which no stage of the pipeline makes"),
+        "{err}"
+    );
+}

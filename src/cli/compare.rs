@@ -139,6 +139,9 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     for pipeline in &mut pipelines {
         let prefix = format!("{}: ", pipeline.file);
         place_objects(pipeline, &replay, &prefix)?;
+        if !a.no_scores {
+            super::warn_every(pipeline);
+        }
     }
     // Equal objects become one allocation, so that references can be shared.
     for i in 1..pipelines.len() {

@@ -104,6 +104,7 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
         reference_stride: a.reference_stride,
         frames: Some(loaded.frames.clone()),
     };
+    super::warn_every(&loaded.pipeline);
     let mut evaluator = Evaluator::new(&loaded.pipeline, header, a.run.seed, &options)
         .map_err(|e| anyhow::anyhow!("{}: {e}", loaded.pipeline.file))?;
     if evaluator.is_empty() {

@@ -215,6 +215,29 @@ pub(crate) fn place_objects(
     Ok(())
 }
 
+/// A warning before scores of a pipeline with stages at their own rate (`every = k`):
+/// on the frames between their runs, they and the stages after them hand on products
+/// of an earlier frame, which eval compares with the current frame's truth and
+/// references.
+pub(crate) fn warn_every(pipeline: &relume::graph::Pipeline) {
+    let slow: Vec<String> = pipeline
+        .stages
+        .iter()
+        .filter(|s| s.every > 1)
+        .map(|s| format!("`{}` (every {})", s.name, s.every))
+        .collect();
+    if !slow.is_empty() {
+        eprintln!(
+            "warning: {} of `{}` {} on every k-th frame: on the frames between, {} and the stages after {} are scored with products of an earlier frame against the current frame's truth and references",
+            slow.join(", "),
+            pipeline.file,
+            if slow.len() == 1 { "runs" } else { "run" },
+            if slow.len() == 1 { "it" } else { "they" },
+            if slow.len() == 1 { "it" } else { "them" },
+        );
+    }
+}
+
 /// Where the built-in default recording is kept.
 pub(crate) fn default_recording_path() -> PathBuf {
     PathBuf::from("recordings").join("default.relume")

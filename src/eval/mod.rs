@@ -278,6 +278,23 @@ impl Evaluator {
                 Scorer::Path(_) | Scorer::Renderer(_) | Scorer::Filter(_) | Scorer::Composite(_)
             )
         });
+        // A renderer scored against another's references (sample.val reads neither
+        // the camera radiance nor a light table): without them every reference score
+        // would be left empty without a word.
+        if let (true, Some(runner), Some(sampler)) = (needs_references, &runner, sampler) {
+            let made = |product: &str| {
+                pipeline
+                    .stages
+                    .iter()
+                    .any(|s| s.outputs.values().any(|o| o == product))
+            };
+            if let Some(missing) = runner.input_products().iter().find(|p| !made(p)) {
+                return Err(format!(
+                    "the 1024-sample references that `{}` ({}) and the stages after it are scored against read `{missing}`, which no stage of the pipeline makes (light.importance makes `light_table`, color.compensate `compensated`); add that stage, or name only other stages with --stage",
+                    sampler.name, sampler.kind
+                ));
+            }
+        }
         let references = runner.filter(|_| needs_references).map(|r| {
             sampling::ReferenceSchedule::new(r, options.reference_stride, options.frames.clone())
         });

@@ -139,6 +139,12 @@ impl PathRunner {
         }
     }
 
+    /// The products the references read (depth, normals, pose, camera radiance, light
+    /// table), for a check that the pipeline makes them.
+    pub fn input_products(&self) -> &[String; 5] {
+        &self.inputs
+    }
+
     /// The stage's outputs with `params` on `frame`'s inputs; `None` when the frame
     /// lacks one of them.
     pub fn run(

@@ -6,10 +6,14 @@
 //!
 //! Which frames run depends only on the frame indices of the run, never on timing,
 //! channel capacity or thread count, so a run's products are as deterministic as with
-//! k = 1. When the stage's inputs do not change between its runs (a light probe, a
-//! static scene's light model), its products are bit for bit those of running it on
-//! every frame; when they do, the frames between see the stage's view of its last run,
-//! as the paper's client sees the server's last light model.
+//! k = 1. For a stage without state across frames whose inputs do not change between
+//! its runs (a light probe's importance table, the light model of a static scene), its
+//! products are bit for bit those of running it on every frame. A stage that builds up
+//! state on each call (depth.fuse's weights, color.compensate's chain, the filter's
+//! temporal reuse, light.val's warm start) sees fewer calls and gives other products.
+//! The frames between runs see the stage's last run, as the paper's client sees the
+//! server's last light model; `relume eval` warns that its scores then compare those
+//! products with the current frame.
 //!
 //! A stage's own time on a frame it skips is the copy of a few pointers; `relume bench`
 //! reports such a stage's mean over all frames, its amortized cost.

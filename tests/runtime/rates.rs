@@ -85,7 +85,10 @@ fn frames_between_runs_carry_the_last_runs_products_whatever_the_threads() {
             "frame {frame}"
         );
         // The source's own record is the frame's.
-        assert_eq!(digest(&runs[frame], "record"), digest(&each[frame], "record"));
+        assert_eq!(
+            digest(&runs[frame], "record"),
+            digest(&each[frame], "record")
+        );
     }
     // A run that starts between multiples runs the stage on its first frame.
     let late = digests(d, every3, "1..5", "2");
@@ -123,4 +126,23 @@ fn every_must_be_a_positive_integer() {
             "{err}"
         );
     }
+}
+
+#[test]
+fn eval_warns_that_a_stage_at_its_own_rate_is_scored_with_earlier_products() {
+    let dir = recording();
+    let d = dir.path();
+    let pipeline = "[[stage]]\nkind = \"decode\"\nevery = 2\n\n[[stage]]\nkind = \"depth.to_points\"\ninputs = { depth = \"depth\" }\n\n[[stage]]\nkind = \"normals.cross\"\n";
+    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(["eval", "s.relume", "-p", "p.toml"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("warning: `decode` (every 2) of `p.toml` runs on every k-th frame: on the frames between, it and the stages after it are scored with products of an earlier frame"),
+        "{err}"
+    );
 }

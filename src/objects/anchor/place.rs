@@ -19,6 +19,10 @@ const SEEN_TOLERANCE: f32 = 0.1;
 /// See [`SEEN_TOLERANCE`] (metres).
 const SEEN_TOLERANCE_M: f32 = 0.1;
 
+/// A surface pixel whose neighbourhood has less than this share of its depth samples on
+/// the fitted surface is said to lie at a depth edge.
+const EDGE_SHARE: f32 = 0.7;
+
 /// Where an anchored object was placed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Placement {
@@ -195,10 +199,16 @@ pub fn place_objects(
                     view.rotation.x_axis,
                     view.rotation.z_axis,
                 );
-                let how = format!(
+                let mut how = format!(
                     "on the surface seen at pixel ({u}, {v}) of frame {frame} (a plane through {} depth samples)",
                     fit.samples
                 );
+                if fit.on_surface_share < EDGE_SHARE {
+                    how.push_str(&format!(
+                        " at a depth edge: only {:.0} % of the depth samples around the pixel lie on that surface, so check that it is the one meant",
+                        100.0 * fit.on_surface_share
+                    ));
+                }
                 (placed, how)
             }
         };

@@ -30,6 +30,10 @@ pub struct SurfaceFit {
     pub samples: usize,
     /// The side of the square window, in depth pixels.
     pub window: u32,
+    /// The share of the depth samples in the small window around the pixel that lie on
+    /// this surface: well below 1 at a depth edge, where the pixel may sit on the
+    /// surface the user did not mean.
+    pub on_surface_share: f32,
 }
 
 /// Why no surface was found along a view ray.
@@ -92,6 +96,21 @@ pub fn surface_at(
             window: 2 * min_radius + 1,
         });
     }
+    let valid_near = {
+        let (u0, v0) = (cu.saturating_sub(min_radius), cv.saturating_sub(min_radius));
+        let (u1, v1) = (
+            (cu + min_radius).min(width - 1),
+            (cv + min_radius).min(height - 1),
+        );
+        (v0..=v1)
+            .flat_map(|v| (u0..=u1).map(move |u| (u, v)))
+            .filter(|&(u, v)| {
+                let z = depth.data[(v * width + u) as usize];
+                z > 0.0 && z.is_finite()
+            })
+            .count()
+    };
+    let on_surface_share = seed.len() as f32 / valid_near as f32;
     let mut plane = fit_inverse_depth(&seed, camera).ok_or(SurfaceError::Degenerate)?;
     let z = seed[0].2;
     let radius = ((WINDOW_RADIUS_M * camera.fx / z).round() as u32).clamp(min_radius, max_radius);
@@ -128,6 +147,7 @@ pub fn surface_at(
         normal,
         samples,
         window,
+        on_surface_share,
     })
 }
 
@@ -281,6 +301,16 @@ mod tests {
         }
         let fit = surface_at(&depth, &cam, cam.ray(80.0, 60.0)).unwrap();
         assert!((fit.point.z - 2.0).abs() < 1e-4, "{fit:?}");
+        assert_eq!(
+            fit.on_surface_share,
+            20.0 / 25.0,
+            "one column of five is the box's"
+        );
+        // Right at the edge, two columns of the 5 x 5 samples are the box's: the
+        // placement says the pixel lies at an edge.
+        let fit = surface_at(&depth, &cam, cam.ray(79.0, 60.0)).unwrap();
+        assert!((fit.point.z - 2.0).abs() < 1e-4, "{fit:?}");
+        assert_eq!(fit.on_surface_share, 15.0 / 25.0);
         assert!(fit.normal.abs_diff_eq(Vec3::NEG_Z, 1e-4));
     }
 

@@ -193,39 +193,52 @@ fn the_vct_pipeline_is_mixed_reality_with_voxel_cone_tracing() {
     );
 }
 
+/// Asserts that `pipelines/{name}.toml` is `pipelines/{twin}.toml` from its `[pipeline]`
+/// table on, renamed and with each of `swaps` (old, new) replaced once, and that it
+/// loads; returns it.
+fn assert_twin(twin: &str, name: &str, swaps: &[(&str, &str)]) -> Pipeline {
+    let file = |name: &str| {
+        std::fs::read_to_string(format!(
+            "{}/pipelines/{name}.toml",
+            env!("CARGO_MANIFEST_DIR")
+        ))
+        .unwrap()
+    };
+    let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
+    let text = file(name);
+    let mut expected = body(&file(twin)).replacen(
+        &format!("name = \"{twin}\""),
+        &format!("name = \"{name}\""),
+        1,
+    );
+    for (old, new) in swaps {
+        assert!(expected.contains(old), "{twin} has no {old:?}");
+        expected = expected.replacen(old, new, 1);
+    }
+    assert_eq!(expected, body(&text), "{name}");
+    Pipeline::parse(
+        &SourceFile {
+            name: format!("pipelines/{name}.toml"),
+            text,
+        },
+        &Registry::builtin(),
+    )
+    .unwrap()
+}
+
 /// The Differential Instant Radiosity pipelines are their sample.path twins with the
 /// renderer swapped and nothing else changed.
 #[test]
 fn the_dir_pipelines_are_their_twins_with_sample_dir_swapped_in() {
-    let file = |name: &str| {
-        std::fs::read_to_string(format!("{}/pipelines/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
-    };
-    let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
     for (twin, name) in [
         ("mixed-reality", "mixed-reality-dir"),
         ("mixed-reality-livingroom1", "mixed-reality-dir-livingroom1"),
     ] {
-        let text = file(&format!("{name}.toml"));
-        assert_eq!(
-            body(&file(&format!("{twin}.toml")))
-                .replacen(
-                    &format!("name = \"{twin}\""),
-                    &format!("name = \"{name}\""),
-                    1
-                )
-                .replacen("-> sample.path ->", "-> sample.dir ->", 1)
-                .replacen("kind = \"sample.path\"\n", "kind = \"sample.dir\"\n", 1),
-            body(&text),
-            "{name}"
-        );
-        let p = Pipeline::parse(
-            &SourceFile {
-                name: format!("pipelines/{name}.toml"),
-                text,
-            },
-            &Registry::builtin(),
-        )
-        .unwrap();
+        let swaps = [
+            ("-> sample.path ->", "-> sample.dir ->"),
+            ("kind = \"sample.path\"\n", "kind = \"sample.dir\"\n"),
+        ];
+        let p = assert_twin(twin, name, &swaps);
         assert!(p.stages.iter().any(|s| s.kind == "sample.dir"), "{name}");
     }
 }
@@ -234,46 +247,24 @@ fn the_dir_pipelines_are_their_twins_with_sample_dir_swapped_in() {
 /// sample.val and an unfiltered composite swapped in for sampling and filtering.
 #[test]
 fn the_val_pipelines_are_their_twins_with_area_lights_swapped_in() {
-    let file = |name: &str| {
-        std::fs::read_to_string(format!("{}/pipelines/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
-    };
-    let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
     let sampling = "[[stage]]\nkind = \"sample.path\"\n\n[[stage]]\nkind = \"filter.axis_aligned\"\n\n[[stage]]\nkind = \"composite.differential\"\n";
     let area_lights = "[[stage]]\nkind = \"light.split\"\n\n[[stage]]\nkind = \"light.val\"\n\n[[stage]]\nkind = \"sample.val\"\n\n[[stage]]\nkind = \"composite.differential\"\ninputs = { e_r_dir = \"e_r_dir\", e_r_ind = \"e_r_ind\", e_rv_dir = \"e_rv_dir\", e_rv_ind = \"e_rv_ind\" }\n";
     for (twin, name) in [
         ("mixed-reality", "mixed-reality-val"),
         ("mixed-reality-livingroom1", "mixed-reality-val-livingroom1"),
     ] {
-        let text = file(&format!("{name}.toml"));
-        assert_eq!(
-            body(&file(&format!("{twin}.toml")))
-                .replacen(
-                    &format!("name = \"{twin}\""),
-                    &format!("name = \"{name}\""),
-                    1
-                )
-                .replacen(
-                    "-> sample.path -> filter.axis_aligned ->",
-                    "-> light.split -> light.val -> sample.val ->",
-                    1
-                )
-                .replacen(
-                    "# --- Sampling, filtering, compositing. ---",
-                    "# --- Area lights and SH (paper 004 Sec. 4), shading, compositing. ---",
-                    1
-                )
-                .replacen(sampling, area_lights, 1),
-            body(&text),
-            "{name}"
-        );
-        let p = Pipeline::parse(
-            &SourceFile {
-                name: format!("pipelines/{name}.toml"),
-                text,
-            },
-            &Registry::builtin(),
-        )
-        .unwrap();
+        let swaps = [
+            (
+                "-> sample.path -> filter.axis_aligned ->",
+                "-> light.split -> light.val -> sample.val ->",
+            ),
+            (
+                "# --- Sampling, filtering, compositing. ---",
+                "# --- Area lights and SH (paper 004 Sec. 4), shading, compositing. ---",
+            ),
+            (sampling, area_lights),
+        ];
+        let p = assert_twin(twin, name, &swaps);
         assert!(p.stages.iter().any(|s| s.kind == "sample.val"), "{name}");
         assert!(!p.stages.iter().any(|s| s.kind == "sample.path"), "{name}");
     }

@@ -195,9 +195,8 @@ fn import_warns_of_what_pipelines_will_miss() {
         "0 0 1\n1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n",
     )
     .unwrap();
-    let o = ok(run_in(
-        d,
-        &[
+    let import = || {
+        let args = [
             "import",
             "redwood",
             "rw",
@@ -205,26 +204,17 @@ fn import_warns_of_what_pipelines_will_miss() {
             "r.relume",
             "--intrinsics",
             "6,6,3.5,2.5",
-        ],
-    ));
+        ];
+        ok(run_in(d, &args))
+    };
+    let o = import();
     assert_eq!(
         stderr(&o),
         "warning: r.relume: only 1 of 2 frames have a camera pose: pipelines that read \
          `pose` stop at the first frame without one\n"
     );
     std::fs::remove_file(rw.join("trajectory.log")).unwrap();
-    let o = ok(run_in(
-        d,
-        &[
-            "import",
-            "redwood",
-            "rw",
-            "-o",
-            "r.relume",
-            "--intrinsics",
-            "6,6,3.5,2.5",
-        ],
-    ));
+    let o = import();
     assert_eq!(
         stderr(&o),
         "warning: r.relume: no camera poses: pipelines that read `pose` (the default one \
@@ -236,18 +226,7 @@ fn import_warns_of_what_pipelines_will_miss() {
             .save(rw.join(format!("depth/{i:05}.png")))
             .unwrap();
     }
-    let o = ok(run_in(
-        d,
-        &[
-            "import",
-            "redwood",
-            "rw",
-            "-o",
-            "r.relume",
-            "--intrinsics",
-            "6,6,3.5,2.5",
-        ],
-    ));
+    let o = import();
     assert!(
         stderr(&o).ends_with(
             "warning: r.relume: the color images are 8x6 and the depth images 4x3: stages \

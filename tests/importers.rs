@@ -33,6 +33,22 @@ fn true_pose(t: f64) -> (DVec3, DQuat) {
     )
 }
 
+/// A TUM groundtruth.txt line: the true pose at `t` seconds after `T0`.
+fn groundtruth_line(t: f64) -> String {
+    let (p, q) = true_pose(t);
+    format!(
+        "{:.6} {} {} {} {} {} {} {}\n",
+        T0 + t,
+        p.x,
+        p.y,
+        p.z,
+        q.x,
+        q.y,
+        q.z,
+        q.w
+    )
+}
+
 /// Five color frames at 30 Hz; depth 7 ms later except frame 3 (45 ms: unmatched);
 /// poses at 100 Hz from -50 ms to +100 ms, so frame 4 (133 ms) has no pose.
 fn write_tum(dir: &Path) {
@@ -58,18 +74,7 @@ fn write_tum(dir: &Path) {
     let mut gt = String::from("# ground truth trajectory\n# timestamp tx ty tz qx qy qz qw\n");
     for k in -5..=10 {
         let t = k as f64 * 0.01;
-        let (p, q) = true_pose(t);
-        gt.push_str(&format!(
-            "{:.6} {} {} {} {} {} {} {}\n",
-            T0 + t,
-            p.x,
-            p.y,
-            p.z,
-            q.x,
-            q.y,
-            q.z,
-            q.w
-        ));
+        gt.push_str(&groundtruth_line(t));
     }
     std::fs::write(dir.join("groundtruth.txt"), gt).unwrap();
 }
@@ -532,18 +537,7 @@ fn poses_are_not_interpolated_across_a_long_gap_and_the_frames_are_counted() {
     // and 4 (33, 67, 133 ms; frame 3 has no depth) fall in the hole.
     let mut gt = String::new();
     for k in (-5..=0).chain(40..=50) {
-        let (p, q) = true_pose(k as f64 * 0.01);
-        gt.push_str(&format!(
-            "{:.6} {} {} {} {} {} {} {}\n",
-            T0 + k as f64 * 0.01,
-            p.x,
-            p.y,
-            p.z,
-            q.x,
-            q.y,
-            q.z,
-            q.w
-        ));
+        gt.push_str(&groundtruth_line(k as f64 * 0.01));
     }
     std::fs::write(dir.join("groundtruth.txt"), gt).unwrap();
     let d = tmp.path();

@@ -142,15 +142,8 @@ impl MaterialScorer {
     pub fn report(&self) -> Option<Value> {
         (self.pixels_scorable > 0).then(|| {
             let n = self.samples as f64;
-            let median = (self.samples > 0).then(|| {
-                let half = self.samples.div_ceil(2);
-                let mut seen = 0;
-                let bin = self.histogram.iter().position(|&c| {
-                    seen += c;
-                    seen >= half
-                });
-                bin.unwrap_or(0) as f64 * BIN
-            });
+            let median = (self.samples > 0)
+                .then(|| super::normals::median_of_histogram(&self.histogram, self.samples) * BIN);
             json!({
                 "albedo_rel_error_median": median,
                 "albedo_rmse": (self.samples > 0).then(|| (self.squared_error_sum / n).sqrt()),

@@ -66,8 +66,8 @@ impl NormalsScorer {
     }
 }
 
-/// The bin index of the median of `count` entries.
-fn median_of_histogram(histogram: &[u64], count: u64) -> f64 {
+/// The bin index of the median of `count` entries (NaN for none).
+pub(super) fn median_of_histogram(histogram: &[u64], count: u64) -> f64 {
     if count == 0 {
         return f64::NAN;
     }

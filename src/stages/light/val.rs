@@ -7,14 +7,20 @@ use super::split::{check_map, same_map};
 use crate::graph::{
     Frame, ParamDefault, ParamSpec, Product, ProductKind, Stage, StageError, StageInfo,
 };
-use crate::light::{AreaLights, EnvMap, ValBuilder, ValParams};
+use crate::light::{AreaLights, EnvMap, LightMethod, ValBuilder, ValParams};
 use std::sync::Arc;
 
 const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
+        "method",
+        ParamDefault::Str("clusters"),
+        "how the direct part becomes lights: clusters = k-means area lights that integrate their texels (Sec. 4.3, steady from frame to frame); vpls = `lights` classic virtual point lights, importance samples with I = I_s / (N p_s) (eq. 14, Fig. 10's baseline: redrawn every update, so they flicker)",
+    )
+    .choices(LightMethod::NAMES),
+    ParamSpec::new(
         "lights",
         ParamDefault::Int(16),
-        "number of virtual area lights M, the k-means clusters (paper 004: 8 <= M <= 64)",
+        "number of lights M: k-means clusters, or point lights with method = vpls (paper 004: 8 <= M <= 64)",
     )
     .range(8.0, 64.0),
     ParamSpec::new(
@@ -76,6 +82,7 @@ pub const INFO: StageInfo = StageInfo {
                 normal_weight: p.float("normal_weight") as f32,
                 distant_radius: p.float("distant_radius") as f32,
                 seed: ctx.seed,
+                method: LightMethod::from_name(p.str("method")).unwrap_or_default(),
             }),
             last: None,
         }))

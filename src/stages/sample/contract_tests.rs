@@ -99,6 +99,7 @@ fn val(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> Irradiance
         camera_to_world: pose(),
         lights: &lights,
         objects,
+        transfer: None,
     };
     let mut out = val_layers(scene.depth.width, scene.depth.height);
     ValRenderer::with_kernel(lanes)

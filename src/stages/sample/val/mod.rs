@@ -21,8 +21,10 @@
 //! Indirect light is the SH9 irradiance of the indirect part at the normal:
 //! E_R^ind = E_RV^ind at real pixels. As in paper 004 (eq. 13 subtracts direct light
 //! only) the occlusion of indirect light by the virtual objects is ignored on real
-//! surfaces; on the objects, their self-occlusion of indirect light (the paper's PRT
-//! transfer C_vk, eq. 11) is ignored too. Virtual pixels: E_RV at the object's surface
+//! surfaces. On the objects (`transfer = "prt"`, the default) it is eq. 9 with the
+//! transfer vectors C_vk of eq. 11 interpolated from the hit triangle's corners
+//! ([`crate::light::prt`]): their occlusion of themselves and of each other is in it
+//! (a back face seen through a gap is shaded with its front's vectors). Virtual pixels: E_RV at the object's surface
 //! (self-shadowing through V^_j, real occluders through V_j), E_R at the real point
 //! behind it (NaN where the depth has none); `k_v` is the albedo (with E in irradiance
 //! units the Lambertian outgoing radiance is k_V E_RV / pi; glossy lobes are not
@@ -49,11 +51,15 @@ mod shade_lanes;
 mod shadow;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod transfer_tests;
 mod virtual_maps;
 
 use super::layers::{IrradianceLayers, LAYER_OUTPUTS, shade_rows};
 use crate::graph::{Frame, ParamDefault, ParamSpec, ProductKind, Stage, StageError, StageInfo};
 use crate::light::AreaLights;
+use crate::light::prt::cache::{self, CacheOutcome};
+use crate::light::prt::{Transfer, TransferParams};
 use crate::objects::VirtualScene;
 use crate::pinhole::Pinhole;
 use crate::raster::{DepthImage, Vec3Image, depth_is_valid};
@@ -98,6 +104,18 @@ const PARAMS: &[ParamSpec] = &[
         "real points count as occluders only from this many metres in front of the objects (seen from the light) onward, so the emitter's own wall or a distant light's room does not shadow everything",
     )
     .range(0.0, 1e6),
+    ParamSpec::new(
+        "transfer",
+        ParamDefault::Str("prt"),
+        "indirect light on the objects: prt = SH9 times each vertex's precomputed transfer, with the objects' occlusion of themselves and each other (paper 004 eqs. 9, 11; computed when the pipeline loads, cached in RELUME_CACHE, else $XDG_CACHE_HOME/relume or ~/.cache/relume; RELUME_CACHE=off computes every run); none = unoccluded SH9 irradiance at the normal",
+    )
+    .choices(&["prt", "none"]),
+    ParamSpec::new(
+        "transfer_samples",
+        ParamDefault::Int(4096),
+        "cosine-weighted directions per vertex of the transfer precomputation (4096: within 2 % of a brute-force integral on the torus)",
+    )
+    .range(1.0, 1_000_000.0),
 ];
 
 /// The output roles: every layer but `touched` (no path is traced, so no pixel is
@@ -123,11 +141,19 @@ pub const INFO: StageInfo = StageInfo {
     },
     build: |ctx| {
         let p = ctx.params;
+        let transfer = (p.str("transfer") == "prt" && !ctx.objects.is_empty()).then(|| {
+            let params = TransferParams {
+                samples: p.int("transfer_samples") as u32,
+                seed: ctx.seed,
+            };
+            Arc::new(load_transfer(ctx.stage_name, ctx.objects, params))
+        });
         Ok(Box::new(SampleVal {
             inputs: ["depth", "normals", "pose", "lights"].map(|r| ctx.input(r)),
             outputs: OUTPUTS.iter().map(|(r, _)| ctx.output(r)).collect(),
             intrinsics: ctx.header.depth_intrinsics,
             objects: ctx.objects.clone(),
+            transfer,
             params: ValShadingParams {
                 shadow_map_size: p.int("shadow_map_size") as usize,
                 virtual_bias: p.float("virtual_bias") as f32,
@@ -139,6 +165,34 @@ pub const INFO: StageInfo = StageInfo {
         }))
     },
 };
+
+/// The objects' radiance transfer from the cache, or computed (and cached), saying on
+/// stderr what it cost when it was computed and where the cache could not be written.
+fn load_transfer(stage: &str, objects: &VirtualScene, params: TransferParams) -> Transfer {
+    let started = std::time::Instant::now();
+    let dir = cache::cache_dir_from_env();
+    let (transfer, outcome) = cache::load_or_compute(objects, params, dir.as_deref());
+    let computed = format!(
+        "stage `{stage}` (sample.val): radiance transfer of {} object vertices ({} directions each) computed in {:.1} s",
+        transfer.vectors.len(),
+        params.samples,
+        started.elapsed().as_secs_f64()
+    );
+    match outcome {
+        CacheOutcome::Loaded(_) => {}
+        CacheOutcome::Written { path, .. } => {
+            eprintln!("{computed}, cached in {}", path.display())
+        }
+        CacheOutcome::NotWritten { path, reason } => {
+            eprintln!(
+                "{computed}; cannot cache it in {}: {reason}",
+                path.display()
+            )
+        }
+        CacheOutcome::Disabled => eprintln!("{computed} (cache off)"),
+    }
+    transfer
+}
 
 /// Settings of [`ValRenderer::render`] (the stage's parameters).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -174,6 +228,9 @@ pub struct ValInputs<'a> {
     pub camera_to_world: Affine3A,
     pub lights: &'a AreaLights,
     pub objects: &'a VirtualScene,
+    /// The objects' radiance transfer (paper 004 eq. 11) for their indirect light, or
+    /// `None` for the unoccluded SH9 irradiance at the normal.
+    pub transfer: Option<&'a Transfer>,
 }
 
 /// The layers [`ValRenderer::render`] writes: irradiance starts at 0 (a pixel with
@@ -432,6 +489,7 @@ struct SampleVal {
     outputs: Vec<String>,
     intrinsics: Intrinsics,
     objects: Arc<VirtualScene>,
+    transfer: Option<Arc<Transfer>>,
     params: ValShadingParams,
     renderer: ValRenderer,
 }
@@ -450,6 +508,7 @@ impl Stage for SampleVal {
             camera_to_world: Affine3A::from_mat4(pose.matrix().as_mat4()),
             lights,
             objects: &self.objects,
+            transfer: self.transfer.as_deref(),
         };
         let mut out = val_layers(depth.width, depth.height);
         self.renderer.render(&inputs, &self.params, &mut out)?;

@@ -8,6 +8,7 @@ use super::shade::shade_point;
 use super::shade::{Biases, Maps, PreparedLight, Sh9Irradiance, Shaded};
 use super::shade_lanes::{Points, shade_points};
 use super::shadow::{PointSampling, TILE};
+use crate::light::prt::{Transfer, barycentrics};
 use crate::objects::ray_triangle;
 use crate::raster::depth_is_valid;
 use crate::simd::{LANES, Lanes};
@@ -74,6 +75,8 @@ struct VirtualHit {
     /// The world size of its splat in the maps ([`PointSampling::footprint`]).
     patch: f32,
     albedo: Vec3,
+    /// Its indirect irradiance (SH9, through the transfer when there is one).
+    e_ind: Vec3,
 }
 
 /// The outputs a visible virtual surface sets in [`PixelOut`].
@@ -290,21 +293,32 @@ impl PixelContext<'_> {
         let origin = Vec3::from(self.sampling.origin);
         let scene = self.inputs.objects;
         let tri = &scene.triangles[id as usize];
-        let hit = match ray_triangle(origin, dir, &tri.vertices, 0.0, f32::INFINITY) {
-            Some((t, u, v)) => Some(scene.hit_record(origin, dir, t, id, u, v)),
+        let (hit, u, v) = match ray_triangle(origin, dir, &tri.vertices, 0.0, f32::INFINITY) {
+            Some((t, u, v)) => (scene.hit_record(origin, dir, t, id, u, v), u, v),
             // The raster and the ray test disagree at the very edge: ask the scene.
-            None => scene.intersect(origin, dir, 0.0, f32::INFINITY),
+            None => {
+                let hit = scene.intersect(origin, dir, 0.0, f32::INFINITY)?;
+                let corners = &scene.triangles[hit.triangle as usize].vertices;
+                let (u, v) = barycentrics(corners, hit.position);
+                (hit, u, v)
+            }
         };
-        let hit = hit?;
         let z = self.inputs.depth.data[i];
         if depth_is_valid(z) && hit.t >= z * ray.length() {
             return None;
         }
         let position = Vec3A::from(hit.position);
+        let e_ind = match self.inputs.transfer {
+            Some(transfer) => {
+                Transfer::irradiance(&transfer.at(hit.triangle, u, v), &self.inputs.lights.sh9)
+            }
+            None => self.sh.at(hit.normal.into()),
+        };
         Some(VirtualHit {
             x,
             position,
             normal: hit.normal.into(),
+            e_ind,
             patch: self.sampling.footprint(position),
             albedo: hit.material.albedo,
         })
@@ -315,7 +329,7 @@ impl PixelContext<'_> {
     fn virtual_surface(&self, hit: &VirtualHit, s: Shaded) -> VirtualSurface {
         VirtualSurface {
             e_rv_dir: s.e_rv,
-            e_rv_ind: self.sh.at(hit.normal),
+            e_rv_ind: hit.e_ind,
             k_v: hit.albedo,
             position: hit.position.into(),
             normal: hit.normal.into(),

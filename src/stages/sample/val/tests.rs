@@ -17,7 +17,7 @@ const SLAB_Y: f32 = 1.3;
 const ALBEDO: Vec3 = Vec3::new(0.8, 0.3, 0.2);
 
 /// A camera looking straight down (camera x = world x, camera y = world z).
-fn camera() -> (Pinhole, Affine3A) {
+pub(super) fn camera() -> (Pinhole, Affine3A) {
     let pinhole = Pinhole {
         width: W,
         height: H,
@@ -72,7 +72,7 @@ fn sphere_at(centre: Vec3, radius: f32) -> VirtualScene {
 
 /// The real scene: the floor y = 0 and, optionally, a horizontal slab at `SLAB_Y` over
 /// x in [0.1, 0.6], z in [-0.3, 0.3] (in view); its depth and (camera-space) normal maps.
-fn real_scene(slab: bool) -> (DepthImage, Vec3Image) {
+pub(super) fn real_scene(slab: bool) -> (DepthImage, Vec3Image) {
     let (camera, to_world) = camera();
     let mut depth = Image::filled(W, H, 0.0);
     for y in 0..H {
@@ -98,7 +98,7 @@ fn light(position: Vec3, intensity: f32) -> AreaLight {
     }
 }
 
-fn lights(list: Vec<AreaLight>) -> AreaLights {
+pub(super) fn lights(list: Vec<AreaLight>) -> AreaLights {
     AreaLights {
         lights: list,
         sh9: project_sh9(&EnvMap::constant(64, 32, Vec3::new(0.2, 0.3, 0.4))),
@@ -119,6 +119,7 @@ fn render(
         camera_to_world,
         lights,
         objects: scene,
+        transfer: None,
     };
     sample_val(&inputs, &ValShadingParams::default()).unwrap()
 }
@@ -319,6 +320,7 @@ fn missing_depth_and_normals_give_nan_irradiance_not_a_failure() {
         camera_to_world,
         lights: &empty_lights,
         objects: &VirtualScene::default(),
+        transfer: None,
     };
     let err = sample_val(&inputs, &ValShadingParams::default()).unwrap_err();
     assert!(err.to_string().contains("normals 4x4"), "{err}");
@@ -528,6 +530,7 @@ fn kernels_match_the_scalar_path(
         camera_to_world,
         lights: set,
         objects: scene,
+        transfer: None,
     };
     let run = |mut renderer: ValRenderer| {
         let mut out = val_layers(depth.width, depth.height);

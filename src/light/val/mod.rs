@@ -43,6 +43,36 @@ pub struct ValParams {
     pub distant_radius: f32,
     /// Seed of the importance samples and of the k-means++ seeding.
     pub seed: u64,
+    /// How the direct part becomes lights.
+    pub method: LightMethod,
+}
+
+/// How [`ValBuilder`] turns the direct part into lights (paper 004 Fig. 10 compares the
+/// two).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LightMethod {
+    /// Importance samples clustered by k-means into area lights that integrate their
+    /// texels (Sec. 4.3; warm-started, so lights stay put from frame to frame).
+    #[default]
+    Clusters,
+    /// Classic virtual point lights (eq. 14): `lights` importance samples of the direct
+    /// part, each a light with I = I_s / (N p_s); redrawn every update, so they jump
+    /// when the map changes (the flicker the paper shows).
+    Vpls,
+}
+
+impl LightMethod {
+    /// The names `light.val`'s `method` parameter takes, in the enum's order.
+    pub const NAMES: &'static [&'static str] = &["clusters", "vpls"];
+
+    /// The method of a `method` name.
+    pub fn from_name(name: &str) -> Option<LightMethod> {
+        match name {
+            "clusters" => Some(LightMethod::Clusters),
+            "vpls" => Some(LightMethod::Vpls),
+            _ => None,
+        }
+    }
 }
 
 impl Default for ValParams {
@@ -54,6 +84,7 @@ impl Default for ValParams {
             normal_weight: 1.0,
             distant_radius: 100.0,
             seed: 0,
+            method: LightMethod::Clusters,
         }
     }
 }
@@ -133,11 +164,18 @@ impl ValBuilder {
     /// Clusters that integrate nothing are dropped (fewer than M lights, never NaN); the
     /// lights keep the order of their centres, so a light keeps its index across frames
     /// while the set of non-empty clusters is unchanged.
+    ///
+    /// With [`LightMethod::Vpls`], steps 2 to 4 are replaced by classic point lights: N =
+    /// `lights` stratified samples of the same CDF, I = L_s dA_s / (N p_s) (eq. 14).
     pub fn update(&mut self, direct: &EnvMap, indirect: &EnvMap) -> AreaLights {
         let sh9 = project_sh9(indirect);
         self.gather_texels(direct);
-        self.draw_samples();
         let p = self.params;
+        if p.method == LightMethod::Vpls {
+            let lights = self.vpls();
+            return AreaLights { lights, sh9 };
+        }
+        self.draw_samples(p.samples);
         let cold = self.centres.len() != p.lights.max(1);
         if cold {
             self.centres =
@@ -202,27 +240,74 @@ impl ValBuilder {
         self.texels.extend(rows.into_iter().flatten());
     }
 
-    /// Step 2: stratified importance samples over the texels' CDF.
-    fn draw_samples(&mut self) {
+    /// The CDF of the texels' weights; returns the total (0 when nothing can emit).
+    fn build_cdf(&mut self) -> f64 {
         self.cdf.clear();
         let mut total = 0.0;
         for t in &self.texels {
             total += t.weight;
             self.cdf.push(total);
         }
-        self.samples.clear();
         if self.texels.is_empty() || total <= 0.0 || !total.is_finite() {
-            return;
+            return 0.0;
         }
-        let n = self.params.samples.max(1);
-        let seed = self.params.seed;
-        let (cdf, texels) = (&self.cdf, &self.texels);
-        self.samples.par_extend((0..n).into_par_iter().map(|i| {
-            let jitter = rng::unit_f64(rng::hash(&[seed, SALT_SAMPLES, i as u64]));
-            let u = (i as f64 + jitter) / n as f64 * total;
-            let k = cdf.partition_point(|&c| c <= u).min(texels.len() - 1);
-            texels[k].feature
-        }));
+        total
+    }
+
+    /// The texel of stratified sample `i` of `n` over the CDF (total `total`), with a
+    /// hashed offset per stratum keyed by (seed, i).
+    fn sample_texel(&self, i: usize, n: usize, total: f64) -> usize {
+        let jitter = rng::unit_f64(rng::hash(&[self.params.seed, SALT_SAMPLES, i as u64]));
+        let u = (i as f64 + jitter) / n as f64 * total;
+        self.cdf
+            .partition_point(|&c| c <= u)
+            .min(self.texels.len() - 1)
+    }
+
+    /// Step 2: `n` stratified importance samples over the texels' CDF.
+    fn draw_samples(&mut self, n: usize) {
+        let total = self.build_cdf();
+        // Taken out and put back, so its allocation serves every frame.
+        let mut samples = std::mem::take(&mut self.samples);
+        samples.clear();
+        if total > 0.0 {
+            let n = n.max(1);
+            let this = &*self;
+            samples.par_extend(
+                (0..n)
+                    .into_par_iter()
+                    .map(|i| this.texels[this.sample_texel(i, n, total)].feature),
+            );
+        }
+        self.samples = samples;
+    }
+
+    /// Classic virtual point lights (paper 004 eq. 14): N = `lights` stratified
+    /// importance samples s of the direct texels by p_s = luminance(L_s) dA_s / total,
+    /// each a light at its texel's position facing the centre with I = L_s dA_s / (N p_s)
+    /// and area dA_s / (N p_s), so that I / area is the texel's radiance and the sum of
+    /// the lights' intensities is an unbiased estimate of the direct part's. A texel
+    /// drawn twice gives two lights.
+    fn vpls(&mut self) -> Vec<AreaLight> {
+        let total = self.build_cdf();
+        if total <= 0.0 {
+            return Vec::new();
+        }
+        let n = self.params.lights.max(1);
+        (0..n)
+            .map(|i| {
+                let t = &self.texels[self.sample_texel(i, n, total)];
+                // dA_s / (N p_s) = total / (N luminance(L_s)).
+                let share = t.area as f64 * total / (n as f64 * t.weight);
+                AreaLight {
+                    position: t.feature.position,
+                    normal: t.feature.normal,
+                    intensity: (t.radiance.as_dvec3() * share).as_vec3(),
+                    area: share as f32,
+                }
+            })
+            .filter(|l| l.intensity.is_finite() && l.area.is_finite())
+            .collect()
     }
 
     /// Step 4: assignment of every direct texel to its nearest centre and integration,
@@ -305,218 +390,4 @@ pub fn val_center_drift(prev: &AreaLights, cur: &AreaLights) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::light::split::{split_direct_indirect, total_intensity};
-
-    const LAMP: Vec3 = Vec3::new(0.0, 1.0, 0.0);
-
-    fn window() -> Vec3 {
-        Vec3::new(1.0, 0.3, 0.5).normalize()
-    }
-
-    /// A room-like impostor seen from (0, 0.3, 0): a dim background, a small warm lamp
-    /// overhead and a larger bluish window, every texel 2.5 m away (or distant).
-    fn room(distance: f32, lamp_gain: f32) -> EnvMap {
-        let mut map = EnvMap::from_fn(128, 64, |d| {
-            let lamp = d.dot(LAMP) > 0.985;
-            let window = d.dot(window()) > 0.95;
-            Vec3::splat(0.15 + 0.05 * d.y)
-                + if lamp {
-                    Vec3::new(100.0, 85.0, 70.0) * lamp_gain
-                } else {
-                    Vec3::ZERO
-                }
-                + if window {
-                    Vec3::new(10.0, 11.0, 14.0)
-                } else {
-                    Vec3::ZERO
-                }
-        });
-        map.distance = vec![distance; map.radiance.len()];
-        map.center = Vec3::new(0.0, 0.3, 0.0);
-        map
-    }
-
-    fn params(lights: usize) -> ValParams {
-        ValParams {
-            lights,
-            seed: 5,
-            ..Default::default()
-        }
-    }
-
-    #[test]
-    fn static_light_gives_static_lights_and_slow_change_moves_them_little() {
-        let (direct, indirect) = split_direct_indirect(&room(2.5, 1.0), 0.9);
-        let mut builder = ValBuilder::new(params(16));
-        let first = builder.update(&direct, &indirect);
-        assert!(
-            builder.last_report.unwrap().converged,
-            "cold start converges"
-        );
-        let second = builder.update(&direct, &indirect);
-        assert_eq!(builder.last_report.unwrap().iterations, 1);
-        assert_eq!(val_center_drift(&first, &second), 0.0);
-        assert_eq!(first, second);
-        // The lamp 5 % brighter, with a ratio that keeps the same texels direct: the
-        // warm-started centres barely move.
-        let mut builder = ValBuilder::new(params(16));
-        let (direct, indirect) = split_direct_indirect(&room(2.5, 1.0), 0.8);
-        let before = builder.update(&direct, &indirect);
-        let (direct, indirect) = split_direct_indirect(&room(2.5, 1.05), 0.8);
-        let after = builder.update(&direct, &indirect);
-        assert_eq!(after.lights.len(), before.lights.len());
-        let drift = val_center_drift(&before, &after);
-        // A cold start on the changed map lands elsewhere: the warm start is what keeps
-        // the lights in place.
-        let cold = ValBuilder::new(ValParams {
-            seed: 6,
-            ..params(16)
-        })
-        .update(&direct, &indirect);
-        let cold_drift = val_center_drift(&before, &cold);
-        eprintln!("warm drift {drift} m, cold drift {cold_drift} m");
-        // Less than half a texel (12 cm at 2.5 m for 128 columns).
-        assert!(drift < 0.05 && drift < cold_drift, "drift {drift} m");
-    }
-
-    #[test]
-    fn intensities_integrate_the_whole_direct_part() {
-        for distance in [2.5, f32::INFINITY] {
-            let (direct, indirect) = split_direct_indirect(&room(distance, 1.0), 0.9);
-            let set = ValBuilder::new(params(16)).update(&direct, &indirect);
-            assert!(set.lights.len() >= 8, "{}", set.lights.len());
-            let mut total = total_intensity(&direct);
-            if !distance.is_finite() {
-                // Distant texels sit at the far radius: dA = dOmega R^2.
-                total = total.map(|t| t * 100.0 * 100.0);
-            }
-            let sum = set
-                .lights
-                .iter()
-                .fold(DVec3::ZERO, |s, l| s + l.intensity.as_dvec3());
-            for c in 0..3 {
-                assert!(
-                    (sum[c] - total[c]).abs() < 1e-5 * total[c],
-                    "{sum} vs {total:?}"
-                );
-            }
-            // The SH9 term is the indirect part's.
-            assert_eq!(set.sh9, project_sh9(&indirect));
-        }
-    }
-
-    #[test]
-    fn lights_sit_at_the_two_sources_and_reproduce_their_irradiance() {
-        let map = room(2.5, 1.0);
-        // 80 %: the two sources hold about 85 % of the light, the background the rest.
-        let (direct, indirect) = split_direct_indirect(&map, 0.8);
-        let set = ValBuilder::new(params(8)).update(&direct, &indirect);
-        let (mut at_lamp, mut at_window) = (0, 0);
-        for l in &set.lights {
-            let d = (l.position - map.center).normalize();
-            assert!((l.position - map.center).length() - 2.5 < 1e-3);
-            assert!((l.normal + d).length() < 1e-5, "faces the centre");
-            if d.dot(LAMP) > 0.97 {
-                at_lamp += 1;
-            } else if d.dot(window()) > 0.93 {
-                at_window += 1;
-            } else {
-                panic!("a light away from both sources: {d}");
-            }
-        }
-        assert!(at_lamp >= 1 && at_window >= 1, "{at_lamp} {at_window}");
-        // Irradiance at the centre from the VALs (eq. 6) against the direct part.
-        for n in [Vec3::Y, window(), Vec3::new(0.5, 1.0, 0.0).normalize()] {
-            let e: Vec3 = set
-                .lights
-                .iter()
-                .map(|l| {
-                    let v = l.position - map.center;
-                    let r2 = v.length_squared();
-                    l.intensity * (n.dot(v).max(0.0) * (-l.normal.dot(v)).max(0.0) / (r2 * r2))
-                })
-                .sum();
-            let reference = direct.irradiance_brute_force(n);
-            let error = (e - reference).abs().max_element() / reference.max_element();
-            eprintln!("VAL irradiance at the centre, n = {n}: relative error {error}");
-            assert!(error < 0.03, "n {n}: {e} vs {reference}");
-        }
-    }
-
-    #[test]
-    fn black_and_empty_maps_give_no_lights() {
-        let black = EnvMap::constant(32, 16, Vec3::ZERO);
-        let set = ValBuilder::new(params(16)).update(&black, &black);
-        assert!(set.lights.is_empty());
-        assert_eq!(set.sh9, [Vec3::ZERO; 9]);
-        let empty = EnvMap::distant(0, 0, Vec::new());
-        assert!(
-            ValBuilder::new(params(16))
-                .update(&empty, &empty)
-                .lights
-                .is_empty()
-        );
-        // One bright texel: one light, the others' clusters are dropped.
-        let mut one = black.clone();
-        one.radiance[100] = Vec3::ONE;
-        let set = ValBuilder::new(params(16)).update(&one, &black);
-        assert_eq!(set.lights.len(), 1);
-        assert!(set.lights[0].intensity.is_finite());
-    }
-
-    #[test]
-    fn deterministic_across_thread_counts() {
-        let (direct, indirect) = split_direct_indirect(&room(2.5, 1.0), 0.9);
-        let run = || {
-            let mut b = ValBuilder::new(params(16));
-            b.update(&direct, &indirect);
-            b.update(&direct, &indirect)
-        };
-        let one = crate::stages::with_threads(1, run);
-        let three = crate::stages::with_threads(3, run);
-        let bits = |s: &AreaLights| {
-            s.lights
-                .iter()
-                .flat_map(|l| {
-                    [l.position, l.normal, l.intensity]
-                        .into_iter()
-                        .flat_map(|v| v.to_array())
-                        .chain([l.area])
-                })
-                .map(f32::to_bits)
-                .collect::<Vec<_>>()
-        };
-        assert_eq!(bits(&one), bits(&three));
-    }
-
-    #[test]
-    fn drift_matches_lights_by_index() {
-        let light = |x: f32| AreaLight {
-            position: Vec3::new(x, 0.0, 0.0),
-            normal: Vec3::Y,
-            intensity: Vec3::ONE,
-            area: 1.0,
-        };
-        let a = AreaLights {
-            lights: vec![light(0.0), light(1.0), light(5.0)],
-            sh9: [Vec3::ZERO; 9],
-        };
-        let b = AreaLights {
-            lights: vec![light(0.5), light(2.0)],
-            sh9: [Vec3::ZERO; 9],
-        };
-        assert_eq!(val_center_drift(&a, &b), 0.75);
-        assert_eq!(
-            val_center_drift(
-                &a,
-                &AreaLights {
-                    lights: vec![],
-                    sh9: b.sh9
-                }
-            ),
-            0.0
-        );
-    }
-}
+mod tests;

@@ -78,8 +78,8 @@ impl ProductKind {
         Self::WRITABLE.contains(&self)
     }
 
-    /// The kinds the `write` stage can save: the images first, then compensation (JSON)
-    /// and the cloud (PLY).
+    /// The kinds the `write` stage can save: the images first, then compensation (JSON),
+    /// the cloud (PLY) and the light model ([`crate::light::record`]).
     pub const WRITABLE: &'static [ProductKind] = &[
         ProductKind::Color,
         ProductKind::Depth,
@@ -90,6 +90,7 @@ impl ProductKind {
         ProductKind::Labels,
         ProductKind::Compensation,
         ProductKind::Cloud,
+        ProductKind::AreaLights,
     ];
 }
 

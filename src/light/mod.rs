@@ -16,6 +16,7 @@ pub mod impostor;
 pub mod kmeans;
 pub mod loaders;
 pub mod prt;
+pub mod record;
 pub mod sh;
 pub mod split;
 pub mod table;

@@ -10,9 +10,13 @@
 //! | scalar map | 16-bit, value x 1000 (like depth in mm) | Y f32 |
 //! | label map | 8-bit gray, the raw values | Y f32 |
 //!
-//! A color compensation is saved as `<frame>.json` (row-major matrices, pair counts) and
-//! the environment-sample cloud as `<frame>.ply` (binary PLY, see [`ply`]), whatever
-//! the formats.
+//! A color compensation is saved as `<frame>.json` (row-major matrices, pair counts),
+//! the environment-sample cloud as `<frame>.ply` (binary PLY, see [`ply`]) and a light
+//! model (`lights`, paper 004's area lights and SH) as `<frame>.val` (32 bytes per light
+//! plus 108 of SH, see [`crate::light::record`]), whatever the formats. A light model is
+//! written when it changes, once per update: with `light.val`'s `every = 8`, files
+//! appear for frames 0, 8, 16, ..., and frame t's model is the file of the largest
+//! frame <= t.
 //!
 //! Every file is written to a temporary name and renamed, so an interrupted run leaves
 //! complete files only.
@@ -25,6 +29,7 @@ use crate::raster::{Image, depth_is_valid};
 use crate::recording::writer::write_file_atomic;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 pub mod ply;
 
@@ -32,7 +37,7 @@ const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
         "products",
         ParamDefault::StrList(&["depth", "normals"]),
-        "products to save: images, compensations (JSON) or clouds (PLY)",
+        "products to save: images, compensations (JSON), clouds (PLY) or light models (.val records, on each update)",
     ),
     ParamSpec::new(
         "formats",
@@ -92,6 +97,7 @@ pub const INFO: StageInfo = StageInfo {
             png: p.str_list("formats").iter().any(|f| f == "png"),
             exr: p.str_list("formats").iter().any(|f| f == "exr"),
             every: p.int("every") as usize,
+            last_lights: Default::default(),
         }))
     },
 };
@@ -113,6 +119,8 @@ struct Write {
     png: bool,
     exr: bool,
     every: usize,
+    /// Per product, the light model written last (a model is written once per update).
+    last_lights: std::collections::HashMap<String, std::sync::Arc<crate::light::AreaLights>>,
 }
 
 impl Stage for Write {
@@ -126,6 +134,13 @@ impl Stage for Write {
                 .get(name)
                 .ok_or_else(|| StageError::MissingInput(name.clone()))?;
             let stem = dir.join(format!("{:06}", frame.index));
+            if let Product::AreaLights(model) = product {
+                let last = self.last_lights.get(name);
+                if last.is_some_and(|last| Arc::ptr_eq(last, model) || **last == **model) {
+                    continue;
+                }
+                self.last_lights.insert(name.clone(), model.clone());
+            }
             if !product.kind().is_image() {
                 jobs.push((product, stem, false));
                 continue;
@@ -246,6 +261,10 @@ pub fn write_record(product: &Product, stem: &Path) -> Result<(), StageError> {
             serde_json::to_vec_pretty(&c.to_json()).expect("JSON of plain values"),
         ),
         Product::Cloud(cloud) => (stem.with_extension("ply"), ply::ply_bytes(cloud)),
+        Product::AreaLights(model) => (
+            stem.with_extension("val"),
+            crate::light::record::encode(model).map_err(|e| StageError::Failed(e.to_string()))?,
+        ),
         other => {
             return Err(StageError::Failed(format!(
                 "a {} cannot be written to a file",
@@ -334,5 +353,68 @@ fn image_size(product: &Product) -> Result<(u32, u32), StageError> {
             "a {} cannot be written as an image",
             other.kind().name()
         ))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::graph::{BuildContext, ParamValue};
+    use crate::light::{AreaLight, AreaLights, record};
+    use crate::recording::{Header, Intrinsics};
+    use glam::Vec3;
+    use std::collections::BTreeMap;
+
+    fn model(intensity: f32) -> Arc<AreaLights> {
+        Arc::new(AreaLights {
+            lights: vec![AreaLight {
+                position: Vec3::new(0.0, 2.5, 0.0),
+                normal: -Vec3::Y,
+                intensity: Vec3::splat(intensity),
+                area: 0.5,
+            }],
+            sh9: [Vec3::splat(0.1); 9],
+        })
+    }
+
+    #[test]
+    fn a_light_model_is_written_once_per_update_as_a_record() {
+        let out = std::env::temp_dir().join(format!("relume-write-val-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&out);
+        let mut params = Params::defaults(PARAMS);
+        params.set("products", ParamValue::StrList(vec!["lights".into()]));
+        let header = Header::new("t", Intrinsics::PRIMESENSE, 0.001);
+        let ctx = BuildContext {
+            stage_name: "write",
+            params: &params,
+            inputs: &BTreeMap::new(),
+            outputs: &BTreeMap::new(),
+            header: &header,
+            out_dir: &out,
+            seed: 0,
+            objects: &Default::default(),
+        };
+        let mut stage = (INFO.build)(&ctx).unwrap();
+        // Frames 0-2 share one update (as `every = 3` lends it), frame 3 brings a new
+        // one, frame 4 an equal model in a new allocation (no change: not written).
+        let (first, second) = (model(1.0), model(2.0));
+        for (index, m) in [&first, &first, &first, &second, &model(2.0)]
+            .into_iter()
+            .enumerate()
+        {
+            let mut frame = Frame::new(index, 0);
+            frame.insert("lights", Product::AreaLights(m.clone()));
+            stage.process(&mut frame).unwrap();
+        }
+        let mut files: Vec<String> = std::fs::read_dir(out.join("lights"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        files.sort();
+        assert_eq!(files, ["000000.val", "000003.val"]);
+        let bytes = std::fs::read(out.join("lights/000003.val")).unwrap();
+        assert_eq!(bytes.len(), 8 + 32 + 108);
+        assert_eq!(record::decode(&bytes).unwrap(), *second);
+        std::fs::remove_dir_all(&out).unwrap();
     }
 }

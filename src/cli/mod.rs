@@ -215,25 +215,31 @@ pub(crate) fn place_objects(
     Ok(())
 }
 
-/// A warning before scores of a pipeline with stages at their own rate (`every = k`):
-/// on the frames between their runs, they and the stages after them hand on products
-/// of an earlier frame, which eval compares with the current frame's truth and
-/// references.
+/// A warning before scores of a pipeline with stages at their own rate (`every = k`,
+/// `lag = n`): on the frames between their runs, or always when they run behind, they
+/// and the stages after them hand on products of an earlier frame, which eval compares
+/// with the current frame's truth and references.
 pub(crate) fn warn_every(pipeline: &relume::graph::Pipeline) {
     let slow: Vec<String> = pipeline
         .stages
         .iter()
-        .filter(|s| s.every > 1)
-        .map(|s| format!("`{}` (every {})", s.name, s.every))
+        .filter(|s| s.every > 1 || s.lag > 0)
+        .map(|s| match (s.every, s.lag) {
+            (1, lag) => format!("`{}` (lag {lag})", s.name),
+            (every, 0) => format!("`{}` (every {every})", s.name),
+            (every, lag) => format!("`{}` (every {every}, lag {lag})", s.name),
+        })
         .collect();
     if !slow.is_empty() {
+        let one = slow.len() == 1;
         eprintln!(
-            "warning: {} of `{}` {} on every k-th frame: on the frames between, {} and the stages after {} are scored with products of an earlier frame against the current frame's truth and references",
+            "warning: {} of `{}` {} at {} own rate (every k: on every k-th frame; lag n: n frames behind): on the frames between, or behind, {} and the stages after {} are scored with products of an earlier frame against the current frame's truth and references",
             slow.join(", "),
             pipeline.file,
-            if slow.len() == 1 { "runs" } else { "run" },
-            if slow.len() == 1 { "it" } else { "they" },
-            if slow.len() == 1 { "it" } else { "them" },
+            if one { "runs" } else { "run" },
+            if one { "its" } else { "their" },
+            if one { "it" } else { "they" },
+            if one { "it" } else { "them" },
         );
     }
 }

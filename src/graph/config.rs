@@ -19,6 +19,8 @@
 //! outputs = { normals = "normals" }
 //! every = 1                     # run on every k-th frame and lend the last products
 //!                               # to the frames between (see `super::every`)
+//! lag = 0                       # run n frames behind on a thread of its own: frame t
+//!                               # reads its products of frame t - n (see `super::lag`)
 //!
 //! [[object]]                    # virtual objects, see `crate::objects`
 //! shape = "torus"
@@ -196,6 +198,9 @@ pub struct StageDecl {
     pub outputs: RolePairs,
     /// `every = k`: the stage runs on every k-th frame (checked in the pipeline).
     pub every: Option<Located<RawValue>>,
+    /// `lag = n`: the stage runs n frames behind on its own thread (checked in the
+    /// pipeline).
+    pub lag: Option<Located<RawValue>>,
     /// Span of the whole stage table.
     pub span: Range<usize>,
 }
@@ -324,7 +329,9 @@ fn parse_stage(src: &SourceFile, item: &Spanned<DeValue<'_>>) -> Result<StageDec
     check_keys(
         src,
         table,
-        &["name", "kind", "params", "inputs", "outputs", "every"],
+        &[
+            "name", "kind", "params", "inputs", "outputs", "every", "lag",
+        ],
         "key in [[stage]]",
     )?;
     let kind = opt_string(src, table, "kind")?.ok_or_else(|| {
@@ -348,6 +355,7 @@ fn parse_stage(src: &SourceFile, item: &Spanned<DeValue<'_>>) -> Result<StageDec
         inputs: string_table(src, table, "inputs")?,
         outputs: string_table(src, table, "outputs")?,
         every: table.get("every").map(raw),
+        lag: table.get("lag").map(raw),
         span: item.span(),
     })
 }

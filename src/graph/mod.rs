@@ -4,6 +4,7 @@ pub mod config;
 mod cycle;
 pub mod every;
 pub mod frame;
+pub mod lag;
 pub mod memory;
 pub mod overrides;
 pub mod panics;
@@ -13,6 +14,7 @@ pub mod product;
 pub mod registry;
 pub mod runtime;
 pub mod stage;
+mod stage_checks;
 pub mod timing;
 pub mod tree;
 

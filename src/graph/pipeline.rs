@@ -2,11 +2,12 @@
 //! declared types and bounds, every input is produced upstream (or, with `@prev`,
 //! anywhere, as a feedback edge delivering the previous frame's value), and kinds match.
 
-use super::config::{self, ConfigError, Located, PipelineDecl, RawValue, SourceFile, StageDecl};
+use super::config::{self, ConfigError, Located, PipelineDecl, SourceFile};
 use super::frame::ProductKind;
-use super::params::{ParamDefault, ParamSpec, ParamValue, Params, a, did_you_mean};
+use super::params::{Params, a, did_you_mean};
 use super::registry::Registry;
 use super::stage::{Stage, StageError};
+use super::stage_checks::{bind_ports, check_params, rate_key};
 use crate::recording::Header;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -36,6 +37,9 @@ pub struct ResolvedStage {
     /// The stage runs on every `every`-th frame and lends its last products to the
     /// frames between (see [`super::every`]); 1 = every frame.
     pub every: u32,
+    /// The stage runs `lag` frames behind on its own thread (see [`super::lag`]); 0 =
+    /// in step.
+    pub lag: u32,
 }
 
 /// A feedback edge: `producer`'s `product` of frame t-1 goes to `consumer` at frame t.
@@ -188,24 +192,8 @@ impl Pipeline {
             let ports = (info.ports)(&params);
             let inputs = bind_ports(src, &d.inputs, &ports.inputs, &name, "input")?;
             let outputs = bind_ports(src, &d.outputs, &ports.outputs, &name, "output")?;
-            let every = match &d.every {
-                None => 1,
-                Some(v) => match v.value {
-                    RawValue::Int(k) if (1..=super::every::MAX_EVERY as i64).contains(&k) => {
-                        k as u32
-                    }
-                    _ => {
-                        return Err(src.error(
-                            v.span.clone(),
-                            format!(
-                                "`every` of stage `{name}` must be an integer from 1 to {}",
-                                super::every::MAX_EVERY
-                            ),
-                            Some("every = 8 runs the stage on frames 0, 8, 16, ...; the frames between reuse its products".into()),
-                        ));
-                    }
-                },
-            };
+            let every = rate_key(src, &d.every, &name, "every", 1..=super::every::MAX_EVERY)?;
+            let lag = rate_key(src, &d.lag, &name, "lag", 0..=super::lag::MAX_LAG)?;
             stages.push(ResolvedStage {
                 name,
                 kind: info.kind,
@@ -214,6 +202,7 @@ impl Pipeline {
                 outputs,
                 line: src.line_col(d.span.start).0,
                 every,
+                lag,
             });
             port_sets.push(ports);
         }
@@ -448,203 +437,4 @@ fn missing_product(
         ),
         Some(hint),
     )
-}
-
-/// Binds a stage's declared ports to product names from the config's role table.
-fn bind_ports(
-    src: &SourceFile,
-    given: &[(Located<String>, Located<String>)],
-    ports: &[super::stage::Port],
-    stage: &str,
-    what: &str,
-) -> Result<BTreeMap<String, String>, ConfigError> {
-    for (role, product) in given {
-        if !ports.iter().any(|p| p.role == role.value) {
-            let roles: Vec<&str> = ports.iter().map(|p| p.role.as_str()).collect();
-            let hint = match did_you_mean(&role.value, roles.iter().copied()) {
-                Some(s) => format!(
-                    "did you mean `{s}`? {what}s of this stage: {}",
-                    roles.join(", ")
-                ),
-                None if roles.is_empty() => format!("this stage has no {what}s"),
-                None => format!("{what}s of this stage: {}", roles.join(", ")),
-            };
-            return Err(src.error(
-                role.span.clone(),
-                format!("stage `{stage}` has no {what} `{}`", role.value),
-                Some(hint),
-            ));
-        }
-        if product.value.trim().is_empty() || (what == "output" && product.value.contains('@')) {
-            return Err(src.error(
-                product.span.clone(),
-                format!("invalid product name {:?}", product.value),
-                Some("product names are non-empty and contain no `@`".into()),
-            ));
-        }
-    }
-    Ok(ports
-        .iter()
-        .map(|p| {
-            let bound = given
-                .iter()
-                .find(|(r, _)| r.value == p.role)
-                .map_or(p.default_product.clone(), |(_, v)| v.value.clone());
-            (p.role.clone(), bound)
-        })
-        .collect())
-}
-
-/// Checks a stage's parameters against its declaration and fills in defaults.
-fn check_params(
-    src: &SourceFile,
-    d: &StageDecl,
-    specs: &[ParamSpec],
-    stage: &str,
-) -> Result<Params, ConfigError> {
-    let mut params = Params::defaults(specs);
-    for (key, value) in &d.params {
-        let Some(spec) = specs.iter().find(|s| s.name == key.value) else {
-            let names: Vec<&str> = specs.iter().map(|s| s.name).collect();
-            let hint = match did_you_mean(&key.value, names.iter().copied()) {
-                Some(s) => format!(
-                    "did you mean `{s}`? parameters of {}: {}",
-                    d.kind.value,
-                    names.join(", ")
-                ),
-                None if names.is_empty() => format!("{} takes no parameters", d.kind.value),
-                None => format!("parameters of {}: {}", d.kind.value, names.join(", ")),
-            };
-            return Err(src.error(
-                key.span.clone(),
-                format!(
-                    "unknown parameter `{}` for stage `{stage}` ({})",
-                    key.value, d.kind.value
-                ),
-                Some(hint),
-            ));
-        };
-        params.set(spec.name, check_value(src, spec, value)?);
-    }
-    Ok(params)
-}
-
-fn check_value(
-    src: &SourceFile,
-    spec: &ParamSpec,
-    value: &Located<RawValue>,
-) -> Result<ParamValue, ConfigError> {
-    let wrong_type = || {
-        src.error(
-            value.span.clone(),
-            format!(
-                "parameter `{}` must be {}, found {}",
-                spec.name,
-                a(spec.type_name()),
-                a(value.value.type_name())
-            ),
-            Some(format!("{}; default {}", spec.doc, spec.default_value())),
-        )
-    };
-    let in_range = |x: f64| -> Result<(), ConfigError> {
-        let low = spec.min.is_some_and(|m| x < m);
-        let high = spec.max.is_some_and(|m| x > m);
-        if low || high || !x.is_finite() {
-            let bounds = format!(
-                "{} to {}",
-                spec.min.map_or("-inf".into(), |m| m.to_string()),
-                spec.max.map_or("inf".into(), |m| m.to_string())
-            );
-            return Err(src.error(
-                value.span.clone(),
-                format!("parameter `{}` = {x} is out of range ({bounds})", spec.name),
-                Some(spec.doc.to_string()),
-            ));
-        }
-        Ok(())
-    };
-    let choice = |s: &str, span: &std::ops::Range<usize>| -> Result<(), ConfigError> {
-        if spec.choices.is_empty() || spec.choices.contains(&s) {
-            return Ok(());
-        }
-        let hint = match did_you_mean(s, spec.choices.iter().copied()) {
-            Some(c) => format!("did you mean {c:?}? choices: {}", spec.choices.join(", ")),
-            None => format!("choices: {}", spec.choices.join(", ")),
-        };
-        Err(src.error(
-            span.clone(),
-            format!("parameter `{}` does not accept {s:?}", spec.name),
-            Some(hint),
-        ))
-    };
-    Ok(match (&spec.default, &value.value) {
-        (ParamDefault::Bool(_), RawValue::Bool(b)) => ParamValue::Bool(*b),
-        (ParamDefault::Int(_), RawValue::Int(i)) => {
-            in_range(*i as f64)?;
-            ParamValue::Int(*i)
-        }
-        (ParamDefault::Float(_), RawValue::Float(f)) => {
-            in_range(*f)?;
-            ParamValue::Float(*f)
-        }
-        (ParamDefault::Float(_), RawValue::Int(i)) => {
-            in_range(*i as f64)?;
-            ParamValue::Float(*i as f64)
-        }
-        (ParamDefault::Str(_), RawValue::Str(s)) => {
-            choice(s, &value.span)?;
-            if let Some(check) = spec.check {
-                check(s).map_err(|message| {
-                    src.error(value.span.clone(), message, Some(spec.doc.to_string()))
-                })?;
-            }
-            if spec.is_file_path && !s.is_empty() {
-                let resolved = src.base_dir().join(s);
-                ParamValue::Str(resolved.to_string_lossy().into_owned())
-            } else {
-                ParamValue::Str(s.clone())
-            }
-        }
-        (ParamDefault::StrList(_), RawValue::Array(items)) => {
-            let mut out = Vec::new();
-            for item in items {
-                match &item.value {
-                    RawValue::Str(s) => {
-                        choice(s, &item.span)?;
-                        // A list names things (products to save, formats): twice would
-                        // do the same work twice, and two writers race for one file.
-                        if out.contains(s) {
-                            return Err(src.error(
-                                item.span.clone(),
-                                format!("parameter `{}` names {s:?} twice", spec.name),
-                                None,
-                            ));
-                        }
-                        out.push(s.clone());
-                    }
-                    other => {
-                        return Err(src.error(
-                            item.span.clone(),
-                            format!(
-                                "parameter `{}` must hold strings, found {}",
-                                spec.name,
-                                a(other.type_name())
-                            ),
-                            None,
-                        ));
-                    }
-                }
-            }
-            // A list names what to do; an empty one would make its stage do nothing.
-            if out.is_empty() {
-                return Err(src.error(
-                    value.span.clone(),
-                    format!("parameter `{}` is empty: name at least one", spec.name),
-                    Some(format!("{}; default {}", spec.doc, spec.default_value())),
-                ));
-            }
-            ParamValue::StrList(out)
-        }
-        _ => return Err(wrong_type()),
-    })
 }

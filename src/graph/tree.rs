@@ -209,7 +209,9 @@ impl StageGraph {
                     objects: &node.objects,
                 };
                 let built = (info.build)(&ctx).map_err(|e| (i, e))?;
-                Ok(super::every::every_k(built, s))
+                let outputs = s.outputs.values().cloned().collect();
+                let paced = super::every::every_k(built, s);
+                Ok(super::lag::lag_n(paced, s.lag, outputs))
             })
             .collect()
     }
@@ -249,6 +251,7 @@ fn same_stage(x: &ResolvedStage, y: &ResolvedStage) -> bool {
     x.name == y.name
         && x.kind == y.kind
         && x.every == y.every
+        && x.lag == y.lag
         && x.params == y.params
         && x.inputs == y.inputs
         && x.outputs == y.outputs

@@ -1,5 +1,6 @@
 //! Stages at their own rate: `every = k` (paper 004 Sec. 3.2's light model at a lower
-//! rate than the frames), through `relume replay --hash`.
+//! rate than the frames) and `lag = n` (computed behind the frames, on its own thread),
+//! through `relume replay --hash`.
 
 use std::path::Path;
 use std::process::Command;
@@ -103,13 +104,21 @@ fn frames_between_runs_carry_the_last_runs_products_whatever_the_threads() {
 }
 
 #[test]
-fn every_must_be_a_positive_integer() {
+fn every_and_lag_must_be_integers_in_range() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    for bad in ["0", "1.5", "\"4\""] {
+    let cases = [
+        ("every", "0", "1 to 100000"),
+        ("every", "1.5", "1 to 100000"),
+        ("every", "\"4\"", "1 to 100000"),
+        ("lag", "-1", "0 to 64"),
+        ("lag", "65", "0 to 64"),
+        ("lag", "true", "0 to 64"),
+    ];
+    for (key, bad, range) in cases {
         std::fs::write(
             d.join("p.toml"),
-            format!("[[stage]]\nkind = \"decode\"\nevery = {bad}\n"),
+            format!("[[stage]]\nkind = \"decode\"\n{key} = {bad}\n"),
         )
         .unwrap();
         let o = Command::new(env!("CARGO_BIN_EXE_relume"))
@@ -117,15 +126,58 @@ fn every_must_be_a_positive_integer() {
             .current_dir(d)
             .output()
             .unwrap();
-        assert_eq!(o.status.code(), Some(1), "{bad}");
+        assert_eq!(o.status.code(), Some(1), "{key} = {bad}");
         let err = String::from_utf8_lossy(&o.stderr);
-        assert!(
-            err.contains(
-                "p.toml:3:9: `every` of stage `decode` must be an integer from 1 to 100000"
-            ),
-            "{err}"
+        let column = key.len() + 4;
+        let expected =
+            format!("p.toml:3:{column}: `{key}` of stage `decode` must be an integer from {range}");
+        assert!(err.contains(&expected), "{err}");
+    }
+}
+
+/// A decode stage `lag` frames behind, the points made from its depth, and the
+/// channels' capacity.
+fn lagged(lag: u32, capacity: u32) -> String {
+    format!(
+        "[pipeline]\nchannel_capacity = {capacity}\n\n[[stage]]\nkind = \"decode\"\nlag = {lag}\n\n[[stage]]\nkind = \"depth.to_points\"\ninputs = {{ depth = \"depth\" }}\n"
+    )
+}
+
+#[test]
+fn a_lagged_stage_hands_on_its_products_of_frame_t_minus_n_whatever_threads_and_capacity() {
+    let dir = recording();
+    let d = dir.path();
+    let each = digests(d, &lagged(0, 2), "0..8", "2");
+    let behind = digests(d, &lagged(2, 2), "0..8", "2");
+    assert_eq!(behind.len(), 8);
+    for (frame, made_from) in [0, 0, 0, 1, 2, 3, 4, 5].into_iter().enumerate() {
+        for product in ["color", "depth", "points"] {
+            assert_eq!(
+                digest(&behind[frame], product),
+                digest(&each[made_from], product),
+                "frame {frame}: {product}"
+            );
+        }
+        assert_eq!(
+            digest(&behind[frame], "record"),
+            digest(&each[frame], "record")
         );
     }
+    for (threads, capacity) in [("1", 1), ("3", 1), ("3", 8)] {
+        assert_eq!(
+            digests(d, &lagged(2, capacity), "0..8", threads),
+            behind,
+            "{threads} threads, capacity {capacity}"
+        );
+    }
+    // Positions in the run, not frame indices: a run from frame 3 starts with frame 3's.
+    let late = digests(d, &lagged(2, 2), "3..6", "2");
+    let shown: Vec<String> = late.iter().map(|f| digest(f, "color")).collect();
+    let expected: Vec<String> = [3, 3, 3]
+        .iter()
+        .map(|&i| digest(&each[i], "color"))
+        .collect();
+    assert_eq!(shown, expected);
 }
 
 #[test]
@@ -142,7 +194,7 @@ fn eval_warns_that_a_stage_at_its_own_rate_is_scored_with_earlier_products() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(
-        err.contains("warning: `decode` (every 2) of `p.toml` runs on every k-th frame: on the frames between, it and the stages after it are scored with products of an earlier frame"),
+        err.contains("warning: `decode` (every 2) of `p.toml` runs at its own rate (every k: on every k-th frame; lag n: n frames behind): on the frames between, or behind, it and the stages after it are scored with products of an earlier frame"),
         "{err}"
     );
 }

@@ -248,7 +248,7 @@ fn the_dir_pipelines_are_their_twins_with_sample_dir_swapped_in() {
 #[test]
 fn the_val_pipelines_are_their_twins_with_area_lights_swapped_in() {
     let sampling = "[[stage]]\nkind = \"sample.path\"\n\n[[stage]]\nkind = \"filter.axis_aligned\"\n\n[[stage]]\nkind = \"composite.differential\"\n";
-    let area_lights = "[[stage]]\nkind = \"light.split\"\nevery = 8\n\n[[stage]]\nkind = \"light.val\"\nevery = 8\nlag = 1\n\n[[stage]]\nkind = \"sample.val\"\n\n[[stage]]\nkind = \"composite.differential\"\ninputs = { e_r_dir = \"e_r_dir\", e_r_ind = \"e_r_ind\", e_rv_dir = \"e_rv_dir\", e_rv_ind = \"e_rv_ind\" }\n";
+    let area_lights = "[[stage]]\nkind = \"light.split\"\nevery = 8\n\n[[stage]]\nkind = \"light.val\"\nevery = 8\nlag = 1\n\n[[stage]]\nkind = \"sample.val\"\nparams = { shadow_updates = 4 }\n\n[[stage]]\nkind = \"composite.differential\"\ninputs = { e_r_dir = \"e_r_dir\", e_r_ind = \"e_r_ind\", e_rv_dir = \"e_rv_dir\", e_rv_ind = \"e_rv_ind\" }\n";
     for (twin, name) in [
         ("mixed-reality", "mixed-reality-val"),
         ("mixed-reality-livingroom1", "mixed-reality-val-livingroom1"),

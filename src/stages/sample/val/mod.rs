@@ -46,6 +46,8 @@
 mod pixel;
 mod raster;
 mod real_splat;
+#[cfg(test)]
+mod round_robin_tests;
 mod shade;
 mod shade_lanes;
 mod shadow;
@@ -105,6 +107,12 @@ const PARAMS: &[ParamSpec] = &[
     )
     .range(0.0, 1e6),
     ParamSpec::new(
+        "shadow_updates",
+        ParamDefault::Int(0),
+        "lights whose two shadow maps are rebuilt per frame, in turn (paper 004 Sec. 5's round robin); the others keep their last maps and frusta; 0 = every light every frame",
+    )
+    .range(0.0, 1024.0),
+    ParamSpec::new(
         "transfer",
         ParamDefault::Str("prt"),
         "indirect light on the objects: prt = SH9 times each vertex's precomputed transfer, with the objects' occlusion of themselves and each other (paper 004 eqs. 9, 11; computed when the pipeline loads, cached in RELUME_CACHE, else $XDG_CACHE_HOME/relume or ~/.cache/relume; RELUME_CACHE=off computes every run); none = unoccluded SH9 irradiance at the normal",
@@ -160,6 +168,7 @@ pub const INFO: StageInfo = StageInfo {
                 real_bias: p.float("real_bias") as f32,
                 slope_bias: p.float("slope_bias") as f32,
                 real_occluder_reach: p.float("real_occluder_reach") as f32,
+                shadow_updates: p.int("shadow_updates") as usize,
             },
             renderer: ValRenderer::default(),
         }))
@@ -202,6 +211,8 @@ pub struct ValShadingParams {
     pub real_bias: f32,
     pub slope_bias: f32,
     pub real_occluder_reach: f32,
+    /// Lights whose shadow maps are rebuilt per frame, in turn; 0 = all.
+    pub shadow_updates: usize,
 }
 
 impl Default for ValShadingParams {
@@ -212,6 +223,7 @@ impl Default for ValShadingParams {
             real_bias: 0.02,
             slope_bias: 1.5,
             real_occluder_reach: 1.0,
+            shadow_updates: 0,
         }
     }
 }
@@ -257,6 +269,11 @@ pub struct ValRenderer {
     /// Per tile, bit j set when the tile's real points may be inside light j's frustum.
     lookup: Vec<u64>,
     maps: Vec<f32>,
+    /// The frustum each light's maps in `maps` were built with, their size, and the
+    /// calls so far (the round robin of `shadow_updates`).
+    map_frusta: Vec<Option<shadow::ShadowFrustum>>,
+    map_size: usize,
+    shadow_calls: u64,
     /// The shading and splatting kernel; `None`: the fastest the CPU runs (all give the
     /// same bits).
     kernel: Option<Kernel>,

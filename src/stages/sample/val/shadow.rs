@@ -287,6 +287,13 @@ impl PointSampling {
 impl ValRenderer {
     /// Fits each light's frustum and builds its two shadow maps (in groups of up to
     /// eight lights, the groups in parallel); returns the lights prepared for shading.
+    ///
+    /// With `shadow_updates` = u between 1 and the number of lights M, only u lights'
+    /// maps are built per call, in turn (paper 004 Sec. 5's round robin: call c builds
+    /// lights (c u + i) mod M, i < u); the others keep the maps and the frusta they
+    /// were last built with, and are looked up through those, so a map stays
+    /// consistent with its own frustum while its light moves. Where nothing was built
+    /// before, or M or the map size changed, every map is built.
     pub(super) fn shadow_maps(
         &mut self,
         inputs: &ValInputs,
@@ -294,7 +301,7 @@ impl ValRenderer {
     ) -> Vec<PreparedLight> {
         let size = params.shadow_map_size;
         let bounds = inputs.objects.bounds();
-        let frusta: Vec<Option<ShadowFrustum>> = inputs
+        let fitted: Vec<Option<ShadowFrustum>> = inputs
             .lights
             .lights
             .iter()
@@ -311,8 +318,26 @@ impl ValRenderer {
                 )
             })
             .collect();
+        let m = fitted.len();
+        let updates = params.shadow_updates;
+        let round_robin =
+            (1..m).contains(&updates) && self.map_frusta.len() == m && self.map_size == size;
+        let start = (self.shadow_calls as usize).wrapping_mul(updates) % m.max(1);
+        let rebuilt: Vec<bool> = (0..m)
+            .map(|j| !round_robin || (j + m - start) % m < updates)
+            .collect();
+        self.shadow_calls = self.shadow_calls.wrapping_add(1);
+        let frusta: Vec<Option<ShadowFrustum>> = (0..m)
+            .map(|j| {
+                if rebuilt[j] {
+                    fitted[j]
+                } else {
+                    self.map_frusta[j]
+                }
+            })
+            .collect();
         let stride = 3 * size * size;
-        self.maps.resize(stride * frusta.len(), f32::INFINITY);
+        self.maps.resize(stride * m, f32::INFINITY);
         let surface = RealSurface {
             points: &self.real_points,
             patches: &self.real_patches,
@@ -320,44 +345,42 @@ impl ValRenderer {
             tiles: &self.tiles,
         };
         let kernel = self.kernel.unwrap_or_else(Kernel::detect);
+        // The maps to build and their frusta.
+        let mut targets: Vec<(&mut [f32], &ShadowFrustum)> = self
+            .maps
+            .chunks_mut(stride)
+            .zip(&frusta)
+            .zip(&rebuilt)
+            .filter(|(_, rebuilt)| **rebuilt)
+            .filter_map(|((maps, frustum), _)| Some((maps, frustum.as_ref()?)))
+            .collect();
         #[cfg(test)]
         if self.scalar_reference {
-            self.maps
-                .par_chunks_mut(stride)
-                .zip(frusta.par_iter())
-                .for_each(|(maps, frustum)| {
-                    if let Some(frustum) = frustum {
-                        let (virtual_target, mut real_target) = light_targets(frustum, maps);
-                        let objects = inputs.objects;
-                        virtual_maps::virtual_shadow_map_reference(
-                            frustum,
-                            objects,
-                            virtual_target.map,
-                        );
-                        real_splat::real_shadow_map_reference(&mut real_target, &surface);
-                    }
-                });
-            return self.prepare_lights(inputs, &frusta);
+            targets.par_iter_mut().for_each(|(maps, frustum)| {
+                let (virtual_target, mut real_target) = light_targets(frustum, maps);
+                let objects = inputs.objects;
+                virtual_maps::virtual_shadow_map_reference(frustum, objects, virtual_target.map);
+                real_splat::real_shadow_map_reference(&mut real_target, &surface);
+            });
+            targets.clear();
         }
         // Up to eight lights per pass over the triangles and the points, in as many
         // passes as there are threads where the lights allow (the maps do not depend on
         // the grouping).
-        let group = frusta
+        let group = targets
             .len()
             .div_ceil(rayon::current_num_threads())
             .clamp(1, LANES);
-        self.maps
-            .par_chunks_mut(group * stride)
-            .zip(frusta.par_chunks(group))
-            .for_each(|(maps, frusta)| {
-                let (mut virtual_targets, mut real_targets): (Vec<_>, Vec<_>) = maps
-                    .chunks_mut(stride)
-                    .zip(frusta)
-                    .filter_map(|(maps, frustum)| Some(light_targets(frustum.as_ref()?, maps)))
-                    .unzip();
-                virtual_shadow_maps(kernel, &mut virtual_targets, inputs.objects);
-                real_shadow_maps(kernel, &mut real_targets, &surface);
-            });
+        targets.par_chunks_mut(group).for_each(|chunk| {
+            let (mut virtual_targets, mut real_targets): (Vec<_>, Vec<_>) = chunk
+                .iter_mut()
+                .map(|(maps, frustum)| light_targets(frustum, maps))
+                .unzip();
+            virtual_shadow_maps(kernel, &mut virtual_targets, inputs.objects);
+            real_shadow_maps(kernel, &mut real_targets, &surface);
+        });
+        self.map_frusta = frusta.clone();
+        self.map_size = size;
         self.prepare_lights(inputs, &frusta)
     }
 

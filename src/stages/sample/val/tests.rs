@@ -31,7 +31,7 @@ pub(super) fn camera() -> (Pinhole, Affine3A) {
 }
 
 /// A UV sphere of `RADIUS` at `SPHERE` with smooth normals.
-fn sphere() -> VirtualScene {
+pub(super) fn sphere() -> VirtualScene {
     sphere_at(SPHERE, RADIUS)
 }
 
@@ -89,7 +89,7 @@ pub(super) fn real_scene(slab: bool) -> (DepthImage, Vec3Image) {
     (depth, Image::filled(W, H, Vec3::new(0.0, 0.0, -1.0)))
 }
 
-fn light(position: Vec3, intensity: f32) -> AreaLight {
+pub(super) fn light(position: Vec3, intensity: f32) -> AreaLight {
     AreaLight {
         position,
         normal: -Vec3::Y,
@@ -137,7 +137,7 @@ fn segment_distance(x: Vec3, light: Vec3) -> f32 {
     (x + d * t).distance(SPHERE)
 }
 
-fn bits(image: &Vec3Image) -> Vec<[u32; 3]> {
+pub(super) fn bits(image: &Vec3Image) -> Vec<[u32; 3]> {
     image
         .data
         .iter()

@@ -98,6 +98,11 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
         let stage = loaded.pipeline.stages.iter().find(|s| s.name == name);
         stage.map_or(1, |s| s.every)
     };
+    // A stage that runs behind on its own thread: its time is its wait for that thread.
+    let lag_of = |name: &str| {
+        let stage = loaded.pipeline.stages.iter().find(|s| s.name == name);
+        stage.map_or(0, |s| s.lag)
+    };
     if a.json {
         let stages: serde_json::Map<String, serde_json::Value> = names
             .iter()
@@ -110,6 +115,7 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
                     "max_ms": s.max_ms,
                     "mean_ms": s.mean_ms,
                     "every": every_of(n),
+                    "lag": lag_of(n),
                 });
                 (n.clone(), timing)
             })
@@ -154,8 +160,12 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
         "max ms",
         "frames/s"
     )?;
-    let mut amortized = Vec::new();
+    let (mut amortized, mut behind) = (Vec::new(), Vec::new());
     for ((n, k), s) in names.iter().zip(&per_stage) {
+        let lag = lag_of(n);
+        if lag > 0 {
+            behind.push(format!("`{n}` (lag {lag})"));
+        }
         let every = every_of(n);
         let typical = if every > 1 {
             amortized.push(format!("`{n}` (every {every})"));
@@ -180,6 +190,12 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
         outln!(
             "{}: the mean over all frames, its cost per frame amortized, in place of the median",
             amortized.join(", ")
+        )?;
+    }
+    if !behind.is_empty() {
+        outln!(
+            "{}: the frame's wait for its own thread's result, not the time that thread computes (it overlaps the other stages, even with --isolated)",
+            behind.join(", ")
         )?;
     }
     if a.isolated {

@@ -13,8 +13,12 @@
 //! in order, as the stage would without a lag, and the runtime's thread waits for the
 //! one result it needs. So a run's products are as deterministic as with lag = 0, and
 //! the stage's own products are bit for bit those it makes without a lag, n frames
-//! later. Positions, not frame indices: where a run skips frames (`--skip-corrupt`), n
-//! counts the frames the run processes.
+//! later, unless it reads through `@prev` a product made from its own (then that
+//! input, too, is n frames older than without a lag). Positions, not frame indices:
+//! where a run skips frames (`--skip-corrupt`), n counts the frames the run processes.
+//!
+//! Only the stage's declared inputs travel to its thread, so the n + 1 frames it may
+//! hold keep those products alive and no others.
 //!
 //! The time the runtime measures for such a stage is the wait for its result (what it
 //! costs the frame), not the time its thread computes. At the end of a run its thread
@@ -36,9 +40,15 @@ pub const MAX_LAG: u32 = 64;
 /// What the stage's thread made of one frame: its products by name, or why it failed.
 type Made = Result<Vec<(String, Option<Arc<Product>>)>, StageError>;
 
-/// `stage` run `lag` frames behind on its own thread; itself for lag 0. `outputs` are
-/// the products it writes.
-pub fn lag_n(stage: Box<dyn Stage>, lag: u32, outputs: Vec<String>) -> Box<dyn Stage> {
+/// `stage` run `lag` frames behind on its own thread; itself for lag 0. `inputs` are
+/// the frame keys it reads (`name@prev` for a previous-frame input), `outputs` the
+/// products it writes.
+pub fn lag_n(
+    stage: Box<dyn Stage>,
+    lag: u32,
+    inputs: Vec<String>,
+    outputs: Vec<String>,
+) -> Box<dyn Stage> {
     if lag == 0 {
         return stage;
     }
@@ -52,6 +62,7 @@ pub fn lag_n(stage: Box<dyn Stage>, lag: u32, outputs: Vec<String>) -> Box<dyn S
         .expect("a thread for a lagged stage");
     Box::new(LagN {
         lag: lag as usize,
+        inputs,
         jobs: Some(jobs),
         made,
         worker: Some(worker),
@@ -96,6 +107,9 @@ fn work(
 
 struct LagN {
     lag: usize,
+    /// The frame keys the stage reads: only those travel to its thread, so the frames
+    /// it holds keep no other product alive.
+    inputs: Vec<String>,
     /// Frames handed to the stage's thread (`None` once finished).
     jobs: Option<Sender<Frame>>,
     made: Receiver<(usize, Made)>,
@@ -132,7 +146,14 @@ impl Stage for LagN {
         let jobs = self.jobs.as_ref().expect("not finished");
         // The thread stops after a failure, and its result says so when it is due: a
         // frame handed after it would wait for nothing, so it is not counted.
-        if jobs.send(frame.clone()).is_ok() {
+        let mut job = Frame::new(frame.index, frame.stamp_ns);
+        job.entered = frame.entered;
+        for key in &self.inputs {
+            if let Some(product) = frame.get_shared(key) {
+                job.insert_shared(key, Arc::clone(product));
+            }
+        }
+        if jobs.send(job).is_ok() {
             self.handed += 1;
         }
         // This frame reads the result of position max(m - n, 0).
@@ -190,7 +211,7 @@ mod tests {
 
     fn run(lag: u32, frames: usize, fail_on: Option<usize>) -> Result<Vec<(f64, f64)>, StageError> {
         let stage = Box::new(Counter { seen: 0, fail_on });
-        let mut stage = lag_n(stage, lag, vec!["count".into()]);
+        let mut stage = lag_n(stage, lag, Vec::new(), vec!["count".into()]);
         let mut out = Vec::new();
         for index in 10..10 + frames {
             let mut frame = Frame::new(index, 0);
@@ -223,6 +244,35 @@ mod tests {
         assert_eq!(plain[3], (4.0, 13.0));
         // The stage itself made the same products, n frames earlier.
         assert_eq!(lagged[5], plain[3]);
+    }
+
+    /// Panics on frame 12 instead of failing.
+    struct Panics;
+
+    impl Stage for Panics {
+        fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
+            assert!(frame.index != 12, "the lamp fell");
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_panic_on_the_stage_thread_is_the_stage_failing_on_its_frame() {
+        let mut stage = lag_n(Box::new(Panics), 1, Vec::new(), Vec::new());
+        let mut outcome = Ok(());
+        for index in 10..16 {
+            outcome = stage.process(&mut Frame::new(index, 0));
+            if outcome.is_err() {
+                break;
+            }
+        }
+        let e = outcome.unwrap_err().to_string();
+        assert!(
+            e.starts_with(
+                "on frame 12, which this stage runs behind (lag): panicked: the lamp fell"
+            ),
+            "{e}"
+        );
     }
 
     #[test]

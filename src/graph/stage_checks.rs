@@ -204,8 +204,8 @@ fn check_value(
         _ => return Err(wrong_type()),
     })
 }
-/// The value of a stage's `every` or `lag` key (`default` when absent), an error at the
-/// value when it is not an integer in `range`.
+/// The value of a stage's `every` or `lag` key (the start of `range` when absent), an
+/// error at the value when it is not an integer in `range`.
 pub(super) fn rate_key(
     src: &SourceFile,
     value: &Option<Located<RawValue>>,

@@ -209,9 +209,10 @@ impl StageGraph {
                     objects: &node.objects,
                 };
                 let built = (info.build)(&ctx).map_err(|e| (i, e))?;
+                let inputs = s.inputs.values().cloned().collect();
                 let outputs = s.outputs.values().cloned().collect();
                 let paced = super::every::every_k(built, s);
-                Ok(super::lag::lag_n(paced, s.lag, outputs))
+                Ok(super::lag::lag_n(paced, s.lag, inputs, outputs))
             })
             .collect()
     }

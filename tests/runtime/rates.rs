@@ -198,3 +198,22 @@ fn eval_warns_that_a_stage_at_its_own_rate_is_scored_with_earlier_products() {
         "{err}"
     );
 }
+
+#[test]
+fn a_stage_at_its_own_rate_and_behind_hands_on_its_last_run_before_the_frame() {
+    let dir = recording();
+    let d = dir.path();
+    let each = digests(d, &lagged(0, 2), "0..8", "2");
+    let paced = lagged(1, 2).replace("lag = 1\n", "every = 3\nlag = 1\n");
+    let shown = digests(d, &paced, "0..8", "2");
+    // Runs on frames 0, 3, 6 (every 3), read one frame later (lag 1): frame t shows
+    // the last run at or before t - 1 (frame 0 its own).
+    for (frame, ran) in [0, 0, 0, 0, 3, 3, 3, 6].into_iter().enumerate() {
+        assert_eq!(
+            digest(&shown[frame], "color"),
+            digest(&each[ran], "color"),
+            "frame {frame}"
+        );
+    }
+    assert_eq!(digests(d, &paced, "0..8", "1"), shown);
+}

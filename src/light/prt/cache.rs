@@ -25,6 +25,9 @@ use crate::rng;
 use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 8] = b"RLPRT001";
+/// The version of [`Transfer::compute`]'s estimator, in the digest: bump it when the
+/// directions, the ray offset or the estimate change, so old files are not used.
+const ESTIMATOR_VERSION: u64 = 1;
 const HEADER_BYTES: usize = 8 + 16 + 4 + 4;
 
 /// What [`load_or_compute`] did.
@@ -56,11 +59,7 @@ pub fn cache_dir_from_env() -> Option<PathBuf> {
 /// The digest of `scene`'s triangles (corners and normals, bit for bit) and of the
 /// settings that change the vectors, as 32 hex digits.
 pub fn digest(scene: &VirtualScene, params: TransferParams) -> String {
-    let mut words = vec![
-        MAGIC.len() as u64,
-        params.samples.max(1) as u64,
-        params.seed,
-    ];
+    let mut words = vec![ESTIMATOR_VERSION, params.samples.max(1) as u64, params.seed];
     words.push(scene.triangles.len() as u64);
     for tri in &scene.triangles {
         for c in 0..3 {
@@ -188,7 +187,13 @@ pub fn load_or_compute(
     };
     let digest = digest(scene, params);
     let path = cache_path(dir, &digest);
-    let existing = crate::files::read_regular(&path).ok();
+    // A file larger than any for this scene (at most 3 vertices per triangle) is not
+    // read at all.
+    let largest = HEADER_BYTES as u64 + 12 * scene.triangles.len() as u64 * 10;
+    let fits = std::fs::metadata(&path).is_ok_and(|m| m.len() <= largest);
+    let existing = fits
+        .then(|| crate::files::read_regular(&path).ok())
+        .flatten();
     if let Some(bytes) = &existing
         && let Ok(transfer) = decode(bytes, &digest, scene.triangles.len())
     {

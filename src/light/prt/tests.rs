@@ -186,6 +186,8 @@ fn the_digest_follows_the_geometry_and_the_settings() {
         ..params
     };
     assert_ne!(cache::digest(&torus, more), base);
+    let reseeded = TransferParams { seed: 2, ..params };
+    assert_ne!(cache::digest(&torus, reseeded), base);
     assert_eq!(cache::digest(&torus.clone(), params), base);
 }
 

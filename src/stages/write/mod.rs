@@ -15,8 +15,9 @@
 //! model (`lights`, paper 004's area lights and SH) as `<frame>.val` (32 bytes per light
 //! plus 108 of SH, see [`crate::light::record`]), whatever the formats. A light model is
 //! written when it changes, once per update: with `light.val`'s `every = 8`, files
-//! appear for frames 0, 8, 16, ..., and frame t's model is the file of the largest
-//! frame <= t.
+//! appear for frames 0, 8, 16, ... (0, 9, 17, ... with `lag = 1` as well), and frame
+//! t's model is the file of the largest frame <= t (with this stage's own `every`, of
+//! the frames it writes).
 //!
 //! Every file is written to a temporary name and renamed, so an interrupted run leaves
 //! complete files only.

@@ -109,7 +109,7 @@ const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
         "shadow_updates",
         ParamDefault::Int(0),
-        "lights whose two shadow maps are rebuilt per frame, in turn (paper 004 Sec. 5's round robin); the others keep their last maps and frusta; 0 = every light every frame",
+        "lights whose two shadow maps are rebuilt per frame, in turn (paper 004 Sec. 5's round robin), besides every light that moved; the others keep their last maps, whose real occluders then come from an earlier frame's depth; 0 = every light every frame",
     )
     .range(0.0, 1024.0),
     ParamSpec::new(
@@ -270,8 +270,10 @@ pub struct ValRenderer {
     lookup: Vec<u64>,
     maps: Vec<f32>,
     /// The frustum each light's maps in `maps` were built with, their size, and the
-    /// calls so far (the round robin of `shadow_updates`).
+    /// calls so far (the round robin of `shadow_updates`, see `shadow.rs`).
     map_frusta: Vec<Option<shadow::ShadowFrustum>>,
+    /// The (position, normal) of the light each map was built for.
+    map_lights: Vec<(Vec3, Vec3)>,
     map_size: usize,
     shadow_calls: u64,
     /// The shading and splatting kernel; `None`: the fastest the CPU runs (all give the

@@ -20,15 +20,24 @@ fn four_lights() -> AreaLights {
 /// Renders with `renderer`, the camera of the tests, the real scene with or without
 /// its slab, the sphere and four lights.
 fn render_with(renderer: &mut ValRenderer, slab: bool, updates: usize) -> IrradianceLayers {
+    render_lit(renderer, slab, updates, &four_lights())
+}
+
+fn render_lit(
+    renderer: &mut ValRenderer,
+    slab: bool,
+    updates: usize,
+    set: &AreaLights,
+) -> IrradianceLayers {
     let (depth, normals) = real_scene(slab);
     let (camera, camera_to_world) = camera();
-    let (set, scene) = (four_lights(), sphere());
+    let scene = sphere();
     let inputs = ValInputs {
         depth: &depth,
         normals: &normals,
         camera,
         camera_to_world,
-        lights: &set,
+        lights: set,
         objects: &scene,
         transfer: None,
     };
@@ -85,4 +94,21 @@ fn lights_take_turns_and_keep_their_last_maps_between() {
     render_with(&mut all, false, 4);
     let every = render_with(&mut all, true, 4);
     assert_eq!(bits(&every.e_rv_dir), bits(&after.e_rv_dir));
+}
+
+#[test]
+fn a_light_that_moved_gets_new_maps_whatever_its_turn() {
+    let mut turns = ValRenderer::default();
+    render_with(&mut turns, true, 1);
+    // A new light model: light 3 moved, the others did not.
+    let mut moved = four_lights();
+    moved.lights[3].position += Vec3::new(0.3, 0.0, -0.2);
+    let mut full = ValRenderer::default();
+    render_lit(&mut full, true, 0, &moved);
+    // Call 1 rebuilds light 1 (its turn) and light 3 (it moved); 0 and 2 had the
+    // same inputs, so every map is the full build's.
+    let out = render_lit(&mut turns, true, 1, &moved);
+    assert!((0..4).all(|j| maps_of(&turns, j) == maps_of(&full, j)));
+    let expected = render_lit(&mut ValRenderer::default(), true, 0, &moved);
+    assert_eq!(bits(&out.e_rv_dir), bits(&expected.e_rv_dir));
 }

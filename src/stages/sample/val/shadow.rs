@@ -290,10 +290,11 @@ impl ValRenderer {
     ///
     /// With `shadow_updates` = u between 1 and the number of lights M, only u lights'
     /// maps are built per call, in turn (paper 004 Sec. 5's round robin: call c builds
-    /// lights (c u + i) mod M, i < u); the others keep the maps and the frusta they
-    /// were last built with, and are looked up through those, so a map stays
-    /// consistent with its own frustum while its light moves. Where nothing was built
-    /// before, or M or the map size changed, every map is built.
+    /// lights (c u + i) mod M, i < u), and those of every light that moved (position
+    /// or normal not bit for bit the one its maps were built for): the maps of the
+    /// others hold their objects' shadows still, and only their real occluders come
+    /// from an earlier frame's points (a static scene seen from elsewhere). Where
+    /// nothing was built before, or M or the map size changed, every map is built.
     pub(super) fn shadow_maps(
         &mut self,
         inputs: &ValInputs,
@@ -323,8 +324,12 @@ impl ValRenderer {
         let round_robin =
             (1..m).contains(&updates) && self.map_frusta.len() == m && self.map_size == size;
         let start = (self.shadow_calls as usize).wrapping_mul(updates) % m.max(1);
+        let placed = |l: &crate::light::AreaLight| (l.position, l.normal);
         let rebuilt: Vec<bool> = (0..m)
-            .map(|j| !round_robin || (j + m - start) % m < updates)
+            .map(|j| {
+                let moved = self.map_lights.get(j) != Some(&placed(&inputs.lights.lights[j]));
+                !round_robin || moved || (j + m - start) % m < updates
+            })
             .collect();
         self.shadow_calls = self.shadow_calls.wrapping_add(1);
         let frusta: Vec<Option<ShadowFrustum>> = (0..m)
@@ -380,6 +385,7 @@ impl ValRenderer {
             real_shadow_maps(kernel, &mut real_targets, &surface);
         });
         self.map_frusta = frusta.clone();
+        self.map_lights = inputs.lights.lights.iter().map(placed).collect();
         self.map_size = size;
         self.prepare_lights(inputs, &frusta)
     }

@@ -62,7 +62,12 @@ pub(super) fn check_params(
     for (key, value) in &d.params {
         let Some(spec) = specs.iter().find(|s| s.name == key.value) else {
             let names: Vec<&str> = specs.iter().map(|s| s.name).collect();
+            let rate_key = matches!(key.value.as_str(), "every" | "lag");
             let hint = match did_you_mean(&key.value, names.iter().copied()) {
+                _ if rate_key => format!(
+                    "`{}` is a key of the [[stage]] table, not a parameter: write `{} = ...` beside `kind` in the pipeline file (--set changes parameters only)",
+                    key.value, key.value
+                ),
                 Some(s) => format!(
                     "did you mean `{s}`? parameters of {}: {}",
                     d.kind.value,

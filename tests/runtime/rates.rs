@@ -217,3 +217,31 @@ fn a_stage_at_its_own_rate_and_behind_hands_on_its_last_run_before_the_frame() {
     }
     assert_eq!(digests(d, &paced, "0..8", "1"), shown);
 }
+
+#[test]
+fn lag_and_every_given_as_parameters_say_where_they_belong() {
+    let dir = recording();
+    let d = dir.path();
+    std::fs::write(d.join("p.toml"), "[[stage]]\nkind = \"decode\"\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args([
+            "replay",
+            "s.relume",
+            "-p",
+            "p.toml",
+            "--out",
+            "o",
+            "--set",
+            "decode.lag=1",
+        ])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("unknown parameter `lag` for stage `decode` (decode)")
+            && err.contains("hint: `lag` is a key of the [[stage]] table, not a parameter: write `lag = ...` beside `kind` in the pipeline file (--set changes parameters only)"),
+        "{err}"
+    );
+}

@@ -42,15 +42,15 @@ type Made = Result<Vec<(String, Option<Arc<Product>>)>, StageError>;
 
 /// `stage` run `lag` frames behind on its own thread; itself for lag 0. `inputs` are
 /// the frame keys it reads (`name@prev` for a previous-frame input), `outputs` the
-/// products it writes.
+/// products it writes. Fails when the system refuses the thread.
 pub fn lag_n(
     stage: Box<dyn Stage>,
     lag: u32,
     inputs: Vec<String>,
     outputs: Vec<String>,
-) -> Box<dyn Stage> {
+) -> Result<Box<dyn Stage>, StageError> {
     if lag == 0 {
-        return stage;
+        return Ok(stage);
     }
     // Jobs are at most lag + 1 ahead of the results taken (the runtime's thread waits
     // for result m - n at frame m), so an unbounded channel stays that small.
@@ -59,8 +59,10 @@ pub fn lag_n(
     let worker = std::thread::Builder::new()
         .name("relume-lag".into())
         .spawn(move || work(stage, job_rx, made_tx, outputs))
-        .expect("a thread for a lagged stage");
-    Box::new(LagN {
+        .map_err(|e| {
+            StageError::Failed(format!("cannot start the thread of a lagged stage: {e}"))
+        })?;
+    Ok(Box::new(LagN {
         lag: lag as usize,
         inputs,
         jobs: Some(jobs),
@@ -70,7 +72,7 @@ pub fn lag_n(
         handed: 0,
         taken: 0,
         latest: None,
-    })
+    }))
 }
 
 /// The stage's thread: processes the frames in order and sends what each made; stops
@@ -211,7 +213,7 @@ mod tests {
 
     fn run(lag: u32, frames: usize, fail_on: Option<usize>) -> Result<Vec<(f64, f64)>, StageError> {
         let stage = Box::new(Counter { seen: 0, fail_on });
-        let mut stage = lag_n(stage, lag, Vec::new(), vec!["count".into()]);
+        let mut stage = lag_n(stage, lag, Vec::new(), vec!["count".into()]).unwrap();
         let mut out = Vec::new();
         for index in 10..10 + frames {
             let mut frame = Frame::new(index, 0);
@@ -258,7 +260,7 @@ mod tests {
 
     #[test]
     fn a_panic_on_the_stage_thread_is_the_stage_failing_on_its_frame() {
-        let mut stage = lag_n(Box::new(Panics), 1, Vec::new(), Vec::new());
+        let mut stage = lag_n(Box::new(Panics), 1, Vec::new(), Vec::new()).unwrap();
         let mut outcome = Ok(());
         for index in 10..16 {
             outcome = stage.process(&mut Frame::new(index, 0));

@@ -212,7 +212,7 @@ impl StageGraph {
                 let inputs = s.inputs.values().cloned().collect();
                 let outputs = s.outputs.values().cloned().collect();
                 let paced = super::every::every_k(built, s);
-                Ok(super::lag::lag_n(paced, s.lag, inputs, outputs))
+                super::lag::lag_n(paced, s.lag, inputs, outputs).map_err(|e| (i, e))
             })
             .collect()
     }

@@ -3,7 +3,16 @@
 //! through `relume replay --hash`.
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
+
+/// `relume ARGS` in `dir`, whatever its exit status.
+fn run(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_relume"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap()
+}
 
 fn relume(dir: &Path, args: &[&str], threads: &str) -> String {
     let o = Command::new(env!("CARGO_BIN_EXE_relume"))
@@ -121,11 +130,7 @@ fn every_and_lag_must_be_integers_in_range() {
             format!("[[stage]]\nkind = \"decode\"\n{key} = {bad}\n"),
         )
         .unwrap();
-        let o = Command::new(env!("CARGO_BIN_EXE_relume"))
-            .args(["validate", "p.toml"])
-            .current_dir(d)
-            .output()
-            .unwrap();
+        let o = run(d, &["validate", "p.toml"]);
         assert_eq!(o.status.code(), Some(1), "{key} = {bad}");
         let err = String::from_utf8_lossy(&o.stderr);
         let column = key.len() + 4;
@@ -186,11 +191,7 @@ fn eval_warns_that_a_stage_at_its_own_rate_is_scored_with_earlier_products() {
     let d = dir.path();
     let pipeline = "[[stage]]\nkind = \"decode\"\nevery = 2\n\n[[stage]]\nkind = \"depth.to_points\"\ninputs = { depth = \"depth\" }\n\n[[stage]]\nkind = \"normals.cross\"\n";
     std::fs::write(d.join("p.toml"), pipeline).unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_relume"))
-        .args(["eval", "s.relume", "-p", "p.toml"])
-        .current_dir(d)
-        .output()
-        .unwrap();
+    let o = run(d, &["eval", "s.relume", "-p", "p.toml"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(
@@ -223,20 +224,17 @@ fn lag_and_every_given_as_parameters_say_where_they_belong() {
     let dir = recording();
     let d = dir.path();
     std::fs::write(d.join("p.toml"), "[[stage]]\nkind = \"decode\"\n").unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_relume"))
-        .args([
-            "replay",
-            "s.relume",
-            "-p",
-            "p.toml",
-            "--out",
-            "o",
-            "--set",
-            "decode.lag=1",
-        ])
-        .current_dir(d)
-        .output()
-        .unwrap();
+    let args = [
+        "replay",
+        "s.relume",
+        "-p",
+        "p.toml",
+        "--out",
+        "o",
+        "--set",
+        "decode.lag=1",
+    ];
+    let o = run(d, &args);
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(

@@ -21,6 +21,7 @@
 
 use super::{Transfer, TransferParams};
 use crate::objects::VirtualScene;
+use crate::recording::writer::write_file_atomic;
 use crate::rng;
 use std::path::{Path, PathBuf};
 
@@ -162,19 +163,6 @@ pub fn decode(bytes: &[u8], digest: &str, triangles: usize) -> Result<Transfer, 
     Ok(transfer)
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same folder and a rename.
-fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir)?;
-    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("prt");
-    let tmp = dir.join(format!(".{name}.{}.partial", std::process::id()));
-    let written = std::fs::write(&tmp, bytes).and_then(|_| std::fs::rename(&tmp, path));
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written
-}
-
 /// The transfer of `scene` from the cache in `dir` when a valid file is there, else
 /// computed (and written there when `dir` is given).
 pub fn load_or_compute(
@@ -200,7 +188,9 @@ pub fn load_or_compute(
         return (transfer, CacheOutcome::Loaded(path));
     }
     let transfer = Transfer::compute(scene, params);
-    let outcome = match write_atomically(&path, &encode(&transfer, &digest)) {
+    let written = std::fs::create_dir_all(dir)
+        .and_then(|_| write_file_atomic(&path, &encode(&transfer, &digest)));
+    let outcome = match written {
         Ok(()) => CacheOutcome::Written {
             path,
             replaced: existing.is_some(),

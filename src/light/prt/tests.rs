@@ -137,6 +137,12 @@ fn interpolation_weights_the_corners() {
     }
 }
 
+/// Few directions: the cache tests need vectors, not accurate ones.
+const FEW: TransferParams = TransferParams {
+    samples: 16,
+    seed: 1,
+};
+
 fn temp_dir(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("relume-prt-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -147,10 +153,7 @@ fn temp_dir(name: &str) -> std::path::PathBuf {
 fn the_cache_writes_once_then_loads_the_same_vectors() {
     let dir = temp_dir("roundtrip");
     let torus = torus();
-    let params = TransferParams {
-        samples: 16,
-        seed: 1,
-    };
+    let params = FEW;
     let (computed, outcome) = cache::load_or_compute(&torus, params, Some(&dir));
     let CacheOutcome::Written { path, replaced } = outcome else {
         panic!("{outcome:?}")
@@ -172,10 +175,7 @@ fn the_cache_writes_once_then_loads_the_same_vectors() {
 #[test]
 fn the_digest_follows_the_geometry_and_the_settings() {
     let torus = torus();
-    let params = TransferParams {
-        samples: 16,
-        seed: 1,
-    };
+    let params = FEW;
     let base = cache::digest(&torus, params);
     assert_eq!(base.len(), 32);
     let mut moved = torus.clone();
@@ -195,10 +195,7 @@ fn the_digest_follows_the_geometry_and_the_settings() {
 fn a_damaged_cache_file_is_recomputed_and_replaced() {
     let dir = temp_dir("damaged");
     let torus = torus();
-    let params = TransferParams {
-        samples: 16,
-        seed: 1,
-    };
+    let params = FEW;
     let (good, _) = cache::load_or_compute(&torus, params, Some(&dir));
     let digest = cache::digest(&torus, params);
     let path = cache::cache_path(&dir, &digest);

@@ -26,9 +26,11 @@ use crate::graph::{
     Frame, ParamDefault, ParamSpec, Params, Port, Ports, Product, ProductKind, Stage, StageError,
     StageInfo,
 };
+use crate::light::AreaLights;
 use crate::raster::{Image, depth_is_valid};
 use crate::recording::writer::write_file_atomic;
 use rayon::prelude::*;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -121,7 +123,7 @@ struct Write {
     exr: bool,
     every: usize,
     /// Per product, the light model written last (a model is written once per update).
-    last_lights: std::collections::HashMap<String, std::sync::Arc<crate::light::AreaLights>>,
+    last_lights: HashMap<String, Arc<AreaLights>>,
 }
 
 impl Stage for Write {

@@ -276,8 +276,12 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         }
     }
     let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
+    let skipped = match summary.skipped_frames {
+        0 => String::new(),
+        n => format!(", {n} frames skipped"),
+    };
     outln!(
-        "wrote {} ({} color, {} depth, {} poses, {:.1} MB) in {:.2} s",
+        "wrote {} ({} color, {} depth, {} poses{skipped}, {:.1} MB) in {:.2} s",
         out.display(),
         summary.color,
         summary.depth,

@@ -179,6 +179,9 @@ pub struct ImportSummary {
     pub color: usize,
     pub depth: usize,
     pub poses: usize,
+    /// Frames found in the source but not imported (ScanNet: lost tracking; MCAP: an
+    /// image without a pose on its stamp), counted so that the user sees them.
+    pub skipped_frames: usize,
     /// What the importer found odd but imported anyway, one sentence each.
     pub warnings: Vec<String>,
 }

@@ -337,6 +337,7 @@ pub fn import(
         color: colors.len(),
         depth: depths.len(),
         poses: poses.len(),
+        skipped_frames: 0,
         warnings,
     })
 }

@@ -25,6 +25,12 @@ pub fn read_regular_to_string(path: &Path) -> std::io::Result<String> {
     })
 }
 
+/// The regular file at `path` opened for reading (for files streamed, not read whole).
+pub fn open_regular(path: &Path) -> std::io::Result<std::fs::File> {
+    check_regular(path)?;
+    std::fs::File::open(path)
+}
+
 fn check_regular(path: &Path) -> std::io::Result<()> {
     let kind = std::fs::metadata(path)?.file_type();
     if kind.is_file() {

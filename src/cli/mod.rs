@@ -24,6 +24,7 @@ mod catalog;
 mod compare;
 mod diff;
 mod eval;
+mod export;
 mod inspect;
 mod interrupt;
 mod out_dir;
@@ -54,9 +55,13 @@ struct Cli {
 enum Command {
     /// Render a synthetic recording of an analytic room with ground truth.
     Synth(produce::SynthArgs),
-    /// Import a recording from a dataset layout (TUM RGB-D, Redwood / Open3D).
+    /// Import a recording from a dataset layout (TUM RGB-D, Redwood / Open3D) or a
+    /// ROS 2 / Foxglove MCAP log.
     #[command(subcommand)]
     Import(produce::ImportCommand),
+    /// Export a recording, and the products a replay saved, as MCAP for Foxglove.
+    #[command(subcommand)]
+    Export(export::ExportCommand),
     /// Describe a recording: header, streams, rates and association.
     Inspect(inspect::InspectArgs),
     /// Replay a recording through a pipeline (with no arguments: the built-in default).
@@ -190,6 +195,7 @@ pub fn main() -> anyhow::Result<i32> {
     match command {
         Command::Synth(a) => produce::synth(a),
         Command::Import(c) => produce::import(c),
+        Command::Export(c) => export::export(c),
         Command::Inspect(a) => inspect::inspect(a),
         Command::Replay(a) => replay::replay(a),
         Command::Eval(a) => eval::eval(a),

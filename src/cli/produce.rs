@@ -6,6 +6,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use relume::recording::association::{self, AssociationStats};
 use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, tum};
+use relume::recording::mcap;
 use relume::recording::synth::{self, SynthConfig};
 use relume::recording::{Recording, Replay, ReplayOptions};
 use std::path::{Path, PathBuf};
@@ -168,6 +169,95 @@ pub enum ImportCommand {
         #[command(flatten)]
         common: CommonImportArgs,
     },
+    /// ROS 2 or Foxglove MCAP log: color and depth images (sensor_msgs/Image,
+    /// CompressedImage incl. compressedDepth, foxglove.RawImage/CompressedImage),
+    /// intrinsics from CameraInfo, poses from /tf + /tf_static or a pose topic. Topics
+    /// and frames are detected when unambiguous; `--list` shows what the file holds.
+    Mcap(McapArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct McapArgs {
+    /// The MCAP file (chunks uncompressed, zstd or lz4).
+    file: PathBuf,
+    /// List the topics, what each holds, and the transform tree; write nothing.
+    #[arg(long)]
+    list: bool,
+    /// Output recording (.relume).
+    #[arg(short, long, required_unless_present = "list")]
+    out: Option<PathBuf>,
+    /// The color image topic (default: the only one).
+    #[arg(long)]
+    color_topic: Option<String>,
+    /// The depth image topic (default: the only one). Depth must be registered to the
+    /// color camera (a driver's aligned_depth_to_color topic).
+    #[arg(long)]
+    depth_topic: Option<String>,
+    /// The CameraInfo / CameraCalibration topic of the color images (default: the one
+    /// beside the color topic, or in its frame, or the only one).
+    #[arg(long)]
+    info_topic: Option<String>,
+    /// A PoseStamped, Odometry or PoseInFrame topic for the camera poses (default: the
+    /// TF tree when it holds the camera frame, else the only pose topic). A PoseStamped
+    /// gives the camera's own pose; an Odometry's child frame is linked to the camera
+    /// through the TF tree.
+    #[arg(long)]
+    pose_topic: Option<String>,
+    /// The frame the camera poses are expressed in (default: the root of the camera's
+    /// transform tree, e.g. map or odom).
+    #[arg(long)]
+    world_frame: Option<String>,
+    /// The camera's optical frame (z forward, x right, y down; default: the color
+    /// images' frame_id).
+    #[arg(long)]
+    camera_frame: Option<String>,
+    /// Camera intrinsics, overriding the camera info: fx,fy,cx,cy in pixels of the
+    /// images' own size, or a preset (primesense, tum-fr1, tum-fr2, tum-fr3).
+    #[arg(long, value_parser = importers::parse_intrinsics)]
+    intrinsics: Option<importers::CameraIntrinsics>,
+    /// Keep images compressed as found (decoded on replay) or store raw pixels.
+    #[arg(long, value_enum, default_value_t = StoreMode::Compressed)]
+    store: StoreMode,
+}
+
+impl McapArgs {
+    fn options(&self) -> mcap::McapOptions {
+        mcap::McapOptions {
+            common: ImportOptions {
+                intrinsics: self.intrinsics.unwrap_or_default(),
+                store: self.store,
+            },
+            intrinsics: self.intrinsics,
+            color_topic: self.color_topic.clone(),
+            depth_topic: self.depth_topic.clone(),
+            info_topic: self.info_topic.clone(),
+            pose_topic: self.pose_topic.clone(),
+            world_frame: self.world_frame.clone(),
+            camera_frame: self.camera_frame.clone(),
+        }
+    }
+}
+
+impl ImportCommand {
+    /// The output recording (`None`: `import mcap --list` writes none).
+    fn out(&self) -> Option<&PathBuf> {
+        match self {
+            ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => {
+                Some(&common.out)
+            }
+            ImportCommand::Mcap(a) => a.out.as_ref(),
+        }
+    }
+
+    /// `--intrinsics` as given, for the notes on rescaled presets.
+    fn intrinsics(&self) -> Option<importers::CameraIntrinsics> {
+        match self {
+            ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => {
+                Some(common.intrinsics)
+            }
+            ImportCommand::Mcap(a) => a.intrinsics,
+        }
+    }
 }
 
 #[derive(Args, Debug)]
@@ -196,9 +286,14 @@ impl CommonImportArgs {
 
 pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     let start = std::time::Instant::now();
-    let out = match &command {
-        ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => &common.out,
-    };
+    if let ImportCommand::Mcap(a) = &command
+        && a.list
+    {
+        let scan = mcap::Scan::read(&a.file)?;
+        outln!("{}", scan.listing().trim_end())?;
+        return Ok(0);
+    }
+    let out = command.out().expect("clap requires -o unless --list");
     super::check_output_file("-o", out)?;
     remove_stale_partials_beside(out);
     let _partial = PartialFile::watch(out);
@@ -207,11 +302,11 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     };
-    let (out, summary) = match &command {
-        ImportCommand::Tum { dir, common } => (
-            &common.out,
-            tum::import(dir, &common.out, &common.options(), &mut tick)?,
-        ),
+    let summary = match &command {
+        ImportCommand::Tum { dir, common } => {
+            tum::import(dir, &common.out, &common.options(), &mut tick)?
+        }
+        ImportCommand::Mcap(a) => mcap::import(&a.file, out, &a.options(), &mut tick)?,
         ImportCommand::Redwood {
             dir,
             fps,
@@ -223,10 +318,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
                 fps: *fps,
                 trajectory: trajectory.clone(),
             };
-            (
-                &common.out,
-                redwood::import(dir, &common.out, &options, &mut tick)?,
-            )
+            redwood::import(dir, &common.out, &options, &mut tick)?
         }
     };
     bar.finish_and_clear();
@@ -241,18 +333,14 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     for warning in &summary.warnings {
         eprintln!("warning: {warning}");
     }
-    let intrinsics = match &command {
-        ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => {
-            common.intrinsics
-        }
-    };
+    let intrinsics = command.intrinsics();
     let header = replay.recording.header();
     let sizes = [
         ("color", &header.color_intrinsics),
         ("depth", &header.depth_intrinsics),
     ];
     let (c, d) = (&header.color_intrinsics, &header.depth_intrinsics);
-    if matches!(intrinsics, importers::CameraIntrinsics::Given { .. })
+    if matches!(intrinsics, Some(importers::CameraIntrinsics::Given { .. }))
         && (c.width, c.height) != (d.width, d.height)
     {
         eprintln!(
@@ -269,7 +357,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     for (stream, k) in sizes {
         let size = (k.width, k.height);
         if !noted.contains(&size)
-            && let Some(note) = intrinsics.rescale_note(stream, size)
+            && let Some(note) = intrinsics.and_then(|k| k.rescale_note(stream, size))
         {
             eprintln!("note: {note}");
             noted.push(size);

@@ -6,6 +6,7 @@ pub mod codec;
 pub mod error;
 pub mod format;
 pub mod importers;
+pub mod mcap;
 pub mod reader;
 pub mod replay;
 pub mod synth;

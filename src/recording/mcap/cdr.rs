@@ -1,0 +1,220 @@
+//! A reader of OMG CDR as ROS 2 writes it (XCDR1, "plain CDR"): a 4-byte encapsulation
+//! header (`00 01` little-endian or `00 00` big-endian, then two option bytes), then the
+//! fields in order, each primitive aligned to its own size counted from the end of the
+//! header; strings and sequences are a `u32` count followed by the elements (a string's
+//! count includes its terminating NUL).
+//!
+//! Only what the ROS 2 messages of [`super::messages`] need. Every read is bounds-checked:
+//! a count larger than the bytes left is an error, never an allocation.
+
+/// A CDR decoding error: what was being read and at which byte of the message.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("byte {offset}: {reason}")]
+pub struct CdrError {
+    pub offset: usize,
+    pub reason: String,
+}
+
+/// A cursor over one CDR-encoded message.
+pub struct CdrReader<'a> {
+    bytes: &'a [u8],
+    /// Position in `bytes`; alignment counts from byte 4 (after the header).
+    pos: usize,
+    little_endian: bool,
+}
+
+impl<'a> CdrReader<'a> {
+    /// Reads the encapsulation header. Only plain CDR (`00 00` or `00 01`) is accepted:
+    /// XCDR2 and parameter lists are used by other DDS types, not ROS 2 messages.
+    pub fn new(bytes: &'a [u8]) -> Result<Self, CdrError> {
+        let header: [u8; 4] = bytes
+            .get(..4)
+            .and_then(|h| h.try_into().ok())
+            .ok_or_else(|| CdrError {
+                offset: 0,
+                reason: format!(
+                    "{} bytes are too short for a CDR encapsulation header",
+                    bytes.len()
+                ),
+            })?;
+        let little_endian = match header[..2] {
+            [0, 1] => true,
+            [0, 0] => false,
+            _ => {
+                return Err(CdrError {
+                    offset: 0,
+                    reason: format!(
+                        "encapsulation {:02x} {:02x} is not plain CDR (00 00 or 00 01)",
+                        header[0], header[1]
+                    ),
+                });
+            }
+        };
+        Ok(CdrReader {
+            bytes,
+            pos: 4,
+            little_endian,
+        })
+    }
+
+    fn err<T>(&self, reason: impl Into<String>) -> Result<T, CdrError> {
+        Err(CdrError {
+            offset: self.pos,
+            reason: reason.into(),
+        })
+    }
+
+    fn align(&mut self, size: usize) -> Result<(), CdrError> {
+        let rel = self.pos - 4;
+        let pad = (size - rel % size) % size;
+        if self.pos + pad > self.bytes.len() {
+            return self.err("message ends inside alignment padding");
+        }
+        self.pos += pad;
+        Ok(())
+    }
+
+    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], CdrError> {
+        self.align(N)?;
+        let Some(slice) = self.bytes.get(self.pos..self.pos + N) else {
+            return self.err(format!("message ends before its {what}"));
+        };
+        let mut raw: [u8; N] = slice.try_into().expect("slice of N bytes");
+        if !self.little_endian {
+            raw.reverse();
+        }
+        self.pos += N;
+        Ok(raw)
+    }
+
+    pub fn u8(&mut self, what: &str) -> Result<u8, CdrError> {
+        Ok(self.take::<1>(what)?[0])
+    }
+
+    pub fn u32(&mut self, what: &str) -> Result<u32, CdrError> {
+        Ok(u32::from_le_bytes(self.take::<4>(what)?))
+    }
+
+    pub fn i32(&mut self, what: &str) -> Result<i32, CdrError> {
+        Ok(i32::from_le_bytes(self.take::<4>(what)?))
+    }
+
+    pub fn f64(&mut self, what: &str) -> Result<f64, CdrError> {
+        Ok(f64::from_le_bytes(self.take::<8>(what)?))
+    }
+
+    /// A sequence or array count, checked against the bytes left (each element at least
+    /// `min_element_size` bytes).
+    fn count(&mut self, what: &str, min_element_size: usize) -> Result<usize, CdrError> {
+        let n = self.u32(what)? as usize;
+        let left = self.bytes.len() - self.pos;
+        if n.saturating_mul(min_element_size) > left {
+            return self.err(format!(
+                "{what} claims {n} elements but only {left} bytes are left"
+            ));
+        }
+        Ok(n)
+    }
+
+    /// A string (u32 length including the NUL, the bytes, the NUL); UTF-8 checked.
+    pub fn string(&mut self, what: &str) -> Result<String, CdrError> {
+        let n = self.count(what, 1)?;
+        let start = self.pos;
+        let raw = &self.bytes[start..start + n];
+        let text = match raw.split_last() {
+            Some((0, text)) => text,
+            // Some writers omit the NUL; an empty string may be written as length 0.
+            Some(_) => raw,
+            None => &[],
+        };
+        self.pos += n;
+        match std::str::from_utf8(text) {
+            Ok(s) => Ok(s.to_string()),
+            Err(_) => Err(CdrError {
+                offset: start,
+                reason: format!("{what} is not UTF-8"),
+            }),
+        }
+    }
+
+    /// A `uint8[]` sequence, borrowed.
+    pub fn bytes(&mut self, what: &str) -> Result<&'a [u8], CdrError> {
+        let n = self.count(what, 1)?;
+        let out = &self.bytes[self.pos..self.pos + n];
+        self.pos += n;
+        Ok(out)
+    }
+
+    /// A `float64[]` sequence.
+    pub fn f64_seq(&mut self, what: &str) -> Result<Vec<f64>, CdrError> {
+        let n = self.count(what, 8)?;
+        (0..n).map(|_| self.f64(what)).collect()
+    }
+
+    /// A fixed `float64[N]` array (no count on the wire).
+    pub fn f64_array<const N: usize>(&mut self, what: &str) -> Result<[f64; N], CdrError> {
+        let mut out = [0.0; N];
+        for v in &mut out {
+            *v = self.f64(what)?;
+        }
+        Ok(out)
+    }
+
+    /// A sequence count of structs (each at least `min_element_size` bytes).
+    pub fn seq_len(&mut self, what: &str, min_element_size: usize) -> Result<usize, CdrError> {
+        self.count(what, min_element_size)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fields_align_from_the_end_of_the_header() {
+        // u8 1, then a u32 aligned to 4 (3 padding bytes), then a f64 aligned to 8.
+        let mut msg = vec![0, 1, 0, 0, 7, 0, 0, 0];
+        msg.extend(5u32.to_le_bytes());
+        msg.extend(2.5f64.to_le_bytes());
+        let mut r = CdrReader::new(&msg).unwrap();
+        assert_eq!(r.u8("a").unwrap(), 7);
+        assert_eq!(r.u32("b").unwrap(), 5);
+        assert_eq!(r.f64("c").unwrap(), 2.5);
+    }
+
+    #[test]
+    fn big_endian_and_strings() {
+        let mut msg = vec![0, 0, 0, 0];
+        msg.extend(4u32.to_be_bytes());
+        msg.extend(b"abc\0");
+        msg.extend(9i32.to_be_bytes());
+        let mut r = CdrReader::new(&msg).unwrap();
+        assert_eq!(r.string("s").unwrap(), "abc");
+        assert_eq!(r.i32("i").unwrap(), 9);
+    }
+
+    #[test]
+    fn counts_beyond_the_message_are_errors_not_allocations() {
+        let mut msg = vec![0, 1, 0, 0];
+        msg.extend(u32::MAX.to_le_bytes());
+        let e = CdrReader::new(&msg).unwrap().bytes("data").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "byte 8: data claims 4294967295 elements but only 0 bytes are left"
+        );
+        let mut r = CdrReader::new(&[0, 1, 0, 0, 1]).unwrap();
+        r.u8("is_bigendian").unwrap();
+        let e = r.u32("step");
+        assert_eq!(
+            e.unwrap_err().to_string(),
+            "byte 5: message ends inside alignment padding"
+        );
+        let e = CdrReader::new(&[0, 1, 0, 0]).unwrap().u32("width");
+        assert_eq!(
+            e.unwrap_err().to_string(),
+            "byte 4: message ends before its width"
+        );
+        assert!(CdrReader::new(&[0, 2, 0, 0]).is_err());
+        assert!(CdrReader::new(&[0, 1]).is_err());
+    }
+}

@@ -1,0 +1,22 @@
+//! MCAP logs in and out.
+//!
+//! - [`import`]: ROS 2 (`cdr`) and Foxglove (`json`) messages to a recording: color and
+//!   depth images by their header stamps, intrinsics from the camera info, camera poses
+//!   from the TF tree or a pose topic ([`messages`] lists the types).
+//! - [`export`]: a recording, and the products a replay saved, to Foxglove's well-known
+//!   schemas in JSON, so that Foxglove and Lichtblick open it without a plug-in; it
+//!   imports back to the same frames.
+
+pub mod cdr;
+pub mod export;
+mod export_products;
+pub mod import;
+pub mod messages;
+pub mod pixels;
+pub mod read;
+pub mod scan;
+pub mod tf;
+
+pub use export::{ExportOptions, ExportSummary, export};
+pub use import::{McapOptions, import};
+pub use scan::Scan;

@@ -222,8 +222,9 @@ fn pose_source(
                 )
             })?)
         }
-        None if scan.tf.has_frame(&camera) && scan.tf.path_to_root(&camera).len() > 1 => None,
+        None if scan.tf.moves(&camera) => None,
         None if scan.poses.len() == 1 => scan.poses.values().next(),
+        None if scan.poses.is_empty() && scan.tf.path_to_root(&camera).len() > 1 => None,
         None if scan.poses.len() > 1 => {
             let topics: Vec<&str> = scan
                 .poses

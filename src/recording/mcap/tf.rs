@@ -136,6 +136,14 @@ impl TfTree {
         path
     }
 
+    /// Whether an edge on the way from `frame` to its root moves (is not static): only
+    /// then does the tree give a camera trajectory.
+    pub fn moves(&self, frame: &str) -> bool {
+        let path = self.path_to_root(frame);
+        path.iter()
+            .any(|f| self.edges.get(f).is_some_and(|e| !e.is_static))
+    }
+
     /// Edges for a listing: (child, parent, static, samples, first and last stamps).
     pub fn describe(&self) -> Vec<(String, String, bool, usize, i64, i64)> {
         self.edges

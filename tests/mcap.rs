@@ -1,0 +1,495 @@
+//! `relume import mcap` and `relume export mcap`: files written by an independent ROS 2
+//! writer (tests/common/ros2.rs) import with the right images, stamps, intrinsics and
+//! poses; livingroom1 goes out to MCAP and back to the same frames; bad files give
+//! errors naming the file, topic and message.
+
+mod common;
+#[path = "common/ros2.rs"]
+mod ros2;
+
+use common::{ok, run_in, stderr, stdout};
+use glam::{DQuat, DVec3};
+use relume::recording::codec;
+use relume::recording::types::Pose;
+use relume::recording::{Replay, ReplayOptions};
+use ros2::{Bag, Tf};
+use std::path::Path;
+
+const T0: i64 = 1_700_000_000_000_000_000;
+const DT: i64 = 33_333_333;
+const W: u32 = 8;
+const H: u32 = 6;
+
+fn color_pixels(k: usize) -> Vec<u8> {
+    (0..W * H * 3)
+        .map(|i| (i as usize * 7 + k * 31) as u8)
+        .collect()
+}
+
+fn depth_units(k: usize) -> Vec<u16> {
+    (0..W * H).map(|i| 500 + i as u16 * 3 + k as u16).collect()
+}
+
+/// The pose of base_link in odom at frame k, and the camera in base_link.
+fn base_pose(k: usize) -> (DVec3, DQuat) {
+    let a = k as f64 * 0.1;
+    (DVec3::new(a, 2.0 * a, 0.5), DQuat::from_rotation_z(a))
+}
+const CAMERA_IN_BASE: ([f64; 3], [f64; 4]) = ([0.1, 0.0, 1.2], [-0.5, 0.5, -0.5, 0.5]);
+
+fn expected_camera_pose(k: usize) -> Pose {
+    let (bt, bq) = base_pose(k);
+    let (ct, cq) = CAMERA_IN_BASE;
+    let cq = DQuat::from_array(cq);
+    Pose::from_parts(bt + bq * DVec3::from(ct), bq * cq)
+}
+
+fn tf_at(stamp_ns: i64, k: usize) -> Tf<'static> {
+    let (t, q) = base_pose(k);
+    Tf {
+        stamp_ns,
+        parent: "odom",
+        child: "base_link",
+        t: t.to_array(),
+        q: q.to_array(),
+    }
+}
+
+/// Five frames of raw rgb8 (rows padded to a longer step) and 16UC1 depth, camera
+/// infos beside each image topic, a static camera mount and odom -> base_link on /tf
+/// from frame 1 on (frame 0 lies before the first transform).
+fn write_raw_bag(path: &Path, compression: Option<mcap::Compression>) {
+    let mut bag = Bag::create(path, compression);
+    let (ct, cq) = CAMERA_IN_BASE;
+    let mount = Tf {
+        stamp_ns: T0,
+        parent: "base_link",
+        child: "camera_color_optical_frame",
+        t: ct,
+        q: cq,
+    };
+    bag.put(
+        "/tf_static",
+        "tf2_msgs/msg/TFMessage",
+        T0 as u64,
+        &ros2::tf_message(&[mount]),
+    );
+    for k in 0..5 {
+        let t = T0 + k as i64 * DT;
+        if k >= 1 {
+            // Two samples around the frame with the same pose: interpolation gives it.
+            for s in [t - 5_000_000, t + 5_000_000] {
+                bag.put(
+                    "/tf",
+                    "tf2_msgs/msg/TFMessage",
+                    s as u64,
+                    &ros2::tf_message(&[tf_at(s, k)]),
+                );
+            }
+        }
+        let step = W * 3 + 4;
+        let mut rows = Vec::new();
+        for r in color_pixels(k).chunks(W as usize * 3) {
+            rows.extend(r);
+            rows.extend([0xEE; 4]);
+        }
+        let frame = "camera_color_optical_frame";
+        bag.put(
+            "/camera/color/image_raw",
+            "sensor_msgs/msg/Image",
+            t as u64,
+            &ros2::image(t, frame, W, H, "rgb8", step, &rows),
+        );
+        bag.put(
+            "/camera/color/camera_info",
+            "sensor_msgs/msg/CameraInfo",
+            t as u64,
+            &ros2::camera_info(t, frame, W, H, 10.5, 11.0, 3.9, 2.7),
+        );
+        let depth: Vec<u8> = depth_units(k)
+            .iter()
+            .flat_map(|u| u.to_le_bytes())
+            .collect();
+        let td = t + 2_000_000;
+        bag.put(
+            "/camera/aligned_depth_to_color/image_raw",
+            "sensor_msgs/msg/Image",
+            td as u64,
+            &ros2::image(td, frame, W, H, "16UC1", W * 2, &depth),
+        );
+        bag.put(
+            "/camera/aligned_depth_to_color/camera_info",
+            "sensor_msgs/msg/CameraInfo",
+            td as u64,
+            &ros2::camera_info(td, frame, W, H, 10.5, 11.0, 3.9, 2.7),
+        );
+    }
+    bag.finish();
+}
+
+fn assert_pose_near(got: &Pose, want: &Pose, what: &str) {
+    let dt = (got.translation() - want.translation()).length();
+    let dq = got.rotation().angle_between(want.rotation());
+    assert!(dt < 1e-9 && dq < 1e-9, "{what}: {got:?} vs {want:?}");
+}
+
+#[test]
+fn ros2_raw_images_tf_and_camera_info_import_exactly() {
+    for compression in [
+        None,
+        Some(mcap::Compression::Zstd),
+        Some(mcap::Compression::Lz4),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        write_raw_bag(&dir.path().join("in.mcap"), compression);
+        let out = ok(run_in(
+            dir.path(),
+            &["import", "mcap", "in.mcap", "-o", "r.relume"],
+        ));
+        // Frame 0 precedes the first transform: skipped and counted, as tf2 would not
+        // extrapolate either.
+        assert!(
+            stdout(&out).contains("(4 color, 5 depth, 4 poses, 1 frames skipped"),
+            "{}",
+            stdout(&out)
+        );
+        let replay = Replay::open(&dir.path().join("r.relume"), ReplayOptions::default()).unwrap();
+        let header = replay.recording.header();
+        let k = &header.color_intrinsics;
+        assert_eq!(
+            (k.width, k.height, k.fx, k.fy, k.cx, k.cy),
+            (W, H, 10.5, 11.0, 3.9, 2.7)
+        );
+        assert_eq!(header.depth_unit_m, 0.001);
+        assert_eq!(header.provenance.settings["world-frame"], "odom");
+        assert_eq!(
+            header.provenance.settings["camera-frame"],
+            "camera_color_optical_frame"
+        );
+        assert_eq!(replay.frames.len(), 4, "{compression:?}");
+        for (i, f) in replay.frames.iter().enumerate() {
+            let k = i + 1;
+            assert_eq!(f.stamp_ns, T0 + k as i64 * DT);
+            let rec = replay.read_frame(i).unwrap();
+            let rgb = codec::decode_color(&rec.color.image).unwrap();
+            let flat: Vec<u8> = rgb.data.iter().flatten().copied().collect();
+            assert_eq!(flat, color_pixels(k), "frame {k} color");
+            let units = codec::decode_depth_units(&rec.depth.unwrap().image).unwrap();
+            assert_eq!(units.data, depth_units(k), "frame {k} depth");
+            assert_pose_near(
+                &rec.pose.unwrap(),
+                &expected_camera_pose(k),
+                &format!("frame {k}"),
+            );
+        }
+    }
+}
+
+fn png_rgb(k: usize) -> Vec<u8> {
+    let img = image::RgbImage::from_raw(W, H, color_pixels(k)).unwrap();
+    let mut out = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+        .unwrap();
+    out
+}
+
+fn png_depth(k: usize) -> Vec<u8> {
+    let img = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(W, H, depth_units(k)).unwrap();
+    let mut out = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut out), image::ImageFormat::Png)
+        .unwrap();
+    out
+}
+
+/// PNG color on a CompressedImage topic, compressedDepth depth on two topics, camera
+/// poses from nav_msgs/Odometry of base_link, mounted by /tf_static.
+fn write_compressed_bag(path: &Path) {
+    let mut bag = Bag::create(path, Some(mcap::Compression::Zstd));
+    let (ct, cq) = CAMERA_IN_BASE;
+    let mount = Tf {
+        stamp_ns: 0,
+        parent: "base_link",
+        child: "cam",
+        t: ct,
+        q: cq,
+    };
+    bag.put(
+        "/tf_static",
+        "tf2_msgs/msg/TFMessage",
+        0,
+        &ros2::tf_message(&[mount]),
+    );
+    for k in 0..4 {
+        let t = T0 + k as i64 * DT;
+        bag.put(
+            "/odom",
+            "nav_msgs/msg/Odometry",
+            t as u64,
+            &ros2::odometry(&tf_at(t, k)),
+        );
+        bag.put(
+            "/cam/color/image/compressed",
+            "sensor_msgs/msg/CompressedImage",
+            t as u64,
+            &ros2::compressed_image(t, "cam", "rgb8; png compressed rgb8", &png_rgb(k)),
+        );
+        let mut depth = 0i32.to_le_bytes().to_vec();
+        depth.extend([0u8; 8]);
+        depth.extend(png_depth(k));
+        for topic in [
+            "/cam/depth/compressedDepth",
+            "/cam/depth_raw/compressedDepth",
+        ] {
+            bag.put(
+                topic,
+                "sensor_msgs/msg/CompressedImage",
+                t as u64,
+                &ros2::compressed_image(t, "cam", "16UC1; compressedDepth png", &depth),
+            );
+        }
+    }
+    bag.put(
+        "/cam/color/camera_info",
+        "sensor_msgs/msg/CameraInfo",
+        T0 as u64,
+        &ros2::camera_info(T0, "cam", W, H, 9.0, 9.0, 4.0, 3.0),
+    );
+    bag.finish();
+}
+
+#[test]
+fn compressed_images_and_odometry_import_and_ambiguity_asks_for_a_topic() {
+    let dir = tempfile::tempdir().unwrap();
+    write_compressed_bag(&dir.path().join("c.mcap"));
+    let e = run_in(dir.path(), &["import", "mcap", "c.mcap", "-o", "r.relume"]);
+    assert!(!e.status.success());
+    assert!(
+        stderr(&e).contains(
+            "2 topics hold depth images (/cam/depth/compressedDepth, /cam/depth_raw/compressedDepth): choose one with --depth-topic"
+        ),
+        "{}",
+        stderr(&e)
+    );
+    assert!(!dir.path().join("r.relume").exists());
+    let list = ok(run_in(dir.path(), &["import", "mcap", "c.mcap", "--list"]));
+    let text = stdout(&list);
+    assert!(
+        text.contains("/odom") && text.contains("poses in frame \"odom\""),
+        "{text}"
+    );
+    assert!(text.contains("cam <- base_link (static)"), "{text}");
+    ok(run_in(
+        dir.path(),
+        &[
+            "import",
+            "mcap",
+            "c.mcap",
+            "-o",
+            "r.relume",
+            "--depth-topic",
+            "/cam/depth/compressedDepth",
+        ],
+    ));
+    let replay = Replay::open(&dir.path().join("r.relume"), ReplayOptions::default()).unwrap();
+    assert_eq!(replay.frames.len(), 4);
+    assert_eq!(replay.recording.header().color_intrinsics.fx, 9.0);
+    for (k, f) in replay.frames.iter().enumerate() {
+        let rec = replay.read_frame(k).unwrap();
+        // PNG bytes kept as sent.
+        assert_eq!(rec.color.image.bytes, png_rgb(k));
+        assert_eq!(
+            codec::decode_depth_units(&rec.depth.unwrap().image)
+                .unwrap()
+                .data,
+            depth_units(k)
+        );
+        assert_eq!(f.stamp_ns, T0 + k as i64 * DT);
+        // Odometry samples at the frame stamps: base pose, then the static mount.
+        assert_pose_near(
+            &rec.pose.unwrap(),
+            &expected_camera_pose(k),
+            &format!("frame {k}"),
+        );
+    }
+}
+
+#[test]
+fn damaged_and_unreadable_files_name_what_is_wrong_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write_raw_bag(&d.join("in.mcap"), None);
+    let bytes = std::fs::read(d.join("in.mcap")).unwrap();
+    let fails = |args: &[&str], want: &str| {
+        let o = run_in(d, args);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(stderr(&o).contains(want), "{args:?}: {}", stderr(&o));
+        assert!(!d.join("r.relume").exists());
+    };
+    // Not MCAP at all.
+    std::fs::write(d.join("junk.mcap"), b"not an mcap file at all").unwrap();
+    fails(
+        &["import", "mcap", "junk.mcap", "-o", "r.relume"],
+        "junk.mcap: not a readable MCAP file",
+    );
+    // Flags naming what is not there.
+    fails(
+        &[
+            "import",
+            "mcap",
+            "in.mcap",
+            "-o",
+            "r.relume",
+            "--color-topic",
+            "/nope",
+        ],
+        "--color-topic /nope: no such topic",
+    );
+    fails(
+        &[
+            "import",
+            "mcap",
+            "in.mcap",
+            "-o",
+            "r.relume",
+            "--color-topic",
+            "/camera/aligned_depth_to_color/image_raw",
+        ],
+        "the topic holds depth images",
+    );
+    fails(
+        &[
+            "import",
+            "mcap",
+            "in.mcap",
+            "-o",
+            "r.relume",
+            "--world-frame",
+            "map",
+        ],
+        "the frame \"map\" is not above \"camera_color_optical_frame\"",
+    );
+    // A file cut short, as by a recorder killed mid-write: what precedes is imported.
+    std::fs::write(d.join("cut.mcap"), &bytes[..bytes.len() * 3 / 4]).unwrap();
+    let o = ok(run_in(
+        d,
+        &["import", "mcap", "cut.mcap", "-o", "cut.relume"],
+    ));
+    assert!(
+        stderr(&o).contains("the file ends inside a record after"),
+        "{}",
+        stderr(&o)
+    );
+    // A message whose byte count runs past its end.
+    let mut bag = Bag::create(&d.join("bad.mcap"), None);
+    let mut img = ros2::image(T0, "cam", W, H, "rgb8", W * 3, &color_pixels(0));
+    let at = img.len() - (W * H * 3) as usize - 4;
+    img[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    bag.put(
+        "/color",
+        "sensor_msgs/msg/Image",
+        T0 as u64,
+        &ros2::image(T0, "cam", W, H, "rgb8", W * 3, &color_pixels(0)),
+    );
+    bag.put("/color", "sensor_msgs/msg/Image", T0 as u64 + 1, &img);
+    bag.finish();
+    fails(
+        &["import", "mcap", "bad.mcap", "-o", "r.relume"],
+        "message 1 on /color: byte",
+    );
+    // ROS 1 messages: said so, with the way out.
+    let mut bag = Bag::create(&d.join("ros1.mcap"), None);
+    bag.put_encoded("/img", "sensor_msgs/Image", "ros1", 0, b"\0");
+    bag.finish();
+    fails(
+        &["import", "mcap", "ros1.mcap", "-o", "r.relume"],
+        "no color images",
+    );
+    let list = ok(run_in(d, &["import", "mcap", "ros1.mcap", "--list"]));
+    assert!(
+        stdout(&list).contains("in ROS 1 encoding"),
+        "{}",
+        stdout(&list)
+    );
+}
+
+/// A pipeline of the decode stage alone: its hash lines are the frames' color, depth
+/// and pose as replay reads them.
+const DECODE_ONLY: &str = "[pipeline]\nname = \"decode\"\n\n[[stage]]\nkind = \"decode\"\n";
+
+fn decoded_hashes(dir: &Path, recording: &str) -> Vec<String> {
+    let out = ok(run_in(
+        dir,
+        &[
+            "replay",
+            recording,
+            "-p",
+            "decode.toml",
+            "--hash",
+            "--out",
+            "o",
+        ],
+    ));
+    stdout(&out)
+        .lines()
+        .map(|l| {
+            l.split(' ')
+                .filter(|w| !w.starts_with("record="))
+                .collect::<Vec<_>>()
+                .join(" ")
+        })
+        .collect()
+}
+
+#[test]
+fn livingroom1_exported_to_mcap_imports_back_to_the_same_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    common::import_livingroom1(d);
+    std::fs::write(d.join("decode.toml"), DECODE_ONLY).unwrap();
+    let out = ok(run_in(d, &["export", "mcap", "lr.relume", "-o", "lr.mcap"]));
+    assert!(
+        stdout(&out).contains("(211 color, 211 depth, 211 poses"),
+        "{}",
+        stdout(&out)
+    );
+    // What a viewer finds: Foxglove's well-known schemas in JSON.
+    let bytes = std::fs::read(d.join("lr.mcap")).unwrap();
+    let summary = mcap::Summary::read(&bytes)
+        .unwrap()
+        .expect("a summary section");
+    let mut topics: Vec<(String, String, String)> = summary
+        .channels
+        .values()
+        .map(|c| {
+            let s = c.schema.as_ref().unwrap();
+            (c.topic.clone(), s.name.clone(), c.message_encoding.clone())
+        })
+        .collect();
+    topics.sort();
+    let json = |t: &str, s: &str| (t.to_string(), s.to_string(), "json".to_string());
+    assert_eq!(
+        topics,
+        [
+            json("/camera/color/calibration", "foxglove.CameraCalibration"),
+            json("/camera/color/image", "foxglove.CompressedImage"),
+            json("/camera/depth/calibration", "foxglove.CameraCalibration"),
+            json("/camera/depth/image", "foxglove.RawImage"),
+            json("/tf", "foxglove.FrameTransform"),
+        ]
+    );
+    ok(run_in(
+        d,
+        &["import", "mcap", "lr.mcap", "-o", "back.relume"],
+    ));
+    let (a, b) = (
+        decoded_hashes(d, "lr.relume"),
+        decoded_hashes(d, "back.relume"),
+    );
+    assert_eq!(a.len(), 211);
+    assert!(
+        a[5].contains(" color=") && a[5].contains(" depth=") && a[5].contains(" pose="),
+        "{}",
+        a[5]
+    );
+    assert_eq!(a, b);
+}

@@ -5,7 +5,7 @@ use super::progress;
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use relume::recording::association::{self, AssociationStats};
-use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, tum};
+use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, scannet, tum};
 use relume::recording::synth::{self, SynthConfig};
 use relume::recording::{Recording, Replay, ReplayOptions};
 use std::path::{Path, PathBuf};
@@ -168,6 +168,17 @@ pub enum ImportCommand {
         #[command(flatten)]
         common: CommonImportArgs,
     },
+    /// ScanNet .sens file: intrinsics, depth scale, poses and stamps from the file;
+    /// frames without a valid pose (lost tracking) are skipped and counted.
+    Scannet {
+        /// The .sens file.
+        file: PathBuf,
+        /// Frames per second for files without stamps (frame k is then at k / fps).
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        #[command(flatten)]
+        common: CommonImportArgs,
+    },
 }
 
 #[derive(Args, Debug)]
@@ -177,9 +188,9 @@ pub struct CommonImportArgs {
     out: PathBuf,
     /// Camera intrinsics: fx,fy,cx,cy in pixels of the images' own size, or a preset for
     /// 640x480 images (rescaled, with a note, to other sizes): primesense, tum-fr1,
-    /// tum-fr2, tum-fr3.
-    #[arg(long, default_value = "primesense", value_parser = importers::parse_intrinsics)]
-    intrinsics: importers::CameraIntrinsics,
+    /// tum-fr2, tum-fr3. Default: primesense; for scannet, the file's own.
+    #[arg(long, value_parser = importers::parse_intrinsics)]
+    intrinsics: Option<importers::CameraIntrinsics>,
     /// Keep images compressed as found (decoded on replay) or store raw pixels.
     #[arg(long, value_enum, default_value_t = StoreMode::Compressed)]
     store: StoreMode,
@@ -188,7 +199,7 @@ pub struct CommonImportArgs {
 impl CommonImportArgs {
     fn options(&self) -> ImportOptions {
         ImportOptions {
-            intrinsics: self.intrinsics,
+            intrinsics: self.intrinsics.unwrap_or_default(),
             store: self.store,
         }
     }
@@ -197,7 +208,9 @@ impl CommonImportArgs {
 pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     let start = std::time::Instant::now();
     let out = match &command {
-        ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => &common.out,
+        ImportCommand::Tum { common, .. }
+        | ImportCommand::Redwood { common, .. }
+        | ImportCommand::Scannet { common, .. } => &common.out,
     };
     super::check_output_file("-o", out)?;
     remove_stale_partials_beside(out);
@@ -228,6 +241,17 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
                 redwood::import(dir, &common.out, &options, &mut tick)?,
             )
         }
+        ImportCommand::Scannet { file, fps, common } => {
+            let options = scannet::ScannetOptions {
+                common: common.options(),
+                fps: *fps,
+                override_intrinsics: common.intrinsics.is_some(),
+            };
+            (
+                &common.out,
+                scannet::import(file, &common.out, &options, &mut tick)?,
+            )
+        }
     };
     bar.finish_and_clear();
     // A recording where no color image has a depth image near it replays nothing: an
@@ -241,10 +265,13 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     for warning in &summary.warnings {
         eprintln!("warning: {warning}");
     }
+    // The intrinsics the user chose, or the default preset (ScanNet: the file's own,
+    // which need neither a rescale note nor a warning).
     let intrinsics = match &command {
         ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => {
-            common.intrinsics
+            Some(common.intrinsics.unwrap_or_default())
         }
+        ImportCommand::Scannet { common, .. } => common.intrinsics,
     };
     let header = replay.recording.header();
     let sizes = [
@@ -252,7 +279,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         ("depth", &header.depth_intrinsics),
     ];
     let (c, d) = (&header.color_intrinsics, &header.depth_intrinsics);
-    if matches!(intrinsics, importers::CameraIntrinsics::Given { .. })
+    if matches!(intrinsics, Some(importers::CameraIntrinsics::Given { .. }))
         && (c.width, c.height) != (d.width, d.height)
     {
         eprintln!(
@@ -269,7 +296,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     for (stream, k) in sizes {
         let size = (k.width, k.height);
         if !noted.contains(&size)
-            && let Some(note) = intrinsics.rescale_note(stream, size)
+            && let Some(note) = intrinsics.and_then(|k| k.rescale_note(stream, size))
         {
             eprintln!("note: {note}");
             noted.push(size);

@@ -5,7 +5,7 @@ use super::progress;
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use relume::recording::association::{self, AssociationStats};
-use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, tum};
+use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, scannet, tum};
 use relume::recording::mcap;
 use relume::recording::synth::{self, SynthConfig};
 use relume::recording::{Recording, Replay, ReplayOptions};
@@ -169,6 +169,17 @@ pub enum ImportCommand {
         #[command(flatten)]
         common: CommonImportArgs,
     },
+    /// ScanNet .sens file: intrinsics, depth scale, poses and stamps from the file;
+    /// frames without a valid pose (lost tracking) are skipped and counted.
+    Scannet {
+        /// The .sens file.
+        file: PathBuf,
+        /// Frames per second for files without stamps (frame k is then at k / fps).
+        #[arg(long, default_value_t = 30.0)]
+        fps: f64,
+        #[command(flatten)]
+        common: CommonImportArgs,
+    },
     /// ROS 2 or Foxglove MCAP log: color and depth images (sensor_msgs/Image,
     /// CompressedImage incl. compressedDepth, foxglove.RawImage/CompressedImage),
     /// intrinsics from CameraInfo, poses from /tf + /tf_static or a pose topic. Topics
@@ -242,9 +253,9 @@ impl ImportCommand {
     /// The output recording (`None`: `import mcap --list` writes none).
     fn out(&self) -> Option<&PathBuf> {
         match self {
-            ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => {
-                Some(&common.out)
-            }
+            ImportCommand::Tum { common, .. }
+            | ImportCommand::Redwood { common, .. }
+            | ImportCommand::Scannet { common, .. } => Some(&common.out),
             ImportCommand::Mcap(a) => a.out.as_ref(),
         }
     }
@@ -253,8 +264,10 @@ impl ImportCommand {
     fn intrinsics(&self) -> Option<importers::CameraIntrinsics> {
         match self {
             ImportCommand::Tum { common, .. } | ImportCommand::Redwood { common, .. } => {
-                Some(common.intrinsics)
+                Some(common.intrinsics.unwrap_or_default())
             }
+            // ScanNet: the file's own unless given, needing neither note nor warning.
+            ImportCommand::Scannet { common, .. } => common.intrinsics,
             ImportCommand::Mcap(a) => a.intrinsics,
         }
     }
@@ -267,9 +280,9 @@ pub struct CommonImportArgs {
     out: PathBuf,
     /// Camera intrinsics: fx,fy,cx,cy in pixels of the images' own size, or a preset for
     /// 640x480 images (rescaled, with a note, to other sizes): primesense, tum-fr1,
-    /// tum-fr2, tum-fr3.
-    #[arg(long, default_value = "primesense", value_parser = importers::parse_intrinsics)]
-    intrinsics: importers::CameraIntrinsics,
+    /// tum-fr2, tum-fr3. Default: primesense; for scannet, the file's own.
+    #[arg(long, value_parser = importers::parse_intrinsics)]
+    intrinsics: Option<importers::CameraIntrinsics>,
     /// Keep images compressed as found (decoded on replay) or store raw pixels.
     #[arg(long, value_enum, default_value_t = StoreMode::Compressed)]
     store: StoreMode,
@@ -278,7 +291,7 @@ pub struct CommonImportArgs {
 impl CommonImportArgs {
     fn options(&self) -> ImportOptions {
         ImportOptions {
-            intrinsics: self.intrinsics,
+            intrinsics: self.intrinsics.unwrap_or_default(),
             store: self.store,
         }
     }
@@ -319,6 +332,14 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
                 trajectory: trajectory.clone(),
             };
             redwood::import(dir, &common.out, &options, &mut tick)?
+        }
+        ImportCommand::Scannet { file, fps, common } => {
+            let options = scannet::ScannetOptions {
+                common: common.options(),
+                fps: *fps,
+                override_intrinsics: common.intrinsics.is_some(),
+            };
+            scannet::import(file, &common.out, &options, &mut tick)?
         }
     };
     bar.finish_and_clear();

@@ -93,7 +93,8 @@ impl RecordingError {
     }
 }
 
-/// An error of an importer: names the file and, for text files, the line.
+/// An error of an importer: names the file and, for text files, the line; for binary
+/// files with frames, the frame.
 #[derive(Debug, thiserror::Error)]
 pub enum ImportError {
     #[error("{}: {source}", path.display())]
@@ -110,6 +111,13 @@ pub enum ImportError {
     },
     #[error("{}: {reason}", path.display())]
     File { path: PathBuf, reason: String },
+    /// A frame of a binary recording file (ScanNet `.sens`), by its index in the file.
+    #[error("{}: frame {frame}: {reason}", path.display())]
+    Frame {
+        path: PathBuf,
+        frame: usize,
+        reason: String,
+    },
     #[error(transparent)]
     Recording(#[from] RecordingError),
 }

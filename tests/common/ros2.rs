@@ -64,6 +64,7 @@ impl Cdr {
 }
 
 /// sensor_msgs/Image.
+#[allow(clippy::too_many_arguments)]
 pub fn image(
     stamp_ns: i64,
     frame: &str,
@@ -92,6 +93,7 @@ pub fn compressed_image(stamp_ns: i64, frame: &str, format: &str, data: &[u8]) -
 }
 
 /// sensor_msgs/CameraInfo (plumb_bob, no distortion, no binning, full ROI).
+#[allow(clippy::too_many_arguments)]
 pub fn camera_info(
     stamp_ns: i64,
     frame: &str,

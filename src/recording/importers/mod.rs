@@ -3,11 +3,15 @@
 //! - [`tum`]: the TUM RGB-D benchmark layout (`rgb.txt`, `depth.txt`, `groundtruth.txt`).
 //! - [`redwood`]: the Redwood / Open3D layout (`color/` or `image/`, `depth/`, a `.log`
 //!   trajectory).
+//! - [`scannet`]: ScanNet's `.sens` files (one binary file: a header, then per frame a
+//!   pose, stamps and the color and depth images).
 //!
-//! Both keep the images' compressed bytes (decoded on replay) unless asked to store raw,
-//! check every image's header (format, size, bit depth) at import, and write atomically.
+//! All keep the images' compressed bytes (ScanNet's zlib depth is stored as PNG; all are
+//! decoded on replay) unless asked to store raw, check every image's header (format,
+//! size, bit depth) at import, and write atomically.
 
 pub mod redwood;
+pub mod scannet;
 pub mod tum;
 
 use super::codec::{self, wrap_image_file};

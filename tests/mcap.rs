@@ -493,3 +493,88 @@ fn livingroom1_exported_to_mcap_imports_back_to_the_same_frames() {
     );
     assert_eq!(a, b);
 }
+
+#[test]
+fn saved_products_export_as_images_and_point_clouds_at_their_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let rec = common::small_recording(d, 4);
+    let rec = rec.to_str().unwrap();
+    let acquisition = common::pipeline("acquisition.toml");
+    ok(run_in(
+        d,
+        &[
+            "replay",
+            rec,
+            "-p",
+            &acquisition,
+            "--save",
+            "color,cloud",
+            "--out",
+            "saved",
+        ],
+    ));
+    let out = ok(run_in(
+        d,
+        &["export", "mcap", rec, "-o", "s.mcap", "--products", "saved"],
+    ));
+    assert!(
+        stdout(&out).contains("products: 4 cloud, 4 color"),
+        "{}",
+        stdout(&out)
+    );
+    let stamps: Vec<u64> = Replay::open(Path::new(rec), ReplayOptions::default())
+        .unwrap()
+        .frames
+        .iter()
+        .map(|f| f.stamp_ns as u64)
+        .collect();
+    let bytes = std::fs::read(d.join("s.mcap")).unwrap();
+    let (mut clouds, mut colors) = (0, 0);
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let json: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        let data = || {
+            use base64::Engine;
+            base64::engine::general_purpose::STANDARD
+                .decode(json["data"].as_str().unwrap())
+                .unwrap()
+        };
+        let frame = || {
+            stamps
+                .iter()
+                .position(|&s| s == m.log_time)
+                .expect("a frame stamp")
+        };
+        match m.channel.topic.as_str() {
+            "/relume/cloud" => {
+                assert_eq!(
+                    m.channel.schema.as_ref().unwrap().name,
+                    "foxglove.PointCloud"
+                );
+                assert_eq!(json["point_stride"], 39);
+                let ply = std::fs::read(d.join(format!("saved/cloud/{:06}.ply", frame()))).unwrap();
+                let body = &ply[ply.windows(11).position(|w| w == b"end_header\n").unwrap() + 11..];
+                assert_eq!(data(), body);
+                clouds += 1;
+            }
+            "/relume/color" => {
+                let png = std::fs::read(d.join(format!("saved/color/{:06}.png", frame()))).unwrap();
+                assert_eq!(data(), png);
+                colors += 1;
+            }
+            _ => {}
+        }
+    }
+    assert_eq!((clouds, colors), (4, 4));
+    // The recording's own color topic is imported, not the saved products.
+    ok(run_in(
+        d,
+        &["import", "mcap", "s.mcap", "-o", "back.relume"],
+    ));
+    let back = Replay::open(&d.join("back.relume"), ReplayOptions::default()).unwrap();
+    assert_eq!(
+        back.recording.header().provenance.settings["color-topic"],
+        "/camera/color/image"
+    );
+}

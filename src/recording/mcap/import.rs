@@ -103,9 +103,16 @@ fn choose_images<'a>(
             )),
         };
     }
-    match candidates[..] {
-        [] => Ok(None),
-        [one] => Ok(Some(one)),
+    // Products a replay saved, exported beside the recording (`/relume/<product>`), are
+    // never taken by default.
+    let sensors: Vec<&Arc<Channel>> = candidates
+        .iter()
+        .copied()
+        .filter(|c| !c.topic.starts_with("/relume/"))
+        .collect();
+    match (&candidates[..], &sensors[..]) {
+        ([], _) => Ok(None),
+        ([one], _) | (_, [one]) => Ok(Some(one)),
         _ => Err(fail(
             path,
             format!(

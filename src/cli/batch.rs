@@ -226,6 +226,9 @@ fn run_item(
     let result = loaded.run_once(dir, &run_args, Pacing::Pipelined, stop, &mut sink);
     bar.finish_and_clear();
     if let Some(e) = save_error {
+        // The flag stopped this item's replay, not the batch: the next items still run
+        // (a signal in the same instant is lost; a second one stops the batch).
+        stop.store(false, Ordering::SeqCst);
         return Err(e.context("saving products"));
     }
     let report = match result {

@@ -28,8 +28,9 @@ Manifest (TOML; paths relative to its folder):
   seed = 1    skip_corrupt = false     set = [\"STAGE.PARAM=VALUE\"]    max_pose_gap_ms = 100
 
 Items: every recording through every pipeline, id <recording stem>__<pipeline stem>__<hash>
-(hash: 8 hex digits of xxh3 of the two paths as written). Each writes OUT/<id>/: the
-saved products, report.json (frames, per-frame product digests), timings.json, then DONE.
+(hash: 8 hex digits of xxh3 of the two paths as written, ./ and // removed). Each writes
+OUT/<id>/: the saved products, report.json (frames, per-frame product digests),
+timings.json, then DONE.
 A rerun skips items with a valid DONE and redoes the others from scratch.
 
 Shards: an item belongs to shard xxh3(id) mod N, whatever its place in the manifest.

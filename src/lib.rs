@@ -10,7 +10,9 @@
 //! - [`objects`]: virtual objects (meshes, primitives, materials) and ray queries.
 //! - [`raster`] and [`rng`]: the image buffer type and counter-based random numbers.
 //! - [`files`]: reading the files a user names, regular files only.
+//! - [`batch`]: batch manifests, item ids, shards and completion markers.
 
+pub mod batch;
 pub mod eval;
 pub mod files;
 pub mod graph;

@@ -19,6 +19,7 @@ macro_rules! out {
     };
 }
 
+mod batch;
 mod bench;
 mod catalog;
 mod compare;
@@ -79,6 +80,10 @@ enum Command {
     /// (also after a first Ctrl-C; a second one aborts at once and leaves it): a bench
     /// times the writing but leaves no files behind.
     Bench(bench::BenchArgs),
+    /// Run a manifest's recordings through its pipelines, one item per pair, all of
+    /// them or one shard (--shard I/N or auto, for Slurm job arrays and Kubernetes
+    /// Indexed Jobs); a rerun skips finished items. --summary DIR: what is done.
+    Batch(batch::BatchArgs),
     /// List every stage kind with its inputs, outputs and parameters.
     Stages(catalog::StagesArgs),
     /// Check a pipeline file without running it.
@@ -202,6 +207,7 @@ pub fn main() -> anyhow::Result<i32> {
         Command::Compare(a) => compare::compare(a),
         Command::Diff(a) => diff::diff(a),
         Command::Bench(a) => bench::bench(a),
+        Command::Batch(a) => batch::batch(a),
         Command::Stages(a) => catalog::stages(a),
         Command::Validate(a) => catalog::validate(a),
         Command::Objects(a) => catalog::objects(a),

@@ -272,7 +272,7 @@ pub(super) fn stop_on_interrupt() -> Arc<AtomicBool> {
 }
 
 /// An error before the run when --save names a product no stage of `pipeline` makes.
-fn check_saved_products(pipeline: &Pipeline, names: &[String]) -> anyhow::Result<()> {
+pub(super) fn check_saved_products(pipeline: &Pipeline, names: &[String]) -> anyhow::Result<()> {
     let made: Vec<&str> = pipeline
         .stages
         .iter()
@@ -507,7 +507,7 @@ pub(super) fn some_frame_replayed(loaded: &Loaded, report: &RunReport) -> anyhow
 
 /// Saves the products named in `names` (or all writable ones for `all`) of `frame` into
 /// `out/<product>/<frame>.<ext>`.
-fn save_products(
+pub(super) fn save_products(
     frame: &Frame,
     names: &[String],
     formats: &[String],

@@ -1,0 +1,451 @@
+//! `relume batch`: a manifest of recordings x pipelines, split into shards by item id,
+//! resumable through each item's DONE marker, and summarized with --summary.
+
+mod common;
+
+use common::{relume, stderr, stdout};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::Output;
+
+/// The variables `--shard auto` reads: cleared so that a test run inside a Slurm or
+/// Kubernetes job is not steered by them.
+const SCHEDULER_VARS: &[&str] = &[
+    "SLURM_ARRAY_TASK_ID",
+    "SLURM_ARRAY_TASK_COUNT",
+    "SLURM_ARRAY_TASK_MIN",
+    "SLURM_ARRAY_TASK_MAX",
+    "SLURM_ARRAY_TASK_STEP",
+    "JOB_COMPLETION_INDEX",
+    "RELUME_SHARDS",
+];
+
+/// `relume ARGS` in `dir` with `vars` set and no other scheduler variable.
+fn batch(dir: &Path, args: &[&str], vars: &[(&str, &str)]) -> Output {
+    let mut cmd = relume();
+    cmd.args(args).current_dir(dir);
+    for v in SCHEDULER_VARS {
+        cmd.env_remove(v);
+    }
+    cmd.envs(vars.iter().copied());
+    cmd.output().expect("run relume")
+}
+
+fn succeeds(o: Output) -> Output {
+    assert!(
+        o.status.success(),
+        "relume failed ({:?})\nstdout:\n{}\nstderr:\n{}",
+        o.status,
+        stdout(&o),
+        stderr(&o)
+    );
+    o
+}
+
+/// Three small recordings in `data/` and two pipelines in `pipes/` (acquisition, and
+/// geometry with its own `write` stage), and `m.toml` pairing them: six items.
+fn setup(dir: &Path) {
+    std::fs::create_dir_all(dir.join("data")).unwrap();
+    std::fs::create_dir_all(dir.join("pipes")).unwrap();
+    for seed in 1..=3 {
+        let name = format!("data/r{seed}.relume");
+        let seed = seed.to_string();
+        succeeds(batch(
+            dir,
+            &[
+                "synth", "-o", &name, "--frames", "4", "--size", "64x48", "--seed", &seed,
+            ],
+            &[],
+        ));
+    }
+    for p in ["acquisition.toml", "geometry.toml"] {
+        std::fs::copy(common::pipeline(p), dir.join("pipes").join(p)).unwrap();
+    }
+    std::fs::write(
+        dir.join("m.toml"),
+        "recordings = [\"data/r1.relume\", \"data/r2.relume\", \"data/r3.relume\"]\n\
+         pipelines = [\"pipes/acquisition.toml\", \"pipes/geometry.toml\"]\n\
+         \n\
+         [settings]\n\
+         frames = \"0..3\"\n\
+         save = [\"normals\"]\n",
+    )
+    .unwrap();
+}
+
+/// Every file under `dir` (relative path -> bytes), but the timings, which differ from
+/// run to run.
+fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    fn walk(root: &Path, dir: &Path, into: &mut BTreeMap<String, Vec<u8>>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                walk(root, &path, into);
+            } else if path.file_name().unwrap() != "timings.json" {
+                let rel = path.strip_prefix(root).unwrap().display().to_string();
+                into.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    let mut files = BTreeMap::new();
+    walk(dir, dir, &mut files);
+    files
+}
+
+/// The item folders under `dir`, sorted.
+fn items(dir: &Path) -> Vec<String> {
+    common::file_names(dir)
+        .into_iter()
+        .filter(|n| dir.join(n).is_dir())
+        .collect()
+}
+
+/// The last line of a batch's stderr: `shard I/N: M item(s): ran A, skipped B ...`.
+fn tally(o: &Output) -> String {
+    stderr(o).lines().last().unwrap_or("").to_string()
+}
+
+#[test]
+fn shards_together_make_exactly_an_unsharded_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    setup(d);
+    let all = succeeds(batch(d, &["batch", "m.toml", "--out", "all"], &[]));
+    assert!(tally(&all).ends_with("6 item(s): ran 6, skipped 0 (done earlier), failed 0"));
+    let whole = tree(&d.join("all"));
+    // Each item: the pipeline's own writes, the saved products, the report, the marker.
+    let id = items(&d.join("all"))
+        .into_iter()
+        .find(|n| n.starts_with("r1__geometry__"))
+        .expect("an item r1__geometry__<hash>");
+    for file in [
+        "normals/000002.png",
+        "color/000000.png",
+        "report.json",
+        "DONE",
+    ] {
+        assert!(whole.contains_key(&format!("{id}/{file}")), "{id}/{file}");
+    }
+    assert!(d.join("all").join(&id).join("timings.json").is_file());
+    // The three shards as separate processes, at once, into one folder.
+    let children: Vec<_> = (0..3)
+        .map(|i| {
+            let mut cmd = relume();
+            let shard = format!("{i}/3");
+            cmd.args(["batch", "m.toml", "--out", "sharded", "--shard", &shard])
+                .current_dir(d)
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped());
+            cmd.spawn().unwrap()
+        })
+        .collect();
+    let mut ran = Vec::new();
+    for child in children {
+        let o = succeeds(child.wait_with_output().unwrap());
+        let line = tally(&o);
+        let n: usize = line
+            .split("ran ")
+            .nth(1)
+            .unwrap()
+            .split(',')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        ran.push(n);
+    }
+    assert_eq!(ran.iter().sum::<usize>(), 6, "{ran:?}");
+    assert!(
+        ran.iter().all(|&n| n < 6),
+        "one shard ran every item: {ran:?}"
+    );
+    let sharded = tree(&d.join("sharded"));
+    assert_eq!(
+        sharded.keys().collect::<Vec<_>>(),
+        whole.keys().collect::<Vec<_>>()
+    );
+    for (name, bytes) in &whole {
+        assert!(sharded[name] == *bytes, "{name} differs between the runs");
+    }
+}
+
+#[test]
+fn a_rerun_redoes_only_unfinished_items() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    setup(d);
+    succeeds(batch(d, &["batch", "m.toml"], &[]));
+    let out = d.join("m-out");
+    let first = tree(&out);
+    let ids = items(&out);
+    assert_eq!(ids.len(), 6);
+    let stamp = |id: &str| {
+        std::fs::metadata(out.join(id).join("report.json"))
+            .unwrap()
+            .modified()
+            .unwrap()
+    };
+    let before: Vec<_> = ids.iter().map(|id| stamp(id)).collect();
+    // A killed item: its folder half-written, without a marker; and an item whose marker
+    // was removed.
+    let killed = &ids[1];
+    std::fs::remove_dir_all(out.join(killed)).unwrap();
+    std::fs::create_dir_all(out.join(killed).join("normals")).unwrap();
+    std::fs::write(out.join(killed).join("normals/000000.png"), b"half").unwrap();
+    let unmarked = &ids[4];
+    std::fs::remove_file(out.join(unmarked).join("DONE")).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    let o = succeeds(batch(d, &["batch", "m.toml"], &[]));
+    assert!(
+        tally(&o).ends_with("6 item(s): ran 2, skipped 4 (done earlier), failed 0"),
+        "{}",
+        stderr(&o)
+    );
+    for (id, was) in ids.iter().zip(&before) {
+        let redone = id == killed || id == unmarked;
+        assert_eq!(stamp(id) != *was, redone, "{id}");
+    }
+    // Redone from scratch: the same files as the first run, none of the half-written.
+    assert_eq!(tree(&out), first);
+    // A third run does nothing.
+    let o = succeeds(batch(d, &["batch", "m.toml"], &[]));
+    assert!(tally(&o).ends_with("ran 0, skipped 6 (done earlier), failed 0"));
+    // Changed settings make the markers invalid: everything runs again.
+    let text = std::fs::read_to_string(d.join("m.toml")).unwrap();
+    std::fs::write(d.join("m.toml"), text.replace("0..3", "0..2")).unwrap();
+    let o = succeeds(batch(d, &["batch", "m.toml"], &[]));
+    assert!(tally(&o).ends_with("ran 6, skipped 0 (done earlier), failed 0"));
+    assert!(stderr(&o).contains("its settings or pipeline changed since it was done"));
+}
+
+/// Extra arguments and the variables of a `--shard auto` run.
+type Run<'a> = (&'a [&'a str], Vec<(&'a str, &'a str)>);
+
+/// The items a batch ran, from its progress lines `[k/m] <id>: ...`, sorted.
+fn ran_items(o: &Output) -> Vec<String> {
+    let mut ids: Vec<String> = stderr(o)
+        .lines()
+        .filter(|l| l.starts_with('[') && l.contains(" through "))
+        .filter_map(|l| l.split_once("] ")?.1.split(':').next().map(str::to_string))
+        .collect();
+    ids.sort();
+    ids.dedup();
+    ids
+}
+
+#[test]
+fn shard_auto_takes_the_shard_from_slurm_or_kubernetes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    setup(d);
+    for i in 0..3 {
+        let fixed = format!("{i}/3");
+        let out = format!("fixed{i}");
+        let expected = ran_items(&succeeds(batch(
+            d,
+            &["batch", "m.toml", "--shard", &fixed, "--out", &out],
+            &[],
+        )));
+        let index = i.to_string();
+        let slurm_id = (i + 1).to_string();
+        let runs: [Run; 4] = [
+            (
+                &[],
+                vec![
+                    ("SLURM_ARRAY_TASK_ID", &index),
+                    ("SLURM_ARRAY_TASK_COUNT", "3"),
+                ],
+            ),
+            // An array numbered 1-3 that gives only its minimum and maximum.
+            (
+                &[],
+                vec![
+                    ("SLURM_ARRAY_TASK_ID", &slurm_id),
+                    ("SLURM_ARRAY_TASK_MIN", "1"),
+                    ("SLURM_ARRAY_TASK_MAX", "3"),
+                ],
+            ),
+            (&["--shards", "3"], vec![("JOB_COMPLETION_INDEX", &index)]),
+            (
+                &[],
+                vec![("JOB_COMPLETION_INDEX", &index), ("RELUME_SHARDS", "3")],
+            ),
+        ];
+        for (k, (extra, vars)) in runs.iter().enumerate() {
+            let out = format!("auto{i}-{k}");
+            let mut args = vec!["batch", "m.toml", "--shard", "auto", "--out", &out];
+            args.extend_from_slice(extra);
+            let o = succeeds(batch(d, &args, vars));
+            assert!(
+                stderr(&o).starts_with(&format!("shard {i}/3 (--shard auto: ")),
+                "{vars:?}: {}",
+                stderr(&o)
+            );
+            assert_eq!(ran_items(&o), expected, "{vars:?}");
+        }
+    }
+    let o = batch(
+        d,
+        &["batch", "m.toml", "--shard", "auto"],
+        &[("JOB_COMPLETION_INDEX", "1")],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stderr(&o),
+        "error: --shard auto: JOB_COMPLETION_INDEX is set but not the number of shards \
+         (Kubernetes sets no count variable for an Indexed Job; N is its completions): pass \
+         --shards N or set RELUME_SHARDS=N\n"
+    );
+    let o = batch(d, &["batch", "m.toml", "--shard", "auto"], &[]);
+    assert_eq!(
+        stderr(&o),
+        "error: --shard auto: neither SLURM_ARRAY_TASK_ID (a Slurm job array) nor \
+         JOB_COMPLETION_INDEX (a Kubernetes Indexed Job) is set; give --shard I/N instead\n"
+    );
+}
+
+#[test]
+fn bad_shard_specs_and_manifests_say_what_and_where() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    setup(d);
+    for (spec, message) in [
+        (
+            "3/2",
+            "index 3 is not below the shard count 2 (shards are numbered 0 to 1)",
+        ),
+        (
+            "a/b",
+            "expected I/N (the 0-based index I of N shards, e.g. 0/4) or auto",
+        ),
+        ("0/0", "the shard count must be at least 1"),
+    ] {
+        let o = batch(d, &["batch", "m.toml", "--shard", spec], &[]);
+        assert_eq!(o.status.code(), Some(1));
+        assert_eq!(
+            stderr(&o),
+            format!("error: invalid --shard {spec:?}: {message}\n")
+        );
+    }
+    assert!(
+        !d.join("m-out").exists(),
+        "nothing runs after a wrong --shard"
+    );
+    let manifest = |text: &str| {
+        std::fs::write(d.join("bad.toml"), text).unwrap();
+        let o = batch(d, &["batch", "bad.toml"], &[]);
+        assert_eq!(o.status.code(), Some(1));
+        stderr(&o)
+    };
+    let e = manifest(
+        "recordings = [\"data/r1.relume\"]\npipelines = [\"pipes/geometry.toml\"]\nouts = \"x\"\n",
+    );
+    assert!(
+        e.starts_with("error: bad.toml:3:1: unknown key in the manifest `outs`"),
+        "{e}"
+    );
+    assert!(e.contains("did you mean `out`?"), "{e}");
+    let e = manifest(
+        "recordings = [\n  \"data/r1.relume\",\n  \"data/r9.relume\",\n]\npipelines = [\"pipes/geometry.toml\"]\n",
+    );
+    assert!(
+        e.starts_with("error: bad.toml:3:3: recording `data/r9.relume` does not exist"),
+        "{e}"
+    );
+    let e = manifest(
+        "recordings = [\"data/r1.relume\"]\npipelines = [\"pipes/geometry.toml\"]\n[settings]\nframes = \"3..1\"\n",
+    );
+    assert!(
+        e.starts_with("error: bad.toml:4:10: frame range \"3..1\" is empty"),
+        "{e}"
+    );
+    let e = manifest("recordings = [\"data/r1.relume\"]\n");
+    assert!(
+        e.starts_with("error: bad.toml:1:1: the manifest has no `pipelines`"),
+        "{e}"
+    );
+}
+
+#[test]
+fn summary_lists_done_failed_and_missing_items() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    setup(d);
+    // A recording that is not one: its items fail, the others still run.
+    std::fs::write(d.join("data/broken.relume"), b"not a recording").unwrap();
+    let text = std::fs::read_to_string(d.join("m.toml")).unwrap();
+    std::fs::write(
+        d.join("m.toml"),
+        text.replace(
+            "[\"data/r1.relume\"",
+            "[\"data/broken.relume\", \"data/r1.relume\"",
+        ),
+    )
+    .unwrap();
+    let o = batch(d, &["batch", "m.toml"], &[]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(tally(&o).ends_with("8 item(s): ran 6, skipped 0 (done earlier), failed 2"));
+    let out = d.join("m-out");
+    let ids = items(&out);
+    let find = |prefix: &str| ids.iter().find(|n| n.starts_with(prefix)).unwrap().clone();
+    // One item never ran, one was killed before its marker.
+    let never = find("r2__acquisition__");
+    std::fs::remove_dir_all(out.join(&never)).unwrap();
+    let killed = find("r3__geometry__");
+    std::fs::remove_file(out.join(&killed).join("DONE")).unwrap();
+    let o = batch(d, &["batch", "--summary", "m-out"], &[]);
+    assert_eq!(o.status.code(), Some(1), "not every item is done");
+    let table = stdout(&o);
+    let row = |id: &str| {
+        table
+            .lines()
+            .find(|l| l.starts_with(id))
+            .unwrap_or_else(|| panic!("no row for {id} in\n{table}"))
+            .to_string()
+    };
+    let broken = find("broken__geometry__");
+    assert!(row(&broken).contains(" failed "), "{table}");
+    assert!(
+        row(&never).contains(" missing ") && row(&never).ends_with("not run"),
+        "{table}"
+    );
+    assert!(row(&killed).contains(" missing "), "{table}");
+    let done = find("r1__geometry__");
+    assert!(
+        row(&done).split_whitespace().collect::<Vec<_>>()[1..3] == ["done", "3"],
+        "{table}"
+    );
+    assert!(
+        table.ends_with("8 item(s): 4 done, 2 failed, 2 missing\n"),
+        "{table}"
+    );
+    let o = batch(d, &["batch", "m.toml", "--summary", "--json"], &[]);
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(
+        doc["counts"],
+        serde_json::json!({"done": 4, "failed": 2, "missing": 2})
+    );
+    let item = |id: &str| {
+        doc["items"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|i| i["id"] == id)
+            .unwrap()
+            .clone()
+    };
+    assert_eq!(item(&never)["status"], "missing");
+    assert_eq!(item(&never)["recording"], "data/r2.relume");
+    assert_eq!(item(&broken)["status"], "failed");
+    assert!(
+        item(&broken)["note"]
+            .as_str()
+            .unwrap()
+            .contains("broken.relume")
+    );
+    assert_eq!(item(&done)["frames"], 3);
+    assert!(item(&done)["fps"].as_f64().unwrap() > 0.0);
+    // The rerun fills in what is missing and retries the failed.
+    let o = batch(d, &["batch", "m.toml"], &[]);
+    assert!(tally(&o).ends_with("ran 2, skipped 4 (done earlier), failed 2"));
+}

@@ -1,9 +1,9 @@
 //! MCAP logs in and out.
 //!
-//! - [`import`]: ROS 2 (`cdr`) and Foxglove (`json`) messages to a recording: color and
+//! - [`import()`]: ROS 2 (`cdr`) and Foxglove (`json`) messages to a recording: color and
 //!   depth images by their header stamps, intrinsics from the camera info, camera poses
 //!   from the TF tree or a pose topic ([`messages`] lists the types).
-//! - [`export`]: a recording, and the products a replay saved, to Foxglove's well-known
+//! - [`export()`]: a recording, and the products a replay saved, to Foxglove's well-known
 //!   schemas in JSON, so that Foxglove and Lichtblick open it without a plug-in; it
 //!   imports back to the same frames.
 

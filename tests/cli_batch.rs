@@ -449,3 +449,69 @@ fn summary_lists_done_failed_and_missing_items() {
     let o = batch(d, &["batch", "m.toml"], &[]);
     assert!(tally(&o).ends_with("ran 2, skipped 4 (done earlier), failed 2"));
 }
+
+#[test]
+fn a_batch_killed_mid_run_resumes_without_redoing_finished_items() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    setup(d);
+    let out = d.join("m-out");
+    let done = || -> Vec<String> {
+        if !out.is_dir() {
+            return Vec::new();
+        }
+        items(&out)
+            .into_iter()
+            .filter(|id| out.join(id).join("DONE").is_file())
+            .collect()
+    };
+    // SIGKILL (no chance to clean up) as soon as the first item is done.
+    let mut cmd = relume();
+    cmd.args(["batch", "m.toml"])
+        .current_dir(d)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
+    for v in SCHEDULER_VARS {
+        cmd.env_remove(v);
+    }
+    let mut child = cmd.spawn().unwrap();
+    let start = std::time::Instant::now();
+    while done().is_empty() {
+        assert!(
+            start.elapsed().as_secs() < 120,
+            "no item finished in 2 minutes"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let finished = done();
+    assert!(
+        !finished.is_empty() && finished.len() < 6,
+        "the kill should land mid-batch: {finished:?}"
+    );
+    let stamp = |id: &str| {
+        std::fs::metadata(out.join(id).join("DONE"))
+            .unwrap()
+            .modified()
+            .unwrap()
+    };
+    let before: Vec<_> = finished.iter().map(|id| stamp(id)).collect();
+    let o = succeeds(batch(d, &["batch", "m.toml"], &[]));
+    let (k, rest) = (finished.len(), 6 - finished.len());
+    assert!(
+        tally(&o).ends_with(&format!(
+            "6 item(s): ran {rest}, skipped {k} (done earlier), failed 0"
+        )),
+        "{}",
+        stderr(&o)
+    );
+    for (id, was) in finished.iter().zip(&before) {
+        assert_eq!(stamp(id), *was, "{id} was redone");
+    }
+    // The resumed batch holds exactly what an uninterrupted one does.
+    let fresh = tempfile::tempdir().unwrap();
+    setup(fresh.path());
+    succeeds(batch(fresh.path(), &["batch", "m.toml"], &[]));
+    assert_eq!(tree(&out), tree(&fresh.path().join("m-out")));
+}

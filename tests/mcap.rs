@@ -578,3 +578,88 @@ fn saved_products_export_as_images_and_point_clouds_at_their_frames() {
         "/camera/color/image"
     );
 }
+
+#[test]
+fn poses_are_not_invented_from_unlinked_or_mistimed_transforms() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let image = |k: usize| {
+        let t = T0 + k as i64 * DT;
+        ros2::image(t, "cam", W, H, "rgb8", W * 3, &color_pixels(k))
+    };
+    // An Odometry of base_link, and nothing links base_link to the camera.
+    let mut bag = Bag::create(&d.join("odom.mcap"), None);
+    for k in 0..3 {
+        let t = T0 + k as i64 * DT;
+        bag.put(
+            "/odom",
+            "nav_msgs/msg/Odometry",
+            t as u64,
+            &ros2::odometry(&tf_at(t, k)),
+        );
+        bag.put("/color", "sensor_msgs/msg/Image", t as u64, &image(k));
+    }
+    bag.finish();
+    let o = ok(run_in(
+        d,
+        &["import", "mcap", "odom.mcap", "-o", "a.relume"],
+    ));
+    assert!(
+        stdout(&o).contains("(3 color, 0 depth, 0 poses"),
+        "{}",
+        stdout(&o)
+    );
+    assert!(
+        stderr(&o).contains("no camera poses are taken from /odom by default"),
+        "{}",
+        stderr(&o)
+    );
+    let e = run_in(
+        d,
+        &[
+            "import",
+            "mcap",
+            "odom.mcap",
+            "-o",
+            "b.relume",
+            "--pose-topic",
+            "/odom",
+        ],
+    );
+    assert!(!e.status.success());
+    assert!(
+        stderr(&e).contains(
+            "the poses on /odom are of frame \"base_link\", which no transform links to the camera frame \"cam\""
+        ),
+        "{}",
+        stderr(&e)
+    );
+    assert!(!d.join("b.relume").exists());
+    // The camera's transforms stamped by another clock than its images.
+    let mut bag = Bag::create(&d.join("sim.mcap"), None);
+    for k in 0..3 {
+        let t = T0 + k as i64 * DT;
+        let sim = 1_000_000_000 + k as i64 * DT;
+        let mut tf = tf_at(sim, k);
+        tf.child = "cam";
+        bag.put(
+            "/tf",
+            "tf2_msgs/msg/TFMessage",
+            t as u64,
+            &ros2::tf_message(&[tf]),
+        );
+        bag.put("/color", "sensor_msgs/msg/Image", t as u64, &image(k));
+    }
+    bag.finish();
+    let e = run_in(d, &["import", "mcap", "sim.mcap", "-o", "c.relume"]);
+    assert!(!e.status.success());
+    assert!(
+        stderr(&e).contains(
+            "none of the 3 color images (stamped 1700000000.000 s to 1700000000.067 s) lies \
+             within the camera's transforms (1.000 s to 1.067 s)"
+        ),
+        "{}",
+        stderr(&e)
+    );
+    assert!(!d.join("c.relume").exists());
+}

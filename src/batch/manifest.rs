@@ -214,6 +214,21 @@ impl Manifest {
                 });
             }
         }
+        // Two items under one id would share a folder and a DONE marker (the id's hash
+        // is 32 bits): refuse rather than count one as the other.
+        let mut seen = std::collections::BTreeMap::new();
+        for item in &items {
+            if let Some(other) = seen.insert(item.id.clone(), item) {
+                return Err(BatchError::io(
+                    path,
+                    std::io::Error::other(format!(
+                        "items ({} through {}) and ({} through {}) have the same id {}: \
+                         rename one of the files",
+                        other.recording, other.pipeline, item.recording, item.pipeline, item.id
+                    )),
+                ));
+            }
+        }
         Ok(Manifest {
             file: path.to_path_buf(),
             out,

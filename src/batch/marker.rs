@@ -53,6 +53,22 @@ pub enum MarkerState {
 
 /// A digest of what configures an item's run: its settings (canonical line) and its
 /// pipeline file's text. A changed pipeline or setting makes an earlier marker invalid.
+/// What identifies a recording's content without reading all of it: its size and a
+/// digest of its first and last 64 KiB (the header, and the index footer that every
+/// write changes). A recording imported again at the same path makes its items stale.
+pub fn recording_digest(path: &Path) -> std::io::Result<u64> {
+    use std::io::{Read, Seek, SeekFrom};
+    const SPAN: u64 = 64 << 10;
+    let mut file = crate::files::open_regular(path)?;
+    let len = file.metadata()?.len();
+    let mut bytes = Vec::with_capacity(2 * SPAN as usize + 8);
+    bytes.extend(len.to_le_bytes());
+    file.by_ref().take(SPAN).read_to_end(&mut bytes)?;
+    file.seek(SeekFrom::Start(len.saturating_sub(SPAN)))?;
+    file.take(SPAN).read_to_end(&mut bytes)?;
+    Ok(xxh3_64(&bytes))
+}
+
 pub fn config_digest(settings: &str, pipeline_text: &str) -> u64 {
     xxh3_64(format!("{settings}\n--\n{pipeline_text}").as_bytes())
 }

@@ -38,7 +38,17 @@ pub fn write_items(out: &Path, items: &[Item]) -> Result<(), BatchError> {
     let mut bytes = serde_json::to_vec_pretty(&serde_json::json!({ "items": listed }))
         .map_err(|e| BatchError::io(&path, std::io::Error::other(e)))?;
     bytes.push(b'\n');
-    crate::recording::writer::write_file_atomic(&path, &bytes).map_err(|e| BatchError::io(path, e))
+    // Shards write this at once on a shared volume, maybe all as PID 1 (one container
+    // each): a temporary name of this process's own, not the pid alone.
+    let nonce = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    let tmp = out.join(format!(".{ITEMS}.{nonce:x}.{}.partial", std::process::id()));
+    let result = std::fs::write(&tmp, &bytes).and_then(|()| std::fs::rename(&tmp, &path));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(|e| BatchError::io(path, e))
 }
 
 /// The items [`ITEMS`] in `out` lists; `None` when there is no such file.

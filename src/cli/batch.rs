@@ -151,7 +151,12 @@ fn run_or_skip(
     let dir = out.join(&item.id);
     let pipeline_text = relume::files::read_regular_to_string(&item.pipeline_path)
         .with_context(|| format!("cannot read {}", item.pipeline_path.display()))?;
-    let config = config_digest(&settings.canonical(), &pipeline_text);
+    let recording = marker::recording_digest(&item.recording_path)
+        .with_context(|| format!("cannot read {}", item.recording_path.display()))?;
+    let config = config_digest(
+        &format!("{}\nrecording {recording:016x}", settings.canonical()),
+        &pipeline_text,
+    );
     match Marker::check(&dir, &item.id, Some(config)) {
         MarkerState::Valid(_) => {
             eprintln!("{prefix}: done earlier, skipped");

@@ -343,6 +343,9 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         }
     };
     bar.finish_and_clear();
+    for warning in &summary.warnings {
+        eprintln!("warning: {warning}");
+    }
     // A recording where no color image has a depth image near it replays nothing: an
     // error naming how far apart the streams' stamps are, and no file.
     let replay = Replay::open(out, ReplayOptions::default())?;
@@ -350,9 +353,6 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         let offsets = association::depth_offsets(replay.recording.index());
         let _ = std::fs::remove_file(out);
         bail!("{}", no_association(&replay.stats, &offsets));
-    }
-    for warning in &summary.warnings {
-        eprintln!("warning: {warning}");
     }
     let intrinsics = command.intrinsics();
     let header = replay.recording.header();

@@ -289,7 +289,10 @@ pub fn import(
     let mut writer = RecordingWriter::create(out, &header)?;
     let store = options.common.store;
     let total = h.frames as usize;
-    for (f, &(color_ns, depth_ns)) in frames.iter().zip(&stamps) {
+    // The file pairs color k with depth k: both are written at the color stamp, so that
+    // replay's nearest-stamp association cannot pair a color image with the depth of a
+    // neighbouring frame when the sensor's depth clock is offset by half a frame or more.
+    for (f, &(color_ns, _depth_ns)) in frames.iter().zip(&stamps) {
         let k = f.index;
         let mut read = |(offset, len): (u64, u64), what: &str| -> Result<Vec<u8>, ImportError> {
             let mut buf = vec![0; len as usize];
@@ -309,7 +312,7 @@ pub fn import(
             image: color,
         }))?;
         writer.write(&Record::Depth(DepthRecord {
-            stamp_ns: depth_ns,
+            stamp_ns: color_ns,
             image: depth,
         }))?;
         // At the color stamp, where replay builds the frame: its own pose, exactly.

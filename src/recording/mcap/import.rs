@@ -211,6 +211,10 @@ fn pose_source(
         .map(frame_name)
         .unwrap_or(color_frame)
         .to_string();
+    let on_camera_chain = |child: &str| {
+        let child = frame_name(child);
+        child == camera || scan.tf.path_to_root(&camera).iter().any(|f| f == child)
+    };
     let pose_topic = match &options.pose_topic {
         Some(t) => {
             let c = scan.channel(t).ok_or_else(|| {
@@ -219,48 +223,67 @@ fn pose_source(
                     format!("--pose-topic {t}: no such topic (`--list` shows the topics)"),
                 )
             })?;
-            Some(scan.poses.get(&c.id).ok_or_else(|| {
-                fail(
-                    path,
-                    format!(
-                        "--pose-topic {t}: the topic holds {}, not PoseStamped, Odometry or PoseInFrame",
-                        c.schema
-                    ),
-                )
-            })?)
+            Some((
+                t.as_str(),
+                scan.poses.get(&c.id).ok_or_else(|| {
+                    fail(
+                        path,
+                        format!(
+                            "--pose-topic {t}: the topic holds {}, not PoseStamped, Odometry or PoseInFrame",
+                            c.schema
+                        ),
+                    )
+                })?,
+            ))
         }
         None if scan.tf.moves(&camera) => None,
-        None if scan.poses.len() == 1 => scan.poses.values().next(),
-        None if scan.poses.is_empty() && scan.tf.path_to_root(&camera).len() > 1 => None,
-        None if scan.poses.len() > 1 => {
-            let topics: Vec<&str> = scan
-                .poses
-                .keys()
-                .map(|id| scan.channels[id].topic.as_str())
-                .collect();
-            return Err(fail(
-                path,
-                format!(
-                    "the camera frame {camera:?} is not in the transform tree and {} topics hold \
-                     poses ({}): choose one with --pose-topic",
-                    topics.len(),
-                    topics.join(", ")
-                ),
-            ));
-        }
         None => {
-            if !camera.is_empty() && !scan.tf.has_frame(&camera) && !scan.tf.describe().is_empty() {
-                warnings.push(format!(
-                    "the transform tree does not hold the camera frame {camera:?}: give \
-                     --camera-frame to name it"
-                ));
+            // A pose topic is taken by itself only when it says whose poses it holds and
+            // that frame is the camera or carries it (an Odometry of the robot base the
+            // camera is mounted on): a PoseStamped may be anything (a goal, a marker).
+            let linked: Vec<(u16, &Vec<TransformMsg>)> = scan
+                .poses
+                .iter()
+                .filter(|(_, p)| {
+                    p.first()
+                        .is_some_and(|t| !t.child.is_empty() && on_camera_chain(&t.child))
+                })
+                .map(|(id, p)| (*id, p))
+                .collect();
+            match linked[..] {
+                [(id, samples)] => Some((scan.channels[&id].topic.as_str(), samples)),
+                _ => {
+                    let topics: Vec<&str> = scan
+                        .poses
+                        .keys()
+                        .map(|id| scan.channels[id].topic.as_str())
+                        .collect();
+                    if !topics.is_empty() {
+                        warnings.push(format!(
+                            "no camera poses are taken from {} by default: give --pose-topic \
+                             when a topic holds the camera's poses (or those of a frame that \
+                             /tf_static links to it)",
+                            topics.join(", ")
+                        ));
+                    } else if scan.tf.path_to_root(&camera).len() > 1 {
+                        warnings.push(format!(
+                            "the camera frame {camera:?} is in the transform tree, but nothing \
+                             on its chain moves (only static transforms): no poses are written"
+                        ));
+                    } else if !camera.is_empty() && !scan.tf.describe().is_empty() {
+                        warnings.push(format!(
+                            "the transform tree does not hold the camera frame {camera:?}: give \
+                             --camera-frame to name it"
+                        ));
+                    }
+                    return Ok(PoseSource::None);
+                }
             }
-            return Ok(PoseSource::None);
         }
     };
     let tree = match pose_topic {
         None => scan.tf.clone(),
-        Some(samples) => {
+        Some((topic, samples)) => {
             // Pose messages become a dynamic edge to their child frame (the camera, for
             // a PoseStamped), linked to the camera by the TF tree where it knows both.
             let mut tree = TfTree::default();
@@ -278,6 +301,17 @@ fn pose_source(
             tree.add(&edge, false).map_err(|e| fail(path, e))?;
             tree.finish();
             tree.absorb(&scan.tf);
+            if !tree.moves(&camera) {
+                let child = &edge[0].child;
+                return Err(fail(
+                    path,
+                    format!(
+                        "the poses on {topic} are of frame {child:?}, which no transform links \
+                         to the camera frame {camera:?}: give --camera-frame {child} if they \
+                         are the camera's own"
+                    ),
+                ));
+            }
             tree
         }
     };
@@ -291,6 +325,12 @@ fn pose_source(
     };
     if let Err(e) = tree.lookup(&world, &camera, 0) {
         return Err(fail(path, e));
+    }
+    for (child, first, other) in &tree.conflicts {
+        warnings.push(format!(
+            "the transforms give the frame {child:?} two parents, {first:?} and {other:?}: \
+             the first is kept, as tf2 would not accept the tree"
+        ));
     }
     Ok(PoseSource::Tree {
         tree,
@@ -439,6 +479,7 @@ pub fn import(
     let total = scan.end.messages as usize;
     let mut sizes = (None, None);
     let mut zero_stamps = 0usize;
+    let mut skipped_span: Option<(i64, i64)> = None;
     let mut flush = |batch: &mut Vec<Pending>,
                      writer: &mut RecordingWriter,
                      summary: &mut ImportSummary|
@@ -448,15 +489,19 @@ pub fn import(
             .map(|p| convert(p, depth_unit_m, options))
             .collect();
         for (p, result) in batch.drain(..).zip(converted) {
-            let (stamp_ns, image) = result
-                .map_err(|e| fail(file, format!("message {} on {}: {e}", p.index, p.topic)))?;
+            let what = format!("message {} on {}", p.index, p.topic);
+            let (stamp_ns, image) = result.map_err(|e| fail(file, format!("{what}: {e}")))?;
             let stamp_ns = if stamp_ns == 0 && p.log_time_ns != 0 {
                 zero_stamps += 1;
-                p.log_time_ns as i64
+                i64::try_from(p.log_time_ns).map_err(|_| {
+                    fail(
+                        file,
+                        format!("{what}: log time {} ns is out of range", p.log_time_ns),
+                    )
+                })?
             } else {
                 stamp_ns
             };
-            let what = format!("message {} on {}", p.index, p.topic);
             match p.role {
                 ImageRole::Color => {
                     check_size(Path::new(&what), &image, &mut sizes.0)?;
@@ -474,6 +519,10 @@ pub fn import(
                                 Some(pose) => Some(pose),
                                 None => {
                                     summary.skipped_frames += 1;
+                                    skipped_span = Some(match skipped_span {
+                                        None => (stamp_ns, stamp_ns),
+                                        Some((a, b)) => (a.min(stamp_ns), b.max(stamp_ns)),
+                                    });
                                     continue;
                                 }
                             }
@@ -536,6 +585,26 @@ pub fn import(
     })?;
     flush(&mut batch, &mut writer, &mut summary)?;
     progress(total, total);
+    if let (0, Some((first, last)), PoseSource::Tree { tree, camera, .. }) =
+        (summary.color, skipped_span, &poses)
+    {
+        let s = |ns: i64| format!("{:.3} s", ns as f64 * 1e-9);
+        let span = match tree.span(camera) {
+            Some((a, b)) => format!("{} to {}", s(a), s(b)),
+            None => "none".into(),
+        };
+        return Err(fail(
+            file,
+            format!(
+                "none of the {} color images (stamped {} to {}) lies within the camera's \
+                 transforms ({span}): are the transforms stamped by another clock (sim time)? \
+                 nothing was written",
+                summary.skipped_frames,
+                s(first),
+                s(last)
+            ),
+        ));
+    }
     writer.finish()?;
     if zero_stamps > 0 {
         summary.warnings.push(format!(

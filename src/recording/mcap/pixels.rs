@@ -105,6 +105,12 @@ fn rows(
     }
     let row = width as usize * bytes_per_pixel;
     let step = step as usize;
+    if step.saturating_mul(height as usize) > data.len().saturating_add(step) {
+        return Err(format!(
+            "{} bytes of pixels for {width}x{height} at step {step}",
+            data.len()
+        ));
+    }
     if step < row {
         return Err(format!(
             "step {step} is shorter than a row of {width} pixels ({row} bytes)"
@@ -144,8 +150,11 @@ pub fn color_image(data: &ImageData, store: StoreMode) -> Result<EncodedImage, S
                 "mono8" => (1, [0, 0, 0]),
                 other => return Err(format!("raw encoding `{other}` is not a color encoding")),
             };
+            // Rows first: they check the size against the bytes sent before anything
+            // is reserved for it.
+            let rows = rows(data, *width, *height, *step, bpp)?;
             let mut bytes = Vec::with_capacity(*width as usize * *height as usize * 3);
-            for row in rows(data, *width, *height, *step, bpp)? {
+            for row in rows {
                 for px in row.chunks_exact(bpp) {
                     bytes.extend(order.map(|c| px[c]));
                 }
@@ -216,8 +225,9 @@ pub fn depth_image(
                 other => return Err(format!("raw encoding `{other}` is not a depth encoding")),
             };
             let bpp = if float { 4 } else { 2 };
+            let rows = rows(data, *width, *height, *step, bpp)?;
             let mut units = Vec::with_capacity(*width as usize * *height as usize);
-            for row in rows(data, *width, *height, *step, bpp)? {
+            for row in rows {
                 for px in row.chunks_exact(bpp) {
                     units.push(match (float, *big_endian) {
                         (false, false) => u16::from_le_bytes([px[0], px[1]]),
@@ -314,6 +324,28 @@ mod tests {
         assert_eq!(
             color_image(&mono, StoreMode::Compressed).unwrap().bytes,
             [7, 7, 7, 9, 9, 9]
+        );
+        // A claimed size far beyond the bytes sent is refused before any allocation.
+        let huge = ImageData::Raw {
+            width: u32::MAX,
+            height: u32::MAX,
+            encoding: "rgb8".into(),
+            big_endian: false,
+            step: u32::MAX,
+            data: Cow::Owned(vec![0; 16]),
+        };
+        assert!(color_image(&huge, StoreMode::Compressed).is_err());
+        let big = ImageData::Raw {
+            width: 8000,
+            height: 8000,
+            encoding: "32FC1".into(),
+            big_endian: false,
+            step: 32000,
+            data: Cow::Owned(vec![0; 16]),
+        };
+        assert_eq!(
+            depth_image(&big, 0.001, StoreMode::Compressed).unwrap_err(),
+            "16 bytes of pixels for 8000x8000 at step 32000"
         );
         let short = raw("rgb8", 2, 6, vec![0; 5]);
         assert_eq!(

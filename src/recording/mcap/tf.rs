@@ -144,6 +144,23 @@ impl TfTree {
             .any(|f| self.edges.get(f).is_some_and(|e| !e.is_static))
     }
 
+    /// The time span over which every moving edge from `frame` to its root has
+    /// samples (where a lookup can succeed); `None` when nothing moves.
+    pub fn span(&self, frame: &str) -> Option<(i64, i64)> {
+        let mut span: Option<(i64, i64)> = None;
+        for f in self.path_to_root(frame) {
+            let Some(e) = self.edges.get(&f).filter(|e| !e.is_static) else {
+                continue;
+            };
+            let (first, last) = (e.samples.first()?.0, e.samples.last()?.0);
+            span = Some(match span {
+                None => (first, last),
+                Some((a, b)) => (a.max(first), b.min(last)),
+            });
+        }
+        span
+    }
+
     /// Edges for a listing: (child, parent, static, samples, first and last stamps).
     pub fn describe(&self) -> Vec<(String, String, bool, usize, i64, i64)> {
         self.edges
@@ -195,7 +212,8 @@ fn sample_at(edge: &Edge, t: i64) -> Option<Pose> {
     match (at.checked_sub(1).and_then(|i| s.get(i)), s.get(at)) {
         (_, Some(&(stamp, pose))) if stamp == t => Some(pose),
         (Some(&(t0, p0)), Some(&(t1, p1))) => {
-            let f = (t - t0) as f64 / (t1 - t0) as f64;
+            // In i128: stamps of any i64 value, far apart, do not overflow.
+            let f = (t as i128 - t0 as i128) as f64 / (t1 as i128 - t0 as i128) as f64;
             Some(Pose::interpolate(&p0, &p1, f))
         }
         _ => None,

@@ -663,3 +663,55 @@ fn poses_are_not_invented_from_unlinked_or_mistimed_transforms() {
     );
     assert!(!d.join("c.relume").exists());
 }
+
+#[test]
+fn a_pose_stamped_topic_gives_the_camera_poses_when_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut bag = Bag::create(&d.join("p.mcap"), Some(mcap::Compression::Lz4));
+    for k in 0..3 {
+        let t = T0 + k as i64 * DT;
+        let img = ros2::image(t, "cam", W, H, "rgb8", W * 3, &color_pixels(k));
+        bag.put("/color", "sensor_msgs/msg/Image", t as u64, &img);
+        let mut pose = tf_at(t, k);
+        pose.parent = "map";
+        bag.put(
+            "/slam/pose",
+            "geometry_msgs/msg/PoseStamped",
+            t as u64,
+            &ros2::pose_stamped(&pose),
+        );
+    }
+    bag.finish();
+    // Not taken by default: a PoseStamped may be anything.
+    let o = ok(run_in(d, &["import", "mcap", "p.mcap", "-o", "a.relume"]));
+    assert!(
+        stdout(&o).contains("(3 color, 0 depth, 0 poses"),
+        "{}",
+        stdout(&o)
+    );
+    ok(run_in(
+        d,
+        &[
+            "import",
+            "mcap",
+            "p.mcap",
+            "-o",
+            "b.relume",
+            "--pose-topic",
+            "/slam/pose",
+        ],
+    ));
+    let replay = Replay::open(&d.join("b.relume"), ReplayOptions::default()).unwrap();
+    assert_eq!(
+        replay.recording.header().provenance.settings["world-frame"],
+        "map"
+    );
+    for k in 0..3 {
+        let (t, q) = base_pose(k);
+        let want = Pose::from_parts(t, q);
+        let got = replay.read_frame(k).unwrap().pose.unwrap();
+        // The camera's own pose, as sent: bit for bit at the message's stamp.
+        assert_eq!(got, want, "frame {k}");
+    }
+}

@@ -138,6 +138,14 @@ pub fn tf_message(transforms: &[Tf]) -> Vec<u8> {
     c.0
 }
 
+/// geometry_msgs/PoseStamped (`t.child` is not sent: the message does not name the
+/// frame it places).
+pub fn pose_stamped(t: &Tf) -> Vec<u8> {
+    let mut c = Cdr::new();
+    c.header(t.stamp_ns, t.parent).f64s(&t.t).f64s(&t.q);
+    c.0
+}
+
 /// nav_msgs/Odometry (zero covariances and twist).
 pub fn odometry(t: &Tf) -> Vec<u8> {
     let mut c = Cdr::new();

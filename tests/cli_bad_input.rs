@@ -436,7 +436,7 @@ fn an_interrupted_synth_leaves_no_partial_file() {
         let o = common::signal_and_wait(child, signal);
         assert_eq!(o.status.code(), Some(130), "{signal}: {}", stderr(&o));
         assert!(
-            stderr(&o).ends_with("interrupted: the unfinished recording was removed\n"),
+            stderr(&o).ends_with("interrupted: the unfinished output file was removed\n"),
             "{}",
             stderr(&o)
         );

@@ -368,6 +368,26 @@ fn damaged_and_unreadable_files_name_what_is_wrong_and_write_nothing() {
         ],
         "the frame \"map\" is not above \"camera_color_optical_frame\"",
     );
+    fails(
+        &[
+            "import",
+            "mcap",
+            "in.mcap",
+            "-o",
+            "r.relume",
+            "--camera-frame",
+            "nope",
+        ],
+        "--camera-frame nope: the transform tree has no such frame",
+    );
+    // The input given as the output: refused, the input kept.
+    let o = run_in(d, &["import", "mcap", "in.mcap", "-o", "in.mcap"]);
+    assert!(
+        stderr(&o).contains("-o in.mcap is the input file"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(std::fs::read(d.join("in.mcap")).unwrap(), bytes);
     // A file cut short, as by a recorder killed mid-write: what precedes is imported.
     std::fs::write(d.join("cut.mcap"), &bytes[..bytes.len() * 3 / 4]).unwrap();
     let o = ok(run_in(

@@ -2,6 +2,15 @@
 //! recording of a manifest through every pipeline, one item after another, each into
 //! `OUT/<item id>/` with a `DONE` marker last (see `relume::batch`).
 
+/// A line on stderr that a closed pipe (`relume batch ... 2>&1 | head`) cannot turn
+/// into a panic: the batch goes on, its markers and exit status say how it went.
+macro_rules! note {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
 use super::replay::{
     Pacing, RunArgs, check_saved_products, load, save_products, some_frame_replayed,
 };
@@ -82,6 +91,11 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
     let spec = a.shard.as_deref().map(ShardSpec::parse).transpose()?;
     let manifest = Manifest::load(manifest_path)?;
     let (shard, from) = match spec {
+        None if a.shards.is_some() => {
+            bail!(
+                "--shards gives the shard count for --shard auto: give --shard auto (or --shard I/N)"
+            )
+        }
         None => (Shard::ALL, "every item".to_string()),
         Some(ShardSpec::Fixed(s)) => {
             if let Some(n) = a.shards.filter(|&n| n != s.count) {
@@ -98,7 +112,7 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     summary::write_items(&out, &manifest.items)?;
     let mine = shard::select(&manifest.items, |i| &i.id, shard);
-    eprintln!(
+    note!(
         "shard {shard} ({from}): {} of the manifest's {} items, into {}",
         mine.len(),
         manifest.items.len(),
@@ -117,7 +131,7 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
             Ok(Outcome::Interrupted) => break,
             Err(e) => {
                 failed += 1;
-                eprintln!("{prefix}: FAILED: {}", super::report(&e));
+                note!("{prefix}: FAILED: {}", super::report(&e));
             }
         }
     }
@@ -126,10 +140,10 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
         mine.len()
     );
     if stop.load(Ordering::SeqCst) {
-        eprintln!("{line}; interrupted: the others were not run");
+        note!("{line}; interrupted: the others were not run");
         return Ok(130);
     }
-    eprintln!("{line}");
+    note!("{line}");
     Ok(if failed > 0 { 1 } else { 0 })
 }
 
@@ -159,28 +173,28 @@ fn run_or_skip(
     );
     match Marker::check(&dir, &item.id, Some(config)) {
         MarkerState::Valid(_) => {
-            eprintln!("{prefix}: done earlier, skipped");
+            note!("{prefix}: done earlier, skipped");
             return Ok(Outcome::Skipped);
         }
-        MarkerState::Invalid(why) => eprintln!("{prefix}: {why}: running it again"),
+        MarkerState::Invalid(why) => note!("{prefix}: {why}: running it again"),
         MarkerState::Absent if dir.exists() => {
-            eprintln!(
+            note!(
                 "{prefix}: its folder has no DONE marker (a failed or interrupted run): running it again"
             )
         }
         MarkerState::Absent => {}
     }
     marker::clear(&dir)?;
-    eprintln!("{prefix}: {} through {}", item.recording, item.pipeline);
+    note!("{prefix}: {} through {}", item.recording, item.pipeline);
     let started = Instant::now();
     match run_item(item, settings, &dir, stop, started) {
         Ok(true) => {
             Marker::of(&dir, &item.id, config)?.write(&dir)?;
-            eprintln!("{prefix}: done in {:.1} s", started.elapsed().as_secs_f64());
+            note!("{prefix}: done in {:.1} s", started.elapsed().as_secs_f64());
             Ok(Outcome::Ran)
         }
         Ok(false) => {
-            eprintln!("{prefix}: interrupted; it has no DONE marker and runs again next time");
+            note!("{prefix}: interrupted; it has no DONE marker and runs again next time");
             Ok(Outcome::Interrupted)
         }
         Err(e) => {
@@ -283,7 +297,7 @@ fn summarize(dir: &Path, json: bool) -> anyhow::Result<i32> {
         bail!("--summary {}: no such folder", dir.display());
     }
     if summary::read_items(dir)?.is_none() {
-        eprintln!(
+        note!(
             "warning: {} has no {}: only items with a folder are listed, not those no shard \
              has started",
             dir.display(),

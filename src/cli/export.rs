@@ -23,7 +23,7 @@ pub struct McapExportArgs {
     /// Output MCAP file.
     #[arg(short, long)]
     out: PathBuf,
-    /// A folder of saved products (`relume replay REC --save color,cloud OUT` writes
+    /// A folder of saved products (`relume replay REC --save color,cloud --out OUT` writes
     /// OUT/<product>/<frame>.png|ply): each product becomes a topic /relume/<product>
     /// at its frames' stamps.
     #[arg(long, value_name = "DIR")]
@@ -34,6 +34,7 @@ pub fn export(command: ExportCommand) -> anyhow::Result<i32> {
     let ExportCommand::Mcap(a) = command;
     let start = std::time::Instant::now();
     super::check_output_file("-o", &a.out)?;
+    super::check_not_input(&a.out, &a.recording)?;
     if let Some(dir) = &a.products
         && !dir.is_dir()
     {

@@ -33,7 +33,7 @@ fn handle() {
     if let Some(partial) = &watch.partial {
         // Not there: not created yet, or already renamed to its final name.
         match std::fs::remove_file(partial) {
-            Ok(()) => eprintln!("\ninterrupted: the unfinished recording was removed"),
+            Ok(()) => eprintln!("\ninterrupted: the unfinished output file was removed"),
             Err(_) => eprintln!("\ninterrupted"),
         }
         std::process::exit(130);

@@ -111,6 +111,20 @@ Examples:
 /// An error before any work (a replay, a synth, an import), rather than after it, when
 /// the file an option names cannot be written: something other than a regular file
 /// stands there (a folder, a device), or its folder does not exist.
+/// An error when the output `out` is the input file `input` (written over before it is
+/// read to its end).
+pub(crate) fn check_not_input(out: &Path, input: &Path) -> anyhow::Result<()> {
+    if let (Ok(a), Ok(b)) = (out.canonicalize(), input.canonicalize())
+        && a == b
+    {
+        anyhow::bail!(
+            "-o {} is the input file: give the output another name",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
 pub(crate) fn check_output_file(option: &str, path: &Path) -> anyhow::Result<()> {
     // Where the file will be written: through a symbolic link, to what it leads to.
     let target = relume::recording::writer::output_target(path)

@@ -308,6 +308,11 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     }
     let out = command.out().expect("clap requires -o unless --list");
     super::check_output_file("-o", out)?;
+    match &command {
+        ImportCommand::Mcap(a) => super::check_not_input(out, &a.file)?,
+        ImportCommand::Scannet { file, .. } => super::check_not_input(out, file)?,
+        _ => {}
+    }
     remove_stale_partials_beside(out);
     let _partial = PartialFile::watch(out);
     let bar = progress::bar(0, "importing", "frames");

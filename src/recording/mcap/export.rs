@@ -274,6 +274,13 @@ fn write_all(
         })
         .map_err(|e| fail(o.path, e.to_string()))?;
     let mut summary = ExportSummary::default();
+    if let Some(damage) = rec.damage() {
+        summary.warnings.push(format!(
+            "{}: {}; the records before it are exported",
+            rec.path().display(),
+            damage.reason()
+        ));
+    }
     let n = rec.index().len();
     for i in 0..n {
         let record = rec.read_record(i)?;

@@ -99,6 +99,18 @@ pub(super) fn write_products(
         move |source| ImportError::Io { path, source }
     };
     let stamps = frame_stamps(rec)?;
+    let header = rec.header();
+    let sizes = [
+        (
+            header.color_intrinsics.width,
+            header.color_intrinsics.height,
+        ),
+        (
+            header.depth_intrinsics.width,
+            header.depth_intrinsics.height,
+        ),
+    ];
+    let mut other_files = 0usize;
     let mut folders: Vec<_> = std::fs::read_dir(dir)
         .map_err(io(dir))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -120,6 +132,7 @@ pub(super) fn write_products(
         for file in files {
             let ext = file.extension().and_then(|e| e.to_str()).unwrap_or("");
             if !matches!(ext, "png" | "ply") {
+                other_files += 1;
                 continue;
             }
             let Some(frame) = frame_of(&file) else {
@@ -143,8 +156,18 @@ pub(super) fn write_products(
                 reason: e,
             };
             if ext == "png" {
-                crate::recording::codec::wrap_image_file(bytes.clone())
+                let (img, _) = crate::recording::codec::wrap_image_file(bytes.clone())
                     .map_err(|e| bad(e.to_string()))?;
+                if !sizes.contains(&(img.width, img.height)) {
+                    summary.warnings.push(format!(
+                        "{}: {}x{} is the size of neither the recording's color nor its depth \
+                         images (saved from another recording?): skipped",
+                        file.display(),
+                        img.width,
+                        img.height
+                    ));
+                    continue;
+                }
                 let msg = json!({"timestamp": time(stamp_ns), "frame_id": CAMERA_FRAME, "format": "png", "data": b64(&bytes)});
                 o.write(&topic, "foxglove.CompressedImage", stamp_ns, &msg)?;
             } else {
@@ -158,6 +181,19 @@ pub(super) fn write_products(
             }
             *summary.products.entry(product.clone()).or_default() += 1;
         }
+    }
+    if other_files > 0 {
+        summary.warnings.push(format!(
+            "{other_files} saved files in other formats (EXR, JSON, light records) are not \
+             exported: MCAP viewers show the PNGs and the clouds"
+        ));
+    }
+    if summary.products.is_empty() {
+        summary.warnings.push(format!(
+            "{}: no products exported: the folder should hold one folder per product with \
+             files named by frame (000012.png), as `relume replay --save ... --out DIR` writes",
+            dir.display()
+        ));
     }
     Ok(())
 }

@@ -8,6 +8,7 @@
 //!   imports back to the same frames.
 
 pub mod cdr;
+mod choose;
 pub mod export;
 mod export_products;
 pub mod import;

@@ -160,10 +160,15 @@ impl Scan {
             let what = match (&c.ty, self.images.get(id), self.infos.get(id)) {
                 (_, Some(img), _) => match &img.role {
                     Ok(role) => format!(
-                        "{} images, {}, frame {:?}",
+                        "{} images, {}, frame {:?}{}",
                         role.name(),
                         img.format,
-                        img.frame_id
+                        img.frame_id,
+                        if c.topic.starts_with("/relume/") {
+                            " (a saved product: not imported by default)"
+                        } else {
+                            ""
+                        }
                     ),
                     Err(e) => format!("images not read: {e}"),
                 },

@@ -215,7 +215,7 @@ fn a_rerun_redoes_only_unfinished_items() {
     std::fs::write(d.join("m.toml"), text.replace("0..3", "0..2")).unwrap();
     let o = succeeds(batch(d, &["batch", "m.toml"], &[]));
     assert!(tally(&o).ends_with("ran 6, skipped 0 (done earlier), failed 0"));
-    assert!(stderr(&o).contains("its settings or pipeline changed since it was done"));
+    assert!(stderr(&o).contains("its recording, settings or pipeline changed since it was done"));
 }
 
 /// Extra arguments and the variables of a `--shard auto` run.

@@ -204,7 +204,7 @@ impl Marker {
         }
         if config.is_some_and(|c| c != marker.config) {
             return MarkerState::Invalid(
-                "its settings or pipeline changed since it was done".into(),
+                "its recording, settings or pipeline changed since it was done".into(),
             );
         }
         match Outputs::list(dir) {

@@ -416,6 +416,17 @@ fn damaged_and_unreadable_files_name_what_is_wrong_and_write_nothing() {
         &["import", "mcap", "bad.mcap", "-o", "r.relume"],
         "message 1 on /color: byte",
     );
+    // An image of another size in the middle of a topic.
+    let mut bag = Bag::create(&d.join("sizes.mcap"), None);
+    let first = ros2::image(T0, "cam", W, H, "rgb8", W * 3, &color_pixels(0));
+    let small = ros2::image(T0 + DT, "cam", 4, H, "rgb8", 12, &color_pixels(0)[..72]);
+    bag.put("/color", "sensor_msgs/msg/Image", T0 as u64, &first);
+    bag.put("/color", "sensor_msgs/msg/Image", (T0 + DT) as u64, &small);
+    bag.finish();
+    fails(
+        &["import", "mcap", "sizes.mcap", "-o", "r.relume"],
+        "sizes.mcap: message 1 on /color: the image is 4x6, but the topic's first is 8x6",
+    );
     // ROS 1 messages: said so, with the way out.
     let mut bag = Bag::create(&d.join("ros1.mcap"), None);
     bag.put_encoded("/img", "sensor_msgs/Image", "ros1", 0, b"\0");

@@ -9,9 +9,7 @@ use super::pixels::{self, ImageRole};
 use super::read::{self, Channel, Event};
 use super::scan::Scan;
 use crate::recording::error::ImportError;
-use crate::recording::importers::{
-    CameraIntrinsics, ImportOptions, ImportSummary, check_size, import_header,
-};
+use crate::recording::importers::{CameraIntrinsics, ImportOptions, ImportSummary, import_header};
 use crate::recording::types::{
     ColorRecord, DepthRecord, EncodedImage, Pose, PoseRecord, Record, StreamKind,
 };
@@ -206,7 +204,7 @@ pub fn import(
             };
             match p.role {
                 ImageRole::Color => {
-                    check_size(Path::new(&what), &image, &mut sizes.0)?;
+                    check_size(file, &what, &image, &mut sizes.0)?;
                     let pose = match &poses {
                         PoseSource::None => None,
                         PoseSource::Tree {
@@ -239,7 +237,7 @@ pub fn import(
                     }
                 }
                 ImageRole::Depth => {
-                    check_size(Path::new(&what), &image, &mut sizes.1)?;
+                    check_size(file, &what, &image, &mut sizes.1)?;
                     writer.write(&Record::Depth(DepthRecord { stamp_ns, image }))?;
                     summary.depth += 1;
                 }
@@ -360,6 +358,31 @@ fn summary_warning_depth_frame(warnings: &mut Vec<String>, topic: &str, depth: &
          relume takes them as one registered camera; if they are not, record depth aligned \
          to color (e.g. a camera driver's aligned_depth_to_color topic)"
     ));
+}
+
+/// A topic's images keep the size of its first: an error naming the file and message
+/// otherwise.
+fn check_size(
+    file: &Path,
+    what: &str,
+    image: &EncodedImage,
+    expected: &mut Option<(u32, u32)>,
+) -> Result<(), ImportError> {
+    let size = (image.width, image.height);
+    match *expected {
+        None => *expected = Some(size),
+        Some(first) if first != size => {
+            return Err(fail(
+                file,
+                format!(
+                    "{what}: the image is {}x{}, but the topic's first is {}x{}",
+                    size.0, size.1, first.0, first.1
+                ),
+            ));
+        }
+        Some(_) => {}
+    }
+    Ok(())
 }
 
 fn check_pose(file: &Path, what: &str, pose: &Pose) -> Result<(), ImportError> {

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{relume, stderr, stdout};
+use common::{ok, relume, stderr, stdout};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::Output;
@@ -31,17 +31,6 @@ fn batch(dir: &Path, args: &[&str], vars: &[(&str, &str)]) -> Output {
     cmd.output().expect("run relume")
 }
 
-fn succeeds(o: Output) -> Output {
-    assert!(
-        o.status.success(),
-        "relume failed ({:?})\nstdout:\n{}\nstderr:\n{}",
-        o.status,
-        stdout(&o),
-        stderr(&o)
-    );
-    o
-}
-
 /// Three small recordings in `data/` and two pipelines in `pipes/` (acquisition, and
 /// geometry with its own `write` stage), and `m.toml` pairing them: six items.
 fn setup(dir: &Path) {
@@ -50,7 +39,7 @@ fn setup(dir: &Path) {
     for seed in 1..=3 {
         let name = format!("data/r{seed}.relume");
         let seed = seed.to_string();
-        succeeds(batch(
+        ok(batch(
             dir,
             &[
                 "synth", "-o", &name, "--frames", "4", "--size", "64x48", "--seed", &seed,
@@ -110,7 +99,7 @@ fn shards_together_make_exactly_an_unsharded_run() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     setup(d);
-    let all = succeeds(batch(d, &["batch", "m.toml", "--out", "all"], &[]));
+    let all = ok(batch(d, &["batch", "m.toml", "--out", "all"], &[]));
     assert!(tally(&all).ends_with("6 item(s): ran 6, skipped 0 (done earlier), failed 0"));
     let whole = tree(&d.join("all"));
     // Each item: the pipeline's own writes, the saved products, the report, the marker.
@@ -141,7 +130,7 @@ fn shards_together_make_exactly_an_unsharded_run() {
         .collect();
     let mut ran = Vec::new();
     for child in children {
-        let o = succeeds(child.wait_with_output().unwrap());
+        let o = ok(child.wait_with_output().unwrap());
         let line = tally(&o);
         let n: usize = line
             .split("ran ")
@@ -174,7 +163,7 @@ fn a_rerun_redoes_only_unfinished_items() {
     let tmp = tempfile::tempdir().unwrap();
     let d = tmp.path();
     setup(d);
-    succeeds(batch(d, &["batch", "m.toml"], &[]));
+    ok(batch(d, &["batch", "m.toml"], &[]));
     let out = d.join("m-out");
     let first = tree(&out);
     let ids = items(&out);
@@ -195,7 +184,7 @@ fn a_rerun_redoes_only_unfinished_items() {
     let unmarked = &ids[4];
     std::fs::remove_file(out.join(unmarked).join("DONE")).unwrap();
     std::thread::sleep(std::time::Duration::from_millis(20));
-    let o = succeeds(batch(d, &["batch", "m.toml"], &[]));
+    let o = ok(batch(d, &["batch", "m.toml"], &[]));
     assert!(
         tally(&o).ends_with("6 item(s): ran 2, skipped 4 (done earlier), failed 0"),
         "{}",
@@ -208,12 +197,12 @@ fn a_rerun_redoes_only_unfinished_items() {
     // Redone from scratch: the same files as the first run, none of the half-written.
     assert_eq!(tree(&out), first);
     // A third run does nothing.
-    let o = succeeds(batch(d, &["batch", "m.toml"], &[]));
+    let o = ok(batch(d, &["batch", "m.toml"], &[]));
     assert!(tally(&o).ends_with("ran 0, skipped 6 (done earlier), failed 0"));
     // Changed settings make the markers invalid: everything runs again.
     let text = std::fs::read_to_string(d.join("m.toml")).unwrap();
     std::fs::write(d.join("m.toml"), text.replace("0..3", "0..2")).unwrap();
-    let o = succeeds(batch(d, &["batch", "m.toml"], &[]));
+    let o = ok(batch(d, &["batch", "m.toml"], &[]));
     assert!(tally(&o).ends_with("ran 6, skipped 0 (done earlier), failed 0"));
     assert!(stderr(&o).contains("its recording, settings or pipeline changed since it was done"));
 }
@@ -241,7 +230,7 @@ fn shard_auto_takes_the_shard_from_slurm_or_kubernetes() {
     for i in 0..3 {
         let fixed = format!("{i}/3");
         let out = format!("fixed{i}");
-        let expected = ran_items(&succeeds(batch(
+        let expected = ran_items(&ok(batch(
             d,
             &["batch", "m.toml", "--shard", &fixed, "--out", &out],
             &[],
@@ -275,7 +264,7 @@ fn shard_auto_takes_the_shard_from_slurm_or_kubernetes() {
             let out = format!("auto{i}-{k}");
             let mut args = vec!["batch", "m.toml", "--shard", "auto", "--out", &out];
             args.extend_from_slice(extra);
-            let o = succeeds(batch(d, &args, vars));
+            let o = ok(batch(d, &args, vars));
             assert!(
                 stderr(&o).starts_with(&format!("shard {i}/3 (--shard auto: ")),
                 "{vars:?}: {}",
@@ -497,7 +486,7 @@ fn a_batch_killed_mid_run_resumes_without_redoing_finished_items() {
             .unwrap()
     };
     let before: Vec<_> = finished.iter().map(|id| stamp(id)).collect();
-    let o = succeeds(batch(d, &["batch", "m.toml"], &[]));
+    let o = ok(batch(d, &["batch", "m.toml"], &[]));
     let (k, rest) = (finished.len(), 6 - finished.len());
     assert!(
         tally(&o).ends_with(&format!(
@@ -512,6 +501,6 @@ fn a_batch_killed_mid_run_resumes_without_redoing_finished_items() {
     // The resumed batch holds exactly what an uninterrupted one does.
     let fresh = tempfile::tempdir().unwrap();
     setup(fresh.path());
-    succeeds(batch(fresh.path(), &["batch", "m.toml"], &[]));
+    ok(batch(fresh.path(), &["batch", "m.toml"], &[]));
     assert_eq!(tree(&out), tree(&fresh.path().join("m-out")));
 }

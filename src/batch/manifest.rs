@@ -24,6 +24,7 @@ use super::BatchError;
 use crate::graph::ParamOverride;
 use crate::graph::config::SourceFile;
 use crate::graph::params::{a, did_you_mean};
+use crate::recording::replay::parse_frames;
 use std::ops::Range;
 use std::path::{Component, Path, PathBuf};
 use toml::de::{DeTable, DeValue};
@@ -465,31 +466,6 @@ fn repeats(src: &SourceFile, v: &Value<'_>, key: &str, names: &[String]) -> Resu
         }
     }
     Ok(())
-}
-
-/// A frame range as `relume replay --frames` takes it: `A..B` (B excluded), `A..`, `..B`
-/// or `N`.
-pub fn parse_frames(text: &str) -> Result<Range<usize>, String> {
-    let invalid = || format!("invalid frame range {text:?}: expected A..B, A.., ..B or N");
-    let num = |s: &str, default: usize| {
-        if s.is_empty() {
-            Ok(default)
-        } else {
-            s.parse::<usize>().map_err(|_| invalid())
-        }
-    };
-    let range = match text.split_once("..") {
-        Some((a, b)) => num(a, 0)?..num(b, usize::MAX)?,
-        None if text.is_empty() => return Err(invalid()),
-        None => {
-            let n = num(text, 0)?;
-            n..n.saturating_add(1)
-        }
-    };
-    if range.start >= range.end {
-        return Err(format!("frame range {text:?} is empty"));
-    }
-    Ok(range)
 }
 
 #[cfg(test)]

@@ -63,15 +63,7 @@ pub fn export(command: ExportCommand) -> anyhow::Result<i32> {
         true => String::new(),
         false => format!(", products: {}", products.join(", ")),
     };
-    let bytes = std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0);
-    outln!(
-        "wrote {} ({} color, {} depth, {} poses{products}, {:.1} MB) in {:.2} s",
-        a.out.display(),
-        summary.color,
-        summary.depth,
-        summary.poses,
-        bytes as f64 / 1e6,
-        start.elapsed().as_secs_f64()
-    )?;
+    let counts = (summary.color, summary.depth, summary.poses);
+    super::print_wrote(&a.out, counts, &products, start)?;
     Ok(0)
 }

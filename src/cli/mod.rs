@@ -111,6 +111,22 @@ Examples:
 /// An error before any work (a replay, a synth, an import), rather than after it, when
 /// the file an option names cannot be written: something other than a regular file
 /// stands there (a folder, a device), or its folder does not exist.
+/// The line that import and export end with: what `out` holds, its size, the time.
+pub(crate) fn print_wrote(
+    out: &Path,
+    (color, depth, poses): (usize, usize, usize),
+    extra: &str,
+    start: std::time::Instant,
+) -> anyhow::Result<()> {
+    let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
+    outln!(
+        "wrote {} ({color} color, {depth} depth, {poses} poses{extra}, {:.1} MB) in {:.2} s",
+        out.display(),
+        bytes as f64 / 1e6,
+        start.elapsed().as_secs_f64()
+    )
+}
+
 /// An error when the output `out` is the input file `input` (written over before it is
 /// read to its end).
 pub(crate) fn check_not_input(out: &Path, input: &Path) -> anyhow::Result<()> {

@@ -389,20 +389,12 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
             noted.push(size);
         }
     }
-    let bytes = std::fs::metadata(out).map(|m| m.len()).unwrap_or(0);
     let skipped = match summary.skipped_frames {
         0 => String::new(),
         n => format!(", {n} frames skipped"),
     };
-    outln!(
-        "wrote {} ({} color, {} depth, {} poses{skipped}, {:.1} MB) in {:.2} s",
-        out.display(),
-        summary.color,
-        summary.depth,
-        summary.poses,
-        bytes as f64 / 1e6,
-        start.elapsed().as_secs_f64()
-    )?;
+    let counts = (summary.color, summary.depth, summary.poses);
+    super::print_wrote(out, counts, &skipped, start)?;
     // What the recording lacks that most pipelines need, from its frames as replay
     // builds them. A dataset may lack it, so this warns rather than fails.
     let mut warnings = missing_streams(&replay.stats);

@@ -97,29 +97,8 @@ pub struct ReplayArgs {
     export_cloud: Option<PathBuf>,
 }
 
-pub(super) fn parse_frames(text: &str) -> Result<Range<usize>, String> {
-    let invalid = || format!("invalid frame range {text:?}: expected A..B, A.., ..B or N");
-    let num = |s: &str, default: usize| {
-        if s.is_empty() {
-            Ok(default)
-        } else {
-            s.parse::<usize>().map_err(|_| invalid())
-        }
-    };
-    let range = match text.split_once("..") {
-        Some((a, b)) => num(a, 0)?..num(b, usize::MAX)?,
-        // A single index; an empty one is a mistake, not frame 0.
-        None if text.is_empty() => return Err(invalid()),
-        None => {
-            let n = num(text, 0)?;
-            n..n.saturating_add(1)
-        }
-    };
-    if range.start >= range.end {
-        return Err(format!("frame range {text:?} is empty"));
-    }
-    Ok(range)
-}
+/// `--frames`: shared with batch manifests' `frames` setting.
+pub(super) use relume::recording::replay::parse_frames;
 
 /// A recording and pipeline loaded and checked, ready to run.
 pub(super) struct Loaded {

@@ -6,6 +6,7 @@ use super::codec;
 use super::error::RecordingError;
 use super::reader::Recording;
 use super::types::{ColorRecord, DepthRecord, Pose, Record, StreamKind, TruthRecord};
+use std::ops::Range;
 use std::path::Path;
 
 /// How to open a recording for replay.
@@ -202,4 +203,29 @@ impl Replay {
             truth,
         })
     }
+}
+/// A frame range as `relume replay --frames` takes it: `A..B` (B excluded), `A..`, `..B`
+/// or `N`.
+pub fn parse_frames(text: &str) -> Result<Range<usize>, String> {
+    let invalid = || format!("invalid frame range {text:?}: expected A..B, A.., ..B or N");
+    let num = |s: &str, default: usize| {
+        if s.is_empty() {
+            Ok(default)
+        } else {
+            s.parse::<usize>().map_err(|_| invalid())
+        }
+    };
+    let range = match text.split_once("..") {
+        Some((a, b)) => num(a, 0)?..num(b, usize::MAX)?,
+        // A single index; an empty one is a mistake, not frame 0.
+        None if text.is_empty() => return Err(invalid()),
+        None => {
+            let n = num(text, 0)?;
+            n..n.saturating_add(1)
+        }
+    };
+    if range.start >= range.end {
+        return Err(format!("frame range {text:?} is empty"));
+    }
+    Ok(range)
 }

@@ -341,7 +341,7 @@ fn convert(
     depth_unit_m: f64,
     options: &McapOptions,
 ) -> Result<(i64, EncodedImage), String> {
-    let Message::Image(img) = messages::decode(p.ty, &p.bytes, true)? else {
+    let Message::Image(img) = messages::decode(p.ty, &p.bytes)? else {
         unreachable!("image types decode to images");
     };
     let store = options.common.store;

@@ -149,16 +149,14 @@ fn stamp_ns(sec: i64, nsec: i64) -> Result<i64, String> {
         .ok_or_else(|| format!("stamp of {sec} s is out of range"))
 }
 
-/// Decodes one message of type `ty`. `with_pixels: false` skips decoding the pixel
-/// bytes of JSON images (base64), for a first pass that needs only stamps and formats;
-/// their `data` is then empty.
-pub fn decode(ty: MessageType, bytes: &[u8], with_pixels: bool) -> Result<Message<'_>, String> {
+/// Decodes one message of type `ty`.
+pub fn decode(ty: MessageType, bytes: &[u8]) -> Result<Message<'_>, String> {
     use MessageType::*;
     match ty {
         RosImage | RosCompressedImage | RosCameraInfo | RosTf | RosPoseStamped | RosOdometry => {
             decode_cdr(ty, bytes).map_err(|e| e.to_string())
         }
-        _ => decode_json(ty, bytes, with_pixels),
+        _ => decode_json(ty, bytes),
     }
 }
 
@@ -318,26 +316,6 @@ struct FoxCompressedImage {
     data: Option<String>,
 }
 
-/// The same messages without their pixels: serde skims the base64 string unread.
-#[derive(Deserialize)]
-struct FoxRawImageHeader {
-    timestamp: FoxTime,
-    #[serde(default)]
-    frame_id: String,
-    width: u32,
-    height: u32,
-    encoding: String,
-    step: u32,
-}
-
-#[derive(Deserialize)]
-struct FoxCompressedImageHeader {
-    timestamp: FoxTime,
-    #[serde(default)]
-    frame_id: String,
-    format: String,
-}
-
 #[derive(Deserialize)]
 #[allow(non_snake_case)]
 struct FoxCalibration {
@@ -395,16 +373,12 @@ fn fox_transform(t: FoxFrameTransform) -> Result<TransformMsg, String> {
     })
 }
 
-fn decode_json(
-    ty: MessageType,
-    bytes: &[u8],
-    with_pixels: bool,
-) -> Result<Message<'static>, String> {
+fn decode_json(ty: MessageType, bytes: &[u8]) -> Result<Message<'static>, String> {
     fn parse<'a, T: Deserialize<'a>>(bytes: &'a [u8]) -> Result<T, String> {
         serde_json::from_slice(bytes).map_err(|e| format!("not a valid message: {e}"))
     }
     Ok(match ty {
-        MessageType::FoxRawImage if with_pixels => {
+        MessageType::FoxRawImage => {
             let m: FoxRawImage = parse(bytes)?;
             Message::Image(ImageMsg {
                 stamp_ns: stamp_ns(m.timestamp.sec, m.timestamp.nsec)?,
@@ -419,22 +393,7 @@ fn decode_json(
                 },
             })
         }
-        MessageType::FoxRawImage => {
-            let m: FoxRawImageHeader = parse(bytes)?;
-            Message::Image(ImageMsg {
-                stamp_ns: stamp_ns(m.timestamp.sec, m.timestamp.nsec)?,
-                frame_id: m.frame_id,
-                data: ImageData::Raw {
-                    width: m.width,
-                    height: m.height,
-                    encoding: m.encoding,
-                    big_endian: false,
-                    step: m.step,
-                    data: Cow::Owned(Vec::new()),
-                },
-            })
-        }
-        MessageType::FoxCompressedImage if with_pixels => {
+        MessageType::FoxCompressedImage => {
             let m: FoxCompressedImage = parse(bytes)?;
             Message::Image(ImageMsg {
                 stamp_ns: stamp_ns(m.timestamp.sec, m.timestamp.nsec)?,
@@ -442,17 +401,6 @@ fn decode_json(
                 data: ImageData::Compressed {
                     format: m.format,
                     data: Cow::Owned(base64_field(m.data)?),
-                },
-            })
-        }
-        MessageType::FoxCompressedImage => {
-            let m: FoxCompressedImageHeader = parse(bytes)?;
-            Message::Image(ImageMsg {
-                stamp_ns: stamp_ns(m.timestamp.sec, m.timestamp.nsec)?,
-                frame_id: m.frame_id,
-                data: ImageData::Compressed {
-                    format: m.format,
-                    data: Cow::Owned(Vec::new()),
                 },
             })
         }

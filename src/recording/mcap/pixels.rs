@@ -129,6 +129,32 @@ fn rows(
         .map(move |r| &r[..row]))
 }
 
+/// compressed_depth_image_transport's (A, B): a 32FC1 depth d is sent as A / d + B.
+type DepthQuantization = (f32, f32);
+
+/// The image file inside a compressed message, and for compressed_depth_image_transport's
+/// `compressedDepth` format the quantization parameters (A, B) of its 12-byte header.
+pub fn compressed_file<'a>(
+    format: &str,
+    data: &'a [u8],
+) -> Result<(Option<DepthQuantization>, &'a [u8]), String> {
+    let format = format.to_ascii_lowercase();
+    if !format.contains("compresseddepth") {
+        return Ok((None, data));
+    }
+    if format.contains("rvl") {
+        return Err("compressedDepth rvl is not read (only png)".into());
+    }
+    if data.len() <= 12 {
+        return Err(format!(
+            "a compressedDepth message of {} bytes has no image after its 12-byte header",
+            data.len()
+        ));
+    }
+    let f = |i: usize| f32::from_le_bytes(data[i..i + 4].try_into().expect("4 bytes"));
+    Ok((Some((f(4), f(8))), &data[12..]))
+}
+
 /// A color message as stored: JPEG/PNG kept (or decoded to raw with `StoreMode::Raw`),
 /// raw pixels as 8-bit RGB. Every image is decoded once, so that a damaged one is
 /// refused at import.
@@ -247,23 +273,7 @@ pub fn depth_image(
             raw_u16(*width, *height, units)
         }
         ImageData::Compressed { format, data } => {
-            let compressed_depth = format.to_ascii_lowercase().contains("compresseddepth");
-            let (header, png) = if compressed_depth {
-                if data.len() <= 12 {
-                    return Err(format!(
-                        "a compressedDepth message of {} bytes has no image after its \
-                         12-byte header",
-                        data.len()
-                    ));
-                }
-                let f = |i: usize| f32::from_le_bytes(data[i..i + 4].try_into().expect("4"));
-                (Some((f(4), f(8))), &data[12..])
-            } else {
-                (None, &data[..])
-            };
-            if compressed_depth && format.to_ascii_lowercase().contains("rvl") {
-                return Err("compressedDepth rvl is not read (only png)".into());
-            }
+            let (header, png) = compressed_file(format, data)?;
             let (img, bits) = wrap_image_file(png.to_vec()).map_err(|e| e.to_string())?;
             if bits != 16 || img.channels != 1 {
                 return Err(format!(

@@ -96,7 +96,7 @@ impl Scan {
                         }
                         return Ok(());
                     }
-                    let message = messages::decode(ty, data, false).map_err(|e| {
+                    let message = messages::decode(ty, data).map_err(|e| {
                         bad(format!(
                             "message {index} on {} ({}): {e}",
                             channel.topic, channel.schema
@@ -219,22 +219,16 @@ impl Scan {
 }
 
 fn image_topic(ty: MessageType, data: &[u8]) -> ImageTopic {
-    match messages::decode(ty, data, true) {
+    match messages::decode(ty, data) {
         Ok(Message::Image(img)) => {
             let size = match &img.data {
                 messages::ImageData::Raw { width, height, .. } => Some((*width, *height)),
-                messages::ImageData::Compressed { data, .. } => {
-                    let bytes = if data.len() > 12
-                        && !data.starts_with(&[0x89, b'P'])
-                        && !data.starts_with(&[0xff, 0xd8])
-                    {
-                        // compressedDepth: a 12-byte header before the PNG.
-                        data[12..].to_vec()
-                    } else {
-                        data.to_vec()
-                    };
-                    crate::recording::codec::wrap_image_file(bytes)
+                messages::ImageData::Compressed { format, data } => {
+                    pixels::compressed_file(format, data)
                         .ok()
+                        .and_then(|(_, file)| {
+                            crate::recording::codec::wrap_image_file(file.to_vec()).ok()
+                        })
                         .map(|(i, _)| (i.width, i.height))
                 }
             };

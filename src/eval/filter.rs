@@ -18,7 +18,9 @@
 //!   each run is filtered by a fresh instance of the stage in order, with its temporal
 //!   extension on and then off; the score is the per-pixel variance over the frames
 //!   (after the first, which has no previous frame), averaged over pixels, layers and
-//!   channels.
+//!   channels. When a `temporal.accumulate` stage stands between the sampler and the
+//!   filter, each run passes through a fresh instance of it first, as the pipeline's
+//!   frames do.
 
 use super::sampling::{PathRunner, ReferenceLayers};
 use crate::graph::{BuildContext, Frame, ParamValue, Registry, ResolvedStage, Stage};
@@ -47,6 +49,9 @@ pub struct FilterScorer {
     /// The pipeline's `sample.path`, whose outputs feed the filter (`None`: no flicker
     /// score).
     sampler: Option<(PathRunner, ResolvedStage)>,
+    /// The pipeline's `temporal.accumulate` between the sampler and the filter, which
+    /// the still-camera runs pass through too.
+    accumulator: Option<ResolvedStage>,
     /// The indices of the frames scored (those with a reference).
     scored_frames: Vec<usize>,
     unfiltered: Mse,
@@ -92,6 +97,7 @@ impl FilterScorer {
         objects: Arc<VirtualScene>,
         seed: u64,
         sampler: Option<(PathRunner, ResolvedStage)>,
+        accumulator: Option<&ResolvedStage>,
     ) -> FilterScorer {
         FilterScorer {
             stage: stage.clone(),
@@ -99,6 +105,7 @@ impl FilterScorer {
             objects,
             seed,
             sampler,
+            accumulator: accumulator.cloned(),
             scored_frames: Vec::new(),
             unfiltered: Mse::default(),
             filtered: Mse::default(),
@@ -160,6 +167,29 @@ impl FilterScorer {
         Ok(())
     }
 
+    /// A fresh instance of `stage` (no state from earlier frames) with `params`.
+    fn build(
+        &self,
+        stage: &ResolvedStage,
+        params: &crate::graph::Params,
+    ) -> Result<Box<dyn Stage>, String> {
+        let registry = Registry::builtin();
+        let info = registry
+            .get(stage.kind)
+            .ok_or_else(|| format!("no stage kind {}", stage.kind))?;
+        let ctx = BuildContext {
+            stage_name: &stage.name,
+            params,
+            inputs: &stage.inputs,
+            outputs: &stage.outputs,
+            header: &self.header,
+            out_dir: std::path::Path::new("."),
+            seed: self.seed,
+            objects: &self.objects,
+        };
+        (info.build)(&ctx).map_err(|e| e.to_string())
+    }
+
     /// The summed per-pixel variance over the still-camera frames (after the first) of
     /// the filtered layers, and the number of values it sums.
     fn flicker(
@@ -171,26 +201,19 @@ impl FilterScorer {
     ) -> Result<(f64, u64), String> {
         let mut params = self.stage.params.clone();
         params.set("temporal", ParamValue::Bool(temporal));
-        let registry = Registry::builtin();
-        let info = registry
-            .get(self.stage.kind)
-            .ok_or_else(|| format!("no stage kind {}", self.stage.kind))?;
-        let ctx = BuildContext {
-            stage_name: &self.stage.name,
-            params: &params,
-            inputs: &self.stage.inputs,
-            outputs: &self.stage.outputs,
-            header: &self.header,
-            out_dir: std::path::Path::new("."),
-            seed: self.seed,
-            objects: &self.objects,
+        let mut filter = self.build(&self.stage, &params)?;
+        let mut accumulator = match &self.accumulator {
+            Some(stage) => Some(self.build(stage, &stage.params)?),
+            None => None,
         };
-        let mut filter: Box<dyn Stage> = (info.build)(&ctx).map_err(|e| e.to_string())?;
         let mut outputs: Vec<[Vec3Image; 4]> = Vec::new();
         for (k, run) in runs.iter().enumerate() {
             let mut still = frame.clone();
             still.index = frame.index + k;
             insert_outputs(&mut still, sampler, run);
+            if let Some(accumulator) = &mut accumulator {
+                accumulator.process(&mut still).map_err(|e| e.to_string())?;
+            }
             filter.process(&mut still).map_err(|e| e.to_string())?;
             let layer = |role: &str| {
                 still

@@ -215,6 +215,7 @@ impl Evaluator {
                             .clone()
                             .filter(|_| resampler.is_some())
                             .zip(resampler.cloned()),
+                        find("temporal.accumulate"),
                     ))),
                     "composite.differential" => {
                         Scorer::Composite(Box::new(composite::CompositeScorer::new(s, sampler)))

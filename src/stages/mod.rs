@@ -21,6 +21,7 @@
 //! | `sample.path` | [`sample::path`] | two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5) |
 //! | `sample.dir` | [`sample::dir`] | E_R / E_RV from virtual point lights with real/virtual flags, imperfect shadow maps and interleaved sampling (paper 002 Sec. 3) |
 //! | `sample.val` | [`sample::val`] | noise-free E_R / E_RV from the area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5) |
+//! | `temporal.accumulate` | [`temporal`] | a renderer's irradiance layers averaged over the frames that saw the same surface points (reprojection; issue 33's temporal reuse) |
 //! | `filter.axis_aligned` | [`filter`] | axis-aligned world-space Gaussian of the four irradiance layers, bandwidths of eqs. 17-18, temporal reuse (paper 001 Secs. 6-7) |
 //! | `composite.differential` | [`composite`] | the finished frame by the differential composite, back in the camera's colors (paper 001 eq. 2, paper 000 Sec. 6.6) |
 //! | `material.estimate` | [`material`] | diffuse reflectance of real surfaces, rho = pi L / E_R (paper 000 eq. 5) |
@@ -41,6 +42,7 @@ pub mod normals;
 pub mod plane_fit;
 pub mod points;
 pub mod sample;
+pub mod temporal;
 pub mod write;
 
 use crate::graph::{Port, Ports, ProductKind, StageInfo};
@@ -65,6 +67,7 @@ pub fn builtin() -> Vec<StageInfo> {
         sample::path::INFO,
         sample::val::INFO,
         sample::dir::INFO,
+        temporal::INFO,
         filter::INFO,
         material::INFO,
         composite::INFO,

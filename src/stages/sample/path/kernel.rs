@@ -87,7 +87,10 @@ pub(super) struct Kernel<'a> {
     /// Pixel bounds [x0, y0, x1, y1] (inclusive) outside which no primary ray can meet
     /// the objects.
     pub(super) object_pixels: [i64; 4],
+    /// The table's strata of a pixel's direct samples: `primary` x `direct` of them,
+    /// and `near_primary` x `direct` for the pixels near the objects.
     pub(super) strata: Vec<u32>,
+    pub(super) near_strata: Vec<u32>,
     /// The table's strata for the object-aware direct candidates.
     pub(super) candidate_strata: Vec<u32>,
     /// Blocked direct samples dimmer than this (largest channel of the sample's
@@ -157,6 +160,10 @@ impl<'a> Kernel<'a> {
             camera_cone,
             object_pixels,
             strata: strata_bounds(params.primary * params.direct, inputs.table.samples.len()),
+            near_strata: strata_bounds(
+                params.near_primaries() * params.direct,
+                inputs.table.samples.len(),
+            ),
             candidate_strata: strata_bounds(params.candidates, inputs.table.samples.len()),
             occluder_min_radiance: params.occluder_threshold
                 * inputs
@@ -262,7 +269,8 @@ impl<'a> Kernel<'a> {
         let (direct_n, indirect_n) = (params.direct as usize, params.indirect as usize);
         let (mut virtual_direct, mut virtual_indirect) =
             (virtual_samples.direct, virtual_samples.indirect);
-        for (j, virtual_hit) in (0..params.primary).zip(primaries.iter()) {
+        let primary = primaries.len() as u32;
+        for (j, virtual_hit) in (0..primary).zip(primaries.iter()) {
             match virtual_hit {
                 None => {
                     if let Some(rp) = real {
@@ -315,10 +323,7 @@ impl<'a> Kernel<'a> {
             acc.touched = true;
         }
         let nan = Vec3::NAN;
-        let (dir_n, ind_n) = (
-            params.primary * params.direct,
-            params.primary * params.indirect,
-        );
+        let (dir_n, ind_n) = (primary * params.direct, primary * params.indirect);
         let (e_r_dir, e_r_ind) = if real.is_some() {
             (mean(acc.r_dir, dir_n, 1.0), mean(acc.r_ind, ind_n, PI))
         } else {
@@ -347,7 +352,7 @@ impl<'a> Kernel<'a> {
             e_r_ind,
             e_rv_dir,
             e_rv_ind,
-            mask: 1.0 - virtual_count as f32 / params.primary as f32,
+            mask: 1.0 - virtual_count as f32 / primary as f32,
             k_v: if virtual_count > 0 {
                 albedo / virtual_count as f32
             } else {
@@ -448,16 +453,48 @@ impl<'a> Kernel<'a> {
             .map(|h| (h, dir))
     }
 
-    /// The table sample of direct sample `s` of the pixel with its index, if the table
-    /// has any.
+    /// The primary samples of pixel (x, y) with real point `real`: `near_primary`
+    /// where a primary may meet an object or the real point lies within
+    /// `near_distance` of the objects' box, else `primary`.
+    #[inline]
+    pub(super) fn primaries_at(&self, x: u32, y: u32, real: Option<&RealPoint>) -> u32 {
+        let params = self.params;
+        let near = params.near_primaries();
+        if near == params.primary {
+            return near;
+        }
+        let Some(objects) = &self.objects else {
+            return params.primary;
+        };
+        let [x0, y0, x1, y1] = self.object_pixels;
+        let sees_objects = (x0..=x1).contains(&(x as i64)) && (y0..=y1).contains(&(y as i64));
+        let beside_objects = real.is_some_and(|rp| {
+            let gap = (objects.aabb.min - rp.surface).max(rp.surface - objects.aabb.max);
+            gap.max(Vec3::ZERO).length() <= params.near_distance
+        });
+        if sees_objects || beside_objects {
+            near
+        } else {
+            params.primary
+        }
+    }
+
+    /// The table sample of direct sample `s` of a pixel with `primary` primary
+    /// samples, with its index, if the table has any.
     #[inline]
     pub(super) fn direct_sample(
         &self,
         stream: &Stream,
         s: u32,
+        primary: u32,
     ) -> Option<(usize, &'a LightSample)> {
         let table = &self.inputs.table.samples;
-        let i = stratum_index(&self.strata, s as usize, table.len(), stream.bits(s as u64))?;
+        let strata = if primary == self.params.primary {
+            &self.strata
+        } else {
+            &self.near_strata
+        };
+        let i = stratum_index(strata, s as usize, table.len(), stream.bits(s as u64))?;
         Some((i, &table[i]))
     }
 

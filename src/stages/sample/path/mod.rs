@@ -72,6 +72,15 @@
 //!   the brightest sample, the cut is the same for any exposure or map scale. Under a
 //!   map dominated by one very bright source (a sun), it ignores the occluders of all
 //!   other light.
+//! - **Near the objects** (`near_primary` > 0): the pixels where the differential is
+//!   take `near_primary` primaries instead of `primary` (each with its `direct` +
+//!   `indirect` samples): those inside the objects' pixel bounds (a primary may meet
+//!   them) and those whose real point lies within `near_distance` of the objects'
+//!   bounding box (their contact shadows and colour bleeding). Elsewhere the composite
+//!   shows the camera's pixel unless a rare path meets an object, so few samples do.
+//!   A pixel gets the bits a run with its own primary count everywhere gives it. The
+//!   default pipeline draws 1 primary with 1 + 1 samples, 2 near the objects, and lets
+//!   `temporal.accumulate` average them over the frames.
 //! - Random numbers are counter-based per (seed, frame, pixel, stream, sample), so the
 //!   products are the same for any thread count.
 //!
@@ -387,6 +396,8 @@ impl Stage for PathStage {
 
 #[cfg(test)]
 mod determinism_tests;
+#[cfg(test)]
+mod near_tests;
 #[cfg(test)]
 mod object_aware_tests;
 #[cfg(test)]

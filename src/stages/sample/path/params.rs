@@ -79,6 +79,18 @@ pub(super) const PARAMS: &[ParamSpec] = &[
     )
     .range(1.0, MAX_CANDIDATES as f64),
     ParamSpec::new(
+        "near_primary",
+        ParamDefault::Int(0),
+        "primary samples (each with its direct and indirect samples) of the pixels where the differential is: those whose primaries may meet an object and those whose real point lies within near_distance of the objects' bounding box (their shadows and colour bleeding). 0: primary, as everywhere",
+    )
+    .range(0.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "near_distance",
+        ParamDefault::Float(0.3),
+        "metres from the objects' bounding box within which a real point takes near_primary samples",
+    )
+    .range(0.0, 1000.0),
+    ParamSpec::new(
         "max_distance",
         ParamDefault::Float(1.0),
         "metres a screen-space ray marches: real geometry beyond it neither occludes nor reflects (the environment map stands for it)",
@@ -132,6 +144,10 @@ pub struct PathParams {
     pub direct: u32,
     /// Indirect samples per primary sample.
     pub indirect: u32,
+    /// Primary samples of the pixels near the objects (0: `primary`).
+    pub near_primary: u32,
+    /// Metres from the objects' bounding box within which a real point is near.
+    pub near_distance: f32,
     pub seed: u64,
     /// Object-aware differential for E_RV^ind at real points (paper 000 Sec. 7).
     pub object_aware: bool,
@@ -168,6 +184,8 @@ impl Default for PathParams {
             primary: 4,
             direct: 4,
             indirect: 4,
+            near_primary: 0,
+            near_distance: 0.3,
             seed: 0,
             object_aware: false,
             object_aware_direct: false,
@@ -194,6 +212,8 @@ impl PathParams {
             primary: p.int("primary") as u32,
             direct: p.int("direct") as u32,
             indirect: p.int("indirect") as u32,
+            near_primary: p.int("near_primary") as u32,
+            near_distance: p.float("near_distance") as f32,
             seed,
             object_aware: p.bool("object_aware"),
             object_aware_direct: p.bool("object_aware_direct"),
@@ -207,6 +227,15 @@ impl PathParams {
             normal_offset: p.float("normal_offset") as f32,
             occluder_threshold: p.float("occluder_threshold") as f32,
             pixel_stride: 1,
+        }
+    }
+
+    /// The primary samples of a pixel near the objects.
+    pub fn near_primaries(&self) -> u32 {
+        if self.near_primary == 0 {
+            self.primary
+        } else {
+            self.near_primary
         }
     }
 
@@ -230,6 +259,18 @@ impl PathParams {
             return bad(
                 "primary",
                 format!("{}, expected 1..={MAX_SAMPLES}", self.primary),
+            );
+        }
+        if self.near_primary > MAX_SAMPLES {
+            return bad(
+                "near_primary",
+                format!("{}, expected 0..={MAX_SAMPLES}", self.near_primary),
+            );
+        }
+        if self.near_distance.is_nan() || self.near_distance < 0.0 {
+            return bad(
+                "near_distance",
+                format!("{}, expected 0 or more metres", self.near_distance),
             );
         }
         if self.direct > MAX_SAMPLES || self.indirect > MAX_SAMPLES {

@@ -71,6 +71,8 @@ pub(super) struct Span<'t> {
     indirect: Vec<IndirectRay>,
     /// Per pixel, per primary: its virtual hit and view direction, if any.
     primaries: Vec<Option<(VirtualHit, Vec3)>>,
+    /// Per pixel, its number of primaries ([`Kernel::primaries_at`]).
+    primary_counts: Vec<u32>,
     /// The samples of the virtual primaries, pixel after pixel, primary after primary.
     virtual_direct: Vec<VirtualDirect>,
     virtual_indirect: Vec<VirtualIndirect>,
@@ -80,8 +82,9 @@ impl<'t> Span<'t> {
     /// Buffers for spans of up to [`SPAN_PIXELS`] pixels whose rays `kernel`'s query
     /// answers.
     pub(super) fn new(kernel: &'t Kernel<'t>, params: &PathParams) -> Span<'t> {
-        let direct = SPAN_PIXELS * (params.primary * params.direct) as usize;
-        let indirect = SPAN_PIXELS * (params.primary * params.indirect) as usize;
+        let most = params.primary.max(params.near_primaries());
+        let direct = SPAN_PIXELS * (most * params.direct) as usize;
+        let indirect = SPAN_PIXELS * (most * params.indirect) as usize;
         let hits = Vec::with_capacity(direct + indirect);
         let batch = match &kernel.world_query {
             Some(query) => RayBatch::World { query, hits },
@@ -96,7 +99,8 @@ impl<'t> Span<'t> {
             real: Vec::with_capacity(SPAN_PIXELS),
             direct: Vec::with_capacity(direct),
             indirect: Vec::with_capacity(indirect),
-            primaries: Vec::with_capacity(SPAN_PIXELS * params.primary as usize),
+            primaries: Vec::with_capacity(SPAN_PIXELS * most as usize),
+            primary_counts: Vec::with_capacity(SPAN_PIXELS),
             virtual_direct: Vec::new(),
             virtual_indirect: Vec::new(),
         }
@@ -118,6 +122,7 @@ impl Kernel<'_> {
         span.direct.clear();
         span.indirect.clear();
         span.primaries.clear();
+        span.primary_counts.clear();
         span.virtual_direct.clear();
         span.virtual_indirect.clear();
         for &x in xs {
@@ -125,24 +130,28 @@ impl Kernel<'_> {
             let rng = PixelRng::new(self.params.seed, inputs.frame, p as u64);
             let z = inputs.depth.data[p];
             let real = self.real_point(x, y, z, inputs.normals.data[p]);
+            let primary = self.primaries_at(x, y, real.as_ref());
             if let Some(rp) = &real {
-                self.draw_real_samples(rp, &rng, span);
+                self.draw_real_samples(rp, &rng, primary, span);
             }
             span.real.push(real);
-            self.draw_primaries(x, y, z, &rng, span);
+            span.primary_counts.push(primary);
+            self.draw_primaries(x, y, z, &rng, primary, span);
         }
         span.batch.trace(self.lanes);
         let params = self.params;
-        let (direct_n, indirect_n) = (
-            (params.primary * params.direct) as usize,
-            (params.primary * params.indirect) as usize,
-        );
-        let primary_n = params.primary as usize;
         let (mut direct, mut indirect) = (&span.direct[..], &span.indirect[..]);
         let (mut virtual_direct, mut virtual_indirect) =
             (&span.virtual_direct[..], &span.virtual_indirect[..]);
-        let pixels = xs.iter().zip(&span.real);
-        for ((&x, real), primaries) in pixels.zip(span.primaries.chunks(primary_n)) {
+        let mut all_primaries = &span.primaries[..];
+        let pixels = xs.iter().zip(&span.real).zip(&span.primary_counts);
+        for ((&x, real), &primary) in pixels {
+            let (direct_n, indirect_n) = (
+                (primary * params.direct) as usize,
+                (primary * params.indirect) as usize,
+            );
+            let (primaries, rest) = all_primaries.split_at(primary as usize);
+            all_primaries = rest;
             let samples = match real {
                 Some(_) => {
                     let samples = RealSamples {
@@ -179,11 +188,19 @@ impl Kernel<'_> {
 
     /// Finds which primaries of pixel (x, y) (depth `z`) meet the objects, and draws
     /// the samples of their virtual hits, queueing their screen-space rays.
-    fn draw_primaries(&self, x: u32, y: u32, z: f32, rng: &PixelRng, span: &mut Span<'_>) {
+    fn draw_primaries(
+        &self,
+        x: u32,
+        y: u32,
+        z: f32,
+        rng: &PixelRng,
+        primary: u32,
+        span: &mut Span<'_>,
+    ) {
         let [x0, y0, x1, y1] = self.object_pixels;
         let may_see_objects = (x0..=x1).contains(&(x as i64)) && (y0..=y1).contains(&(y as i64));
         if !may_see_objects {
-            let real_only = (0..self.params.primary).map(|_| None);
+            let real_only = (0..primary).map(|_| None);
             span.primaries.extend(real_only);
             return;
         }
@@ -192,13 +209,14 @@ impl Kernel<'_> {
             rng.stream(StreamId::Direct),
             rng.stream(StreamId::Indirect),
         );
-        for j in 0..self.params.primary {
+        for j in 0..primary {
             let hit = self.primary_hit(&primary_stream, j, x, y, z);
             if let Some((hit, view)) = &hit {
                 self.draw_virtual_samples(
                     hit,
                     -*view,
                     j,
+                    primary,
                     &direct_stream,
                     &indirect_stream,
                     &mut span.batch,
@@ -212,14 +230,14 @@ impl Kernel<'_> {
 
     /// Draws the direct and indirect samples of real point `rp` (from its pixel's
     /// streams `rng`) for every primary, queueing their screen-space rays.
-    fn draw_real_samples(&self, rp: &RealPoint, rng: &PixelRng, span: &mut Span<'_>) {
+    fn draw_real_samples(&self, rp: &RealPoint, rng: &PixelRng, primary: u32, span: &mut Span<'_>) {
         let params = self.params;
         let (direct_stream, indirect_stream) =
             (rng.stream(StreamId::Direct), rng.stream(StreamId::Indirect));
         let t_max = params.max_distance;
-        for s in 0..params.primary * params.direct {
+        for s in 0..primary * params.direct {
             let drawn = self
-                .direct_sample(&direct_stream, s)
+                .direct_sample(&direct_stream, s, primary)
                 .and_then(|(sample, ls)| {
                     let cos = rp.normal_world.dot(ls.direction);
                     (cos > 0.0 && ls.pdf > 0.0).then(|| DirectRay {
@@ -234,7 +252,7 @@ impl Kernel<'_> {
                 });
             span.direct.push(drawn);
         }
-        for s in 0..params.primary * params.indirect {
+        for s in 0..primary * params.indirect {
             let (u1, u2) = indirect_stream.pair(s as u64);
             let dir_camera = rp.basis_camera.to_world(cosine_hemisphere(u1, u2));
             // For the world-space queries, only rays that may meet an object need

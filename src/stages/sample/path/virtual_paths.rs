@@ -71,6 +71,7 @@ impl Kernel<'_> {
         hit: &VirtualHit,
         to_viewer: Vec3,
         j: u32,
+        primary: u32,
         direct_stream: &Stream,
         indirect_stream: &Stream,
         batch: &mut RayBatch<'_>,
@@ -86,7 +87,7 @@ impl Kernel<'_> {
         let objects = self.objects.as_ref().filter(|_| params.visibility);
         for k in 0..params.direct {
             let s = j * params.direct + k;
-            let drawn = match self.direct_sample(direct_stream, s) {
+            let drawn = match self.direct_sample(direct_stream, s, primary) {
                 Some((sample, ls)) => {
                     let cos = n.dot(ls.direction);
                     if cos > 0.0 && ls.pdf > 0.0 {
@@ -132,7 +133,7 @@ impl Kernel<'_> {
         });
         // `vct`: the cones share the lobe (narrowed to the Phong lobe when glossy).
         let spread = if surface.glossy {
-            cone_spread(params.primary * params.indirect, hit.material.exponent)
+            cone_spread(primary * params.indirect, hit.material.exponent)
         } else {
             self.indirect_spread
         };

@@ -37,6 +37,31 @@ fn hash_lines_are_identical_across_runs_and_thread_counts() {
     assert_eq!(hash_lines(tmp.path(), "small.relume", Some("3")), first);
 }
 
+/// Every pipeline relume ships gives the same `--hash` lines at 1, 2 and 3 threads (on
+/// a small synthetic recording; the livingroom1 pipelines' objects then stand where
+/// livingroom1's floor would be).
+#[test]
+fn every_shipped_pipeline_hashes_the_same_at_1_2_and_3_threads() {
+    let tmp = tempfile::tempdir().unwrap();
+    small_recording(tmp.path(), 3);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines");
+    let mut pipelines: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    pipelines.sort();
+    assert!(pipelines.len() >= 18, "{pipelines:?}");
+    for p in &pipelines {
+        let p = p.to_str().unwrap();
+        let hashes = |threads| common::replay_hashes(tmp.path(), "small.relume", p, threads);
+        let one = hashes("1");
+        assert_eq!(one.lines().count(), 3, "{p}: {one}");
+        assert_eq!(hashes("2"), one, "{p}");
+        assert_eq!(hashes("3"), one, "{p}");
+    }
+}
+
 #[test]
 fn livingroom1_imports_inspects_and_replays() {
     let tmp = tempfile::tempdir().unwrap();

@@ -20,6 +20,7 @@ fn the_default_pipeline_is_the_mixed_reality_chain() {
             "light.impostor",
             "light.importance",
             "sample.path",
+            "temporal.accumulate",
             "filter.axis_aligned",
             "composite.differential",
             "write",
@@ -46,7 +47,7 @@ fn the_default_pipeline_is_the_mixed_reality_chain() {
     );
 }
 
-/// The fast preset is the mixed-reality chain with fewer samples and a fixed B_e, and
+/// The fast preset is the reference chain with fewer samples and a fixed B_e, and
 /// nothing else: a change to one file that is not made to the other fails here.
 #[test]
 fn the_fast_pipeline_is_mixed_reality_with_fewer_samples_and_a_fixed_b_e() {
@@ -56,9 +57,9 @@ fn the_fast_pipeline_is_mixed_reality_with_fewer_samples_and_a_fixed_b_e() {
     let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
     let fast = file("mixed-reality-fast.toml");
     assert_eq!(
-        body(&file("mixed-reality.toml"))
+        body(&file("mixed-reality-reference.toml"))
             .replacen(
-                "name = \"mixed-reality\"",
+                "name = \"mixed-reality-reference\"",
                 "name = \"mixed-reality-fast\"",
                 1
             )
@@ -90,7 +91,7 @@ fn the_fast_pipeline_is_mixed_reality_with_fewer_samples_and_a_fixed_b_e() {
     assert_eq!(filter.unwrap().params.float("environment_bandwidth"), 4.0);
 }
 
-/// Paper 000's low / medium / high presets are the mixed-reality chain with only
+/// Paper 000's low / medium / high presets are the reference chain with only
 /// sample.path's parameters changed: its query, samples, cache and visibility.
 #[test]
 fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
@@ -116,8 +117,12 @@ fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
         let name = format!("mixed-reality-nei-{level}");
         let text = file(&format!("{name}.toml"));
         assert_eq!(
-            body(&file("mixed-reality.toml"))
-                .replacen("name = \"mixed-reality\"", &format!("name = \"{name}\""), 1)
+            body(&file("mixed-reality-reference.toml"))
+                .replacen(
+                    "name = \"mixed-reality-reference\"",
+                    &format!("name = \"{name}\""),
+                    1
+                )
                 .replacen(
                     "kind = \"sample.path\"\n",
                     &format!("kind = \"sample.path\"\nparams = {{ {params} }}\n"),
@@ -140,7 +145,7 @@ fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
     }
 }
 
-/// The vct pipeline is the mixed-reality chain with light.voxels added and only
+/// The vct pipeline is the reference chain with light.voxels added and only
 /// sample.path's query (and the medium preset's object-aware sampling) changed.
 #[test]
 fn the_vct_pipeline_is_mixed_reality_with_voxel_cone_tracing() {
@@ -150,8 +155,12 @@ fn the_vct_pipeline_is_mixed_reality_with_voxel_cone_tracing() {
     let body = |text: &str| text[text.find("[pipeline]").unwrap()..].to_string();
     let text = file("mixed-reality-vct.toml");
     assert_eq!(
-        body(&file("mixed-reality.toml"))
-            .replacen("name = \"mixed-reality\"", "name = \"mixed-reality-vct\"", 1)
+        body(&file("mixed-reality-reference.toml"))
+            .replacen(
+                "name = \"mixed-reality-reference\"",
+                "name = \"mixed-reality-vct\"",
+                1
+            )
             .replacen("-> light.impostor ->", "-> light.impostor, light.voxels ->", 1)
             .replacen(
                 "kind = \"light.impostor\"\n",
@@ -226,13 +235,80 @@ fn assert_twin(twin: &str, name: &str, swaps: &[(&str, &str)]) -> Pipeline {
     .unwrap()
 }
 
-/// The Differential Instant Radiosity pipelines are their sample.path twins with the
+/// The mixed-reality pipelines (the default and its livingroom1 twin) are their
+/// reference chains with temporal reuse swapped in: few fresh samples, more near the
+/// objects, the accumulator between the sampler and the filter, and B_e fixed.
+#[test]
+fn the_mixed_reality_pipelines_are_the_reference_chains_with_temporal_reuse() {
+    let reference_block = "# --- Sampling, filtering, compositing. ---\n[[stage]]\nkind = \"sample.path\"\n\n[[stage]]\nkind = \"filter.axis_aligned\"\n";
+    let temporal_block = std::fs::read_to_string(format!(
+        "{}/pipelines/mixed-reality.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    let start = temporal_block
+        .find("# --- Sampling with temporal reuse")
+        .unwrap();
+    let end = temporal_block
+        .find("[[stage]]\nkind = \"composite")
+        .unwrap();
+    let temporal_block = &temporal_block[start..end - 1];
+    for (twin, name) in [
+        ("mixed-reality-reference", "mixed-reality"),
+        (
+            "mixed-reality-reference-livingroom1",
+            "mixed-reality-livingroom1",
+        ),
+    ] {
+        let swaps = [
+            (
+                "-> sample.path -> filter.axis_aligned ->",
+                "-> sample.path -> temporal.accumulate -> filter.axis_aligned ->",
+            ),
+            (reference_block, temporal_block),
+        ];
+        let p = assert_twin(twin, name, &swaps);
+        let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
+        for (key, value) in [
+            ("primary", 1),
+            ("direct", 1),
+            ("indirect", 1),
+            ("near_primary", 2),
+        ] {
+            assert_eq!(path.params.int(key), value, "{name}: {key}");
+        }
+        let accumulate = p
+            .stages
+            .iter()
+            .find(|s| s.kind == "temporal.accumulate")
+            .unwrap();
+        assert_eq!(
+            path.outputs["e_r_dir"], accumulate.inputs["e_r_dir"],
+            "{name}"
+        );
+        let filter = p
+            .stages
+            .iter()
+            .find(|s| s.kind == "filter.axis_aligned")
+            .unwrap();
+        assert_eq!(
+            accumulate.outputs["e_rv_dir"], filter.inputs["e_rv_dir"],
+            "{name}"
+        );
+        assert_eq!(filter.params.float("environment_bandwidth"), 4.0, "{name}");
+    }
+}
+
+/// The Differential Instant Radiosity pipelines are their reference twins with the
 /// renderer swapped and nothing else changed.
 #[test]
 fn the_dir_pipelines_are_their_twins_with_sample_dir_swapped_in() {
     for (twin, name) in [
-        ("mixed-reality", "mixed-reality-dir"),
-        ("mixed-reality-livingroom1", "mixed-reality-dir-livingroom1"),
+        ("mixed-reality-reference", "mixed-reality-dir"),
+        (
+            "mixed-reality-reference-livingroom1",
+            "mixed-reality-dir-livingroom1",
+        ),
     ] {
         let swaps = [
             ("-> sample.path ->", "-> sample.dir ->"),
@@ -243,15 +319,18 @@ fn the_dir_pipelines_are_their_twins_with_sample_dir_swapped_in() {
     }
 }
 
-/// The area-light pipelines (paper 004) are their sample.path twins with the light model,
+/// The area-light pipelines (paper 004) are their reference twins with the light model,
 /// sample.val and an unfiltered composite swapped in for sampling and filtering.
 #[test]
 fn the_val_pipelines_are_their_twins_with_area_lights_swapped_in() {
     let sampling = "[[stage]]\nkind = \"sample.path\"\n\n[[stage]]\nkind = \"filter.axis_aligned\"\n\n[[stage]]\nkind = \"composite.differential\"\n";
     let area_lights = "[[stage]]\nkind = \"light.split\"\nevery = 8\n\n[[stage]]\nkind = \"light.val\"\nevery = 8\nlag = 1\n\n[[stage]]\nkind = \"sample.val\"\nparams = { shadow_updates = 4 }\n\n[[stage]]\nkind = \"composite.differential\"\ninputs = { e_r_dir = \"e_r_dir\", e_r_ind = \"e_r_ind\", e_rv_dir = \"e_rv_dir\", e_rv_ind = \"e_rv_ind\" }\n";
     for (twin, name) in [
-        ("mixed-reality", "mixed-reality-val"),
-        ("mixed-reality-livingroom1", "mixed-reality-val-livingroom1"),
+        ("mixed-reality-reference", "mixed-reality-val"),
+        (
+            "mixed-reality-reference-livingroom1",
+            "mixed-reality-val-livingroom1",
+        ),
     ] {
         let swaps = [
             (
@@ -275,7 +354,7 @@ fn the_val_pipelines_are_their_twins_with_area_lights_swapped_in() {
 #[test]
 fn an_impostor_query_without_an_environment_map_is_refused_at_load_time() {
     let text = std::fs::read_to_string(format!(
-        "{}/pipelines/mixed-reality.toml",
+        "{}/pipelines/mixed-reality-reference.toml",
         env!("CARGO_MANIFEST_DIR")
     ))
     .unwrap()

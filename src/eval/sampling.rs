@@ -41,6 +41,10 @@ pub const MAX_SCORED_FRAMES: usize = 2;
 /// Independent reference runs, each with 64 + 64 samples per primary sample.
 pub const REFERENCE_RUNS: u64 = 4;
 const REFERENCE_SAMPLES: u32 = 64;
+/// Primary samples per pixel of every reference, whatever the scored stage takes, so
+/// that pipelines with different sample counts are scored against the same
+/// references (4 x 64 x 4 runs = 1024 samples per pixel and layer).
+const REFERENCE_PRIMARY: u32 = 4;
 /// Further runs of the stage's own configuration for the bias test.
 const BIAS_RUNS: u64 = 8;
 /// Salts of the scorer's seeds (distinct from the stage's).
@@ -316,13 +320,16 @@ impl ReferenceCache {
 
 impl PathRunner {
     /// The settings of reference run `k` (of [`REFERENCE_RUNS`]) on the lattice of
-    /// `stride`. Every query is scored against the same reference: screen-space
-    /// marching with self-occlusion, as `sample.path` runs by default.
+    /// `stride`. Every query and sample count is scored against the same reference:
+    /// screen-space marching with self-occlusion, as `sample.path` runs by default,
+    /// with [`REFERENCE_PRIMARY`] primaries on every pixel.
     fn reference_params(&self, k: u64, stride: u32) -> PathParams {
         PathParams {
             query: QueryKind::Ssrt,
             visibility: true,
             object_aware_direct: false,
+            primary: REFERENCE_PRIMARY,
+            near_primary: 0,
             direct: REFERENCE_SAMPLES,
             indirect: REFERENCE_SAMPLES,
             object_aware: false,
@@ -545,9 +552,12 @@ impl PathScorer {
         }
         let m = means.iter().sum::<f64>() / means.len() as f64;
         let var = means.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (means.len() - 1) as f64;
-        // The reference holds REFERENCE_RUNS * 16 times the samples of one run.
-        let reference_share =
-            (REFERENCE_RUNS * (REFERENCE_SAMPLES / params.direct.max(1)) as u64) as f64;
+        // The reference holds this many times the direct samples of one run (at the
+        // pixels with the most primaries, near the objects: the smaller share).
+        let run_primary = params.primary.max(params.near_primaries());
+        let reference_share = (REFERENCE_RUNS * (REFERENCE_PRIMARY * REFERENCE_SAMPLES) as u64)
+            as f64
+            / (run_primary * params.direct.max(1)) as f64;
         let se = (var / BIAS_RUNS as f64 + var / reference_share).sqrt();
         if se > 0.0 && region.iter().any(|&r| r) {
             self.z_scores.push((m - reference_mean) / se);

@@ -18,9 +18,11 @@
 //!   each run is filtered by a fresh instance of the stage in order, with its temporal
 //!   extension on and then off; the score is the per-pixel variance over the frames
 //!   (after the first, which has no previous frame), averaged over pixels, layers and
-//!   channels. When a `temporal.accumulate` stage stands between the sampler and the
-//!   filter, each run passes through a fresh instance of it first, as the pipeline's
-//!   frames do.
+//!   channels. When the pipeline has a `temporal.accumulate` stage (between the
+//!   sampler and the filter), each run passes through a fresh instance of it first, as
+//!   the pipeline's frames do: the score is then the spread of its first frames, while
+//!   it holds 2 to 5 frames (a still camera flickers less once it holds more), and the
+//!   spatial-only score too includes the accumulator's averaging over time.
 
 use super::sampling::{PathRunner, ReferenceLayers};
 use crate::graph::{BuildContext, Frame, ParamValue, Registry, ResolvedStage, Stage};

@@ -9,31 +9,33 @@
 //! temporal filter does (eqs. 24-26), and averaged with the new estimate.
 //!
 //! Per pixel with a visible surface point p (`world_position`, normal n):
-//! 1. **Reprojection**: p is projected into the previous camera and rounded to a pixel;
-//!    that pixel is taken when its surface point q lies within half the tolerance
-//!    below; otherwise, of the 3 x 3 window around it, the previous pixel whose q is
-//!    nearest p is taken when |q - p| is within `tolerance` pixel footprints of p
-//!    (the footprint is the pixel's width at p's distance, divided by the cosine
-//!    between n and the view ray, at most 4x) and the normals agree
-//!    (n . n_q >= `min_normal_cos`), and when the two pixels have estimates of the
-//!    same layers (E_R exists at both or at neither, E_RV likewise). Otherwise the
-//!    pixel starts a new history.
+//! 1. **Reprojection**: p is projected into the previous camera. Of the four previous
+//!    pixels around the projection, those whose surface point q lies within
+//!    `tolerance` pixel footprints of p (the footprint is the pixel's width at p's
+//!    distance, divided by the cosine between n and the view ray, at most 4x), whose
+//!    normals agree (n . n_q >= `min_normal_cos`) and which have estimates of the same
+//!    layers (E_R at both or at neither, E_RV likewise) are mixed bilinearly, their
+//!    weights renormalized (so a history does not trail behind a slowly moving camera,
+//!    as it would from the nearest pixel). When none qualifies (p beside a depth edge),
+//!    the nearest qualifying point of the 3 x 3 window around the projected pixel is
+//!    taken; when none there either, the pixel starts a new history.
 //! 2. **Average**: with h frames of history, this frame's estimate gets weight 1 / n,
 //!    n = min(h + 1, `max_history`): the plain mean of the last n frames while the
 //!    history is shorter than `max_history`, then an exponential average of time
 //!    constant `max_history` frames (so that the estimate follows a light table that
 //!    changes as the camera sees more of the room).
 //! 3. **Minimum distances** (the filter's nearest occluder and indirect hit) are the
-//!    minimum over the history: with a static scene, every earlier frame's samples saw
-//!    the same occluders. `touched` is 1 where this frame's or an earlier frame's
+//!    minimum of this frame's and the history's (of the heaviest bilinear tap): with a
+//!    static scene, every earlier frame's samples saw the same occluders. `touched` is 1 where this frame's or an earlier frame's
 //!    paths met an object.
 //!
 //! E_RV == E_R holds bit for bit wherever it held in this frame's estimate and in the
 //! history: both are averaged by the same operations with the same weight.
 //!
-//! Where it departs from a world-space cache: the history moves with the nearest
-//! previous pixel, not an exact interpolation, so an estimate drifts by up to half a
-//! pixel per frame; far below the filter's widths. The mask, k_V, the exponent and the
+//! Where it departs from a world-space cache: the bilinear mix blurs the history a
+//! little each frame the camera moves (a fraction of a pixel; far below the filter's
+//! widths), and on glossy objects it averages light that depends on the view over
+//! the views of up to `max_history` frames. The mask, k_V, the exponent and the
 //! surface positions are this frame's own (the accumulated estimates are of the
 //! surface the pixel shows now).
 
@@ -220,10 +222,9 @@ pub fn accumulate(
         for x in 0..width {
             let i = y * width + x;
             let fresh_pixel = fresh_pixel(fresh, i);
-            let pixel = match history
-                .and_then(|hist| Some((hist, previous_pixel(fresh, i, hist, camera, eye, params)?)))
+            let pixel = match history.and_then(|hist| previous(fresh, i, hist, camera, eye, params))
             {
-                Some((hist, j)) => blend(&fresh_pixel, &history_pixel(hist, j), max_history),
+                Some(previous) => blend(&fresh_pixel, &previous, max_history),
                 None => fresh_pixel,
             };
             row.set(x, &pixel);
@@ -322,10 +323,41 @@ fn history_pixel(history: &History, j: usize) -> Pixel {
     }
 }
 
+/// The bilinear mix of previous pixels `taps` (index, weight > 0): the same weights for
+/// every irradiance layer (so equal E_R and E_RV stay equal bit for bit) and the frame
+/// counts; `touched` where any tap is; the minimum distances of the heaviest tap (a
+/// minimum over all four would spread an occluder a pixel further every frame).
+fn mixed_history(history: &History, taps: &[(usize, f32)]) -> Pixel {
+    let total: f32 = taps.iter().map(|&(_, w)| w).sum();
+    let heaviest = taps
+        .iter()
+        .fold(taps[0], |a, &b| if b.1 > a.1 { b } else { a });
+    let nearest = history_pixel(history, heaviest.0);
+    let mut mixed = Pixel {
+        irradiance: [Vec3::ZERO; 4],
+        frames: 0.0,
+        touched: 0,
+        ..nearest
+    };
+    for &(j, w) in taps {
+        let tap = history_pixel(history, j);
+        let w = w / total;
+        for (sum, value) in mixed.irradiance.iter_mut().zip(tap.irradiance) {
+            *sum += value * w;
+        }
+        mixed.frames += tap.frames * w;
+        mixed.touched |= tap.touched;
+    }
+    mixed
+}
+
 /// The running average of step 2 and the minima of step 3.
 #[inline]
 fn blend(fresh: &Pixel, previous: &Pixel, max_history: f32) -> Pixel {
     let n = (previous.frames + 1.0).min(max_history);
+    if n <= 1.0 {
+        return *fresh;
+    }
     let weight = 1.0 / n;
     Pixel {
         irradiance: [0, 1, 2, 3].map(|k| {
@@ -339,15 +371,15 @@ fn blend(fresh: &Pixel, previous: &Pixel, max_history: f32) -> Pixel {
     }
 }
 
-/// Step 1: the index of the previous pixel showing the surface point of pixel `i`.
-fn previous_pixel(
+/// Step 1: the history of the surface point of pixel `i`, if the previous frame saw it.
+fn previous(
     fresh: &FreshLayers,
     i: usize,
     history: &History,
     camera: Pinhole,
     eye: Vec3,
     params: &AccumulateParams,
-) -> Option<usize> {
+) -> Option<Pixel> {
     let p = fresh.world_position.data[i];
     let n = fresh.world_normal.data[i];
     if !p.is_finite() {
@@ -362,11 +394,9 @@ fn previous_pixel(
     let footprint = distance / camera.fx.abs().max(f32::MIN_POSITIVE);
     let grazing = (1.0 / cos.max(1.0 / MAX_GRAZING_FACTOR)).min(MAX_GRAZING_FACTOR);
     let tolerance = params.tolerance * footprint * grazing;
-    let (u, v) = history
-        .camera
-        .pixel_of(history.world_to_camera.transform_point3(p))?;
+    let in_previous = history.world_to_camera.transform_point3(p);
     let (width, height) = (history.camera.width as i32, history.camera.height as i32);
-    let has = |image: &Vec3Image, k: usize| image.data[k].x.is_finite();
+    let has = |image: &Vec3Image, k: usize| image.data[k].is_finite();
     let tolerance2 = tolerance * tolerance;
     // Previous pixel j's squared distance to p when it may be the same point.
     let candidate = |j: usize| -> Option<f32> {
@@ -385,18 +415,39 @@ fn previous_pixel(
             .all(|k| has(fresh.irradiance[k], i) == has(history.irradiance[k], j));
         (normals_agree && same_layers && history.frames.data[j] > 0.0).then_some(d2)
     };
-    // Most pixels land on their own point: the projected pixel within half the
-    // tolerance is taken without searching.
-    let centre = v as usize * width as usize + u as usize;
-    let centre_d2 = candidate(centre);
-    if centre_d2.is_some_and(|d2| d2 <= tolerance2 * 0.25) {
-        return Some(centre);
+    // The bilinear taps around p's projection that show p.
+    let uv = history.camera.project(in_previous)?;
+    let (u0, v0) = (uv.x.floor(), uv.y.floor());
+    let (fx, fy) = (uv.x - u0, uv.y - v0);
+    let mut taps = [(0usize, 0.0f32); 4];
+    let mut count = 0;
+    for (dx, dy, w) in [
+        (0, 0, (1.0 - fx) * (1.0 - fy)),
+        (1, 0, fx * (1.0 - fy)),
+        (0, 1, (1.0 - fx) * fy),
+        (1, 1, fx * fy),
+    ] {
+        let (x, y) = (u0 as i32 + dx, v0 as i32 + dy);
+        if w <= 0.0 || x < 0 || y < 0 || x >= width || y >= height {
+            continue;
+        }
+        let j = y as usize * width as usize + x as usize;
+        if candidate(j).is_some() {
+            taps[count] = (j, w);
+            count += 1;
+        }
     }
-    let mut best = centre_d2.map(|d2| (d2, centre));
+    if count > 0 {
+        return Some(mixed_history(history, &taps[..count]));
+    }
+    // None of them (p lies on a depth edge, or beyond the bilinear cell): the
+    // nearest point of the 3 x 3 window around the projected pixel.
+    let (u, v) = history.camera.pixel_of(in_previous)?;
+    let mut best: Option<(f32, usize)> = None;
     for dy in -SEARCH_RADIUS..=SEARCH_RADIUS {
         for dx in -SEARCH_RADIUS..=SEARCH_RADIUS {
             let (x, y) = (u as i32 + dx, v as i32 + dy);
-            if (dx, dy) == (0, 0) || x < 0 || y < 0 || x >= width || y >= height {
+            if x < 0 || y < 0 || x >= width || y >= height {
                 continue;
             }
             let j = y as usize * width as usize + x as usize;
@@ -407,5 +458,5 @@ fn previous_pixel(
             }
         }
     }
-    best.map(|(_, j)| j)
+    best.map(|(_, j)| history_pixel(history, j))
 }

@@ -50,7 +50,7 @@ pub fn environment_bandwidth(map: &EnvMap) -> f32 {
 /// Each frequency's sums run over x (then y) in order, as a direct DFT's would, but
 /// the loops keep every frequency of a row at once: the sums are independent chains
 /// that vectorize, where one sum at a time waited on each addition (0.55 ms a frame
-/// for the default pipeline's 64 x 32, whose map is new every frame).
+/// for the reference pipeline's 64 x 32, whose map is new every frame).
 fn spectrum(w: usize, h: usize, lum: &[f64]) -> Vec<(f64, f64)> {
     assert_eq!(lum.len(), w * h);
     // Per (j, k): e^{-2 pi i j k / n} as cosines and sines, rows of j.

@@ -26,8 +26,8 @@
 //!    changes as the camera sees more of the room).
 //! 3. **Minimum distances** (the filter's nearest occluder and indirect hit) are the
 //!    minimum of this frame's and the history's (of the heaviest bilinear tap): with a
-//!    static scene, every earlier frame's samples saw the same occluders. `touched` is 1 where this frame's or an earlier frame's
-//!    paths met an object.
+//!    static scene, every earlier frame's samples saw the same occluders. `touched` is
+//!    1 where this frame's or an earlier frame's paths met an object.
 //!
 //! E_RV == E_R holds bit for bit wherever it held in this frame's estimate and in the
 //! history: both are averaged by the same operations with the same weight.

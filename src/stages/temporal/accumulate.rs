@@ -396,7 +396,8 @@ fn previous(
     let tolerance = params.tolerance * footprint * grazing;
     let in_previous = history.world_to_camera.transform_point3(p);
     let (width, height) = (history.camera.width as i32, history.camera.height as i32);
-    let has = |image: &Vec3Image, k: usize| image.data[k].is_finite();
+    // Which layers this pixel has (E_R^dir, E_RV^dir stand for their pairs), once.
+    let fresh_has = [0, 2].map(|k| fresh.irradiance[k].data[i].is_finite());
     let tolerance2 = tolerance * tolerance;
     // Previous pixel j's squared distance to p when it may be the same point.
     let candidate = |j: usize| -> Option<f32> {
@@ -410,9 +411,10 @@ fn previous(
             (false, false) => n.dot(m) >= params.min_normal_cos,
             (zero_n, zero_m) => zero_n == zero_m,
         };
-        let same_layers = (0..4)
-            .step_by(2)
-            .all(|k| has(fresh.irradiance[k], i) == has(history.irradiance[k], j));
+        let same_layers = [0, 2]
+            .into_iter()
+            .zip(fresh_has)
+            .all(|(k, has)| history.irradiance[k].data[j].is_finite() == has);
         (normals_agree && same_layers && history.frames.data[j] > 0.0).then_some(d2)
     };
     // The bilinear taps around p's projection that show p.

@@ -331,22 +331,22 @@ fn mixed_history(history: &History, taps: &[(usize, f32)]) -> Pixel {
     let total: f32 = taps.iter().map(|&(_, w)| w).sum();
     let heaviest = taps
         .iter()
-        .fold(taps[0], |a, &b| if b.1 > a.1 { b } else { a });
-    let nearest = history_pixel(history, heaviest.0);
+        .fold(taps[0], |a, &b| if b.1 > a.1 { b } else { a })
+        .0;
     let mut mixed = Pixel {
         irradiance: [Vec3::ZERO; 4],
-        frames: 0.0,
+        direct_min: history.direct_min_distance.data[heaviest],
+        indirect_min: history.indirect_min_distance.data[heaviest],
         touched: 0,
-        ..nearest
+        frames: 0.0,
     };
     for &(j, w) in taps {
-        let tap = history_pixel(history, j);
         let w = w / total;
-        for (sum, value) in mixed.irradiance.iter_mut().zip(tap.irradiance) {
-            *sum += value * w;
+        for (sum, layer) in mixed.irradiance.iter_mut().zip(history.irradiance) {
+            *sum += layer.data[j] * w;
         }
-        mixed.frames += tap.frames * w;
-        mixed.touched |= tap.touched;
+        mixed.frames += history.frames.data[j] * w;
+        mixed.touched |= history.touched.data[j];
     }
     mixed
 }
@@ -369,6 +369,43 @@ fn blend(fresh: &Pixel, previous: &Pixel, max_history: f32) -> Pixel {
         touched: fresh.touched | previous.touched,
         frames: n,
     }
+}
+
+/// Previous pixel `j` of `history` when it may show the same surface point as `p`
+/// (normal `n`, layers `fresh_has`: E_R^dir and E_RV^dir present): its squared
+/// distance to `p`.
+#[inline(always)]
+fn candidate(
+    history: &History,
+    j: usize,
+    p: Vec3,
+    n: Vec3,
+    fresh_has: [bool; 2],
+    tolerance2: f32,
+    min_normal_cos: f32,
+) -> Option<f32> {
+    // NaN frame counts and distances (no previous surface) fail here too.
+    let frames = history.frames.data[j];
+    let d2 = (history.world_position.data[j] - p).length_squared();
+    if frames.is_nan() || frames <= 0.0 || d2.is_nan() || d2 > tolerance2 {
+        return None;
+    }
+    let m = history.world_normal.data[j];
+    let normals_agree = match (n == Vec3::ZERO, m == Vec3::ZERO) {
+        (false, false) => n.dot(m) >= min_normal_cos,
+        (zero_n, zero_m) => zero_n == zero_m,
+    };
+    let same_layers = history.irradiance[0].data[j].is_finite() == fresh_has[0]
+        && history.irradiance[2].data[j].is_finite() == fresh_has[1];
+    (normals_agree && same_layers).then_some(d2)
+}
+
+/// `x.floor()` as an integer for |x| < 2^31 (larger values saturate, NaN gives 0:
+/// both then index no pixel), without the library call `floor` is without SSE4.1.
+#[inline(always)]
+fn floor_i32(x: f32) -> i32 {
+    let t = x as i32;
+    t - ((x < t as f32) as i32)
 }
 
 /// Step 1: the history of the surface point of pixel `i`, if the previous frame saw it.
@@ -399,28 +436,21 @@ fn previous(
     // Which layers this pixel has (E_R^dir, E_RV^dir stand for their pairs), once.
     let fresh_has = [0, 2].map(|k| fresh.irradiance[k].data[i].is_finite());
     let tolerance2 = tolerance * tolerance;
-    // Previous pixel j's squared distance to p when it may be the same point.
-    let candidate = |j: usize| -> Option<f32> {
-        let d2 = (history.world_position.data[j] - p).length_squared();
-        // NaN distances (no previous surface) fail here too.
-        if d2.is_nan() || d2 > tolerance2 {
-            return None;
-        }
-        let m = history.world_normal.data[j];
-        let normals_agree = match (n == Vec3::ZERO, m == Vec3::ZERO) {
-            (false, false) => n.dot(m) >= params.min_normal_cos,
-            (zero_n, zero_m) => zero_n == zero_m,
-        };
-        let same_layers = [0, 2]
-            .into_iter()
-            .zip(fresh_has)
-            .all(|(k, has)| history.irradiance[k].data[j].is_finite() == has);
-        (normals_agree && same_layers && history.frames.data[j] > 0.0).then_some(d2)
+    let same_point = |j: usize| {
+        candidate(
+            history,
+            j,
+            p,
+            n,
+            fresh_has,
+            tolerance2,
+            params.min_normal_cos,
+        )
     };
     // The bilinear taps around p's projection that show p.
     let uv = history.camera.project(in_previous)?;
-    let (u0, v0) = (uv.x.floor(), uv.y.floor());
-    let (fx, fy) = (uv.x - u0, uv.y - v0);
+    let (u0, v0) = (floor_i32(uv.x), floor_i32(uv.y));
+    let (fx, fy) = (uv.x - u0 as f32, uv.y - v0 as f32);
     let mut taps = [(0usize, 0.0f32); 4];
     let mut count = 0;
     for (dx, dy, w) in [
@@ -429,12 +459,12 @@ fn previous(
         (0, 1, (1.0 - fx) * fy),
         (1, 1, fx * fy),
     ] {
-        let (x, y) = (u0 as i32 + dx, v0 as i32 + dy);
+        let (x, y) = (u0.saturating_add(dx), v0.saturating_add(dy));
         if w <= 0.0 || x < 0 || y < 0 || x >= width || y >= height {
             continue;
         }
         let j = y as usize * width as usize + x as usize;
-        if candidate(j).is_some() {
+        if same_point(j).is_some() {
             taps[count] = (j, w);
             count += 1;
         }
@@ -453,7 +483,7 @@ fn previous(
                 continue;
             }
             let j = y as usize * width as usize + x as usize;
-            if let Some(d2) = candidate(j)
+            if let Some(d2) = same_point(j)
                 && best.is_none_or(|(best_d2, _)| d2 < best_d2)
             {
                 best = Some((d2, j));

@@ -237,7 +237,8 @@ fn assert_twin(twin: &str, name: &str, swaps: &[(&str, &str)]) -> Pipeline {
 
 /// The mixed-reality pipelines (the default and its livingroom1 twin) are their
 /// reference chains with temporal reuse swapped in: few fresh samples, more near the
-/// objects, the accumulator between the sampler and the filter, and B_e fixed.
+/// objects, the accumulator between the sampler and the filter, B_e fixed and the
+/// filter's own temporal extension off.
 #[test]
 fn the_mixed_reality_pipelines_are_the_reference_chains_with_temporal_reuse() {
     let reference_block = "# --- Sampling, filtering, compositing. ---\n[[stage]]\nkind = \"sample.path\"\n\n[[stage]]\nkind = \"filter.axis_aligned\"\n";
@@ -296,6 +297,7 @@ fn the_mixed_reality_pipelines_are_the_reference_chains_with_temporal_reuse() {
             "{name}"
         );
         assert_eq!(filter.params.float("environment_bandwidth"), 4.0, "{name}");
+        assert!(!filter.params.bool("temporal"), "{name}");
     }
 }
 

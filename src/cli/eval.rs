@@ -37,7 +37,8 @@ Scores (per stage, keyed by the stage's name):
                     Gaussian over the same window) against the same references, on the
                     same frames; temporal_flicker, temporal_flicker_spatial_only (variance
                     per pixel over 4 re-sampled frames of a still camera, with and
-                    without the temporal extension)
+                    without the temporal extension), flicker_as_configured (the one
+                    the stage's `temporal` setting runs)
   composite.differential
                     psnr_db of the final image against the composite of the references;
                     psnr_db_unfiltered (the composite of the unfiltered layers);

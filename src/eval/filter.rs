@@ -23,6 +23,9 @@
 //!   the pipeline's frames do: the score is then the spread of its first frames, while
 //!   it holds 2 to 5 frames (a still camera flickers less once it holds more), and the
 //!   spatial-only score too includes the accumulator's averaging over time.
+//!   `flicker_as_configured` repeats the one of the two that the stage's own
+//!   `temporal` setting runs (the default pipeline turns the extension off: its
+//!   accumulator already reuses earlier frames).
 
 use super::sampling::{PathRunner, ReferenceLayers};
 use crate::graph::{BuildContext, Frame, ParamValue, Registry, ResolvedStage, Stage};
@@ -265,6 +268,11 @@ impl FilterScorer {
             "mse_filtered_by_layer": self.layers.iter().map(|l| l.1.value()).collect::<Vec<_>>(),
             "temporal_flicker": self.flicker_temporal.value(),
             "temporal_flicker_spatial_only": self.flicker_spatial.value(),
+            "flicker_as_configured": if self.stage.params.bool("temporal") {
+                self.flicker_temporal.value()
+            } else {
+                self.flicker_spatial.value()
+            },
         })
     }
 }

@@ -14,7 +14,7 @@
 //! | `light.val` | `sh_irradiance_rel_error`, `val_center_drift_m`, `environment_static`, `lights` | no |
 //! | `sample.path` | `ratio_rmse`, `ratio_rmse_alternative`, `object_aware`, `unbiased_p`, `frames_scored`, `scored_frames` (their indices), `region_pixels` (against 1024-sample references; see [`sampling`]) | no |
 //! | `sample.dir`, `sample.val` | `ratio_rmse`, `ratio_rmse_all`, `frames_scored`, `scored_frames`, `region_pixels` (against the default `sample.path`'s 1024-sample references on the renderer's inputs; see [`renderer`]) | no |
-//! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `mse_unfiltered_by_layer`, `mse_filtered_by_layer` (per layer: E_R^dir, E_R^ind, E_RV^dir, E_RV^ind), `temporal_flicker`, `temporal_flicker_spatial_only`, `frames_scored`, `scored_frames` (against the same references; see [`filter`]) | no |
+//! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `mse_unfiltered_by_layer`, `mse_filtered_by_layer` (per layer: E_R^dir, E_R^ind, E_RV^dir, E_RV^ind), `temporal_flicker`, `temporal_flicker_spatial_only`, `flicker_as_configured`, `frames_scored`, `scored_frames` (against the same references; see [`filter`]) | no |
 //! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `psnr_db_by_frame`, `frames_scored`, `scored_frames` (against a composite of the references; see [`composite`]) | no |
 //!
 //! Ground truth comes from the recording's truth stream (synthetic recordings).

@@ -32,6 +32,22 @@ pub enum Projection {
     },
 }
 
+/// Where a point falls in a map: its texel's column and row, and its depth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Texel {
+    pub x: u32,
+    pub y: u32,
+    pub depth: f32,
+}
+
+impl Texel {
+    /// The texel's index in a map of `size` x `size` texels.
+    #[inline]
+    pub fn index(&self, size: usize) -> usize {
+        self.y as usize * size + self.x as usize
+    }
+}
+
 /// A right-handed orthonormal frame whose third axis is `axis` (unit).
 pub fn frame_about(axis: Vec3) -> [Vec3; 3] {
     let (t1, t2) = axis.any_orthonormal_pair();
@@ -39,10 +55,10 @@ pub fn frame_about(axis: Vec3) -> [Vec3; 3] {
 }
 
 impl Projection {
-    /// The texel of a `size`-texel map that `p` falls in, and its depth; `None` outside
+    /// The texel of a `size`-texel map that `p` falls in, with its depth; `None` outside
     /// the map.
     #[inline]
-    pub fn project(&self, p: Vec3, size: usize) -> Option<(usize, f32)> {
+    pub fn project(&self, p: Vec3, size: usize) -> Option<Texel> {
         let (uv, depth) = match *self {
             Projection::Paraboloid { origin, frame } => {
                 let d = p - origin;
@@ -73,7 +89,11 @@ impl Projection {
         if !(u >= 0.0 && v >= 0.0 && u < s && v < s) {
             return None;
         }
-        Some((v as usize * size + u as usize, depth))
+        Some(Texel {
+            x: u as u32,
+            y: v as u32,
+            depth,
+        })
     }
 
     /// The world size of one texel at `depth` (at the disc's centre for the
@@ -108,7 +128,7 @@ pub fn splat(
     let last = size as i32 - 1;
     let mut written = [size, size, 0, 0];
     for (p, radius) in points {
-        let Some((texel, depth)) = projection.project(p, size) else {
+        let Some(Texel { x, y, depth }) = projection.project(p, size) else {
             continue;
         };
         let reach = (radius / projection.texel_size(depth, size) - 0.5).ceil();
@@ -117,7 +137,7 @@ pub fn splat(
         } else {
             0
         };
-        let (x, y) = ((texel % size) as i32, (texel / size) as i32);
+        let (x, y) = (x as i32, y as i32);
         written[0] = written[0].min((x - reach).max(0) as usize);
         written[1] = written[1].min((y - reach).max(0) as usize);
         written[2] = written[2].max((x + reach).min(last) as usize + 1);
@@ -273,16 +293,16 @@ impl MapView<'_> {
     /// [`MapView::visibility`] of a point already projected (`projected`: its texel and
     /// depth from this map's projection).
     #[inline]
-    pub fn test(&self, projected: Option<(usize, f32)>, cos: f32) -> (f32, f32) {
-        let Some((texel, depth)) = projected else {
+    pub fn test(&self, projected: Option<Texel>, cos: f32) -> (f32, f32) {
+        let Some(texel) = projected else {
             return (1.0, f32::INFINITY);
         };
-        let (x, y) = ((texel % self.size) as u16, (texel / self.size) as u16);
-        let [x0, y0, x1, y1] = self.rect;
-        if x < x0 || x >= x1 || y < y0 || y >= y1 {
+        let [x0, y0, x1, y1] = self.rect.map(u32::from);
+        if texel.x < x0 || texel.x >= x1 || texel.y < y0 || texel.y >= y1 {
             return (1.0, f32::INFINITY);
         }
-        let stored = self.depth[texel];
+        let depth = texel.depth;
+        let stored = self.depth[texel.index(self.size)];
         let cos = cos.clamp(1e-3, 1.0);
         let tan = ((1.0 - cos * cos).sqrt() / cos).min(MAX_SLOPE);
         let bias = self.bias + self.slope * tan * self.projection.texel_size(depth, self.size);

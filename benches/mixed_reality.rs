@@ -1,10 +1,11 @@
 //! Per-frame cost of every stage of `pipelines/mixed-reality.toml` (the default
 //! pipeline) at 640x480 on the synthetic recording, with the state (fused depth, cloud,
-//! the filter's previous frame) built up over the preceding frames: `stage/<name>` is
+//! the accumulator's history) built up over the preceding frames: `stage/<name>` is
 //! that stage's `process` on copies of the last two frames as they arrive there, in
 //! turn. Each run thus meets a frame other than the one the stage saw last, as in a
-//! replay (one step forward, one back): the filter's temporal taps reproject a frame
-//! that moved, as they do on real frames. (Re-running one frame would reproject it onto
+//! replay (one step forward, one back): the accumulator (and, in a pipeline whose
+//! filter has `temporal = true`, the filter's temporal taps) reprojects a frame that
+//! moved, as on real frames. (Re-running one frame would reproject it onto
 //! itself, every lane at offset 0, the cheapest case.) The sum of the medians bounds
 //! the pipeline's frame time from above on one core; `relume bench` measures the
 //! pipelined throughput.

@@ -400,12 +400,13 @@ fn candidate(
     (normals_agree && same_layers).then_some(d2)
 }
 
-/// `x.floor()` as an integer for |x| < 2^31 (larger values saturate, NaN gives 0:
-/// both then index no pixel), without the library call `floor` is without SSE4.1.
+/// `x.floor()` as an integer for |x| < 2^31 (beyond, and for infinities, it saturates
+/// at `i32::MIN` or `i32::MAX`; NaN gives 0: no pixel is indexed either way), without
+/// the library call `floor` is without SSE4.1.
 #[inline(always)]
 fn floor_i32(x: f32) -> i32 {
     let t = x as i32;
-    t - ((x < t as f32) as i32)
+    t.saturating_sub((x < t as f32) as i32)
 }
 
 /// Step 1: the history of the surface point of pixel `i`, if the previous frame saw it.
@@ -491,4 +492,25 @@ fn previous(
         }
     }
     best.map(|(_, j)| history_pixel(history, j))
+}
+
+#[cfg(test)]
+mod floor_tests {
+    use super::floor_i32;
+
+    #[test]
+    fn floor_i32_is_floor_in_range_and_saturates_beyond() {
+        for x in [
+            0.0f32, -0.0, 0.5, -0.5, -1.0, -1.5, 1.0, 639.999, 2.0e9, -2.0e9,
+        ] {
+            assert_eq!(floor_i32(x), x.floor() as i32, "{x}");
+        }
+        // Points just in front of the previous camera's plane project this far out;
+        // neither end may overflow (a panic in debug builds).
+        assert_eq!(floor_i32(-1.0e30), i32::MIN);
+        assert_eq!(floor_i32(f32::NEG_INFINITY), i32::MIN);
+        assert_eq!(floor_i32(1.0e30), i32::MAX);
+        assert_eq!(floor_i32(f32::INFINITY), i32::MAX);
+        assert_eq!(floor_i32(f32::NAN), 0);
+    }
 }

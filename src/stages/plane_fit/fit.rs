@@ -65,6 +65,25 @@ impl Scatter {
         }
     }
 
+    /// A scatter from sums taken elsewhere (the lane-wise gather's, eight pixels at a
+    /// time), with the meaning of the fields of one built by [`Scatter::add`].
+    #[inline]
+    pub(crate) fn from_sums(
+        origin: Vec3A,
+        count: u32,
+        sum: Vec3A,
+        squares: Vec3A,
+        cross: Vec3A,
+    ) -> Scatter {
+        Scatter {
+            origin,
+            count,
+            sum,
+            squares,
+            cross,
+        }
+    }
+
     /// Number of samples added (k-hat of the paper).
     #[inline]
     pub fn count(&self) -> u32 {

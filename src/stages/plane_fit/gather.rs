@@ -5,25 +5,25 @@
 //! precomputed once per pixel phase and sorted nearest first. The result is the same set
 //! of covering disks, visited in a fixed order, so the list of at most k is deterministic.
 
+use super::NormalCode;
 use super::fit::Scatter;
-use super::{NormalCode, PlaneFitParams};
-use crate::graph::StageError;
-use crate::pinhole::Pinhole;
-use crate::raster::{DepthImage, LabelImage, Vec3Image};
+use crate::raster::Vec3Image;
 use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 
 /// The samples of a points image on a grid of step `step`, padded by `margin` grid cells
 /// of NaN on every side so that no window read leaves the buffer. Invalid samples are NaN.
-struct SampleGrid {
-    samples: Vec<Vec3A>,
+pub(super) struct SampleGrid {
+    pub samples: Vec<Vec3A>,
+    /// The same samples as three planes (x, y, z), for the lane-wise gather.
+    pub planes: [Vec<f32>; 3],
     /// Width of the padded grid (grid columns + 2 margin).
-    stride: usize,
-    margin: usize,
+    pub stride: usize,
+    pub margin: usize,
 }
 
 impl SampleGrid {
-    fn new(points: &Vec3Image, step: usize, margin: usize) -> SampleGrid {
+    pub fn new(points: &Vec3Image, step: usize, margin: usize) -> SampleGrid {
         let (w, h) = (points.width as usize, points.height as usize);
         let (columns, rows) = (w.div_ceil(step), h.div_ceil(step));
         let stride = columns + 2 * margin;
@@ -41,8 +41,10 @@ impl SampleGrid {
                     }
                 }
             });
+        let planes = [0, 1, 2].map(|c| samples.iter().map(|p| p[c]).collect());
         SampleGrid {
             samples,
+            planes,
             stride,
             margin,
         }
@@ -52,7 +54,7 @@ impl SampleGrid {
 /// For each pixel phase (x mod step, y mod step), row-major: the index offsets in the
 /// padded sample grid of the samples whose disk of radius `radius` covers the pixel,
 /// sorted by distance (ties by row, then column).
-fn covering_offsets(step: usize, radius: f32, stride: usize) -> Vec<Vec<isize>> {
+pub(super) fn covering_offsets(step: usize, radius: f32, stride: usize) -> Vec<Vec<isize>> {
     let (s, reach) = (step as i64, radius.floor() as i64);
     let r2 = radius * radius;
     let mut tables = Vec::with_capacity(step * step);
@@ -81,104 +83,84 @@ fn covering_offsets(step: usize, radius: f32, stride: usize) -> Vec<Vec<isize>> 
 }
 
 /// The largest grid offset any window reaches: samples up to `radius` pixels away.
-fn margin(step: usize, radius: f32) -> usize {
+pub(super) fn margin(step: usize, radius: f32) -> usize {
     (radius.floor() as usize).div_ceil(step)
 }
 
-/// Normals by per-pixel plane fits (paper 000 Sec. 5) from the camera-space position map
-/// `points` (NaN = missing), seen by `camera` (at the size of `points`).
-///
-/// Samples are the valid positions at pixels on a grid of step `params.sample_step`. Each
-/// pixel lists, nearest first, up to `params.k` samples whose disk of radius
-/// `params.radius` pixels covers it; the nearest one is the reference and listed samples
-/// farther than `params.max_depth_gap` from it in depth are discarded (so k-hat <= k). The plane of
-/// [`Scatter::fit`] gives the pixel's unit normal (facing the camera) and its refined
-/// depth, where the view ray through the pixel centre meets the plane. Pixels without
-/// raw depth get both from the covering disks (densification).
-///
-/// Writes, for every pixel: `normals` (zero unless valid), `refined_depth` (0 unless
-/// valid), `neighbours` (k-hat, the samples used) and `codes` ([`NormalCode`]).
-#[allow(clippy::too_many_arguments)]
-pub fn plane_fit_normals(
-    points: &Vec3Image,
-    camera: &Pinhole,
-    params: &PlaneFitParams,
-    normals: &mut Vec3Image,
-    refined_depth: &mut DepthImage,
-    neighbours: &mut LabelImage,
-    codes: &mut LabelImage,
-) -> Result<(), StageError> {
-    let size = |what: &str, w: u32, h: u32| {
-        StageError::Failed(format!(
-            "{what} is {w}x{h}, points are {}x{}",
-            points.width, points.height
-        ))
-    };
-    if !points.same_size(normals) {
-        return Err(size("normal map", normals.width, normals.height));
-    }
-    if !points.same_size(refined_depth) {
-        return Err(size(
-            "refined depth",
-            refined_depth.width,
-            refined_depth.height,
-        ));
-    }
-    if !points.same_size(neighbours) {
-        return Err(size("neighbour count", neighbours.width, neighbours.height));
-    }
-    if !points.same_size(codes) {
-        return Err(size("code map", codes.width, codes.height));
-    }
-    if camera.width != points.width || camera.height != points.height {
-        return Err(size("camera", camera.width, camera.height));
-    }
-    params.check()?;
-    if points.is_empty() {
-        return Ok(());
-    }
-    let (w, step) = (points.width as usize, params.sample_step);
-    let grid = SampleGrid::new(points, step, margin(step, params.radius));
-    let tables = covering_offsets(step, params.radius, grid.stride);
-    let ray_x: Vec<f32> = (0..w).map(|x| (x as f32 - camera.cx) / camera.fx).collect();
-    let k = params.k.min(u8::MAX as usize) as u32;
-    let (gap, min_det) = (params.max_depth_gap, params.min_determinant);
+/// What the fits of every row share.
+pub(super) struct RowFit<'a> {
+    pub grid: &'a SampleGrid,
+    /// [`covering_offsets`] of every pixel phase.
+    pub tables: &'a [Vec<isize>],
+    /// Per column, the x of its view ray (whose z is 1).
+    pub ray_x: &'a [f32],
+    pub camera_cy: f32,
+    pub camera_fy: f32,
+    pub step: usize,
+    pub k: u32,
+    pub gap: f32,
+    pub min_determinant: f32,
+}
 
-    normals
-        .data
-        .par_chunks_mut(w)
-        .zip(refined_depth.data.par_chunks_mut(w))
-        .zip(neighbours.data.par_chunks_mut(w))
-        .zip(codes.data.par_chunks_mut(w))
-        .enumerate()
-        .for_each(|(y, (((normal_row, depth_row), count_row), code_row))| {
-            let ray_y = (y as f32 - camera.cy) / camera.fy;
-            let row_tables = &tables[(y % step) * step..][..step];
-            let mut base = (y / step + grid.margin) * grid.stride + grid.margin;
-            let mut phase = 0;
-            for x in 0..w {
-                let ray = Vec3::new(ray_x[x], ray_y, 1.0);
-                let (count, result) = fit_pixel(
-                    &grid.samples,
-                    base,
-                    &row_tables[phase],
-                    k,
-                    gap,
-                    min_det,
-                    ray,
-                );
-                phase += 1;
-                if phase == step {
-                    (phase, base) = (0, base + 1);
-                }
-                count_row[x] = count as u8;
-                (normal_row[x], depth_row[x], code_row[x]) = match result {
-                    Ok((n, z)) => (n, z, NormalCode::Valid as u8),
-                    Err(code) => (Vec3::ZERO, 0.0, code as u8),
-                };
-            }
-        });
-    Ok(())
+impl RowFit<'_> {
+    /// The view ray through the centre of pixel (x, y), with z = 1.
+    #[inline]
+    pub fn ray(&self, x: usize, y: usize) -> Vec3 {
+        Vec3::new(
+            self.ray_x[x],
+            (y as f32 - self.camera_cy) / self.camera_fy,
+            1.0,
+        )
+    }
+
+    /// The tables of row `y`'s pixel phases.
+    #[inline]
+    pub fn row_tables(&self, y: usize) -> &[Vec<isize>] {
+        &self.tables[(y % self.step) * self.step..][..self.step]
+    }
+
+    /// The grid index of the sample at column 0 of row `y`'s grid row; pixel x's
+    /// windows are centred `x / step` further on.
+    #[inline]
+    pub fn row_base(&self, y: usize) -> usize {
+        (y / self.step + self.grid.margin) * self.grid.stride + self.grid.margin
+    }
+}
+
+/// One row of the four outputs.
+pub(super) struct RowOut<'a> {
+    pub normals: &'a mut [Vec3],
+    pub depth: &'a mut [f32],
+    pub counts: &'a mut [u8],
+    pub codes: &'a mut [u8],
+}
+
+impl RowOut<'_> {
+    /// Writes pixel `x`: k-hat, and the normal and refined depth or why there is none.
+    #[inline]
+    pub fn set(&mut self, x: usize, count: u32, result: Result<(Vec3, f32), NormalCode>) {
+        self.counts[x] = count as u8;
+        (self.normals[x], self.depth[x], self.codes[x]) = match result {
+            Ok((n, z)) => (n, z, NormalCode::Valid as u8),
+            Err(code) => (Vec3::ZERO, 0.0, code as u8),
+        };
+    }
+}
+
+/// Fits row `y` one pixel at a time (the reference the lane-wise rows match bit for
+/// bit, and what they do with the pixels left over).
+pub(super) fn fit_row(fit: &RowFit, y: usize, out: &mut RowOut) {
+    let row_tables = fit.row_tables(y);
+    let mut base = fit.row_base(y);
+    let mut phase = 0;
+    for x in 0..out.normals.len() {
+        let (count, result) = fit_pixel(fit, base, &row_tables[phase], fit.ray(x, y));
+        out.set(x, count, result);
+        phase += 1;
+        if phase == fit.step {
+            (phase, base) = (0, base + 1);
+        }
+    }
 }
 
 /// Gathers and fits one pixel's neighbourhood: the first `k` valid samples at `base +
@@ -187,15 +169,13 @@ pub fn plane_fit_normals(
 /// Returns k-hat and the normal with the depth at which `ray` meets the plane, or why
 /// there is none.
 #[inline]
-fn fit_pixel(
-    samples: &[Vec3A],
+pub(super) fn fit_pixel(
+    fit: &RowFit,
     base: usize,
     offsets: &[isize],
-    k: u32,
-    gap: f32,
-    min_determinant: f32,
     ray: Vec3,
 ) -> (u32, Result<(Vec3, f32), NormalCode>) {
+    let (samples, k, gap) = (&fit.grid.samples, fit.k, fit.gap);
     let mut rest = offsets.iter();
     let reference = rest
         .by_ref()
@@ -218,15 +198,24 @@ fn fit_pixel(
         // Branch-free: holes (NaN) and samples across a discontinuity add nothing.
         scatter.add_if((p.z - reference.z).abs() <= gap, p);
     }
-    let result = scatter.fit(min_determinant).and_then(|plane| {
+    (scatter.count(), plane_along(&scatter, fit, ray))
+}
+
+/// The plane of `scatter` and the depth at which `ray` meets it, or why there is none.
+#[inline]
+pub(super) fn plane_along(
+    scatter: &Scatter,
+    fit: &RowFit,
+    ray: Vec3,
+) -> Result<(Vec3, f32), NormalCode> {
+    scatter.fit(fit.min_determinant).and_then(|plane| {
         let z = plane.depth_along(ray);
         // The ray must meet the plane near the samples' mean depth: a farther (or
         // negative) depth is an extrapolation along a plane seen at a grazing angle.
-        if (z - plane.centroid.z).abs() <= gap && z > 0.0 {
+        if (z - plane.centroid.z).abs() <= fit.gap && z > 0.0 {
             Ok((plane.normal, z))
         } else {
             Err(NormalCode::RayMissesPlane)
         }
-    });
-    (scatter.count(), result)
+    })
 }

@@ -6,6 +6,7 @@ use crate::graph::{BuildContext, Params};
 use crate::raster::{DepthImage, LabelImage, Vec3Image};
 use crate::recording::Header;
 use crate::rng::Counter;
+use crate::simd::Kernel;
 use std::collections::BTreeMap;
 
 const W: u32 = 40;
@@ -317,6 +318,68 @@ fn same_bits_for_any_thread_count() {
     let one = bits(1);
     assert!(one.3.iter().filter(|&&c| c == 0).count() > 1000);
     assert_eq!(one, bits(3));
+}
+
+#[test]
+fn lanes_give_the_bits_of_one_pixel_at_a_time() {
+    // Noise, holes, patches pushed 0.3 m back (depth steps beyond the gap) and a few
+    // points at zero depth: every branch of the gather.
+    let (mut points, _) = noisy_plane(true);
+    for (i, p) in points.data.iter_mut().enumerate() {
+        let (x, y) = (i % W as usize, i / W as usize);
+        if (x / 7 + y / 5) % 3 == 0 {
+            *p *= 1.15;
+        }
+        if (x * 31 + y * 17) % 53 == 0 {
+            *p = Vec3::ZERO;
+        }
+    }
+    let bits = |kernel: Option<Kernel>, p: &PlaneFitParams| {
+        let mut out = Outputs {
+            normals: Image::filled(W, H, Vec3::ONE),
+            depth: Image::filled(W, H, -1.0),
+            counts: Image::filled(W, H, 99),
+            codes: Image::filled(W, H, 99),
+        };
+        super::image::plane_fit_normals_by(
+            kernel,
+            &points,
+            &camera(),
+            p,
+            &mut out.normals,
+            &mut out.depth,
+            &mut out.counts,
+            &mut out.codes,
+        )
+        .unwrap();
+        let normals: Vec<[u32; 3]> = (out.normals.data.iter())
+            .map(|n| n.to_array().map(f32::to_bits))
+            .collect();
+        let depth: Vec<u32> = out.depth.data.iter().map(|z| z.to_bits()).collect();
+        (normals, depth, out.counts.data, out.codes.data)
+    };
+    let mut invalid = 0;
+    for (step, radius, k) in [(1, 2.5, 16), (2, 5.0, 8), (3, 7.0, 255), (4, 9.0, 3)] {
+        let p = params(step, radius, k);
+        let reference = bits(None, &p);
+        let codes = &reference.3;
+        let valid = codes.iter().filter(|&&c| c == 0).count();
+        assert!(valid > 300, "step {step}: {valid} valid");
+        invalid += codes.len() - valid;
+        // The depth steps thin some lists: without the gap test, other counts.
+        let no_gap = PlaneFitParams {
+            max_depth_gap: 100.0,
+            ..p
+        };
+        assert!(bits(None, &no_gap).2 != reference.2, "step {step}");
+        for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+            assert!(
+                bits(Some(kernel), &p) == reference,
+                "step {step}, {kernel:?}"
+            );
+        }
+    }
+    assert!(invalid > 20, "{invalid} pixels without a plane");
 }
 
 #[test]

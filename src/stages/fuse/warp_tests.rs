@@ -7,6 +7,7 @@ use crate::pinhole::Pinhole;
 use crate::raster::{DepthImage, Image, ScalarImage};
 use crate::recording::Intrinsics;
 use crate::recording::Pose;
+use crate::simd::Kernel;
 use glam::{DQuat, DVec3};
 
 fn camera(w: u32, h: u32) -> Pinhole {
@@ -218,6 +219,37 @@ fn warping_is_bit_identical_for_any_thread_count() {
     assert!(one.0.iter().filter(|&&b| b != 0).count() > 96 * 72 / 2);
     assert_eq!(one, run(3));
     assert_eq!(one, run(3));
+}
+
+#[test]
+fn lanes_give_the_bits_of_one_quad_at_a_time() {
+    // 99 columns: 12 groups of eight quads and two quads left over per row.
+    let (depth, weight) = rough_scene(99, 72);
+    let cam = camera(99, 72);
+    let moves = [
+        // A small step: triangles about a pixel wide (the lanes' case).
+        pose([0.07, 0.02, -0.05], [0.2, 1.0, 0.3], 0.06),
+        // Forward by a third of the depth: triangles up to three pixels wide (the
+        // scalar fallback's case).
+        pose([0.0, 0.0, 0.8], [0.0, 1.0, 0.0], 0.0),
+        // Rolled: edges at all angles.
+        pose([0.01, 0.0, 0.0], [0.0, 0.0, 1.0], 0.7),
+    ];
+    for cur in moves {
+        let run = |kernel: Option<Kernel>| {
+            let mut out = WarpedDepth::new(99, 72);
+            let poses = (&Pose::IDENTITY, &cur);
+            let p = WarpParams::default();
+            warp_depth_by(kernel, &depth, &weight, poses, &cam, &p, &mut out).unwrap();
+            let bits = |d: &[f32]| d.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            (bits(&out.depth.data), bits(&out.weight.data))
+        };
+        let reference = run(None);
+        assert!(reference.0.iter().filter(|&&b| b != 0).count() > 99 * 72 / 3);
+        for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+            assert!(run(Some(kernel)) == reference, "{cur:?}, {kernel:?}");
+        }
+    }
 }
 
 #[test]

@@ -1,12 +1,11 @@
 //! The previous fused map as a triangle mesh seen from the current camera (paper 002
 //! eqs. 11-14): one vertex per pixel, back-projected, moved and projected
 //! ([`Mesh::warp_row`]), and each 2x2 quad's two triangles z-tested into the target's
-//! keys ([`Mesh::triangle`]; eight quads at a time in `mesh_lanes.rs`, with the same
-//! bits).
+//! keys ([`Mesh::quad`], [`Mesh::triangle`]; `mesh_lanes.rs` does eight quads at a
+//! time with the same bits, `warp.rs` runs the bands).
 
 use crate::pinhole::Pinhole;
 use crate::raster::depth_is_valid;
-use crate::simd::Kernel;
 use glam::{Mat3, Vec3};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -41,7 +40,7 @@ pub(super) struct VertexRows {
 }
 
 impl VertexRows {
-    fn clear(&mut self) {
+    pub fn clear(&mut self) {
         self.x.clear();
         self.y.clear();
         self.inv_z.clear();
@@ -100,13 +99,11 @@ pub(super) struct Mesh<'a> {
     pub x_last: f32,
     pub y_last: f32,
     pub keys: &'a [AtomicU64],
-    /// Whose lanes rasterize eight quads at a time (`None`: one at a time).
-    pub kernel: Option<Kernel>,
 }
 
 impl Mesh<'_> {
     /// Warps the vertices of pixel row `y` into `out` (appended).
-    fn warp_row(&self, y: usize, out: &mut VertexRows) {
+    pub fn warp_row(&self, y: usize, out: &mut VertexRows) {
         let c = &self.camera;
         let row_ray = self.rotation.y_axis * ((y as f32 - c.cy) / c.fy) + self.rotation.z_axis;
         let start = y * self.width;
@@ -131,34 +128,10 @@ impl Mesh<'_> {
         }
     }
 
-    /// Rasterizes the quads of rows `first..end` (vertex rows `first..=end`).
-    pub fn rasterize_band(&self, first: usize, end: usize, vertices: &mut VertexRows) {
-        let w = self.width;
-        vertices.clear();
-        for y in first..=end {
-            self.warp_row(y, vertices);
-        }
-        for y in first..end {
-            let row = QuadRow {
-                top: (y - first) * w,
-                bottom: (y - first + 1) * w,
-                z_top: &self.depth[y * w..(y + 1) * w],
-                z_bottom: &self.depth[(y + 1) * w..(y + 2) * w],
-            };
-            let done = match self.kernel {
-                Some(kernel) => super::mesh_lanes::rasterize_quads(kernel, self, vertices, &row),
-                None => 0,
-            };
-            for x in done..w - 1 {
-                self.quad(vertices, &row, x);
-            }
-        }
-    }
-
     /// Rasterizes quad `x` of `row`: its two triangles, split along the diagonal whose
     /// end depths differ less.
     #[inline]
-    fn quad(&self, vertices: &VertexRows, row: &QuadRow, x: usize) {
+    pub fn quad(&self, vertices: &VertexRows, row: &QuadRow, x: usize) {
         // a b
         // c d
         let (a, b) = (vertices.get(row.top + x), vertices.get(row.top + x + 1));

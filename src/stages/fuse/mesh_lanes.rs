@@ -17,10 +17,9 @@ pub(super) fn rasterize_quads(
     vertices: &VertexRows,
     row: &QuadRow,
 ) -> usize {
-    match kernel {
+    match kernel.available() {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: the mesh's kernel came from `Kernel::available`: the CPU has AVX2
-        // and FMA.
+        // SAFETY: `Kernel::available` says the CPU has AVX2 and FMA.
         Kernel::Avx2Fma => unsafe { rasterize_quads_avx2(mesh, vertices, row) },
         _ => rasterize_quads_with::<Portable>(mesh, vertices, row),
     }

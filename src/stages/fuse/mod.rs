@@ -14,8 +14,9 @@
 //! one division each) and bounds 614k triangles, most of which hold no pixel centre;
 //! each of the about 307k covered pixels costs two divisions and one atomic
 //! `fetch_min` (skipped when a nearer value is already there). The triangles go eight
-//! quads at a time through the CPU's vector lanes (`mesh_lanes.rs`, the same bits as
-//! one at a time), which took the stage from 28 to 9-11 ms of one core on livingroom1.
+//! quads at a time through the CPU's AVX2 lanes (`mesh_lanes.rs`, the same bits as
+//! one at a time), which took the stage from 28 to 9-11 ms of one core on livingroom1
+//! (the warp's rasterization was most of it).
 //! The merge is one pass, plus a small window at the holes it fills. No per-pixel
 //! allocation.
 

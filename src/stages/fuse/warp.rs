@@ -10,7 +10,8 @@
 //! camera's space lands in the current camera's space at `T_cur^-1 * T_prev * p`
 //! ([`previous_to_current`]).
 
-use super::mesh::{Mesh, VertexRows};
+use super::mesh::{Mesh, QuadRow, VertexRows};
+use super::mesh_lanes::rasterize_quads;
 use crate::graph::StageError;
 use crate::pinhole::Pinhole;
 use crate::raster::{DepthImage, Image, ScalarImage};
@@ -92,7 +93,8 @@ pub fn warp_depth(
     params: &WarpParams,
     warped: &mut WarpedDepth,
 ) -> Result<(), StageError> {
-    let kernel = Some(Kernel::detect());
+    // The portable lanes compute what one quad at a time does, only slower.
+    let kernel = (Kernel::detect() == Kernel::Avx2Fma).then_some(Kernel::Avx2Fma);
     let poses = (prev_pose, cur_pose);
     warp_depth_by(
         kernel,
@@ -151,7 +153,6 @@ pub(super) fn warp_depth_by(
         x_last: w as f32 - 1.0,
         y_last: h as f32 - 1.0,
         keys: &warped.keys,
-        kernel: kernel.map(Kernel::available),
     };
     let quad_rows = h.saturating_sub(1);
     if w >= 2 {
@@ -159,7 +160,8 @@ pub(super) fn warp_depth_by(
             .into_par_iter()
             .for_each_init(VertexRows::default, |vertices, band| {
                 let first = band * BAND_ROWS;
-                mesh.rasterize_band(first, (first + BAND_ROWS).min(quad_rows), vertices);
+                let end = (first + BAND_ROWS).min(quad_rows);
+                rasterize_band(&mesh, kernel, first, end, vertices);
             });
     }
     // Read the z-buffer out and leave it empty for the next call.
@@ -182,4 +184,32 @@ pub(super) fn warp_depth_by(
             }
         });
     Ok(())
+}
+
+/// Rasterizes the quads of rows `first..end` (vertex rows `first..=end`): eight at a
+/// time with `kernel`'s lanes where given, the rest one at a time.
+fn rasterize_band(
+    mesh: &Mesh,
+    kernel: Option<Kernel>,
+    first: usize,
+    end: usize,
+    vertices: &mut VertexRows,
+) {
+    let w = mesh.width;
+    vertices.clear();
+    for y in first..=end {
+        mesh.warp_row(y, vertices);
+    }
+    for y in first..end {
+        let row = QuadRow {
+            top: (y - first) * w,
+            bottom: (y - first + 1) * w,
+            z_top: &mesh.depth[y * w..(y + 1) * w],
+            z_bottom: &mesh.depth[(y + 1) * w..(y + 2) * w],
+        };
+        let done = kernel.map_or(0, |kernel| rasterize_quads(kernel, mesh, vertices, &row));
+        for x in done..w - 1 {
+            mesh.quad(vertices, &row, x);
+        }
+    }
 }

@@ -14,10 +14,9 @@ use glam::Vec3A;
 /// Fits row `y` with `kernel`'s lanes (pixels left over after the last full group of
 /// a phase one at a time).
 pub(super) fn fit_row_lanes(kernel: Kernel, fit: &RowFit, y: usize, out: &mut RowOut) {
-    match kernel {
+    match kernel.available() {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: the caller's kernel came from `Kernel::available`: the CPU has AVX2
-        // and FMA.
+        // SAFETY: `Kernel::available` says the CPU has AVX2 and FMA.
         Kernel::Avx2Fma => unsafe { fit_row_avx2(fit, y, out) },
         _ => fit_row_with::<Portable>(fit, y, out),
     }

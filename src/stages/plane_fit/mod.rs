@@ -15,22 +15,23 @@
 //! On the synthetic recording's raw 640x480 depth (Kinect-like noise, disparity
 //! quantization, holes) the defaults give a mean angle to the true normals of about 12
 //! degrees where forward-difference cross products give 66, halve the depth error, and
-//! fill most holes. Cost: one pass over the covering samples per pixel, made eight
-//! pixels at a time (`lanes.rs`, the same bits as one at a time), then the fit per
-//! pixel: about 13 ms of one core per 640x480 frame with the defaults, half of what the
-//! one-pixel gather took in the same minutes.
+//! fill most holes. Cost: one pass over the covering samples per pixel (about 17 with
+//! the defaults), made eight pixels at a time where the CPU has AVX2 (`lanes.rs`, the
+//! same bits as one pixel at a time), then the fit per pixel: about 13 ms of one core
+//! per 640x480 frame on livingroom1, against 25 ms one pixel at a time (the two
+//! measured alternately, the machine's speed drifting over the hour).
 
+mod driver;
 pub mod fit;
 mod gather;
-mod image;
 mod lanes;
 #[cfg(test)]
 mod synth_tests;
 #[cfg(test)]
 mod tests;
 
+pub use driver::plane_fit_normals;
 pub use fit::{FitCase, Plane, Scatter, fit_plane};
-pub use image::plane_fit_normals;
 
 use crate::graph::{
     Frame, ParamDefault, ParamSpec, Product, ProductKind, Stage, StageError, StageInfo,

@@ -322,8 +322,8 @@ fn same_bits_for_any_thread_count() {
 
 #[test]
 fn lanes_give_the_bits_of_one_pixel_at_a_time() {
-    // Noise, holes, patches pushed 0.3 m back (depth steps beyond the gap) and a few
-    // points at zero depth: every branch of the gather.
+    // Noise, holes (NaN, and zero depth), and patches pushed 0.3 m back (depth steps
+    // beyond the gap): references found late, lists thinned, too few samples.
     let (mut points, _) = noisy_plane(true);
     for (i, p) in points.data.iter_mut().enumerate() {
         let (x, y) = (i % W as usize, i / W as usize);
@@ -341,7 +341,7 @@ fn lanes_give_the_bits_of_one_pixel_at_a_time() {
             counts: Image::filled(W, H, 99),
             codes: Image::filled(W, H, 99),
         };
-        super::image::plane_fit_normals_by(
+        super::driver::plane_fit_normals_by(
             kernel,
             &points,
             &camera(),

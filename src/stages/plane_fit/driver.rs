@@ -1,5 +1,5 @@
 //! The image operation of `normals.plane_fit`: checks, the sample grid and its tables,
-//! then the rows in parallel, eight pixels at a time where the CPU allows
+//! then the rows in parallel, eight pixels at a time where the CPU has AVX2
 //! ([`super::lanes`]) and one at a time elsewhere ([`super::gather`]), with the same bits.
 
 use super::PlaneFitParams;
@@ -34,8 +34,10 @@ pub fn plane_fit_normals(
     neighbours: &mut LabelImage,
     codes: &mut LabelImage,
 ) -> Result<(), StageError> {
+    // The portable lanes compute what one pixel at a time does, only slower.
+    let kernel = (Kernel::detect() == Kernel::Avx2Fma).then_some(Kernel::Avx2Fma);
     plane_fit_normals_by(
-        Some(Kernel::detect()),
+        kernel,
         points,
         camera,
         params,
@@ -103,7 +105,6 @@ pub(super) fn plane_fit_normals_by(
         gap: params.max_depth_gap,
         min_determinant: params.min_determinant,
     };
-    let kernel = kernel.map(Kernel::available);
     normals
         .data
         .par_chunks_mut(w)

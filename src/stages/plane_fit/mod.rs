@@ -16,10 +16,10 @@
 //! quantization, holes) the defaults give a mean angle to the true normals of about 12
 //! degrees where forward-difference cross products give 66, halve the depth error, and
 //! fill most holes. Cost: one pass over the covering samples per pixel (about 17 with
-//! the defaults), made eight pixels at a time where the CPU has AVX2 (`lanes.rs`, the
-//! same bits as one pixel at a time), then the fit per pixel: about 13 ms of one core
-//! per 640x480 frame on livingroom1, against 25 ms one pixel at a time (the two
-//! measured alternately, the machine's speed drifting over the hour).
+//! the defaults), then the fit; both eight pixels at a time where the CPU has AVX2
+//! (`lanes.rs`, the same bits as one pixel at a time): about 8 ms of one core per
+//! 640x480 frame on livingroom1, against 25 ms one pixel at a time (measured
+//! alternately, the machine's speed drifting over the hour).
 
 mod driver;
 pub mod fit;

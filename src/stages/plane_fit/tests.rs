@@ -320,6 +320,34 @@ fn same_bits_for_any_thread_count() {
     assert_eq!(one, bits(3));
 }
 
+/// Every output of a fit of `points` with `kernel`'s lanes (`None`: one pixel at a
+/// time), as bits.
+type FitBits = (Vec<[u32; 3]>, Vec<u32>, Vec<u8>, Vec<u8>);
+fn fit_bits(kernel: Option<Kernel>, points: &Vec3Image, p: &PlaneFitParams) -> FitBits {
+    let mut out = Outputs {
+        normals: Image::filled(W, H, Vec3::ONE),
+        depth: Image::filled(W, H, -1.0),
+        counts: Image::filled(W, H, 99),
+        codes: Image::filled(W, H, 99),
+    };
+    super::driver::plane_fit_normals_by(
+        kernel,
+        points,
+        &camera(),
+        p,
+        &mut out.normals,
+        &mut out.depth,
+        &mut out.counts,
+        &mut out.codes,
+    )
+    .unwrap();
+    let normals: Vec<[u32; 3]> = (out.normals.data.iter())
+        .map(|n| n.to_array().map(f32::to_bits))
+        .collect();
+    let depth: Vec<u32> = out.depth.data.iter().map(|z| z.to_bits()).collect();
+    (normals, depth, out.counts.data, out.codes.data)
+}
+
 #[test]
 fn lanes_give_the_bits_of_one_pixel_at_a_time() {
     // Noise, holes (NaN, and zero depth), and patches pushed 0.3 m back (depth steps
@@ -334,30 +362,7 @@ fn lanes_give_the_bits_of_one_pixel_at_a_time() {
             *p = Vec3::ZERO;
         }
     }
-    let bits = |kernel: Option<Kernel>, p: &PlaneFitParams| {
-        let mut out = Outputs {
-            normals: Image::filled(W, H, Vec3::ONE),
-            depth: Image::filled(W, H, -1.0),
-            counts: Image::filled(W, H, 99),
-            codes: Image::filled(W, H, 99),
-        };
-        super::driver::plane_fit_normals_by(
-            kernel,
-            &points,
-            &camera(),
-            p,
-            &mut out.normals,
-            &mut out.depth,
-            &mut out.counts,
-            &mut out.codes,
-        )
-        .unwrap();
-        let normals: Vec<[u32; 3]> = (out.normals.data.iter())
-            .map(|n| n.to_array().map(f32::to_bits))
-            .collect();
-        let depth: Vec<u32> = out.depth.data.iter().map(|z| z.to_bits()).collect();
-        (normals, depth, out.counts.data, out.codes.data)
-    };
+    let bits = |kernel: Option<Kernel>, p: &PlaneFitParams| fit_bits(kernel, &points, p);
     let mut invalid = 0;
     for (step, radius, k) in [(1, 2.5, 16), (2, 5.0, 8), (3, 7.0, 255), (4, 9.0, 3)] {
         let p = params(step, radius, k);
@@ -380,6 +385,54 @@ fn lanes_give_the_bits_of_one_pixel_at_a_time() {
         }
     }
     assert!(invalid > 20, "{invalid} pixels without a plane");
+}
+
+#[test]
+fn lanes_give_the_bits_of_one_pixel_at_a_time_in_every_case_of_the_fit() {
+    // Noisy planes whose normals lie nearest the y and the x axis (the fit's Y and X
+    // cases; the plane above is its Z case), and one with a patch stretched 1e21
+    // times along x, whose sums overflow (NaN determinants, which go to the scalar
+    // fit; here the lanes would agree with it anyway).
+    let noisy = |normal: Vec3, offset: f32| {
+        let mut points = plane_points(normal.normalize(), offset);
+        for (i, p) in points.data.iter_mut().enumerate() {
+            *p *= 1.0 + 0.0025 * Counter::new(&[9, i as u64]).next_gaussian() as f32;
+        }
+        points
+    };
+    let floor = noisy(Vec3::new(0.1, 1.0, 0.6), 1.0);
+    let wall = noisy(Vec3::new(1.0, 0.1, 0.6), 1.0);
+    let mut stretched = noisy_plane(false).0;
+    for (i, p) in stretched.data.iter_mut().enumerate() {
+        if i % W as usize >= 24 && i / W as usize >= 12 {
+            p.x *= 1e21;
+        }
+    }
+    let p = params(2, 5.0, 16);
+    for (name, points, axis) in [
+        ("floor", &floor, 1),
+        ("wall", &wall, 0),
+        ("stretched", &stretched, 2),
+    ] {
+        let reference = fit_bits(None, points, &p);
+        // Most normals lie nearest the case's axis.
+        let nearest = |n: &[u32; 3]| {
+            let a = n.map(|c| f32::from_bits(c).abs());
+            (0..3).max_by(|&i, &j| a[i].total_cmp(&a[j])).unwrap()
+        };
+        let valid = (reference.3.iter().zip(&reference.0)).filter(|&(&c, _)| c == 0);
+        let on_axis = valid.filter(|&(_, n)| nearest(n) == axis).count();
+        assert!(
+            on_axis > 600,
+            "{name}: {on_axis} normals nearest axis {axis}"
+        );
+        for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+            assert!(
+                fit_bits(Some(kernel), points, &p) == reference,
+                "{name}, {kernel:?}"
+            );
+        }
+    }
 }
 
 #[test]

@@ -249,15 +249,22 @@ fn fit_lanes<V: Lanes>(fit: &RowFit, sums: &LaneSums<V>, ray: [V; 2]) -> [(u32, 
         normal[1].to_array(),
         normal[2].to_array(),
     ];
-    let arrays = SumArrays::of(sums);
+    let count = sums.count.to_array();
+    // The sums lane by lane, for the scalar fit, only when a lane needs it.
+    let fallback = match numbers.iter().all(|m| m.to_bits() >> 31 == 1) {
+        true => None,
+        false => Some(SumArrays::of(sums)),
+    };
     std::array::from_fn(|l| {
         let set = |mask: &[f32; LANES]| mask[l].to_bits() >> 31 == 1;
-        let n = arrays.count[l] as u32;
+        let n = count[l] as u32;
         let result = if !set(&found) {
             return (0, Err(NormalCode::NoSample));
         } else if n < 3 {
             Err(NormalCode::TooFewSamples)
-        } else if !set(&numbers) {
+        } else if !set(&numbers)
+            && let Some(arrays) = &fallback
+        {
             let ray = Vec3::new(rays[0][l], rays[1][l], 1.0);
             plane_along(&arrays.scatter(l), fit, ray)
         } else if !set(&well) || !set(&finite) {

@@ -11,7 +11,7 @@
 //! A new renderer is one line in [`RENDERERS`]: a function that renders the shared
 //! floor scene under the environment `SKY` with given objects and lanes.
 
-use super::dir::{DirInputs, DirParams, sample_dir};
+use super::dir::{DirInputs, DirParams, DirRenderer, MeshPoints};
 use super::layers::IrradianceLayers;
 use super::path::tests::{
     SKY, SPHERE_CENTER, SPHERE_RADIUS, Scene, bits, camera, dome, floor_scene, pose, same_bits,
@@ -108,9 +108,9 @@ fn val(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> Irradiance
     out
 }
 
-/// `sample.dir`: the importance table of the constant environment (it has no SIMD
-/// path: `lanes` changes nothing).
-fn dir(scene: &Scene, objects: &VirtualScene, _lanes: simd::Kernel) -> IrradianceLayers {
+/// `sample.dir`: the importance table of the constant environment, real receivers
+/// gathered with `lanes`.
+fn dir(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> IrradianceLayers {
     let table = uniform_table(4096);
     let inputs = DirInputs {
         depth: &scene.depth,
@@ -122,7 +122,13 @@ fn dir(scene: &Scene, objects: &VirtualScene, _lanes: simd::Kernel) -> Irradianc
         objects,
         frame: 7,
     };
-    sample_dir(&inputs, &DirParams::default()).unwrap()
+    let params = DirParams::default();
+    let mesh = MeshPoints::new(objects, params.mesh_points as usize, params.seed);
+    let mut out = IrradianceLayers::new(scene.depth.width, scene.depth.height);
+    DirRenderer::with_kernel(Some(lanes))
+        .render(&inputs, &params, &mesh, &mut out)
+        .unwrap();
+    out
 }
 
 #[test]

@@ -269,7 +269,7 @@ pub struct MapView<'a> {
 }
 
 /// The largest tangent the slope bias takes (about 83 degrees of incidence).
-const MAX_SLOPE: f32 = 8.0;
+pub(super) const MAX_SLOPE: f32 = 8.0;
 
 impl MapView<'_> {
     /// 1 when nothing in the map lies in front of `p` (see the module docs), else 0;

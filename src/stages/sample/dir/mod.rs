@@ -59,6 +59,7 @@
 
 mod blur;
 mod bounce;
+mod gather_lanes;
 pub mod ism;
 pub mod points;
 mod render;

@@ -2,6 +2,7 @@
 //! interleaved gather and the blur (the order of paper 002 Fig. 2).
 
 use super::blur::blur_layers;
+use super::gather_lanes::gather_real_lanes;
 use super::ism::{Projection, fill_holes, frame_about, splat};
 use super::points::{MeshPoints, RealSurface};
 use super::shade::{Gathered, LightSet, Receiver, gather};
@@ -10,13 +11,15 @@ use super::{DirInputs, DirParams};
 use crate::graph::StageError;
 use crate::objects::VirtualHit;
 use crate::rng;
-use crate::stages::sample::layers::{IrradianceLayers, PixelLayers, check_sizes, shade_rows};
+use crate::simd::{Kernel, LANES};
+use crate::stages::sample::layers::{
+    IrradianceLayers, LayerRow, PixelLayers, check_sizes, shade_rows,
+};
 use glam::Vec3;
 use rayon::prelude::*;
 
 /// Shades frames with reusable buffers (real surface, VPLs, shadow maps, the
 /// un-blurred layers).
-#[derive(Default)]
 pub struct DirRenderer {
     pub(super) real: RealSurface,
     pub(super) vpls: Vec<Vpl>,
@@ -35,9 +38,41 @@ pub struct DirRenderer {
     raw: Option<IrradianceLayers>,
     /// The blur's pass along x.
     between: Option<IrradianceLayers>,
+    /// The lanes that gather eight real receivers at a time; `None`: one pixel at a
+    /// time (the same bits).
+    kernel: Option<Kernel>,
+}
+
+impl Default for DirRenderer {
+    fn default() -> Self {
+        // The lanes only where they are fast: the portable ones are slower than
+        // the one-pixel gather.
+        let kernel = (Kernel::detect() == Kernel::Avx2Fma).then_some(Kernel::Avx2Fma);
+        DirRenderer::with_kernel(kernel)
+    }
 }
 
 impl DirRenderer {
+    /// A renderer that gathers with `kernel`'s lanes, or one pixel at a time (`None`);
+    /// every choice gives the same bits.
+    pub fn with_kernel(kernel: Option<Kernel>) -> DirRenderer {
+        DirRenderer {
+            real: RealSurface::default(),
+            vpls: Vec::new(),
+            projections: Vec::new(),
+            rects: Vec::new(),
+            maps: Vec::new(),
+            map_size: 0,
+            candidates: Vec::new(),
+            reflectors: Vec::new(),
+            members: Vec::new(),
+            environment: Vec::new(),
+            raw: None,
+            between: None,
+            kernel,
+        }
+    }
+
     /// Renders one frame into `out` (the depth map's size): [`DirRenderer::lights`],
     /// then [`DirRenderer::shade`].
     pub fn render(
@@ -151,6 +186,7 @@ impl DirRenderer {
         );
         let (real, members) = (&self.real, &self.members);
         let scale = classes as f32;
+        let kernel = self.kernel;
         shade_rows(
             raw,
             w as usize,
@@ -159,41 +195,37 @@ impl DirRenderer {
             |_, y, mut row| {
                 // Class by class (the paper's split G-buffer): a class's VPLs and their
                 // maps stay in cache over its pixels.
-                let xs = (0..k).flat_map(|cx| (cx..w as usize).step_by(k));
-                for x in xs {
-                    let i = y * w as usize + x;
-                    let class = (y % k) * k + x % k;
-                    let (p, n) = (real.position[i], real.normal[i]);
-                    let real_here = n != Vec3::ZERO;
-                    let hit = primary_hit(inputs, x, y, real_here.then_some(p));
-                    let r =
-                        real_here.then(|| gather(&lights, &members[class], p, n, Receiver::Real));
-                    let out = match (&hit, r) {
-                        (Some(hit), r) => {
-                            let v = gather(
+                for cx in 0..k.min(w as usize) {
+                    let class = (y % k) * k + cx;
+                    let shading = Shading {
+                        inputs,
+                        lights: &lights,
+                        members: &members[class],
+                        real,
+                        scale,
+                    };
+                    let count = (w as usize - cx).div_ceil(k);
+                    let mut j = 0;
+                    if let Some(kernel) = kernel {
+                        // Eight pixels of the class at a time.
+                        while j + LANES <= count {
+                            let xs: [usize; LANES] = std::array::from_fn(|l| cx + (j + l) * k);
+                            let i = xs.map(|x| y * w as usize + x);
+                            let gathered = gather_real_lanes(
+                                kernel,
                                 &lights,
                                 &members[class],
-                                hit.position,
-                                hit.normal,
-                                Receiver::Virtual,
+                                &i.map(|i| real.position[i]),
+                                &i.map(|i| real.normal[i]),
                             );
-                            pixel(Some(hit), r.unwrap_or(NO_LIGHT), v, scale)
+                            for (x, g) in xs.into_iter().zip(gathered) {
+                                shading.pixel(x, y, Some(g), &mut row);
+                            }
+                            j += LANES;
                         }
-                        (None, Some(r)) => pixel(None, r, r, scale),
-                        (None, None) => {
-                            row.set(x, &NOTHING);
-                            continue;
-                        }
-                    };
-                    row.set(x, &out);
-                    if !real_here {
-                        // No real point behind the object: E_R has no estimate.
-                        row.e_r_dir[x] = Vec3::NAN;
-                        row.e_r_ind[x] = Vec3::NAN;
                     }
-                    if hit.is_none() {
-                        row.world_position[x] = p;
-                        row.world_normal[x] = n;
+                    for j in j..count {
+                        shading.pixel(cx + j * k, y, None, &mut row);
                     }
                 }
             },
@@ -335,6 +367,62 @@ fn primary_hit(inputs: &DirInputs, x: usize, y: usize, real: Option<Vec3>) -> Op
     inputs
         .objects
         .intersect(origin, dir, (t0 - 1e-4).max(0.0), t1 + 1e-4)
+}
+
+/// What shading a pixel of one interleaving class reads.
+struct Shading<'a> {
+    inputs: &'a DirInputs<'a>,
+    lights: &'a LightSet<'a>,
+    /// The class's VPLs.
+    members: &'a [u32],
+    real: &'a RealSurface,
+    /// The interleaving's scale (the number of classes).
+    scale: f32,
+}
+
+impl Shading<'_> {
+    /// Shades pixel (x, y) of the class into `row`; `gathered`: what its real point
+    /// gathers as a real receiver, when already known (from the lanes).
+    fn pixel(&self, x: usize, y: usize, gathered: Option<Gathered>, row: &mut LayerRow<'_>) {
+        let i = y * self.real_width() + x;
+        let (p, n) = (self.real.position[i], self.real.normal[i]);
+        let real_here = n != Vec3::ZERO;
+        let hit = primary_hit(self.inputs, x, y, real_here.then_some(p));
+        let r = real_here.then(|| {
+            gathered.unwrap_or_else(|| gather(self.lights, self.members, p, n, Receiver::Real))
+        });
+        let out = match (&hit, r) {
+            (Some(hit), r) => {
+                let v = gather(
+                    self.lights,
+                    self.members,
+                    hit.position,
+                    hit.normal,
+                    Receiver::Virtual,
+                );
+                pixel(Some(hit), r.unwrap_or(NO_LIGHT), v, self.scale)
+            }
+            (None, Some(r)) => pixel(None, r, r, self.scale),
+            (None, None) => {
+                row.set(x, &NOTHING);
+                return;
+            }
+        };
+        row.set(x, &out);
+        if !real_here {
+            // No real point behind the object: E_R has no estimate.
+            row.e_r_dir[x] = Vec3::NAN;
+            row.e_r_ind[x] = Vec3::NAN;
+        }
+        if hit.is_none() {
+            row.world_position[x] = p;
+            row.world_normal[x] = n;
+        }
+    }
+
+    fn real_width(&self) -> usize {
+        self.inputs.depth.width as usize
+    }
 }
 
 /// A pixel with neither a real point nor an object.

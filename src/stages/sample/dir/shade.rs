@@ -29,7 +29,7 @@ pub struct LightSet<'a> {
 impl LightSet<'_> {
     /// The real (`which` = 0) or virtual (1) map of slot `i`.
     #[inline]
-    fn map(&self, i: usize, which: usize) -> MapView<'_> {
+    pub(super) fn map(&self, i: usize, which: usize) -> MapView<'_> {
         let texels = self.size * self.size;
         let start = (2 * i + which) * texels;
         MapView {

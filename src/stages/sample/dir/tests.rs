@@ -6,6 +6,7 @@ use super::shade::{LightSet, Receiver, gather};
 use super::vpl::{Candidate, Emitter, Vpl, resample};
 use super::*;
 use crate::objects::Material;
+use crate::simd::Kernel;
 use crate::stages::sample::path::tests::{
     SPHERE_CENTER, SPHERE_RADIUS, Scene, assert_untouched_pixels_equal, bits, camera, floor_scene,
     pixel_of, pose, sphere, uniform_table,
@@ -477,4 +478,67 @@ fn a_second_bounce_keeps_light_that_met_an_object_out_of_the_real_solution() {
         bits(&out) != bits(&one_bounce),
         "the second bounce changed nothing"
     );
+}
+
+/// The lanes gather eight real receivers with the bits of the one-pixel gather, on
+/// either kernel: over a floor whose normals are tilted every which way (some away
+/// from the light, some past the horizon), with holes (no depth, NaN depth, no
+/// normal), under one and two bounces, two interleavings and a reach short enough
+/// that some surface VPLs light only part of a group of eight.
+#[test]
+fn the_lane_gather_gives_the_bits_of_the_one_pixel_gather() {
+    let mut scene = floor_scene();
+    for i in 0..scene.depth.data.len() {
+        let h = crate::rng::hash(&[0x1A_4E5, i as u64]);
+        let tilt = Vec3::new(
+            crate::rng::unit_f32(h) - 0.5,
+            crate::rng::unit_f32(h >> 21) - 0.5,
+            crate::rng::unit_f32(h >> 42) - 0.5,
+        );
+        let n = scene.normals.data[i];
+        if n != Vec3::ZERO {
+            scene.normals.data[i] = (n + 1.5 * tilt).normalize();
+        }
+        scene.radiance.data[i] *= 0.5 + tilt.abs();
+        match h % 37 {
+            0 => scene.depth.data[i] = 0.0,
+            1 => scene.depth.data[i] = f32::NAN,
+            2 => scene.normals.data[i] = Vec3::ZERO,
+            _ => {}
+        }
+    }
+    let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, RED);
+    let table = uniform_table(4096);
+    let mesh_params = DirParams::default();
+    let mesh = MeshPoints::new(&objects, mesh_params.mesh_points as usize, 1);
+    let settings = [
+        DirParams::default(),
+        DirParams {
+            bounces: 2,
+            interleave: 3,
+            max_distance: 0.6,
+            ..DirParams::default()
+        },
+    ];
+    for params in settings {
+        let render = |kernel| {
+            let mut out = IrradianceLayers::new(scene.depth.width, scene.depth.height);
+            DirRenderer::with_kernel(kernel)
+                .render(
+                    &inputs(&scene, &objects, &table, 3),
+                    &params,
+                    &mesh,
+                    &mut out,
+                )
+                .unwrap();
+            bits(&out)
+        };
+        let one_pixel = render(None);
+        for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+            assert!(
+                render(Some(kernel)) == one_pixel,
+                "{kernel:?} lanes differ from one pixel at a time ({params:?})"
+            );
+        }
+    }
 }

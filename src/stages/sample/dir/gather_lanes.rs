@@ -1,0 +1,292 @@
+//! [`gather`] for eight real receivers at a time: the pixels of one interleaving class
+//! in a row share their VPLs, so each VPL's terms (its transfer, the projection into
+//! its two shadow maps, the lookups and the depth tests) run for eight pixels at once,
+//! one pixel per lane. Each lane follows the scalar [`gather`] operation for operation
+//! (the same products, sums and comparisons in the same order, no fused multiply-add),
+//! so a pixel gets the same bits either way; the tests check that.
+
+use super::ism::{MAX_SLOPE, MapView, Projection};
+use super::shade::{Gathered, LightSet};
+use super::vpl::Emitter;
+use crate::simd::{Kernel, LANES, Lanes, Portable, dot3};
+use glam::Vec3;
+use std::f32::consts::FRAC_1_PI;
+
+#[cfg(doc)]
+use super::shade::gather;
+
+/// [`gather`] with [`super::shade::Receiver::Real`] at eight points (`positions`,
+/// unit `normals`) with `kernel`'s lanes. A lane whose point is not finite gathers
+/// garbage that the caller drops, as the scalar gather would.
+pub(super) fn gather_real_lanes(
+    kernel: Kernel,
+    lights: &LightSet,
+    members: &[u32],
+    positions: &[Vec3; LANES],
+    normals: &[Vec3; LANES],
+) -> [Gathered; LANES] {
+    match kernel.available() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Kernel::available` says the CPU has AVX2 and FMA.
+        Kernel::Avx2Fma => unsafe { gather_real_avx2(lights, members, positions, normals) },
+        _ => gather_real_with::<Portable>(lights, members, positions, normals),
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn gather_real_avx2(
+    lights: &LightSet,
+    members: &[u32],
+    positions: &[Vec3; LANES],
+    normals: &[Vec3; LANES],
+) -> [Gathered; LANES] {
+    gather_real_with::<crate::simd::Avx2>(lights, members, positions, normals)
+}
+
+/// Eight points as three planes of lanes.
+#[inline(always)]
+fn planes<V: Lanes>(points: &[Vec3; LANES]) -> [V; 3] {
+    [
+        V::from_array(points.map(|p| p.x)),
+        V::from_array(points.map(|p| p.y)),
+        V::from_array(points.map(|p| p.z)),
+    ]
+}
+
+#[inline(always)]
+fn splat3<V: Lanes>(v: Vec3) -> [V; 3] {
+    [V::splat(v.x), V::splat(v.y), V::splat(v.z)]
+}
+
+#[inline(always)]
+fn sub3<V: Lanes>(a: [V; 3], b: [V; 3]) -> [V; 3] {
+    [a[0].sub(b[0]), a[1].sub(b[1]), a[2].sub(b[2])]
+}
+
+/// `sum + light * factor` where `active`, else `sum` (the scalar `+=` of a Vec3).
+#[inline(always)]
+fn add_where<V: Lanes>(sum: &mut [V; 3], active: V, light: [V; 3], factor: V) {
+    for c in 0..3 {
+        sum[c] = V::select(active, sum[c].add(light[c].mul(factor)), sum[c]);
+    }
+}
+
+/// Eight points projected into a map ([`Projection::project`] per lane): the mask of
+/// those that fall in it, their texels' columns and rows (as floats), their depths.
+struct Projected<V> {
+    inside: V,
+    x: V,
+    y: V,
+    depth: V,
+}
+
+#[inline(always)]
+fn project<V: Lanes>(projection: &Projection, p: [V; 3], size: usize) -> Projected<V> {
+    let zero = V::splat(0.0);
+    let (inside, u, v, depth) = match *projection {
+        Projection::Paraboloid { origin, frame } => {
+            let d = sub3(p, splat3(origin));
+            let r = dot3(d, d).sqrt();
+            let z = dot3(d, splat3(frame[2]));
+            // r NaN, r <= 0 or z <= 0: outside.
+            let inside = r.gt(zero).and(z.gt(zero));
+            let k = V::splat(1.0).div(r.add(z));
+            let u = dot3(d, splat3(frame[0])).mul(k);
+            let v = dot3(d, splat3(frame[1])).mul(k);
+            (inside, u, v, r)
+        }
+        Projection::Orthographic {
+            center,
+            radius,
+            frame,
+        } => {
+            let d = sub3(p, splat3(center));
+            let depth = V::splat(radius).sub(dot3(d, splat3(frame[2])));
+            // depth NaN or < 0: outside.
+            let inside = depth.ge(zero);
+            let k = V::splat(1.0 / radius);
+            let u = dot3(d, splat3(frame[0])).mul(k);
+            let v = dot3(d, splat3(frame[1])).mul(k);
+            (inside, u, v, depth)
+        }
+    };
+    let (half, s) = (V::splat(0.5), V::splat(size as f32));
+    let u = u.mul(half).add(half).mul(s);
+    let v = v.mul(half).add(half).mul(s);
+    let inside = inside
+        .and(u.ge(zero))
+        .and(v.ge(zero))
+        .and(u.lt(s))
+        .and(v.lt(s));
+    Projected {
+        inside,
+        x: u.trunc(),
+        y: v.trunc(),
+        depth,
+    }
+}
+
+/// [`MapView::test`] per lane, of the lanes in `active`: visibility (1 or 0) and the
+/// occluder's depth difference (INFINITY where visible).
+#[inline(always)]
+fn test<V: Lanes>(map: &MapView, at: &Projected<V>, cos: V, active: V) -> (V, V) {
+    let (one, infinity) = (V::splat(1.0), V::splat(f32::INFINITY));
+    let [x0, y0, x1, y1] = map.rect.map(f32::from).map(V::splat);
+    let hit = active
+        .and(at.inside)
+        .and(at.x.ge(x0))
+        .and(at.x.lt(x1))
+        .and(at.y.ge(y0))
+        .and(at.y.lt(y1));
+    if !hit.any() {
+        return (one, infinity);
+    }
+    let size = map.size as f32;
+    let index = V::select(hit, at.y.mul(V::splat(size)).add(at.x), V::splat(0.0));
+    // SAFETY: a hit lane's texel lies in the map (0 <= x, y < size); the others read
+    // texel 0.
+    let stored = unsafe { V::gather_at(map.depth.as_ptr(), index) };
+    let cos = cos.max(V::splat(1e-3)).min(one);
+    let tan = one
+        .sub(cos.mul(cos))
+        .sqrt()
+        .div(cos)
+        .min(V::splat(MAX_SLOPE));
+    let texel = match *map.projection {
+        Projection::Paraboloid { .. } => at.depth.mul(V::splat(4.0)).div(V::splat(size)),
+        Projection::Orthographic { radius, .. } => V::splat(2.0 * radius / size),
+    };
+    let bias = V::splat(map.bias).add(V::splat(map.slope).mul(tan).mul(texel));
+    let hidden = hit.and(at.depth.gt(stored.add(bias)));
+    (
+        V::select(hidden, V::splat(0.0), one),
+        V::select(hidden, at.depth.sub(stored), infinity),
+    )
+}
+
+#[inline(always)]
+fn gather_real_with<V: Lanes>(
+    lights: &LightSet,
+    members: &[u32],
+    positions: &[Vec3; LANES],
+    normals: &[Vec3; LANES],
+) -> [Gathered; LANES] {
+    let (zero, infinity) = (V::splat(0.0), V::splat(f32::INFINITY));
+    let p = planes::<V>(positions);
+    let n = planes::<V>(normals);
+    let reach_squared = V::splat(lights.reach * lights.reach);
+    let mut r_dir = [zero; 3];
+    let mut r_ind = [zero; 3];
+    let mut rv_dir = [zero; 3];
+    let mut rv_ind = [zero; 3];
+    let mut touched = zero;
+    let mut direct_min = infinity;
+    let mut indirect_min = infinity;
+    for &i in members {
+        let vpl = &lights.vpls[i as usize];
+        let slot = vpl.slot as usize;
+        // A real receiver: every VPL of a real path counts for L_r, every one but the
+        // ir = 1 kind for L_rv.
+        let (for_real, for_combined) = (vpl.counts_for_real(), vpl.counts_for_combined());
+        if !for_real && !for_combined {
+            continue;
+        }
+        let (transfer, distance, direct, cos, reached) = match vpl.emitter {
+            Emitter::Direction(d) => {
+                let cos = dot3(n, splat3(d)).max(zero);
+                (cos, zero, true, cos, V::splat(f32::from_bits(!0)))
+            }
+            Emitter::Surface {
+                position: origin,
+                normal: n_vpl,
+            } => {
+                let to = sub3(p, splat3(origin));
+                let d2 = dot3(to, to);
+                let d = d2.sqrt();
+                let cos_vpl = dot3(splat3(n_vpl), to).div(d);
+                let cos_p = V::splat(-1.0).mul(dot3(n, to)).div(d);
+                let floor = lights.clamp_squared.max(vpl.patch * FRAC_1_PI);
+                let transfer = cos_vpl.mul(cos_p).div(d2.max(V::splat(floor)));
+                // 0 < d2 <= reach^2 (not NaN), both cosines positive.
+                let reached = d2
+                    .gt(zero)
+                    .and_not(d2.gt(reach_squared))
+                    .and(cos_vpl.gt(zero))
+                    .and(cos_p.gt(zero));
+                (transfer, d, false, cos_p, reached)
+            }
+        };
+        // A NaN or non-positive transfer adds nothing.
+        let active = reached.and(transfer.gt(zero));
+        if !active.any() {
+            continue;
+        }
+        let (real_map, virtual_map) = (lights.map(slot, 0), lights.map(slot, 1));
+        let projected = project(real_map.projection, p, lights.size);
+        let (st_r, behind_r) = test(&real_map, &projected, cos, active);
+        let (st_v, behind_v) = if !for_combined || virtual_map.is_empty() {
+            (V::splat(1.0), infinity)
+        } else if virtual_map.projection == real_map.projection {
+            // A surface VPL's two maps share their paraboloid.
+            test(&virtual_map, &projected, cos, active)
+        } else {
+            let projected = project(virtual_map.projection, p, lights.size);
+            test(&virtual_map, &projected, cos, active)
+        };
+        let light = [
+            V::splat(vpl.power.x).mul(transfer),
+            V::splat(vpl.power.y).mul(transfer),
+            V::splat(vpl.power.z).mul(transfer),
+        ];
+        let st_rv = st_r.min(st_v);
+        touched = if for_real != for_combined {
+            touched.or(active)
+        } else {
+            touched.or(active.and(st_v.lt(st_r)))
+        };
+        let (r, rv) = if direct {
+            (&mut r_dir, &mut rv_dir)
+        } else {
+            (&mut r_ind, &mut rv_ind)
+        };
+        if for_real {
+            add_where(r, active, light, st_r);
+        }
+        if for_combined {
+            add_where(rv, active, light, st_rv);
+        }
+        if direct {
+            let behind = behind_r.min(behind_v);
+            let counts = active.and(behind.lt(infinity));
+            let nearest = direct_min.min(behind.div(transfer.max(V::splat(1e-3))));
+            direct_min = V::select(counts, nearest, direct_min);
+        } else {
+            let counts = active.and(st_rv.gt(zero).or(st_r.gt(zero)));
+            indirect_min = V::select(counts, indirect_min.min(distance), indirect_min);
+        }
+    }
+    // Lane results as arrays (no lane operations in closures: see `crate::simd`).
+    let mut sums = [[[0.0; LANES]; 3]; 4];
+    for (sum, lanes) in sums.iter_mut().zip([r_dir, r_ind, rv_dir, rv_ind]) {
+        for c in 0..3 {
+            sum[c] = lanes[c].to_array();
+        }
+    }
+    let [r_dir, r_ind, rv_dir, rv_ind] = sums;
+    let vec3 = |v: &[[f32; LANES]; 3], l: usize| Vec3::new(v[0][l], v[1][l], v[2][l]);
+    let (touched, direct_min, indirect_min) = (
+        touched.to_array(),
+        direct_min.to_array(),
+        indirect_min.to_array(),
+    );
+    std::array::from_fn(|l| Gathered {
+        r_dir: vec3(&r_dir, l),
+        r_ind: vec3(&r_ind, l),
+        rv_dir: vec3(&rv_dir, l),
+        rv_ind: vec3(&rv_ind, l),
+        touched: touched[l].to_bits() != 0,
+        direct_min_distance: direct_min[l],
+        indirect_min_distance: indirect_min[l],
+    })
+}

@@ -366,6 +366,7 @@ pub(crate) use avx2::Avx2;
 
 #[cfg(target_arch = "x86_64")]
 mod avx2;
+pub mod xyz;
 
 #[cfg(test)]
 mod tests;

@@ -12,40 +12,8 @@ use super::planes::{
     B2_IND, B2X_DIR, B2Y_DIR, BandwidthSettings, DIR, IND, MISSING_POSITION, PX, PY, PZ,
     PrepareInputs, RowLayout,
 };
+use crate::simd::xyz::{Xyz, finite, finite_xyz, load_xyz, sub_xyz as sub};
 use crate::simd::{LANES, Lanes, dot3};
-use glam::Vec3;
-
-/// Three coordinate planes of eight pixels.
-type Xyz<V> = [V; 3];
-
-/// Pixels `i..i + LANES` of `data` as three planes: three vector loads and
-/// [`Lanes::deinterleave3`] (three gathers per call took a quarter of the pass).
-#[inline(always)]
-fn load_xyz<V: Lanes>(data: &[Vec3], i: usize) -> Xyz<V> {
-    let pixels = &data[i..i + LANES];
-    let floats = pixels.as_ptr().cast::<f32>();
-    // SAFETY: the LANES pixels are 3 LANES floats (Vec3 is #[repr(C)], three f32).
-    let triples = unsafe {
-        [
-            V::load(floats),
-            V::load(floats.add(LANES)),
-            V::load(floats.add(2 * LANES)),
-        ]
-    };
-    V::deinterleave3(triples)
-}
-
-/// Mask of the lanes where `v` is finite (v - v is 0 there, NaN elsewhere).
-#[inline(always)]
-fn finite<V: Lanes>(v: V) -> V {
-    v.sub(v).ge(V::splat(0.0))
-}
-
-/// Mask of the lanes where all three coordinates are finite.
-#[inline(always)]
-fn finite_xyz<V: Lanes>(v: &Xyz<V>) -> V {
-    finite(v[0]).and(finite(v[1])).and(finite(v[2]))
-}
 
 /// Mask of the lanes where `v` is +0 or -0.
 #[inline(always)]
@@ -54,13 +22,6 @@ fn is_zero<V: Lanes>(v: V) -> V {
     v.ge(zero).and(zero.ge(v))
 }
 
-/// `a - b` per coordinate.
-#[inline(always)]
-fn sub<V: Lanes>(a: &Xyz<V>, b: &Xyz<V>) -> Xyz<V> {
-    [a[0].sub(b[0]), a[1].sub(b[1]), a[2].sub(b[2])]
-}
-
-/// `v.normalize()` as glam computes it: v * (1 / sqrt(v . v)).
 #[inline(always)]
 fn normalize<V: Lanes>(v: &Xyz<V>) -> Xyz<V> {
     let recip = V::splat(1.0).div(dot3(*v, *v).sqrt());
@@ -251,6 +212,7 @@ mod tests {
     use crate::rng::{hash, unit_f32};
     use crate::simd::Kernel;
     use crate::simd::Portable;
+    use glam::Vec3;
 
     fn noise(seed: u64, i: usize) -> f32 {
         unit_f32(hash(&[seed, i as u64]))

@@ -8,6 +8,7 @@
 use super::ism::{MAX_SLOPE, MapView, Projection};
 use super::shade::{Gathered, LightSet};
 use super::vpl::Emitter;
+use crate::simd::xyz::{splat_xyz, sub_xyz};
 use crate::simd::{Kernel, LANES, Lanes, Portable, dot3};
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
@@ -54,16 +55,6 @@ fn planes<V: Lanes>(points: &[Vec3; LANES]) -> [V; 3] {
     ]
 }
 
-#[inline(always)]
-fn splat3<V: Lanes>(v: Vec3) -> [V; 3] {
-    [V::splat(v.x), V::splat(v.y), V::splat(v.z)]
-}
-
-#[inline(always)]
-fn sub3<V: Lanes>(a: [V; 3], b: [V; 3]) -> [V; 3] {
-    [a[0].sub(b[0]), a[1].sub(b[1]), a[2].sub(b[2])]
-}
-
 /// `sum + light * factor` where `active`, else `sum` (the scalar `+=` of a Vec3).
 #[inline(always)]
 fn add_where<V: Lanes>(sum: &mut [V; 3], active: V, light: [V; 3], factor: V) {
@@ -86,14 +77,14 @@ fn project<V: Lanes>(projection: &Projection, p: [V; 3], size: usize) -> Project
     let zero = V::splat(0.0);
     let (inside, u, v, depth) = match *projection {
         Projection::Paraboloid { origin, frame } => {
-            let d = sub3(p, splat3(origin));
+            let d = sub_xyz(&p, &splat_xyz(origin));
             let r = dot3(d, d).sqrt();
-            let z = dot3(d, splat3(frame[2]));
+            let z = dot3(d, splat_xyz(frame[2]));
             // r NaN, r <= 0 or z <= 0: outside.
             let inside = r.gt(zero).and(z.gt(zero));
             let k = V::splat(1.0).div(r.add(z));
-            let u = dot3(d, splat3(frame[0])).mul(k);
-            let v = dot3(d, splat3(frame[1])).mul(k);
+            let u = dot3(d, splat_xyz(frame[0])).mul(k);
+            let v = dot3(d, splat_xyz(frame[1])).mul(k);
             (inside, u, v, r)
         }
         Projection::Orthographic {
@@ -101,13 +92,13 @@ fn project<V: Lanes>(projection: &Projection, p: [V; 3], size: usize) -> Project
             radius,
             frame,
         } => {
-            let d = sub3(p, splat3(center));
-            let depth = V::splat(radius).sub(dot3(d, splat3(frame[2])));
+            let d = sub_xyz(&p, &splat_xyz(center));
+            let depth = V::splat(radius).sub(dot3(d, splat_xyz(frame[2])));
             // depth NaN or < 0: outside.
             let inside = depth.ge(zero);
             let k = V::splat(1.0 / radius);
-            let u = dot3(d, splat3(frame[0])).mul(k);
-            let v = dot3(d, splat3(frame[1])).mul(k);
+            let u = dot3(d, splat_xyz(frame[0])).mul(k);
+            let v = dot3(d, splat_xyz(frame[1])).mul(k);
             (inside, u, v, depth)
         }
     };
@@ -194,17 +185,17 @@ fn gather_real_with<V: Lanes>(
         }
         let (transfer, distance, direct, cos, reached) = match vpl.emitter {
             Emitter::Direction(d) => {
-                let cos = dot3(n, splat3(d)).max(zero);
+                let cos = dot3(n, splat_xyz(d)).max(zero);
                 (cos, zero, true, cos, V::splat(f32::from_bits(!0)))
             }
             Emitter::Surface {
                 position: origin,
                 normal: n_vpl,
             } => {
-                let to = sub3(p, splat3(origin));
+                let to = sub_xyz(&p, &splat_xyz(origin));
                 let d2 = dot3(to, to);
                 let d = d2.sqrt();
-                let cos_vpl = dot3(splat3(n_vpl), to).div(d);
+                let cos_vpl = dot3(splat_xyz(n_vpl), to).div(d);
                 let cos_p = V::splat(-1.0).mul(dot3(n, to)).div(d);
                 let floor = lights.clamp_squared.max(vpl.patch * FRAC_1_PI);
                 let transfer = cos_vpl.mul(cos_p).div(d2.max(V::splat(floor)));

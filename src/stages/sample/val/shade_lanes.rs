@@ -10,6 +10,7 @@
 
 use super::shade::{Biases, Maps, PreparedLight, Shaded};
 use super::shadow::MAX_SHADOW_MAP_SIZE;
+use crate::simd::xyz::splat_xyz;
 use crate::simd::{LANES, Lanes, dot3};
 use glam::Vec3;
 
@@ -42,11 +43,6 @@ fn sub_splat<V: Lanes>(a: [V; 3], b: Vec3) -> [V; 3] {
         a[1].sub(V::splat(b.y)),
         a[2].sub(V::splat(b.z)),
     ]
-}
-
-#[inline(always)]
-fn splat3<V: Lanes>(v: Vec3) -> [V; 3] {
-    [V::splat(v.x), V::splat(v.y), V::splat(v.z)]
 }
 
 /// The [`Shaded`] values of eight points, one per lane, as arrays: a pixel reads its
@@ -95,7 +91,7 @@ pub(crate) fn shade_points<V: Lanes>(
         let v = sub_from(light.position.into(), x);
         let cos_receiver = dot3(n, v);
         // -(n_j . v): negating the normal first gives the same bits.
-        let cos_light = dot3(splat3(-Vec3::from(light.normal)), v);
+        let cos_light = dot3(splat_xyz(-Vec3::from(light.normal)), v);
         let lit = cos_receiver
             .gt(zero)
             .and(cos_light.gt(zero))
@@ -117,9 +113,9 @@ pub(crate) fn shade_points<V: Lanes>(
         let frustum = light.frustum_to_look_up(j, lookup);
         if let Some(f) = frustum {
             let d = sub_splat(x, f.origin.into());
-            let lx = dot3(d, splat3(f.right.into()));
-            let ly = dot3(d, splat3(f.up.into()));
-            let lz = dot3(d, splat3(f.axis.into()));
+            let lx = dot3(d, splat_xyz(f.right.into()));
+            let ly = dot3(d, splat_xyz(f.up.into()));
+            let lz = dot3(d, splat_xyz(f.axis.into()));
             // `ShadowFrustum::texel`.
             let k = V::splat(f.scale).div(lz);
             let half = V::splat(f.size as f32 * 0.5);

@@ -11,82 +11,110 @@
 //! same values for both, so its E_RV equals its E_R bit for bit (it is computed once and
 //! copied); `touched` is set wherever that is not so.
 
+use super::blur_lanes::{Taps, blur_span};
 use super::points::RealSurface;
 use super::shade::same_surface;
+use crate::simd::Kernel;
 use crate::stages::sample::layers::{IrradianceLayers, LayerRow, shade_rows};
 use glam::Vec3;
 
 /// Metres a neighbour may lie off a pixel's tangent plane and still be averaged in.
 pub const PLANE_TOLERANCE: f32 = 0.03;
 
+/// The layers a pass reads: `input`'s light layers, `geometry`'s visible surface and
+/// mask (the raw layers), and the real surface.
+pub(super) struct PassInputs<'a> {
+    pub geometry: &'a IrradianceLayers,
+    pub input: &'a IrradianceLayers,
+    pub real: &'a RealSurface,
+}
+
 /// Blurs `raw` (the interleaved estimates, `k` x `k` classes) into `out`, through
-/// `between` (the pass along x), all of one size.
+/// `between` (the pass along x), all of one size; with `kernel`'s lanes where all of
+/// a pixel's taps lie inside the image (the same bits), else one pixel at a time.
 pub fn blur_layers(
     raw: &IrradianceLayers,
     real: &RealSurface,
     k: usize,
+    kernel: Option<Kernel>,
     between: &mut IrradianceLayers,
     out: &mut IrradianceLayers,
 ) {
     let (w, h) = (raw.mask.width as usize, raw.mask.height as usize);
     let (lo, hi) = ((k.max(1) - 1) / 2, k.max(1) / 2);
+    let along_x = PassInputs {
+        geometry: raw,
+        input: raw,
+        real,
+    };
     shade_rows(
         between,
         w,
         1,
         || (),
-        |_, y, row| pass_row(raw, real, y, w, lo, hi, row),
+        |_, y, mut row| {
+            let taps = Taps {
+                start: y * w,
+                stride: 1,
+                lo,
+                hi,
+            };
+            // Pixels lo..w - hi have every tap inside.
+            let mut lanes_end = lo.min(w);
+            if let Some(kernel) = kernel
+                && w > lo + hi
+            {
+                lanes_end = blur_span(kernel, &along_x, taps, lo..w - hi, &mut row);
+            }
+            for x in (0..lo.min(w)).chain(lanes_end..w) {
+                let (first, last) = (x.saturating_sub(lo), (x + hi).min(w - 1));
+                let taps = y * w + first..y * w + last + 1;
+                put_light(&mut row, x, &blur_pixel(&along_x, y * w + x, taps));
+            }
+        },
     );
-    let between = &*between;
+    let along_y = PassInputs {
+        geometry: raw,
+        input: between,
+        real,
+    };
     shade_rows(
         out,
         w,
         1,
         || (),
-        |_, y, row| {
-            // Along y: pixel x of row y steps by w, within the image's height.
-            pass_column(raw, between, real, y, w, h, lo, hi, row)
+        |_, y, mut row| {
+            let (first, last) = (y.saturating_sub(lo), (y + hi).min(h - 1));
+            let start = y * w;
+            // The surface and mask of the raw layers, the light blurred.
+            row.mask.copy_from_slice(&raw.mask.data[start..start + w]);
+            row.k_v.copy_from_slice(&raw.k_v.data[start..start + w]);
+            row.exponent
+                .copy_from_slice(&raw.exponent.data[start..start + w]);
+            row.world_position
+                .copy_from_slice(&raw.world_position.data[start..start + w]);
+            row.world_normal
+                .copy_from_slice(&raw.world_normal.data[start..start + w]);
+            let mut lanes_end = 0;
+            if let Some(kernel) = kernel
+                && y >= lo
+                && y + hi < h
+            {
+                let taps = Taps {
+                    start,
+                    stride: w,
+                    lo,
+                    hi,
+                };
+                lanes_end = blur_span(kernel, &along_y, taps, 0..w, &mut row);
+            }
+            for x in lanes_end..w {
+                // Along y: pixel x of row y steps by w, within the image's height.
+                let taps = (first..=last).map(|qy| qy * w + x);
+                put_light(&mut row, x, &blur_pixel(&along_y, start + x, taps));
+            }
         },
     );
-}
-
-/// One row of the pass along y: each pixel's taps are the pixels above and below.
-#[allow(clippy::too_many_arguments)]
-fn pass_column(
-    geometry: &IrradianceLayers,
-    input: &IrradianceLayers,
-    real: &RealSurface,
-    y: usize,
-    w: usize,
-    h: usize,
-    lo: usize,
-    hi: usize,
-    mut row: LayerRow<'_>,
-) {
-    let (first, last) = (y.saturating_sub(lo), (y + hi).min(h - 1));
-    for x in 0..w {
-        let taps = (first..=last).map(|qy| qy * w + x);
-        let px = blur_pixel(geometry, input, real, y * w + x, taps);
-        put(&mut row, x, geometry, y * w + x, px);
-    }
-}
-
-/// One row of the pass along x, from the raw layers.
-fn pass_row(
-    raw: &IrradianceLayers,
-    real: &RealSurface,
-    y: usize,
-    w: usize,
-    lo: usize,
-    hi: usize,
-    mut row: LayerRow<'_>,
-) {
-    let start = y * w;
-    for x in 0..w {
-        let (first, last) = (x.saturating_sub(lo), (x + hi).min(w - 1));
-        let px = blur_pixel(raw, raw, real, start + x, start + first..start + last + 1);
-        put_light(&mut row, x, &px);
-    }
 }
 
 /// A blurred pixel.
@@ -100,15 +128,9 @@ struct Blurred {
     indirect_min: f32,
 }
 
-/// Pixel `i` of `input` averaged over `taps` (see the module docs); `geometry` holds
-/// the visible surface and the mask (the raw layers).
-fn blur_pixel(
-    geometry: &IrradianceLayers,
-    input: &IrradianceLayers,
-    real: &RealSurface,
-    i: usize,
-    taps: impl Iterator<Item = usize> + Clone,
-) -> Blurred {
+/// Pixel `i` of `pass.input` averaged over `taps` (see the module docs).
+fn blur_pixel(pass: &PassInputs, i: usize, taps: impl Iterator<Item = usize> + Clone) -> Blurred {
+    let (geometry, input, real) = (pass.geometry, pass.input, pass.real);
     let mask = &geometry.mask.data;
     let touched = taps
         .clone()
@@ -190,8 +212,8 @@ fn blur_pixel(
     }
 }
 
-/// Writes the blurred values of pixel `x` of `row` (the pass along x: the surface
-/// layers are read from the raw layers, not from its output).
+/// Writes the blurred values of pixel `x` of `row` (its surface and mask are copied
+/// apart).
 fn put_light(row: &mut LayerRow<'_>, x: usize, px: &Blurred) {
     row.e_r_dir[x] = px.e_r_dir;
     row.e_r_ind[x] = px.e_r_ind;
@@ -200,15 +222,4 @@ fn put_light(row: &mut LayerRow<'_>, x: usize, px: &Blurred) {
     row.direct_min_distance[x] = px.direct_min;
     row.indirect_min_distance[x] = px.indirect_min;
     row.touched[x] = px.touched as u8;
-}
-
-/// Writes pixel `x` of `row`: the blurred values, and pixel `i`'s surface and mask
-/// from `geometry`.
-fn put(row: &mut LayerRow<'_>, x: usize, geometry: &IrradianceLayers, i: usize, px: Blurred) {
-    put_light(row, x, &px);
-    row.mask[x] = geometry.mask.data[i];
-    row.k_v[x] = geometry.k_v.data[i];
-    row.exponent[x] = geometry.exponent.data[i];
-    row.world_position[x] = geometry.world_position.data[i];
-    row.world_normal[x] = geometry.world_normal.data[i];
 }

@@ -58,6 +58,7 @@
 //! frame, index), so the layers are the same at any thread count.
 
 mod blur;
+mod blur_lanes;
 mod bounce;
 mod gather_lanes;
 pub mod ism;

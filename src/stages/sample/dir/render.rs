@@ -234,7 +234,7 @@ impl DirRenderer {
             Some(between) if between.size() == Some((w, h)) => between,
             slot => slot.insert(IrradianceLayers::new(w, h)),
         };
-        blur_layers(raw, &self.real, k, between, out);
+        blur_layers(raw, &self.real, k, self.kernel, between, out);
     }
 
     /// Splats and fills the maps of slots `first..`: `points_per_vpl` real points into

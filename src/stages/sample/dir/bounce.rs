@@ -21,6 +21,7 @@
 //! first takes the remainder), and within a bounce `virtual_share` of them go to the
 //! meshes' candidates.
 
+use super::gather_lanes::gather_each;
 use super::points::MeshPoints;
 use super::render::{DirRenderer, light_set};
 use super::shade::{Receiver, gather};
@@ -177,30 +178,46 @@ impl DirRenderer {
             params,
         );
         let cam = inputs.camera;
-        let (real, environment) = (&self.real, &self.environment[..]);
+        let (real, environment, kernel) = (&self.real, &self.environment[..], self.kernel);
         let found: Vec<(Candidate, Reflector)> = (0..h.div_ceil(g))
             .into_par_iter()
             .flat_map_iter(|cy| {
-                let lights = &lights;
-                (0..w.div_ceil(g)).filter_map(move |cx| {
-                    let hsh = rng::hash(&[key, 0xCA4D, cx as u64, cy as u64]);
-                    // The cell, cut at the image's edge.
-                    let (gw, gh) = (g.min(w - cx * g), g.min(h - cy * g));
-                    let x = cx * g + ((rng::unit_f32(hsh) * gw as f32) as usize).min(gw - 1);
-                    let y = cy * g
-                        + ((rng::unit_f32(rng::mix64(hsh)) * gh as f32) as usize).min(gh - 1);
-                    let i = y * w + x;
-                    let (p, n) = (real.position[i], real.normal[i]);
+                // The row's cells with a usable pixel, and the area each stands for.
+                let cells: Vec<(usize, f32)> = (0..w.div_ceil(g))
+                    .filter_map(|cx| {
+                        let hsh = rng::hash(&[key, 0xCA4D, cx as u64, cy as u64]);
+                        // The cell, cut at the image's edge.
+                        let (gw, gh) = (g.min(w - cx * g), g.min(h - cy * g));
+                        let x = cx * g + ((rng::unit_f32(hsh) * gw as f32) as usize).min(gw - 1);
+                        let y = cy * g
+                            + ((rng::unit_f32(rng::mix64(hsh)) * gh as f32) as usize).min(gh - 1);
+                        let i = y * w + x;
+                        let (p, n) = (real.position[i], real.normal[i]);
+                        if n == Vec3::ZERO || !inputs.radiance.data[i].is_finite() {
+                            return None;
+                        }
+                        let z = inputs.depth.data[i];
+                        let view = (p - Vec3::from(inputs.camera_to_world.translation))
+                            .normalize_or_zero();
+                        let area = (gw * gh) as f32 * z * z
+                            / (cam.fx * cam.fy)
+                            / n.dot(view).abs().max(0.2);
+                        Some((i, area))
+                    })
+                    .collect();
+                let mut lit = Vec::with_capacity(cells.len());
+                let point = |&(i, _): &(usize, f32)| Some((real.position[i], real.normal[i]));
+                gather_each(
+                    kernel,
+                    &lights,
+                    environment,
+                    Receiver::Real,
+                    &cells,
+                    point,
+                    |g| lit.push(g.expect("every cell's point gathers")),
+                );
+                cells.into_iter().zip(lit).map(|((i, area), lit)| {
                     let radiance = inputs.radiance.data[i];
-                    if n == Vec3::ZERO || !radiance.is_finite() {
-                        return None;
-                    }
-                    let z = inputs.depth.data[i];
-                    let view =
-                        (p - Vec3::from(inputs.camera_to_world.translation)).normalize_or_zero();
-                    let area =
-                        (gw * gh) as f32 * z * z / (cam.fx * cam.fy) / n.dot(view).abs().max(0.2);
-                    let lit = gather(lights, environment, p, n, Receiver::Real);
                     let (r, rv) = (luminance(lit.r_dir), luminance(lit.rv_dir));
                     let unblocked = if r > 0.0 {
                         (rv / r).clamp(0.0, 1.0)
@@ -209,8 +226,8 @@ impl DirRenderer {
                     };
                     let power_r = radiance.max(Vec3::ZERO) * area;
                     let candidate = Candidate {
-                        position: p,
-                        normal: n,
+                        position: real.position[i],
+                        normal: real.normal[i],
                         power_r,
                         power_rv: power_r * unblocked,
                         real: true,
@@ -220,7 +237,7 @@ impl DirRenderer {
                         radiance_or_reflectance: radiance.max(Vec3::ZERO),
                         received_r: lit.r_dir,
                     };
-                    Some((candidate, reflector))
+                    (candidate, reflector)
                 })
             })
             .collect();
@@ -244,11 +261,25 @@ impl DirRenderer {
             super::points::strided(mesh.len(), params.points_per_vpl as usize, key ^ 0x71C7)
                 .collect();
         let area = mesh.area * mesh.len() as f32 / picks.len().max(1) as f32;
+        let (environment, kernel) = (&self.environment[..], self.kernel);
         let found: Vec<(Candidate, Reflector)> = picks
-            .par_iter()
-            .map(|&j| {
+            .par_chunks(64)
+            .flat_map_iter(|picks| {
+                let mut lit = Vec::with_capacity(picks.len());
+                let point = |&j: &usize| Some((mesh.position[j], mesh.normal[j]));
+                gather_each(
+                    kernel,
+                    &lights,
+                    environment,
+                    Receiver::Virtual,
+                    picks,
+                    point,
+                    |g| lit.push(g.expect("every mesh point gathers")),
+                );
+                picks.iter().zip(lit).map(|(&j, lit)| (j, lit))
+            })
+            .map(|(j, lit)| {
                 let (p, n) = (mesh.position[j], mesh.normal[j]);
-                let lit = gather(&lights, &self.environment, p, n, Receiver::Virtual);
                 let reflectance = mesh.material[j].albedo / PI;
                 let candidate = Candidate {
                     position: p,

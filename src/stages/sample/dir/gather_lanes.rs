@@ -1,48 +1,86 @@
-//! [`gather`] for eight real receivers at a time: the pixels of one interleaving class
-//! in a row share their VPLs, so each VPL's terms (its transfer, the projection into
+//! [`gather`] for eight receivers at a time: the pixels of one interleaving class in a
+//! row share their VPLs (as do the bounce candidates), so each VPL's terms (its transfer, the projection into
 //! its two shadow maps, the lookups and the depth tests) run for eight pixels at once,
 //! one pixel per lane. Each lane follows the scalar [`gather`] operation for operation
 //! (the same products, sums and comparisons in the same order, no fused multiply-add),
 //! so a pixel gets the same bits either way; the tests check that.
 
 use super::ism::{MAX_SLOPE, MapView, Projection};
-use super::shade::{Gathered, LightSet};
+use super::shade::{Gathered, LightSet, Receiver, gather};
 use super::vpl::Emitter;
 use crate::simd::xyz::{splat_xyz, sub_xyz};
 use crate::simd::{Kernel, LANES, Lanes, Portable, dot3};
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
 
-#[cfg(doc)]
-use super::shade::gather;
-
-/// [`gather`] with [`super::shade::Receiver::Real`] at eight points (`positions`,
-/// unit `normals`) with `kernel`'s lanes. A lane whose point is not finite gathers
-/// garbage that the caller drops, as the scalar gather would.
-pub(super) fn gather_real_lanes(
+/// [`gather`] at eight points (`positions`, unit `normals`) of one kind of `receiver`
+/// with `kernel`'s lanes. A lane whose point is not finite gathers garbage that the
+/// caller drops, as the scalar gather would.
+pub(super) fn gather_lanes(
     kernel: Kernel,
     lights: &LightSet,
     members: &[u32],
+    receiver: Receiver,
     positions: &[Vec3; LANES],
     normals: &[Vec3; LANES],
 ) -> [Gathered; LANES] {
+    let points = (positions, normals);
     match kernel.available() {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `Kernel::available` says the CPU has AVX2 and FMA.
-        Kernel::Avx2Fma => unsafe { gather_real_avx2(lights, members, positions, normals) },
-        _ => gather_real_with::<Portable>(lights, members, positions, normals),
+        Kernel::Avx2Fma => unsafe { gather_avx2(lights, members, receiver, points) },
+        _ => gather_with::<Portable>(lights, members, receiver, points),
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn gather_real_avx2(
+/// Gathers `members` at the point and normal `point_of` gives each item (none: no
+/// gather), in order, eight at a time with `kernel`'s lanes, else one at a time;
+/// `put` takes each result.
+pub(super) fn gather_each<T>(
+    kernel: Option<Kernel>,
     lights: &LightSet,
     members: &[u32],
-    positions: &[Vec3; LANES],
-    normals: &[Vec3; LANES],
+    receiver: Receiver,
+    items: &[T],
+    point_of: impl Fn(&T) -> Option<(Vec3, Vec3)>,
+    mut put: impl FnMut(Option<Gathered>),
+) {
+    for group in items.chunks(LANES) {
+        if let (Some(kernel), Ok(group)) = (kernel, <&[T; LANES]>::try_from(group)) {
+            let points = group.each_ref().map(&point_of);
+            // The lanes of items without a point gather garbage, dropped here.
+            let (p, n) = (Vec3::NAN, Vec3::ZERO);
+            let gathered = gather_lanes(
+                kernel,
+                lights,
+                members,
+                receiver,
+                &points.map(|point| point.map_or(p, |(p, _)| p)),
+                &points.map(|point| point.map_or(n, |(_, n)| n)),
+            );
+            for (g, point) in gathered.into_iter().zip(points) {
+                put(point.map(|_| g));
+            }
+        } else {
+            for item in group {
+                put(point_of(item).map(|(p, n)| gather(lights, members, p, n, receiver)));
+            }
+        }
+    }
+}
+
+/// Eight receivers' positions and normals.
+type Points<'a> = (&'a [Vec3; LANES], &'a [Vec3; LANES]);
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn gather_avx2(
+    lights: &LightSet,
+    members: &[u32],
+    receiver: Receiver,
+    points: Points,
 ) -> [Gathered; LANES] {
-    gather_real_with::<crate::simd::Avx2>(lights, members, positions, normals)
+    gather_with::<crate::simd::Avx2>(lights, members, receiver, points)
 }
 
 /// Eight points as three planes of lanes.
@@ -65,15 +103,15 @@ fn add_where<V: Lanes>(sum: &mut [V; 3], active: V, light: [V; 3], factor: V) {
 
 /// Eight points projected into a map ([`Projection::project`] per lane): the mask of
 /// those that fall in it, their texels' columns and rows (as floats), their depths.
-struct Projected<V> {
-    inside: V,
-    x: V,
-    y: V,
-    depth: V,
+pub(super) struct Projected<V> {
+    pub inside: V,
+    pub x: V,
+    pub y: V,
+    pub depth: V,
 }
 
 #[inline(always)]
-fn project<V: Lanes>(projection: &Projection, p: [V; 3], size: usize) -> Projected<V> {
+pub(super) fn project<V: Lanes>(projection: &Projection, p: [V; 3], size: usize) -> Projected<V> {
     let zero = V::splat(0.0);
     let (inside, u, v, depth) = match *projection {
         Projection::Paraboloid { origin, frame } => {
@@ -157,11 +195,11 @@ fn test<V: Lanes>(map: &MapView, at: &Projected<V>, cos: V, active: V) -> (V, V)
 }
 
 #[inline(always)]
-fn gather_real_with<V: Lanes>(
+fn gather_with<V: Lanes>(
     lights: &LightSet,
     members: &[u32],
-    positions: &[Vec3; LANES],
-    normals: &[Vec3; LANES],
+    receiver: Receiver,
+    (positions, normals): Points,
 ) -> [Gathered; LANES] {
     let (zero, infinity) = (V::splat(0.0), V::splat(f32::INFINITY));
     let p = planes::<V>(positions);
@@ -177,9 +215,9 @@ fn gather_real_with<V: Lanes>(
     for &i in members {
         let vpl = &lights.vpls[i as usize];
         let slot = vpl.slot as usize;
-        // A real receiver: every VPL of a real path counts for L_r, every one but the
-        // ir = 1 kind for L_rv.
-        let (for_real, for_combined) = (vpl.counts_for_real(), vpl.counts_for_combined());
+        let real = receiver == Receiver::Real;
+        let for_real = real && vpl.counts_for_real();
+        let for_combined = vpl.counts_for_combined() && (real || !vpl.real_only);
         if !for_real && !for_combined {
             continue;
         }

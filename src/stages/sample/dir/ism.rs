@@ -12,6 +12,8 @@
 //! visible. Maps are plain `f32` slices of `size * size` texels (INFINITY: empty), so a
 //! frame's maps live in one buffer.
 
+use super::splat_lanes::project_points;
+use crate::simd::{Kernel, LANES};
 use glam::Vec3;
 
 /// How a light's map sees the scene.
@@ -125,33 +127,89 @@ pub fn splat(
     projection: &Projection,
     points: impl Iterator<Item = (Vec3, f32)>,
 ) -> [usize; 4] {
-    let last = size as i32 - 1;
+    splat_with(None, map, size, projection, points)
+}
+
+/// [`splat`], projecting eight points at a time with `kernel`'s lanes (`None`: one at a
+/// time; the same bits).
+pub(super) fn splat_with(
+    kernel: Option<Kernel>,
+    map: &mut [f32],
+    size: usize,
+    projection: &Projection,
+    mut points: impl Iterator<Item = (Vec3, f32)>,
+) -> [usize; 4] {
     let mut written = [size, size, 0, 0];
-    for (p, radius) in points {
-        let Some(Texel { x, y, depth }) = projection.project(p, size) else {
-            continue;
-        };
-        let reach = (radius / projection.texel_size(depth, size) - 0.5).ceil();
-        let reach = if reach > 0.0 {
-            (reach as i32).min(MAX_SPLAT_RADIUS)
-        } else {
-            0
-        };
-        let (x, y) = (x as i32, y as i32);
-        written[0] = written[0].min((x - reach).max(0) as usize);
-        written[1] = written[1].min((y - reach).max(0) as usize);
-        written[2] = written[2].max((x + reach).min(last) as usize + 1);
-        written[3] = written[3].max((y + reach).min(last) as usize + 1);
-        for ty in (y - reach).max(0)..=(y + reach).min(last) {
-            for tx in (x - reach).max(0)..=(x + reach).min(last) {
-                let t = &mut map[ty as usize * size + tx as usize];
-                if depth < *t {
-                    *t = depth;
+    if let Some(kernel) = kernel {
+        let mut group = [(Vec3::ZERO, 0.0); LANES];
+        loop {
+            let mut n = 0;
+            for (slot, point) in group.iter_mut().zip(points.by_ref()) {
+                *slot = point;
+                n += 1;
+            }
+            if n < LANES {
+                // The last few, one at a time.
+                for &(p, radius) in &group[..n] {
+                    if let Some((texel, reach)) = project_point(projection, size, p, radius) {
+                        splat_square(map, size, texel, reach, &mut written);
+                    }
                 }
+                return written;
+            }
+            for (texel, reach) in project_points(kernel, projection, size, &group)
+                .into_iter()
+                .flatten()
+            {
+                splat_square(map, size, texel, reach, &mut written);
             }
         }
     }
+    for (p, radius) in points {
+        if let Some((texel, reach)) = project_point(projection, size, p, radius) {
+            splat_square(map, size, texel, reach, &mut written);
+        }
+    }
     written
+}
+
+/// Where the point `p` standing for a patch of `radius` falls in the map, and how many
+/// texels its splat reaches; `None` outside the map.
+#[inline]
+pub(super) fn project_point(
+    projection: &Projection,
+    size: usize,
+    p: Vec3,
+    radius: f32,
+) -> Option<(Texel, i32)> {
+    let texel = projection.project(p, size)?;
+    let reach = (radius / projection.texel_size(texel.depth, size) - 0.5).ceil();
+    let reach = if reach > 0.0 {
+        (reach as i32).min(MAX_SPLAT_RADIUS)
+    } else {
+        0
+    };
+    Some((texel, reach))
+}
+
+/// Keeps `texel.depth` where it is nearer in the square of `reach` texels about
+/// `texel`, and grows `written` to hold it.
+#[inline]
+fn splat_square(map: &mut [f32], size: usize, texel: Texel, reach: i32, written: &mut [usize; 4]) {
+    let last = size as i32 - 1;
+    let (x, y, depth) = (texel.x as i32, texel.y as i32, texel.depth);
+    written[0] = written[0].min((x - reach).max(0) as usize);
+    written[1] = written[1].min((y - reach).max(0) as usize);
+    written[2] = written[2].max((x + reach).min(last) as usize + 1);
+    written[3] = written[3].max((y + reach).min(last) as usize + 1);
+    for ty in (y - reach).max(0)..=(y + reach).min(last) {
+        for tx in (x - reach).max(0)..=(x + reach).min(last) {
+            let t = &mut map[ty as usize * size + tx as usize];
+            if depth < *t {
+                *t = depth;
+            }
+        }
+    }
 }
 
 /// Pull-push hole filling (Marroquim et al., as imperfect shadow maps use it): the map

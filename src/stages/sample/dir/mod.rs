@@ -28,7 +28,7 @@
 //!    paraboloids over their hemispheres, 128 x 128 by default. With `bounces` > 1
 //!    the same candidates are lit again by the last bounce's VPLs and resampled into
 //!    the next bounce's share of the slots, their flags carried on (`bounce.rs`).
-//! 4. **Interleaved gather** (`shade.rs`): the image is split into `interleave` x
+//! 4. **Interleaved gather** (`interleave.rs`, the terms in `shade.rs`): the image is split into `interleave` x
 //!    `interleave` classes by pixel position; class c gathers the VPLs of slots c,
 //!    c + k^2, ... (a real VPL and its ir = 1 twin share a slot)
 //!    (eqs. 1-8: L_r takes a VPL when its path is real, with the real visibility st_r;
@@ -36,6 +36,10 @@
 //!    gathers L_rv at the object's surface without the ir = 1 VPLs, and L_r at the
 //!    real point behind it), times k^2.
 //! 5. **Geometry-aware blur** (`blur.rs`) over each k x k window.
+//!
+//! Where the CPU has AVX2, the gather, the blur and the maps' projections run eight
+//! receivers, pixels or points at a time (`gather_lanes.rs`, `blur_lanes.rs`,
+//! `splat_lanes.rs`), with the bits of the one-at-a-time code the other CPUs run.
 //!
 //! **The VPL singularity**: a surface VPL at distance d brings power cos cos / d^2,
 //! unbounded as d -> 0; the stage divides by max(d^2, `clamp_distance`^2, A / pi),
@@ -61,10 +65,12 @@ mod blur;
 mod blur_lanes;
 mod bounce;
 mod gather_lanes;
+mod interleave;
 pub mod ism;
 pub mod points;
 mod render;
 mod shade;
+mod splat_lanes;
 #[cfg(test)]
 mod tests;
 pub mod vpl;

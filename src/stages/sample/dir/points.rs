@@ -20,6 +20,9 @@ pub struct RealSurface {
     pub area: Vec<f32>,
     /// Indices of the pixels with a position and a normal, in raster order.
     pub valid: Vec<u32>,
+    /// Per valid pixel (as `valid`), its position and area side by side: the shadow
+    /// maps' subsets read one cache line a point.
+    valid_points: Vec<(Vec3, f32)>,
 }
 
 impl RealSurface {
@@ -65,6 +68,12 @@ impl RealSurface {
             .extend((0..self.position.len() as u32).filter(|&i| {
                 self.normal[i as usize] != Vec3::ZERO && self.position[i as usize].is_finite()
             }));
+        self.valid_points.clear();
+        self.valid_points.extend(
+            self.valid
+                .iter()
+                .map(|&i| (self.position[i as usize], self.area[i as usize])),
+        );
     }
 
     /// The `count` points of subset `key` of the valid pixels: every `n / count`-th
@@ -75,8 +84,8 @@ impl RealSurface {
         let n = self.valid.len();
         let share = n as f32 / count.min(n).max(1) as f32 / std::f32::consts::PI;
         strided(n, count, key).map(move |i| {
-            let j = self.valid[i] as usize;
-            (self.position[j], (self.area[j] * share).sqrt())
+            let (position, area) = self.valid_points[i];
+            (position, (area * share).sqrt())
         })
     }
 }
@@ -91,7 +100,11 @@ pub fn strided(n: usize, count: usize, key: u64) -> impl Iterator<Item = usize> 
     } else {
         (rng::mix64(key) % n as u64) as usize
     };
-    (0..take).map(move |k| (offset + k * stride) % n)
+    // offset < n and k stride < n: one wrap at most.
+    (0..take).map(move |k| {
+        let i = offset + k * stride;
+        if i >= n { i - n } else { i }
+    })
 }
 
 /// Points spread uniformly by area over the virtual meshes (stratified over the

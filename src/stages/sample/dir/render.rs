@@ -2,19 +2,16 @@
 //! interleaved gather and the blur (the order of paper 002 Fig. 2).
 
 use super::blur::blur_layers;
-use super::gather_lanes::gather_real_lanes;
-use super::ism::{Projection, fill_holes, frame_about, splat};
+use super::interleave::{Interleaved, RowScratch, object_rect};
+use super::ism::{Projection, fill_holes, frame_about, splat_with};
 use super::points::{MeshPoints, RealSurface};
-use super::shade::{Gathered, LightSet, Receiver, gather};
+use super::shade::LightSet;
 use super::vpl::{Candidate, Emitter, Vpl, environment_vpls};
 use super::{DirInputs, DirParams};
 use crate::graph::StageError;
-use crate::objects::VirtualHit;
 use crate::rng;
-use crate::simd::{Kernel, LANES};
-use crate::stages::sample::layers::{
-    IrradianceLayers, LayerRow, PixelLayers, check_sizes, shade_rows,
-};
+use crate::simd::Kernel;
+use crate::stages::sample::layers::{IrradianceLayers, check_sizes, shade_rows};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -40,7 +37,7 @@ pub struct DirRenderer {
     between: Option<IrradianceLayers>,
     /// The lanes that gather eight real receivers at a time; `None`: one pixel at a
     /// time (the same bits).
-    kernel: Option<Kernel>,
+    pub(super) kernel: Option<Kernel>,
 }
 
 impl Default for DirRenderer {
@@ -172,7 +169,6 @@ impl DirRenderer {
     pub fn shade(&mut self, inputs: &DirInputs, params: &DirParams, out: &mut IrradianceLayers) {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
         let k = params.interleave as usize;
-        let classes = k * k;
         let raw = match &mut self.raw {
             Some(raw) if raw.size() == Some((w, h)) => raw,
             slot => slot.insert(IrradianceLayers::new(w, h)),
@@ -184,51 +180,21 @@ impl DirRenderer {
             &self.maps,
             params,
         );
-        let (real, members) = (&self.real, &self.members);
-        let scale = classes as f32;
-        let kernel = self.kernel;
+        let interleaved = Interleaved {
+            inputs,
+            lights: &lights,
+            real: &self.real,
+            members: &self.members,
+            k,
+            kernel: self.kernel,
+            object_rect: object_rect(inputs),
+        };
         shade_rows(
             raw,
             w as usize,
             1,
-            || (),
-            |_, y, mut row| {
-                // Class by class (the paper's split G-buffer): a class's VPLs and their
-                // maps stay in cache over its pixels.
-                for cx in 0..k.min(w as usize) {
-                    let class = (y % k) * k + cx;
-                    let shading = Shading {
-                        inputs,
-                        lights: &lights,
-                        members: &members[class],
-                        real,
-                        scale,
-                    };
-                    let count = (w as usize - cx).div_ceil(k);
-                    let mut j = 0;
-                    if let Some(kernel) = kernel {
-                        // Eight pixels of the class at a time.
-                        while j + LANES <= count {
-                            let xs: [usize; LANES] = std::array::from_fn(|l| cx + (j + l) * k);
-                            let i = xs.map(|x| y * w as usize + x);
-                            let gathered = gather_real_lanes(
-                                kernel,
-                                &lights,
-                                &members[class],
-                                &i.map(|i| real.position[i]),
-                                &i.map(|i| real.normal[i]),
-                            );
-                            for (x, g) in xs.into_iter().zip(gathered) {
-                                shading.pixel(x, y, Some(g), &mut row);
-                            }
-                            j += LANES;
-                        }
-                    }
-                    for j in j..count {
-                        shading.pixel(cx + j * k, y, None, &mut row);
-                    }
-                }
-            },
+            RowScratch::default,
+            |scratch, y, mut row| interleaved.shade_row(y, &mut row, scratch),
         );
         let between = match &mut self.between {
             Some(between) if between.size() == Some((w, h)) => between,
@@ -266,6 +232,7 @@ impl DirRenderer {
         let count = params.points_per_vpl as usize;
         let (real, projections) = (&self.real, &self.projections);
         let levels = params.fill_levels as usize;
+        let kernel = self.kernel;
         self.maps[2 * first * texels..]
             .par_chunks_mut(2 * texels)
             .zip(self.rects[first..n].par_iter_mut())
@@ -277,13 +244,15 @@ impl DirRenderer {
                 // Every depth the slot's maps held lies in last frame's rectangles.
                 clear(real_map, size, rects[0]);
                 clear(virtual_map, size, rects[1]);
-                let real_splats = splat(
+                let real_splats = splat_with(
+                    kernel,
                     real_map,
                     size,
                     &projections[i][0],
                     real.subset(count, vpl_key),
                 );
-                let virtual_splats = splat(
+                let virtual_splats = splat_with(
+                    kernel,
                     virtual_map,
                     size,
                     &projections[i][1],
@@ -346,127 +315,4 @@ fn objects_sphere(inputs: &DirInputs, real: &RealSurface) -> (Vec3, f32) {
         },
         0.0,
     )
-}
-
-/// The object the view ray through pixel (x, y) meets in front of the real point
-/// `real` (if any).
-fn primary_hit(inputs: &DirInputs, x: usize, y: usize, real: Option<Vec3>) -> Option<VirtualHit> {
-    if inputs.objects.is_empty() {
-        return None;
-    }
-    let origin: Vec3 = inputs.camera_to_world.translation.into();
-    let dir = inputs
-        .camera_to_world
-        .transform_vector3(inputs.camera.ray(x as f32, y as f32))
-        .normalize();
-    let t_max = real.map_or(f32::INFINITY, |p| p.distance(origin));
-    let (t0, t1) = inputs
-        .objects
-        .bounds()
-        .ray_span(origin, dir.recip(), 0.0, t_max)?;
-    inputs
-        .objects
-        .intersect(origin, dir, (t0 - 1e-4).max(0.0), t1 + 1e-4)
-}
-
-/// What shading a pixel of one interleaving class reads.
-struct Shading<'a> {
-    inputs: &'a DirInputs<'a>,
-    lights: &'a LightSet<'a>,
-    /// The class's VPLs.
-    members: &'a [u32],
-    real: &'a RealSurface,
-    /// The interleaving's scale (the number of classes).
-    scale: f32,
-}
-
-impl Shading<'_> {
-    /// Shades pixel (x, y) of the class into `row`; `gathered`: what its real point
-    /// gathers as a real receiver, when already known (from the lanes).
-    fn pixel(&self, x: usize, y: usize, gathered: Option<Gathered>, row: &mut LayerRow<'_>) {
-        let i = y * self.real_width() + x;
-        let (p, n) = (self.real.position[i], self.real.normal[i]);
-        let real_here = n != Vec3::ZERO;
-        let hit = primary_hit(self.inputs, x, y, real_here.then_some(p));
-        let r = real_here.then(|| {
-            gathered.unwrap_or_else(|| gather(self.lights, self.members, p, n, Receiver::Real))
-        });
-        let out = match (&hit, r) {
-            (Some(hit), r) => {
-                let v = gather(
-                    self.lights,
-                    self.members,
-                    hit.position,
-                    hit.normal,
-                    Receiver::Virtual,
-                );
-                pixel(Some(hit), r.unwrap_or(NO_LIGHT), v, self.scale)
-            }
-            (None, Some(r)) => pixel(None, r, r, self.scale),
-            (None, None) => {
-                row.set(x, &NOTHING);
-                return;
-            }
-        };
-        row.set(x, &out);
-        if !real_here {
-            // No real point behind the object: E_R has no estimate.
-            row.e_r_dir[x] = Vec3::NAN;
-            row.e_r_ind[x] = Vec3::NAN;
-        }
-        if hit.is_none() {
-            row.world_position[x] = p;
-            row.world_normal[x] = n;
-        }
-    }
-
-    fn real_width(&self) -> usize {
-        self.inputs.depth.width as usize
-    }
-}
-
-/// A pixel with neither a real point nor an object.
-const NOTHING: PixelLayers = PixelLayers {
-    e_r_dir: Vec3::NAN,
-    e_r_ind: Vec3::NAN,
-    e_rv_dir: Vec3::NAN,
-    e_rv_ind: Vec3::NAN,
-    mask: 1.0,
-    k_v: Vec3::ZERO,
-    exponent: 0.0,
-    world_position: Vec3::NAN,
-    world_normal: Vec3::ZERO,
-    direct_min_distance: f32::INFINITY,
-    indirect_min_distance: f32::INFINITY,
-    touched: false,
-};
-
-const NO_LIGHT: Gathered = Gathered {
-    r_dir: Vec3::NAN,
-    r_ind: Vec3::NAN,
-    rv_dir: Vec3::ZERO,
-    rv_ind: Vec3::ZERO,
-    touched: true,
-    direct_min_distance: f32::INFINITY,
-    indirect_min_distance: f32::INFINITY,
-};
-
-/// One pixel's un-blurred layers: E_R from the real point `r`, E_RV from `v` (the
-/// object's point where `hit`, else the same real point), both times the interleaving
-/// `scale`.
-fn pixel(hit: Option<&VirtualHit>, r: Gathered, v: Gathered, scale: f32) -> PixelLayers {
-    PixelLayers {
-        e_r_dir: r.r_dir * scale,
-        e_r_ind: r.r_ind * scale,
-        e_rv_dir: v.rv_dir * scale,
-        e_rv_ind: v.rv_ind * scale,
-        mask: if hit.is_some() { 0.0 } else { 1.0 },
-        k_v: hit.map_or(Vec3::ZERO, |h| h.material.albedo),
-        exponent: 0.0,
-        world_position: hit.map_or(Vec3::NAN, |h| h.position),
-        world_normal: hit.map_or(Vec3::ZERO, |h| h.normal),
-        direct_min_distance: r.direct_min_distance.min(v.direct_min_distance),
-        indirect_min_distance: r.indirect_min_distance.min(v.indirect_min_distance),
-        touched: hit.is_some() || r.touched,
-    }
 }

@@ -480,13 +480,14 @@ fn a_second_bounce_keeps_light_that_met_an_object_out_of_the_real_solution() {
     );
 }
 
-/// The lanes gather eight real receivers with the bits of the one-pixel gather, on
-/// either kernel: over a floor whose normals are tilted every which way (some away
+/// A frame rendered with either kernel's lanes (the gather at real and virtual
+/// receivers and bounce candidates, the blur, the splats' projections) has the bits of
+/// one receiver, pixel and point at a time: over a floor whose normals are tilted every which way (some away
 /// from the light, some past the horizon), with holes (no depth, NaN depth, no
 /// normal), under one and two bounces, two interleavings and a reach short enough
 /// that some surface VPLs light only part of a group of eight.
 #[test]
-fn the_lane_gather_gives_the_bits_of_the_one_pixel_gather() {
+fn the_lanes_give_the_bits_of_one_receiver_pixel_and_point_at_a_time() {
     let mut scene = floor_scene();
     for i in 0..scene.depth.data.len() {
         let h = crate::rng::hash(&[0x1A_4E5, i as u64]);
@@ -541,4 +542,99 @@ fn the_lane_gather_gives_the_bits_of_the_one_pixel_gather() {
             );
         }
     }
+}
+
+/// The gather looks for the objects only inside `object_rect`: every pixel whose view
+/// ray meets the sphere lies in it, for the sphere in view and for the camera inside
+/// the objects' box (the whole image).
+#[test]
+fn every_view_ray_that_meets_an_object_lies_in_the_object_rectangle() {
+    use super::interleave::{object_rect, primary_hit};
+    let scene = floor_scene();
+    let table = uniform_table(64);
+    let (w, h) = (scene.depth.width as usize, scene.depth.height as usize);
+    let camera_position = Vec3::from(pose().translation);
+    for (center, radius, whole) in [
+        (SPHERE_CENTER, SPHERE_RADIUS, false),
+        (Vec3::new(0.4, 0.2, 0.5), 0.05, false),
+        (camera_position, 0.5, true),
+    ] {
+        let objects = sphere(center, radius, RED);
+        let inputs = inputs(&scene, &objects, &table, 0);
+        let [x0, y0, x1, y1] = object_rect(&inputs);
+        let mut hits = 0;
+        for y in 0..h {
+            for x in 0..w {
+                if primary_hit(&inputs, x, y, None).is_some() {
+                    hits += 1;
+                    assert!(
+                        (x0..x1).contains(&x) && (y0..y1).contains(&y),
+                        "({x}, {y}) meets the sphere at {center} outside [{x0}, {y0}, {x1}, {y1})"
+                    );
+                }
+            }
+        }
+        assert!(hits > 0, "the sphere at {center} is in view");
+        let area = (x1 - x0) * (y1 - y0);
+        if whole {
+            assert_eq!([x0, y0, x1, y1], [0, 0, w, h]);
+        } else {
+            assert!(area < w * h / 4, "[{x0}, {y0}, {x1}, {y1}) is not tight");
+        }
+    }
+    let none = VirtualScene::default();
+    assert_eq!(object_rect(&inputs(&scene, &none, &table, 0)), [0; 4]);
+}
+
+/// The splat's projection in lanes gives each point the texel, depth and reach of the
+/// one-point code, for both projections and patch radii from none through whole texel
+/// counts to past the largest reach, NaN and infinite.
+#[test]
+fn the_splat_lanes_project_as_one_point_at_a_time() {
+    use super::ism::project_point;
+    use super::splat_lanes::project_points;
+    let size = 128;
+    let frame = frame_about(Vec3::new(0.3, 0.8, -0.2).normalize());
+    let projections = [
+        Projection::Paraboloid {
+            origin: Vec3::new(0.1, 0.2, 0.3),
+            frame,
+        },
+        Projection::Orthographic {
+            center: Vec3::new(-0.2, 0.1, 0.0),
+            radius: 1.3,
+            frame,
+        },
+    ];
+    let mut reaches = std::collections::BTreeSet::new();
+    for projection in &projections {
+        for group in 0..400u64 {
+            let points: [(Vec3, f32); 8] = std::array::from_fn(|l| {
+                let h = crate::rng::hash(&[0x5B1A7, group, l as u64]);
+                let u = |k: u64| crate::rng::unit_f32(crate::rng::hash(&[h, k])) * 3.0 - 1.5;
+                let p = Vec3::new(u(0), u(1), u(2));
+                let texel = projection.texel_size(1.0, size);
+                let radius = match h % 9 {
+                    0 => 0.0,
+                    1 => f32::NAN,
+                    2 => f32::INFINITY,
+                    // Whole and half texel counts at depth 1 (exact ceilings).
+                    3 => texel * (1.5 + (h % 5) as f32),
+                    4 => texel * (h % 7) as f32,
+                    _ => crate::rng::unit_f32(h >> 40) * 0.2,
+                };
+                (p, radius)
+            });
+            let one_at_a_time = points.map(|(p, r)| project_point(projection, size, p, r));
+            for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+                assert_eq!(
+                    project_points(kernel, projection, size, &points),
+                    one_at_a_time,
+                    "{kernel:?}, {projection:?}, {points:?}"
+                );
+            }
+            reaches.extend(one_at_a_time.iter().flatten().map(|&(_, reach)| reach));
+        }
+    }
+    assert_eq!(reaches.into_iter().collect::<Vec<_>>(), [0, 1, 2, 3, 4]);
 }

@@ -256,45 +256,29 @@ pub fn fill_holes(
         total += (size >> l) * (size >> l);
     }
     scratch.resize(total.max(scratch.len()), f32::INFINITY);
-    // Pull.
+    // Pull: level l from level l - 1 (the map for l = 1).
     for l in 1..=levels {
         let (side, half) = (size >> (l - 1), size >> l);
-        let start = offsets[l - 1];
-        for y in region[1] >> l..region[3] >> l {
-            for x in region[0] >> l..region[2] >> l {
-                let (mut sum, mut n) = (0.0f32, 0u32);
-                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                    let i = (2 * y + dy) * side + 2 * x + dx;
-                    let v = if l == 1 {
-                        map[i]
-                    } else {
-                        scratch[offsets[l - 2] + i]
-                    };
-                    if v.is_finite() {
-                        sum += v;
-                        n += 1;
-                    }
-                }
-                scratch[start + y * half + x] = if n > 0 { sum / n as f32 } else { f32::INFINITY };
-            }
+        let coarse_region = region.map(|v| v >> l);
+        if l == 1 {
+            let coarse = &mut scratch[..half * half];
+            pull_level(map, side, coarse, half, coarse_region);
+        } else {
+            let (finer, coarser) = scratch.split_at_mut(offsets[l - 1]);
+            let fine = &finer[offsets[l - 2]..];
+            pull_level(fine, side, &mut coarser[..half * half], half, coarse_region);
         }
     }
     // Push: coarse to fine, empty texels take their parent's value.
     for l in (1..=levels).rev() {
         let (side, half) = (size >> (l - 1), size >> l);
-        let parent = offsets[l - 1];
-        for y in region[1] >> (l - 1)..region[3] >> (l - 1) {
-            for x in region[0] >> (l - 1)..region[2] >> (l - 1) {
-                let up = scratch[parent + (y / 2) * half + x / 2];
-                let v = if l == 1 {
-                    &mut map[y * size + x]
-                } else {
-                    &mut scratch[offsets[l - 2] + y * side + x]
-                };
-                if !v.is_finite() {
-                    *v = up;
-                }
-            }
+        let fine_region = region.map(|v| v >> (l - 1));
+        if l == 1 {
+            push_level(&scratch[..half * half], half, map, side, fine_region);
+        } else {
+            let (finer, coarser) = scratch.split_at_mut(offsets[l - 1]);
+            let fine = &mut finer[offsets[l - 2]..];
+            push_level(&coarser[..half * half], half, fine, side, fine_region);
         }
     }
     let mut rect = [u16::MAX, u16::MAX, 0, 0];
@@ -310,6 +294,50 @@ pub fn fill_holes(
         rect[3] = y as u16 + 1;
     }
     if rect[2] <= rect[0] { [0; 4] } else { rect }
+}
+
+/// One level of the pull: texel (x, y) of `coarse` (`half` wide), for (x, y) in the
+/// rectangle `[x0, y0, x1, y1)`, the mean of the finite ones of its four children in
+/// `fine` (`side` wide), INFINITY when none. The children are added in the order
+/// (0, 0), (1, 0), (0, 1), (1, 1), an empty one as +0 (depths are never -0, so the
+/// sum keeps its bits), without branches so that the rows vectorize.
+fn pull_level(fine: &[f32], side: usize, coarse: &mut [f32], half: usize, rect: [usize; 4]) {
+    let [x0, y0, x1, y1] = rect;
+    for y in y0..y1 {
+        let top = &fine[2 * y * side + 2 * x0..2 * y * side + 2 * x1];
+        let bottom = &fine[(2 * y + 1) * side + 2 * x0..(2 * y + 1) * side + 2 * x1];
+        let out = &mut coarse[y * half + x0..y * half + x1];
+        for ((texel, top), bottom) in out
+            .iter_mut()
+            .zip(top.chunks_exact(2))
+            .zip(bottom.chunks_exact(2))
+        {
+            let (mut sum, mut n) = (0.0f32, 0u32);
+            for v in [top[0], top[1], bottom[0], bottom[1]] {
+                let filled = v.is_finite();
+                sum += if filled { v } else { 0.0 };
+                n += filled as u32;
+            }
+            *texel = if n > 0 { sum / n as f32 } else { f32::INFINITY };
+        }
+    }
+}
+
+/// One level of the push: every empty texel of `fine` (`side` wide) in the rectangle
+/// `[x0, y0, x1, y1)` (even corners) takes its parent's value in `coarse` (`half` wide).
+fn push_level(coarse: &[f32], half: usize, fine: &mut [f32], side: usize, rect: [usize; 4]) {
+    let [x0, y0, x1, y1] = rect;
+    for y in y0..y1 {
+        let parents = &coarse[(y / 2) * half + x0 / 2..(y / 2) * half + x1 / 2];
+        let row = &mut fine[y * side + x0..y * side + x1];
+        for (pair, &parent) in row.chunks_exact_mut(2).zip(parents) {
+            for v in pair {
+                if !v.is_finite() {
+                    *v = parent;
+                }
+            }
+        }
+    }
 }
 
 /// One light's map with where it sits and what it covers.

@@ -1,6 +1,7 @@
 //! Eight f32 lanes, one pixel per lane, for the per-pixel loops that the compiler does
 //! not vectorize well by itself (the filter's tap loops, `sample.val`'s shading and
-//! shadow maps, `normals.plane_fit`'s gather, `depth.fuse`'s triangles): AVX2
+//! shadow maps, `normals.plane_fit`'s gather, `depth.fuse`'s triangles, `sample.dir`'s
+//! gather, blur and splats): AVX2
 //! with FMA where the CPU has them (detected at run time, [`Kernel::detect`]), plain
 //! arrays with `f32::mul_add` elsewhere. Both compute the same operations with the same
 //! roundings (a fused multiply-add rounds once in either), so outputs do not depend on
@@ -17,7 +18,8 @@
 pub const LANES: usize = 8;
 
 /// Which eight-lane code runs: the filter's passes, sample.val's shading and shadow
-/// maps, plane_fit's gather and depth.fuse's triangles (through [`Lanes`]), and the
+/// maps, plane_fit's gather, depth.fuse's triangles and sample.dir's gather, blur and
+/// splats (through [`Lanes`]), and the
 /// screen-space tracer's batches (`ssrt::TraceBatch`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kernel {

@@ -22,6 +22,7 @@ fn is_zero<V: Lanes>(v: V) -> V {
     v.ge(zero).and(zero.ge(v))
 }
 
+/// `v.normalize()` as glam computes it: v * (1 / sqrt(v . v)).
 #[inline(always)]
 fn normalize<V: Lanes>(v: &Xyz<V>) -> Xyz<V> {
     let recip = V::splat(1.0).div(dot3(*v, *v).sqrt());

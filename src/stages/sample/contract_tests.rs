@@ -108,8 +108,8 @@ fn val(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> Irradiance
     out
 }
 
-/// `sample.dir`: the importance table of the constant environment, real receivers
-/// gathered with `lanes`.
+/// `sample.dir`: the importance table of the constant environment, with `lanes` (the
+/// gather, blur and splats).
 fn dir(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> IrradianceLayers {
     let table = uniform_table(4096);
     let inputs = DirInputs {

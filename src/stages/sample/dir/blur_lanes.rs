@@ -4,8 +4,9 @@
 //! minima), so a pixel gets the same bits either way; the tests check that.
 //!
 //! `same_surface` is tested in its reduced form: `n . m >= 0.9` already fails where
-//! either normal is zero or not finite, and `|(q - p) . n| <= tolerance` where `q` is
-//! not finite, so the explicit checks of the scalar code change no answer.
+//! either normal is zero (n . m is +-0, or NaN against an infinite coordinate), and
+//! `|(q - p) . n| <= tolerance` where `q` is not finite, so the explicit checks of the
+//! scalar code change no answer.
 
 use super::blur::{PLANE_TOLERANCE, PassInputs};
 use crate::simd::xyz::{Xyz, finite_xyz, load_xyz, store_xyz, sub_xyz};

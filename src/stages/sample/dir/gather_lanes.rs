@@ -1,7 +1,8 @@
 //! [`gather`] for eight receivers at a time: the pixels of one interleaving class in a
-//! row share their VPLs (as do the bounce candidates), so each VPL's terms (its transfer, the projection into
-//! its two shadow maps, the lookups and the depth tests) run for eight pixels at once,
-//! one pixel per lane. Each lane follows the scalar [`gather`] operation for operation
+//! row share their VPLs (as do the first bounce's candidates: further bounces relight
+//! them one at a time), so each VPL's terms (its transfer, the projection into its two
+//! shadow maps, the lookups and the depth tests) run for eight receivers at once, one
+//! per lane. Each lane follows the scalar [`gather`] operation for operation
 //! (the same products, sums and comparisons in the same order, no fused multiply-add),
 //! so a pixel gets the same bits either way; the tests check that.
 
@@ -14,8 +15,8 @@ use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
 
 /// [`gather`] at eight points (`positions`, unit `normals`) of one kind of `receiver`
-/// with `kernel`'s lanes. A lane whose point is not finite gathers garbage that the
-/// caller drops, as the scalar gather would.
+/// with `kernel`'s lanes. The results of lanes whose point is not finite (the NaN
+/// stand-ins [`gather_each`] gives items without a point) are garbage to drop.
 pub(super) fn gather_lanes(
     kernel: Kernel,
     lights: &LightSet,
@@ -161,7 +162,10 @@ pub(super) fn project<V: Lanes>(projection: &Projection, p: [V; 3], size: usize)
 #[inline(always)]
 fn test<V: Lanes>(map: &MapView, at: &Projected<V>, cos: V, active: V) -> (V, V) {
     let (one, infinity) = (V::splat(1.0), V::splat(f32::INFINITY));
-    let [x0, y0, x1, y1] = map.rect.map(f32::from).map(V::splat);
+    // (No lane operations in closures: see `crate::simd`.)
+    let [x0, y0, x1, y1] = map.rect;
+    let (x0, y0) = (V::splat(f32::from(x0)), V::splat(f32::from(y0)));
+    let (x1, y1) = (V::splat(f32::from(x1)), V::splat(f32::from(y1)));
     let hit = active
         .and(at.inside)
         .and(at.x.ge(x0))
@@ -173,8 +177,9 @@ fn test<V: Lanes>(map: &MapView, at: &Projected<V>, cos: V, active: V) -> (V, V)
     }
     let size = map.size as f32;
     let index = V::select(hit, at.y.mul(V::splat(size)).add(at.x), V::splat(0.0));
-    // SAFETY: a hit lane's texel lies in the map (0 <= x, y < size); the others read
-    // texel 0.
+    // SAFETY: a hit lane's texel lies in the map (0 <= x, y < size, exact in f32 up to
+    // 2^12 texels a side); the others read texel 0.
+    debug_assert!(map.size <= 4096 && map.depth.len() >= map.size * map.size);
     let stored = unsafe { V::gather_at(map.depth.as_ptr(), index) };
     let cos = cos.max(V::splat(1e-3)).min(one);
     let tan = one
@@ -232,17 +237,18 @@ fn gather_with<V: Lanes>(
             } => {
                 let to = sub_xyz(&p, &splat_xyz(origin));
                 let d2 = dot3(to, to);
+                // 0 < d2 <= reach^2 (not NaN): most VPLs reach none of the eight.
+                let within = d2.gt(zero).and_not(d2.gt(reach_squared));
+                if !within.any() {
+                    continue;
+                }
                 let d = d2.sqrt();
                 let cos_vpl = dot3(splat_xyz(n_vpl), to).div(d);
                 let cos_p = V::splat(-1.0).mul(dot3(n, to)).div(d);
                 let floor = lights.clamp_squared.max(vpl.patch * FRAC_1_PI);
                 let transfer = cos_vpl.mul(cos_p).div(d2.max(V::splat(floor)));
-                // 0 < d2 <= reach^2 (not NaN), both cosines positive.
-                let reached = d2
-                    .gt(zero)
-                    .and_not(d2.gt(reach_squared))
-                    .and(cos_vpl.gt(zero))
-                    .and(cos_p.gt(zero));
+                // Within reach, both cosines positive.
+                let reached = within.and(cos_vpl.gt(zero)).and(cos_p.gt(zero));
                 (transfer, d, false, cos_p, reached)
             }
         };

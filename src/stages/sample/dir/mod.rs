@@ -28,8 +28,8 @@
 //!    paraboloids over their hemispheres, 128 x 128 by default. With `bounces` > 1
 //!    the same candidates are lit again by the last bounce's VPLs and resampled into
 //!    the next bounce's share of the slots, their flags carried on (`bounce.rs`).
-//! 4. **Interleaved gather** (`interleave.rs`, the terms in `shade.rs`): the image is split into `interleave` x
-//!    `interleave` classes by pixel position; class c gathers the VPLs of slots c,
+//! 4. **Interleaved gather** (`interleave.rs`, the terms in `shade.rs`): the image
+//!    is split into `interleave` x `interleave` classes by pixel position; class c gathers the VPLs of slots c,
 //!    c + k^2, ... (a real VPL and its ir = 1 twin share a slot)
 //!    (eqs. 1-8: L_r takes a VPL when its path is real, with the real visibility st_r;
 //!    L_rv takes it unless it is ir = 1, with st_rv = min(st_r, st_v); a virtual pixel
@@ -67,6 +67,8 @@ mod bounce;
 mod gather_lanes;
 mod interleave;
 pub mod ism;
+#[cfg(test)]
+mod lane_tests;
 pub mod points;
 mod render;
 mod shade;

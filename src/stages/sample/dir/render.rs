@@ -35,8 +35,8 @@ pub struct DirRenderer {
     raw: Option<IrradianceLayers>,
     /// The blur's pass along x.
     between: Option<IrradianceLayers>,
-    /// The lanes that gather eight real receivers at a time; `None`: one pixel at a
-    /// time (the same bits).
+    /// The lanes that gather, blur and project eight receivers, pixels or points at a
+    /// time; `None`: one at a time (the same bits).
     pub(super) kernel: Option<Kernel>,
 }
 
@@ -50,8 +50,8 @@ impl Default for DirRenderer {
 }
 
 impl DirRenderer {
-    /// A renderer that gathers with `kernel`'s lanes, or one pixel at a time (`None`);
-    /// every choice gives the same bits.
+    /// A renderer that runs `kernel`'s lanes, or one receiver, pixel and point at a time
+    /// (`None`); every choice gives the same bits.
     pub fn with_kernel(kernel: Option<Kernel>) -> DirRenderer {
         DirRenderer {
             real: RealSurface::default(),

@@ -91,10 +91,9 @@ impl Interleaved<'_> {
             hit_pixels.extend(hits.iter().enumerate().filter_map(|(j, h)| h.map(|_| j)));
             at_hits.clear();
             let hit_points = |&j: &usize| hits[j].map(|hit| (hit.position, hit.normal));
-            let lights = self.lights;
             gather_each(
                 self.kernel,
-                lights,
+                self.lights,
                 members,
                 Receiver::Virtual,
                 hit_pixels,

@@ -8,39 +8,15 @@ use super::ism::project_point;
 use super::ism::{Projection, frame_about};
 use super::shade::{Gathered, LightSet, Receiver, gather};
 use super::splat_lanes::project_points;
+use super::tests::{RED, inputs};
 use super::vpl::{Emitter, Vpl};
 use super::*;
-use crate::objects::Material;
 use crate::rng::{hash, unit_f32};
 use crate::simd::Kernel;
 use crate::stages::sample::path::tests::{
-    SPHERE_CENTER, SPHERE_RADIUS, bits, camera, floor_scene, pose, sphere, uniform_table,
+    SPHERE_CENTER, SPHERE_RADIUS, bits, floor_scene, pose, sphere, uniform_table,
 };
 use glam::Vec3;
-
-const RED: Material = Material {
-    albedo: Vec3::new(0.9, 0.1, 0.05),
-    exponent: 0.0,
-};
-
-/// The floor scene's inputs with `objects` under `table`, at `frame`.
-fn inputs<'a>(
-    scene: &'a crate::stages::sample::path::tests::Scene,
-    objects: &'a VirtualScene,
-    table: &'a LightTable,
-    frame: u64,
-) -> DirInputs<'a> {
-    DirInputs {
-        depth: &scene.depth,
-        normals: &scene.normals,
-        radiance: &scene.radiance,
-        camera: camera(),
-        camera_to_world: pose(),
-        table,
-        objects,
-        frame,
-    }
-}
 
 /// A uniform float in [lo, hi) from hash `h` and `k`.
 fn uniform(h: u64, k: u64, lo: f32, hi: f32) -> f32 {

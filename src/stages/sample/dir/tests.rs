@@ -14,7 +14,7 @@ use crate::stages::with_threads;
 use glam::Vec3;
 
 /// The shared floor scene's inputs with `objects` under `table`, at `frame`.
-fn inputs<'a>(
+pub(super) fn inputs<'a>(
     scene: &'a Scene,
     objects: &'a VirtualScene,
     table: &'a LightTable,
@@ -41,7 +41,7 @@ fn render(
     sample_dir(&inputs(scene, objects, table, 5), params).unwrap()
 }
 
-const RED: Material = Material {
+pub(super) const RED: Material = Material {
     albedo: Vec3::new(0.9, 0.1, 0.05),
     exponent: 0.0,
 };

@@ -12,7 +12,7 @@
 //! visible. Maps are plain `f32` slices of `size * size` texels (INFINITY: empty), so a
 //! frame's maps live in one buffer.
 
-use super::splat_lanes::project_points;
+use super::splat_lanes::splat_points;
 use crate::simd::{Kernel, LANES};
 use glam::Vec3;
 
@@ -157,12 +157,7 @@ pub(super) fn splat_with(
                 }
                 return written;
             }
-            for (texel, reach) in project_points(kernel, projection, size, &group)
-                .into_iter()
-                .flatten()
-            {
-                splat_square(map, size, texel, reach, &mut written);
-            }
+            splat_points(kernel, projection, size, &group, map, &mut written);
         }
     }
     for (p, radius) in points {
@@ -195,21 +190,46 @@ pub(super) fn project_point(
 /// Keeps `texel.depth` where it is nearer in the square of `reach` texels about
 /// `texel`, and grows `written` to hold it.
 #[inline]
-fn splat_square(map: &mut [f32], size: usize, texel: Texel, reach: i32, written: &mut [usize; 4]) {
-    let last = size as i32 - 1;
-    let (x, y, depth) = (texel.x as i32, texel.y as i32, texel.depth);
-    written[0] = written[0].min((x - reach).max(0) as usize);
-    written[1] = written[1].min((y - reach).max(0) as usize);
-    written[2] = written[2].max((x + reach).min(last) as usize + 1);
-    written[3] = written[3].max((y + reach).min(last) as usize + 1);
-    for ty in (y - reach).max(0)..=(y + reach).min(last) {
-        for tx in (x - reach).max(0)..=(x + reach).min(last) {
-            let t = &mut map[ty as usize * size + tx as usize];
+pub(super) fn splat_square(
+    map: &mut [f32],
+    size: usize,
+    texel: Texel,
+    reach: i32,
+    written: &mut [usize; 4],
+) {
+    let [x0, y0, x1, y1] = square_bounds(size, texel, reach, written);
+    let depth = texel.depth;
+    for ty in y0..y1 {
+        for t in &mut map[ty * size + x0..ty * size + x1] {
             if depth < *t {
                 *t = depth;
             }
         }
     }
+}
+
+/// The square of `reach` texels about `texel`, clipped to the map (`[x0, y0, x1,
+/// y1)`), with `written` grown to hold it.
+#[inline(always)]
+pub(super) fn square_bounds(
+    size: usize,
+    texel: Texel,
+    reach: i32,
+    written: &mut [usize; 4],
+) -> [usize; 4] {
+    let last = size as i32 - 1;
+    let (x, y) = (texel.x as i32, texel.y as i32);
+    let square = [
+        (x - reach).max(0) as usize,
+        (y - reach).max(0) as usize,
+        (x + reach).min(last) as usize + 1,
+        (y + reach).min(last) as usize + 1,
+    ];
+    written[0] = written[0].min(square[0]);
+    written[1] = written[1].min(square[1]);
+    written[2] = written[2].max(square[2]);
+    written[3] = written[3].max(square[3]);
+    square
 }
 
 /// Pull-push hole filling (Marroquim et al., as imperfect shadow maps use it): the map

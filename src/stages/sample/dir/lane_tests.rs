@@ -4,8 +4,8 @@
 
 use super::gather_lanes::gather_lanes;
 use super::interleave::{object_rect, primary_hit};
-use super::ism::project_point;
 use super::ism::{Projection, frame_about};
+use super::ism::{project_point, splat_with};
 use super::shade::{Gathered, LightSet, Receiver, gather};
 use super::splat_lanes::project_points;
 use super::tests::{RED, inputs};
@@ -341,4 +341,65 @@ fn the_splat_lanes_project_as_one_point_at_a_time() {
         }
     }
     assert_eq!(reaches.into_iter().collect::<Vec<_>>(), [0, 1, 2, 3, 4]);
+}
+
+/// Splatting eight points at a time writes the maps of one point at a time bit for bit
+/// (the squares' rows in lanes, clipped at every edge, the last rows one at a time),
+/// with the same written rectangle.
+#[test]
+fn the_splat_lanes_write_the_maps_of_one_point_at_a_time() {
+    let size = 32;
+    let frame = frame_about(Vec3::new(-0.4, 0.7, 0.5).normalize());
+    let projections = [
+        Projection::Paraboloid {
+            origin: Vec3::ZERO,
+            frame,
+        },
+        Projection::Orthographic {
+            center: Vec3::ZERO,
+            radius: 1.0,
+            frame,
+        },
+    ];
+    let mut bottom_right = 0;
+    for projection in &projections {
+        for set in 0..40u64 {
+            // 8 k + 5 points: the group loop and its tail both run.
+            let points: Vec<(Vec3, f32)> = (0..8 * (set % 6) + 5)
+                .map(|i| {
+                    let h = crate::rng::hash(&[0x5B1A8, set, i]);
+                    let u = |k: u64| crate::rng::unit_f32(crate::rng::hash(&[h, k])) * 2.4 - 1.2;
+                    let texel = projection.texel_size(1.0, size);
+                    (Vec3::new(u(0), u(1), u(2)), texel * (h % 11) as f32 * 0.5)
+                })
+                .collect();
+            let mut one_at_a_time = vec![f32::INFINITY; size * size];
+            let expected = splat_with(
+                None,
+                &mut one_at_a_time,
+                size,
+                projection,
+                points.iter().copied(),
+            );
+            bottom_right += one_at_a_time[size * size - 1].is_finite() as u32;
+            for kernel in [Kernel::Portable, Kernel::Avx2Fma] {
+                let mut map = vec![f32::INFINITY; size * size];
+                let written = splat_with(
+                    Some(kernel),
+                    &mut map,
+                    size,
+                    projection,
+                    points.iter().copied(),
+                );
+                assert_eq!(written, expected, "{kernel:?}, {projection:?}, set {set}");
+                let map_bits = |m: &[f32]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(
+                    map_bits(&map),
+                    map_bits(&one_at_a_time),
+                    "{kernel:?}, {projection:?}, set {set}"
+                );
+            }
+        }
+    }
+    assert!(bottom_right > 0, "some square reaches the map's last texel");
 }

@@ -1,16 +1,20 @@
-//! The projection of [`super::ism::splat`], eight points at a time: where each point
-//! falls in a map and how many texels its splat reaches, one point per lane, operation
-//! for operation as the scalar `Projection::project`, `texel_size` and reach (the same
-//! bits). The squares are then written one point at a time: the nearest depth a texel
-//! keeps does not depend on the order of the points.
+//! [`super::ism::splat`], eight points at a time: where each point falls in a map and
+//! how many texels its splat reaches, one point per lane, operation for operation as
+//! the scalar `Projection::project`, `texel_size` and reach (the same bits). The squares
+//! are then written one point at a time (the nearest depth a texel keeps does not
+//! depend on the order of the points), eight texels of a square's row at once: a
+//! texel keeps the nearer of its depth and the point's, as the scalar `splat_square`
+//! does (depths are never NaN, so the comparison is the same).
 
 use super::gather_lanes::{Projected, project};
-use super::ism::{MAX_SPLAT_RADIUS, Projection, Texel};
+use super::ism::{MAX_SPLAT_RADIUS, Projection, Texel, splat_square, square_bounds};
 use crate::simd::{Kernel, LANES, Lanes, Portable};
 use glam::Vec3;
 
 /// Where each of eight points (position, patch radius) falls in a `size`-texel map of
-/// `projection`, and its splat's reach in texels; `None` outside the map.
+/// `projection`, and its splat's reach in texels; `None` outside the map (the tests'
+/// view of what [`splat_points`] splats).
+#[cfg(test)]
 pub(super) fn project_points(
     kernel: Kernel,
     projection: &Projection,
@@ -25,7 +29,7 @@ pub(super) fn project_points(
     }
 }
 
-#[cfg(target_arch = "x86_64")]
+#[cfg(all(test, target_arch = "x86_64"))]
 #[target_feature(enable = "avx2,fma")]
 fn project_points_avx2(
     projection: &Projection,
@@ -33,6 +37,88 @@ fn project_points_avx2(
     points: &[(Vec3, f32); LANES],
 ) -> [Option<(Texel, i32)>; LANES] {
     project_points_with::<crate::simd::Avx2>(projection, size, points)
+}
+
+/// Splats eight points (position, patch radius) into `map` as `splat_square` does
+/// each, growing `written` to hold them.
+pub(super) fn splat_points(
+    kernel: Kernel,
+    projection: &Projection,
+    size: usize,
+    points: &[(Vec3, f32); LANES],
+    map: &mut [f32],
+    written: &mut [usize; 4],
+) {
+    match kernel.available() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `Kernel::available` says the CPU has AVX2 and FMA.
+        Kernel::Avx2Fma => unsafe { splat_points_avx2(projection, size, points, map, written) },
+        _ => splat_points_with::<Portable>(projection, size, points, map, written),
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn splat_points_avx2(
+    projection: &Projection,
+    size: usize,
+    points: &[(Vec3, f32); LANES],
+    map: &mut [f32],
+    written: &mut [usize; 4],
+) {
+    splat_points_with::<crate::simd::Avx2>(projection, size, points, map, written)
+}
+
+#[inline(always)]
+fn splat_points_with<V: Lanes>(
+    projection: &Projection,
+    size: usize,
+    points: &[(Vec3, f32); LANES],
+    map: &mut [f32],
+    written: &mut [usize; 4],
+) {
+    for (texel, reach) in project_points_with::<V>(projection, size, points)
+        .into_iter()
+        .flatten()
+    {
+        if reach == 0 {
+            splat_square(map, size, texel, reach, written);
+        } else {
+            splat_square_lanes::<V>(map, size, texel, reach, written);
+        }
+    }
+}
+
+/// `splat_square` with the first eight texels of each row in lanes (the ninth, at
+/// reach 4, and rows whose eight lanes would pass the end of `map`, one at a time).
+#[inline(always)]
+fn splat_square_lanes<V: Lanes>(
+    map: &mut [f32],
+    size: usize,
+    texel: Texel,
+    reach: i32,
+    written: &mut [usize; 4],
+) {
+    let [x0, y0, x1, y1] = square_bounds(size, texel, reach, written);
+    let head = (x1 - x0).min(LANES);
+    let columns = V::from_array(std::array::from_fn(|l| l as f32));
+    let in_square = columns.lt(V::splat(head as f32));
+    let depth = V::splat(texel.depth);
+    for ty in y0..y1 {
+        let (start, end) = (ty * size + x0, ty * size + x1);
+        let rest = if start + LANES <= map.len() {
+            let old = V::load_slice(map, start);
+            V::select(in_square.and(depth.lt(old)), depth, old).store_slice(map, start);
+            start + head..end
+        } else {
+            start..end
+        };
+        for t in &mut map[rest] {
+            if texel.depth < *t {
+                *t = texel.depth;
+            }
+        }
+    }
 }
 
 #[inline(always)]

@@ -79,15 +79,8 @@ impl DirRenderer {
         mesh: &MeshPoints,
         out: &mut IrradianceLayers,
     ) -> Result<(), StageError> {
-        if out.size() != Some((inputs.depth.width, inputs.depth.height)) {
-            return Err(StageError::Failed(format!(
-                "sample.dir: output buffers are not all {}x{}",
-                inputs.depth.width, inputs.depth.height
-            )));
-        }
         self.lights(inputs, params, mesh)?;
-        self.shade(inputs, params, out);
-        Ok(())
+        self.shade(inputs, params, out)
     }
 
     /// The frame's VPLs and their shadow maps (steps 1-3 of the module docs).
@@ -165,10 +158,26 @@ impl DirRenderer {
     }
 
     /// The interleaved gather and the blur into `out` (steps 4-5), from the VPLs of the
-    /// last [`DirRenderer::lights`] on the same inputs.
-    pub fn shade(&mut self, inputs: &DirInputs, params: &DirParams, out: &mut IrradianceLayers) {
+    /// last [`DirRenderer::lights`] on the same inputs. An error when no lights were
+    /// made for a frame of this size and interleaving, or `out` is not that size.
+    pub fn shade(
+        &mut self,
+        inputs: &DirInputs,
+        params: &DirParams,
+        out: &mut IrradianceLayers,
+    ) -> Result<(), StageError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
         let k = params.interleave as usize;
+        if self.real.position.len() != w as usize * h as usize || self.members.len() != k * k {
+            return Err(StageError::Failed(format!(
+                "sample.dir: no lights made for a {w}x{h} frame with interleave {k} to shade"
+            )));
+        }
+        if out.size() != Some((w, h)) {
+            return Err(StageError::Failed(format!(
+                "sample.dir: output buffers are not all {w}x{h}"
+            )));
+        }
         let raw = match &mut self.raw {
             Some(raw) if raw.size() == Some((w, h)) => raw,
             slot => slot.insert(IrradianceLayers::new(w, h)),
@@ -201,6 +210,7 @@ impl DirRenderer {
             slot => slot.insert(IrradianceLayers::new(w, h)),
         };
         blur_layers(raw, &self.real, k, self.kernel, between, out);
+        Ok(())
     }
 
     /// Splats and fills the maps of slots `first..`: `points_per_vpl` real points into

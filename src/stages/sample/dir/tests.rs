@@ -416,6 +416,39 @@ fn a_reused_renderer_gives_the_bits_of_a_fresh_one() {
     assert!(bits(&out) == bits(&fresh));
 }
 
+/// Shading reads the lights of the last `lights` call: without lights for a frame of
+/// its size and interleaving, or into layers of another size, it is an error.
+#[test]
+fn shading_without_lights_of_the_frame_is_an_error() {
+    let scene = floor_scene();
+    let (objects, table) = (VirtualScene::default(), uniform_table(64));
+    let (params, inputs) = (DirParams::default(), inputs(&scene, &objects, &table, 0));
+    let mesh = MeshPoints::new(&objects, params.mesh_points as usize, params.seed);
+    let (w, h) = (scene.depth.width, scene.depth.height);
+    let mut renderer = DirRenderer::default();
+    let mut out = IrradianceLayers::new(w, h);
+    let no_lights = "sample.dir: no lights made for a 96x72 frame with interleave 4 to shade";
+    let err = renderer.shade(&inputs, &params, &mut out).unwrap_err();
+    assert_eq!(err.to_string(), no_lights);
+    renderer.lights(&inputs, &params, &mesh).unwrap();
+    let other = DirParams {
+        interleave: 2,
+        ..params
+    };
+    let err = renderer.shade(&inputs, &other, &mut out).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "sample.dir: no lights made for a 96x72 frame with interleave 2 to shade"
+    );
+    let mut small = IrradianceLayers::new(w / 2, h);
+    let err = renderer.shade(&inputs, &params, &mut small).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "sample.dir: output buffers are not all 96x72"
+    );
+    renderer.shade(&inputs, &params, &mut out).unwrap();
+}
+
 #[test]
 fn shadow_maps_beyond_a_gibibyte_are_refused_before_allocating() {
     let params = DirParams {

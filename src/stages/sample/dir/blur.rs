@@ -32,8 +32,10 @@ pub(super) struct PassInputs<'a> {
 /// Blurs `raw` (the interleaved estimates, `k` x `k` classes) into `out`, through
 /// `between` (the pass along x), all of one size; with `kernel`'s lanes where all of
 /// a pixel's taps lie inside the image (the same bits), else one pixel at a time.
+/// `out` takes `raw`'s surface and mask layers (swapped, not copied: `raw` is left
+/// with `out`'s old ones).
 pub fn blur_layers(
-    raw: &IrradianceLayers,
+    raw: &mut IrradianceLayers,
     real: &RealSurface,
     k: usize,
     kernel: Option<Kernel>,
@@ -86,15 +88,6 @@ pub fn blur_layers(
         |_, y, mut row| {
             let (first, last) = (y.saturating_sub(lo), (y + hi).min(h - 1));
             let start = y * w;
-            // The surface and mask of the raw layers, the light blurred.
-            row.mask.copy_from_slice(&raw.mask.data[start..start + w]);
-            row.k_v.copy_from_slice(&raw.k_v.data[start..start + w]);
-            row.exponent
-                .copy_from_slice(&raw.exponent.data[start..start + w]);
-            row.world_position
-                .copy_from_slice(&raw.world_position.data[start..start + w]);
-            row.world_normal
-                .copy_from_slice(&raw.world_normal.data[start..start + w]);
             let mut lanes_end = 0;
             if let Some(kernel) = kernel
                 && y >= lo
@@ -115,6 +108,12 @@ pub fn blur_layers(
             }
         },
     );
+    // The surface and mask of the raw layers, the light blurred.
+    std::mem::swap(&mut out.mask, &mut raw.mask);
+    std::mem::swap(&mut out.k_v, &mut raw.k_v);
+    std::mem::swap(&mut out.exponent, &mut raw.exponent);
+    std::mem::swap(&mut out.world_position, &mut raw.world_position);
+    std::mem::swap(&mut out.world_normal, &mut raw.world_normal);
 }
 
 /// A blurred pixel.

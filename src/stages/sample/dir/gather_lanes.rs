@@ -157,10 +157,37 @@ pub(super) fn project<V: Lanes>(projection: &Projection, p: [V; 3], size: usize)
     }
 }
 
-/// [`MapView::test`] per lane, of the lanes in `active`: visibility (1 or 0) and the
-/// occluder's depth difference (INFINITY where visible).
+/// The tangent of the slope bias for the cosine `cos` of the light's angle to the
+/// receiver's normal, as [`MapView::test`] takes it; made by the first of a VPL's
+/// two tests that needs it (`slope`: `None` before).
 #[inline(always)]
-fn test<V: Lanes>(map: &MapView, at: &Projected<V>, cos: V, active: V) -> (V, V) {
+fn slope_tangent<V: Lanes>(cos: V, slope: &mut Option<V>) -> V {
+    // (No lane operations in closures: see `crate::simd`.)
+    if let Some(tan) = *slope {
+        return tan;
+    }
+    let one = V::splat(1.0);
+    let cos = cos.max(V::splat(1e-3)).min(one);
+    let tan = one
+        .sub(cos.mul(cos))
+        .sqrt()
+        .div(cos)
+        .min(V::splat(MAX_SLOPE));
+    *slope = Some(tan);
+    tan
+}
+
+/// [`MapView::test`] per lane, of the lanes in `active`: visibility (1 or 0) and the
+/// occluder's depth difference (INFINITY where visible). `tan` holds the slope bias's
+/// tangent of `cos` once a test of the same VPL made it ([`slope_tangent`]).
+#[inline(always)]
+fn test<V: Lanes>(
+    map: &MapView,
+    at: &Projected<V>,
+    cos: V,
+    tan: &mut Option<V>,
+    active: V,
+) -> (V, V) {
     let (one, infinity) = (V::splat(1.0), V::splat(f32::INFINITY));
     // (No lane operations in closures: see `crate::simd`.)
     let [x0, y0, x1, y1] = map.rect;
@@ -181,12 +208,7 @@ fn test<V: Lanes>(map: &MapView, at: &Projected<V>, cos: V, active: V) -> (V, V)
     // 2^12 texels a side); the others read texel 0.
     debug_assert!(map.size <= 4096 && map.depth.len() >= map.size * map.size);
     let stored = unsafe { V::gather_at(map.depth.as_ptr(), index) };
-    let cos = cos.max(V::splat(1e-3)).min(one);
-    let tan = one
-        .sub(cos.mul(cos))
-        .sqrt()
-        .div(cos)
-        .min(V::splat(MAX_SLOPE));
+    let tan = slope_tangent(cos, tan);
     let texel = match *map.projection {
         Projection::Paraboloid { .. } => at.depth.mul(V::splat(4.0)).div(V::splat(size)),
         Projection::Orthographic { radius, .. } => V::splat(2.0 * radius / size),
@@ -259,15 +281,16 @@ fn gather_with<V: Lanes>(
         }
         let (real_map, virtual_map) = (lights.map(slot, 0), lights.map(slot, 1));
         let projected = project(real_map.projection, p, lights.size);
-        let (st_r, behind_r) = test(&real_map, &projected, cos, active);
+        let mut tan = None;
+        let (st_r, behind_r) = test(&real_map, &projected, cos, &mut tan, active);
         let (st_v, behind_v) = if !for_combined || virtual_map.is_empty() {
             (V::splat(1.0), infinity)
         } else if virtual_map.projection == real_map.projection {
             // A surface VPL's two maps share their paraboloid.
-            test(&virtual_map, &projected, cos, active)
+            test(&virtual_map, &projected, cos, &mut tan, active)
         } else {
             let projected = project(virtual_map.projection, p, lights.size);
-            test(&virtual_map, &projected, cos, active)
+            test(&virtual_map, &projected, cos, &mut tan, active)
         };
         let light = [
             V::splat(vpl.power.x).mul(transfer),

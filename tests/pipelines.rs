@@ -321,6 +321,21 @@ fn the_dir_pipelines_are_their_twins_with_sample_dir_swapped_in() {
     }
 }
 
+/// The Distance Impostor Tracing pipeline is the default chain with the query swapped
+/// and nothing else changed (its temporal reuse and filter settings included).
+#[test]
+fn the_dit_pipeline_is_the_default_chain_with_the_impostor_traced() {
+    let sampling = "params = { primary = 1, direct = 1, indirect = 1,";
+    let swaps = [(
+        sampling,
+        "params = { query = \"dit\", primary = 1, direct = 1, indirect = 1,",
+    )];
+    let p = assert_twin("mixed-reality", "mixed-reality-dit", &swaps);
+    let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
+    assert_eq!(path.params.str("query"), "dit");
+    assert!(path.params.bool("visibility"));
+}
+
 /// The area-light pipelines (paper 004) are their reference twins with the light model,
 /// sample.val and an unfiltered composite swapped in for sampling and filtering.
 #[test]

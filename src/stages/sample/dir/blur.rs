@@ -211,8 +211,8 @@ fn blur_pixel(pass: &PassInputs, i: usize, taps: impl Iterator<Item = usize> + C
     }
 }
 
-/// Writes the blurred values of pixel `x` of `row` (its surface and mask are copied
-/// apart).
+/// Writes the blurred values of pixel `x` of `row` (its surface and mask come from the
+/// raw layers, swapped in after the passes).
 fn put_light(row: &mut LayerRow<'_>, x: usize, px: &Blurred) {
     row.e_r_dir[x] = px.e_r_dir;
     row.e_r_ind[x] = px.e_r_ind;

@@ -35,6 +35,10 @@ pub struct DirRenderer {
     raw: Option<IrradianceLayers>,
     /// The blur's pass along x.
     between: Option<IrradianceLayers>,
+    /// What the last [`DirRenderer::lights`] made lights for (`None` before, or after
+    /// one that failed): the frame's width and height, the interleaving and the maps'
+    /// size, which [`DirRenderer::shade`] must be asked for.
+    lit: Option<[u32; 4]>,
     /// The lanes that gather, blur and project eight receivers, pixels or points at a
     /// time; `None`: one at a time (the same bits).
     pub(super) kernel: Option<Kernel>,
@@ -66,6 +70,7 @@ impl DirRenderer {
             environment: Vec::new(),
             raw: None,
             between: None,
+            lit: None,
             kernel,
         }
     }
@@ -91,6 +96,7 @@ impl DirRenderer {
         mesh: &MeshPoints,
     ) -> Result<(), StageError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
+        self.lit = None;
         check_sizes(
             "sample.dir",
             (w, h),
@@ -154,12 +160,14 @@ impl DirRenderer {
         for (i, v) in self.vpls.iter().enumerate() {
             self.members[v.slot as usize % classes].push(i as u32);
         }
+        self.lit = Some(lit_frame(w, h, params));
         Ok(())
     }
 
     /// The interleaved gather and the blur into `out` (steps 4-5), from the VPLs of the
-    /// last [`DirRenderer::lights`] on the same inputs. An error when no lights were
-    /// made for a frame of this size and interleaving, or `out` is not that size.
+    /// last [`DirRenderer::lights`] on the same inputs. An error when the last lights
+    /// were not made for a frame of this size with this interleaving and map size, or
+    /// `out` is not that size.
     pub fn shade(
         &mut self,
         inputs: &DirInputs,
@@ -168,9 +176,10 @@ impl DirRenderer {
     ) -> Result<(), StageError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
         let k = params.interleave as usize;
-        if self.real.position.len() != w as usize * h as usize || self.members.len() != k * k {
+        if self.lit != Some(lit_frame(w, h, params)) {
             return Err(StageError::Failed(format!(
-                "sample.dir: no lights made for a {w}x{h} frame with interleave {k} to shade"
+                "sample.dir: no lights made for a {w}x{h} frame with interleave {k} and {s}x{s} maps to shade",
+                s = params.shadow_map_size
             )));
         }
         if out.size() != Some((w, h)) {
@@ -274,6 +283,11 @@ impl DirRenderer {
                 ];
             });
     }
+}
+
+/// What [`DirRenderer::lit`] records of a frame `w` x `h` lit with `params`.
+fn lit_frame(w: u32, h: u32, params: &DirParams) -> [u32; 4] {
+    [w, h, params.interleave, params.shadow_map_size]
 }
 
 /// Empties the rectangle `[x0, y0, x1, y1)` of a `size`-texel map.

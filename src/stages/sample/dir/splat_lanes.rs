@@ -3,8 +3,9 @@
 //! the scalar `Projection::project`, `texel_size` and reach (the same bits). The squares
 //! are then written one point at a time (the nearest depth a texel keeps does not
 //! depend on the order of the points), eight texels of a square's row at once: a
-//! texel keeps the nearer of its depth and the point's, as the scalar `splat_square`
-//! does (depths are never NaN, so the comparison is the same).
+//! texel takes the point's depth where that is less than its own and keeps its bits
+//! otherwise, as the scalar `splat_square` does (a comparison with NaN is false in
+//! both).
 
 use super::gather_lanes::{Projected, project};
 use super::ism::{MAX_SPLAT_RADIUS, Projection, Texel, splat_square, square_bounds};

@@ -427,18 +427,39 @@ fn shading_without_lights_of_the_frame_is_an_error() {
     let (w, h) = (scene.depth.width, scene.depth.height);
     let mut renderer = DirRenderer::default();
     let mut out = IrradianceLayers::new(w, h);
-    let no_lights = "sample.dir: no lights made for a 96x72 frame with interleave 4 to shade";
+    let no_lights =
+        "sample.dir: no lights made for a 96x72 frame with interleave 4 and 128x128 maps to shade";
     let err = renderer.shade(&inputs, &params, &mut out).unwrap_err();
     assert_eq!(err.to_string(), no_lights);
     renderer.lights(&inputs, &params, &mesh).unwrap();
-    let other = DirParams {
-        interleave: 2,
-        ..params
-    };
-    let err = renderer.shade(&inputs, &other, &mut out).unwrap_err();
+    for (other, what) in [
+        (
+            DirParams {
+                interleave: 2,
+                ..params
+            },
+            "96x72 frame with interleave 2 and 128x128 maps",
+        ),
+        (
+            DirParams {
+                shadow_map_size: 256,
+                ..params
+            },
+            "96x72 frame with interleave 4 and 256x256 maps",
+        ),
+    ] {
+        let err = renderer.shade(&inputs, &other, &mut out).unwrap_err();
+        let expected = format!("sample.dir: no lights made for a {what} to shade");
+        assert_eq!(err.to_string(), expected);
+    }
+    // A frame of the same pixel count in another shape.
+    let transposed = crate::raster::Image::filled(h, w, 1.0f32);
+    let mut other_shape = inputs;
+    other_shape.depth = &transposed;
+    let err = renderer.shade(&other_shape, &params, &mut out).unwrap_err();
     assert_eq!(
         err.to_string(),
-        "sample.dir: no lights made for a 96x72 frame with interleave 2 to shade"
+        "sample.dir: no lights made for a 72x96 frame with interleave 4 and 128x128 maps to shade"
     );
     let mut small = IrradianceLayers::new(w / 2, h);
     let err = renderer.shade(&inputs, &params, &mut small).unwrap_err();

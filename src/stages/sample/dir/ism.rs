@@ -198,12 +198,17 @@ pub(super) fn splat_square(
     written: &mut [usize; 4],
 ) {
     let [x0, y0, x1, y1] = square_bounds(size, texel, reach, written);
-    let depth = texel.depth;
     for ty in y0..y1 {
-        for t in &mut map[ty * size + x0..ty * size + x1] {
-            if depth < *t {
-                *t = depth;
-            }
+        keep_nearer(&mut map[ty * size + x0..ty * size + x1], texel.depth);
+    }
+}
+
+/// Puts `depth` in each of `texels` whose depth is farther.
+#[inline(always)]
+pub(super) fn keep_nearer(texels: &mut [f32], depth: f32) {
+    for t in texels {
+        if depth < *t {
+            *t = depth;
         }
     }
 }

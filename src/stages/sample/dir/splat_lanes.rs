@@ -8,7 +8,7 @@
 //! both).
 
 use super::gather_lanes::{Projected, project};
-use super::ism::{MAX_SPLAT_RADIUS, Projection, Texel, splat_square, square_bounds};
+use super::ism::{MAX_SPLAT_RADIUS, Projection, Texel, keep_nearer, splat_square, square_bounds};
 use crate::simd::{Kernel, LANES, Lanes, Portable};
 use glam::Vec3;
 
@@ -114,11 +114,7 @@ fn splat_square_lanes<V: Lanes>(
         } else {
             start..end
         };
-        for t in &mut map[rest] {
-            if texel.depth < *t {
-                *t = texel.depth;
-            }
-        }
+        keep_nearer(&mut map[rest], texel.depth);
     }
 }
 

@@ -336,6 +336,31 @@ fn the_dit_pipeline_is_the_default_chain_with_the_impostor_traced() {
     assert!(path.params.bool("visibility"));
 }
 
+/// The Voxel Cone Tracing pipeline with temporal reuse is the default chain with the
+/// voxel volume built and the query swapped, nothing else changed.
+#[test]
+fn the_vct_reuse_pipeline_is_the_default_chain_with_cones_through_the_voxels() {
+    let swaps = [
+        (
+            "-> light.impostor -> light.importance ->",
+            "-> light.impostor, light.voxels -> light.importance ->",
+        ),
+        (
+            "kind = \"light.importance\"\n",
+            "kind = \"light.voxels\"\n\n[[stage]]\nkind = \"light.importance\"\n",
+        ),
+        (
+            "params = { primary = 1, direct = 1, indirect = 1,",
+            "params = { query = \"vct\", primary = 1, direct = 1, indirect = 1,",
+        ),
+    ];
+    let p = assert_twin("mixed-reality", "mixed-reality-vct-reuse", &swaps);
+    let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
+    assert_eq!(path.params.str("query"), "vct");
+    assert!(path.params.bool("visibility"));
+    assert!(p.stages.iter().any(|s| s.kind == "light.voxels"));
+}
+
 /// The area-light pipelines (paper 004) are their reference twins with the light model,
 /// sample.val and an unfiltered composite swapped in for sampling and filtering.
 #[test]

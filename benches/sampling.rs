@@ -18,6 +18,10 @@
 //!   16, 32 and 64 samples per pixel and layer (4 primaries x 4, 8, 16 direct and as
 //!   many indirect), with the objects' self-occlusion test and without (`_novis`).
 //!   `RELUME_BENCH_TABLE3=16` limits it to one N.
+//! - `sample.path/reuse/<query>`: `em`, `dit` and `vct` on the same case at the default
+//!   chain's counts (1 + 1 fresh samples a pixel, 2 + 2 near the objects, with
+//!   visibility), as `pipelines/mixed-reality.toml` and its query twins run them with
+//!   temporal reuse.
 //! - `sample.path/no_objects`: the same with no virtual object: the real scene's
 //!   estimates alone, the floor under every case with objects.
 //! - `objects/nearest`: the BVH alone, on one thread: the frame's object queries of
@@ -387,6 +391,24 @@ fn bench_queries(
                 });
             }
         }
+    }
+    // The same queries at the default chain's counts (pipelines/mixed-reality.toml and
+    // its dit / vct twins): 1 + 1 fresh samples a pixel, 2 + 2 near the objects, with
+    // visibility; temporal.accumulate (not timed here) reuses earlier frames' samples.
+    for query in [QueryKind::Em, QueryKind::Dit, QueryKind::Vct] {
+        let p = PathParams {
+            query,
+            visibility: true,
+            primary: 1,
+            direct: 1,
+            indirect: 1,
+            near_primary: 2,
+            near_distance: 0.1,
+            ..*params
+        };
+        group.bench_function(format!("sample.path/reuse/{}", query.name()), |b| {
+            b.iter(|| sample_path(inputs, &p, &mut out).unwrap())
+        });
     }
 }
 

@@ -103,6 +103,10 @@ pub(super) struct Kernel<'a> {
     pub(super) table_em: Vec<Option<Hit>>,
     /// How the screen-space rays are marched (the same hits with any).
     pub(super) lanes: simd::Kernel,
+    /// `em`, `dit`: a real point's indirect rays are not asked of the impostor when
+    /// drawn (its answer brings them no light, see [`super::rays::NOT_ASKED`]); only
+    /// a ray that meets an object asks it, whether the impostor's surface comes first.
+    pub(super) impostor_bounds_reflectors: bool,
 }
 
 impl<'a> Kernel<'a> {
@@ -145,6 +149,7 @@ impl<'a> Kernel<'a> {
                 .collect(),
             _ => Vec::new(),
         };
+        let impostor_bounds_reflectors = matches!(world_query, Some(WorldQuery::Impostor(_)));
         Kernel {
             inputs,
             params,
@@ -178,6 +183,7 @@ impl<'a> Kernel<'a> {
                 .iter()
                 .map(|ls| Vec3::from(to_camera * Vec3A::from(ls.direction)))
                 .collect(),
+            impostor_bounds_reflectors,
             table_em,
             lanes,
         }
@@ -595,7 +601,13 @@ impl<'a> Kernel<'a> {
                     // With object-aware sampling the candidates stand for these paths.
                     Some(o) if !params.object_aware && rp.cone_camera.admits(dir_camera) => {
                         let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
-                        o.hit(rp.world, dir, t_real)
+                        // The nearest hit before t_real is the nearest hit, if nearer.
+                        o.hit(rp.world, dir, t_real).filter(|hit| {
+                            !self.impostor_bounds_reflectors
+                                || self
+                                    .query_from_real(rp, dir_camera)
+                                    .is_none_or(|real| hit.t < real.t)
+                        })
                     }
                     _ => None,
                 };

@@ -256,9 +256,13 @@ impl Kernel<'_> {
             let (u1, u2) = indirect_stream.pair(s as u64);
             let dir_camera = rp.basis_camera.to_world(cosine_hemisphere(u1, u2));
             // For the world-space queries, only rays that may meet an object need
-            // their distance (see `real_samples`).
+            // their distance (see `real_samples`); the impostor's is asked there, and
+            // only of the rays that do meet one.
             let world = |q: &WorldQuery| {
-                if self.params.object_aware || !rp.cone_camera.admits(dir_camera) {
+                if self.params.object_aware
+                    || self.impostor_bounds_reflectors
+                    || !rp.cone_camera.admits(dir_camera)
+                {
                     return Some(NOT_ASKED);
                 }
                 q.query(&self.real_ray(rp, dir_camera))

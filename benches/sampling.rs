@@ -14,9 +14,10 @@
 //! - `sample.path/tenth_fast`: the same at `pipelines/mixed-reality-fast.toml`'s sample
 //!   counts, 4 direct + 4 indirect samples per pixel.
 //! - `sample.path/table3/<query>_<N>[_novis]`: paper 000 Table 3's grid on the
-//!   `tenth` case: each radiance query (`ssrt`, `em`, `dit` with 4 iterations) at N =
-//!   16, 32 and 64 samples per pixel and layer (4 primaries x 4, 8, 16 direct and as
-//!   many indirect), with the objects' self-occlusion test and without (`_novis`).
+//!   `tenth` case: each radiance query (`ssrt`, `em`, `dit` with 6 iterations,
+//!   `vct`) at N = 16, 32 and 64 samples per pixel and layer (4 primaries x 4, 8, 16
+//!   direct and as many indirect), with the objects' self-occlusion test and without
+//!   (`_novis`).
 //!   `RELUME_BENCH_TABLE3=16` limits it to one N.
 //! - `sample.path/reuse/<query>`: `em`, `dit` and `vct` on the same case at the default
 //!   chain's counts (1 + 1 fresh samples a pixel, 2 + 2 near the objects, with

@@ -19,10 +19,10 @@
 //!   direct and as many indirect), with the objects' self-occlusion test and without
 //!   (`_novis`).
 //!   `RELUME_BENCH_TABLE3=16` limits it to one N.
-//! - `sample.path/reuse/<query>`: `em`, `dit` and `vct` on the same case at the default
-//!   chain's counts (1 + 1 fresh samples a pixel, 2 + 2 near the objects, with
-//!   visibility), as `pipelines/mixed-reality.toml` and its query twins run them with
-//!   temporal reuse.
+//! - `sample.path/reuse/<query>`: every query on the same case at the default chain's
+//!   counts (1 + 1 fresh samples a pixel, 2 + 2 near the objects, with visibility), as
+//!   `pipelines/mixed-reality.toml` runs `ssrt` and its twins
+//!   `mixed-reality-{dit,vct-reuse}.toml` run `dit` and `vct`, with temporal reuse.
 //! - `sample.path/no_objects`: the same with no virtual object: the real scene's
 //!   estimates alone, the floor under every case with objects.
 //! - `objects/nearest`: the BVH alone, on one thread: the frame's object queries of
@@ -396,7 +396,12 @@ fn bench_queries(
     // The same queries at the default chain's counts (pipelines/mixed-reality.toml and
     // its dit / vct twins): 1 + 1 fresh samples a pixel, 2 + 2 near the objects, with
     // visibility; temporal.accumulate (not timed here) reuses earlier frames' samples.
-    for query in [QueryKind::Em, QueryKind::Dit, QueryKind::Vct] {
+    for query in [
+        QueryKind::Ssrt,
+        QueryKind::Em,
+        QueryKind::Dit,
+        QueryKind::Vct,
+    ] {
         let p = PathParams {
             query,
             visibility: true,

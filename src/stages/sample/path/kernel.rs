@@ -104,8 +104,9 @@ pub(super) struct Kernel<'a> {
     /// How the screen-space rays are marched (the same hits with any).
     pub(super) lanes: simd::Kernel,
     /// `em`, `dit`: a real point's indirect rays are not asked of the impostor when
-    /// drawn (its answer brings them no light, see [`super::rays::NOT_ASKED`]); only
-    /// a ray that meets an object asks it, whether the impostor's surface comes first.
+    /// drawn (its answer brings them no light, see [`super::rays::NOT_ASKED`]); a ray
+    /// of a real primary that meets an object asks it then, to learn whether the
+    /// impostor's surface comes first ([`Kernel::before_impostor`]).
     pub(super) impostor_bounds_reflectors: bool,
 }
 
@@ -601,12 +602,9 @@ impl<'a> Kernel<'a> {
                     // With object-aware sampling the candidates stand for these paths.
                     Some(o) if !params.object_aware && rp.cone_camera.admits(dir_camera) => {
                         let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
-                        // The nearest hit before t_real is the nearest hit, if nearer.
                         o.hit(rp.world, dir, t_real).filter(|hit| {
                             !self.impostor_bounds_reflectors
-                                || self
-                                    .query_from_real(rp, dir_camera)
-                                    .is_none_or(|real| hit.t < real.t)
+                                || self.before_impostor(o, rp, dir, dir_camera, hit.t)
                         })
                     }
                     _ => None,
@@ -617,6 +615,33 @@ impl<'a> Kernel<'a> {
                     acc.indirect_min = acc.indirect_min.min(hit.t);
                 }
                 acc.rv_ind += l_rv;
+            }
+        }
+    }
+}
+
+impl Kernel<'_> {
+    /// `em`, `dit`: whether the objects' nearest hit at `t` along world direction
+    /// `dir` (camera space `dir_camera`) from real point `rp` comes before the
+    /// impostor's surface: exactly when `objects.hit` bounded by the impostor's
+    /// distance (the ray's answer had it been asked when drawn) finds it, box test
+    /// included. The nearest hit before a bound is the nearest hit, if nearer.
+    fn before_impostor(
+        &self,
+        objects: &Objects,
+        rp: &RealPoint,
+        dir: Vec3,
+        dir_camera: Vec3,
+        t: f32,
+    ) -> bool {
+        match self.query_from_real(rp, dir_camera) {
+            None => true,
+            Some(real) => {
+                t < real.t
+                    && objects
+                        .aabb
+                        .ray_span(rp.world, dir.recip(), 0.0, real.t)
+                        .is_some()
             }
         }
     }

@@ -15,10 +15,12 @@ use crate::stages::sample::query::{
 use crate::stages::sample::ssrt::{RayOrigin, TraceBatch};
 use glam::{Vec3, Vec3A};
 
-/// The answer recorded for an impostor ray whose answer cannot matter: an indirect ray
-/// from a real point outside the objects' cone (no object can be in its way), or any
-/// indirect ray from a real point when the object-aware differential stands for them;
-/// the environment brings indirect light nothing (direct light counts it).
+/// The answer recorded for a world-space ray whose answer cannot matter when drawn: an
+/// indirect ray from a real point outside the objects' cone (no object can be in its
+/// way), any indirect ray from a real point when the object-aware differential stands
+/// for them, and under `em` and `dit` every indirect ray from a real point (the
+/// impostor is asked only if the ray meets an object: `Kernel::before_impostor`); the
+/// environment brings indirect light nothing (direct light counts it).
 pub(super) const NOT_ASKED: Hit = Hit {
     t: f32::INFINITY,
     radiance: Vec3::ZERO,

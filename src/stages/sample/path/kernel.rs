@@ -620,33 +620,6 @@ impl<'a> Kernel<'a> {
     }
 }
 
-impl Kernel<'_> {
-    /// `em`, `dit`: whether the objects' nearest hit at `t` along world direction
-    /// `dir` (camera space `dir_camera`) from real point `rp` comes before the
-    /// impostor's surface: exactly when `objects.hit` bounded by the impostor's
-    /// distance (the ray's answer had it been asked when drawn) finds it, box test
-    /// included. The nearest hit before a bound is the nearest hit, if nearer.
-    fn before_impostor(
-        &self,
-        objects: &Objects,
-        rp: &RealPoint,
-        dir: Vec3,
-        dir_camera: Vec3,
-        t: f32,
-    ) -> bool {
-        match self.query_from_real(rp, dir_camera) {
-            None => true,
-            Some(real) => {
-                t < real.t
-                    && objects
-                        .aabb
-                        .ray_span(rp.world, dir.recip(), 0.0, real.t)
-                        .is_some()
-            }
-        }
-    }
-}
-
 /// `sum` / `count` times `scale`, 0 for no samples.
 #[inline]
 fn mean(sum: Vec3, count: u32, scale: f32) -> Vec3 {

@@ -7,6 +7,7 @@
 //! one answer per ray, in push order. The questions the estimator asks one ray at a
 //! time (the object-aware candidates, the bounce off an object) are here too.
 
+use super::bounds::Objects;
 use super::kernel::{Kernel, RealPoint};
 use crate::simd;
 use crate::stages::sample::query::{
@@ -193,6 +194,31 @@ impl Kernel<'_> {
         match &self.world_query {
             Some(query) => query.query(&ray),
             None => self.screen().query(&ray),
+        }
+    }
+
+    /// `em`, `dit`: whether the objects' nearest hit at `t` along world direction
+    /// `dir` (camera space `dir_camera`) from real point `rp` comes before the
+    /// impostor's surface: exactly when `objects.hit` bounded by the impostor's
+    /// distance (the ray's answer had it been asked when drawn) finds it, box test
+    /// included. The nearest hit before a bound is the nearest hit, if nearer.
+    pub(super) fn before_impostor(
+        &self,
+        objects: &Objects,
+        rp: &RealPoint,
+        dir: Vec3,
+        dir_camera: Vec3,
+        t: f32,
+    ) -> bool {
+        match self.query_from_real(rp, dir_camera) {
+            None => true,
+            Some(real) => {
+                t < real.t
+                    && objects
+                        .aabb
+                        .ray_span(rp.world, dir.recip(), 0.0, real.t)
+                        .is_some()
+            }
         }
     }
 }

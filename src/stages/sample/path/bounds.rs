@@ -57,8 +57,17 @@ impl Objects<'_> {
     /// pretest.
     #[inline]
     pub fn hit(&self, o: Vec3, d: Vec3, t_max: f32) -> Option<VirtualHit> {
-        self.aabb.ray_span(o, d.recip(), 0.0, t_max)?;
+        if !self.box_admits(o, d, t_max) {
+            return None;
+        }
         self.scene.intersect(o, d, 0.0, t_max)
+    }
+
+    /// The bounding-box pretest of [`Objects::hit`]: whether `o + t d` meets the box
+    /// with t < t_max.
+    #[inline]
+    pub fn box_admits(&self, o: Vec3, d: Vec3, t_max: f32) -> bool {
+        self.aabb.ray_span(o, d.recip(), 0.0, t_max).is_some()
     }
 }
 

@@ -103,11 +103,6 @@ pub(super) struct Kernel<'a> {
     pub(super) table_em: Vec<Option<Hit>>,
     /// How the screen-space rays are marched (the same hits with any).
     pub(super) lanes: simd::Kernel,
-    /// `em`, `dit`: a real point's indirect rays are not asked of the impostor when
-    /// drawn (its answer brings them no light, see [`super::rays::NOT_ASKED`]); a ray
-    /// of a real primary that meets an object asks it then, to learn whether the
-    /// impostor's surface comes first ([`Kernel::before_impostor`]).
-    pub(super) impostor_bounds_reflectors: bool,
 }
 
 impl<'a> Kernel<'a> {
@@ -150,7 +145,6 @@ impl<'a> Kernel<'a> {
                 .collect(),
             _ => Vec::new(),
         };
-        let impostor_bounds_reflectors = matches!(world_query, Some(WorldQuery::Impostor(_)));
         Kernel {
             inputs,
             params,
@@ -184,10 +178,18 @@ impl<'a> Kernel<'a> {
                 .iter()
                 .map(|ls| Vec3::from(to_camera * Vec3A::from(ls.direction)))
                 .collect(),
-            impostor_bounds_reflectors,
             table_em,
             lanes,
         }
+    }
+
+    /// `em`, `dit`: a real point's indirect rays are not asked of the impostor when
+    /// drawn (its answer brings them no light, see [`super::rays::NOT_ASKED`]); a ray
+    /// of a real primary that meets an object asks it then, to learn whether the
+    /// impostor's surface comes first ([`Kernel::before_impostor`]).
+    #[inline]
+    pub(super) fn impostor_bounds_reflectors(&self) -> bool {
+        matches!(self.world_query, Some(WorldQuery::Impostor(_)))
     }
 
     /// `vct`: the cone of a direct sample's aperture from `origin` along `dir` through
@@ -603,7 +605,7 @@ impl<'a> Kernel<'a> {
                     Some(o) if !params.object_aware && rp.cone_camera.admits(dir_camera) => {
                         let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
                         o.hit(rp.world, dir, t_real).filter(|hit| {
-                            !self.impostor_bounds_reflectors
+                            !self.impostor_bounds_reflectors()
                                 || self.before_impostor(o, rp, dir, dir_camera, hit.t)
                         })
                     }

@@ -212,13 +212,7 @@ impl Kernel<'_> {
     ) -> bool {
         match self.query_from_real(rp, dir_camera) {
             None => true,
-            Some(real) => {
-                t < real.t
-                    && objects
-                        .aabb
-                        .ray_span(rp.world, dir.recip(), 0.0, real.t)
-                        .is_some()
-            }
+            Some(real) => t < real.t && objects.box_admits(rp.world, dir, real.t),
         }
     }
 }

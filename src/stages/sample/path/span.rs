@@ -260,7 +260,7 @@ impl Kernel<'_> {
             // only of the rays that do meet one.
             let world = |q: &WorldQuery| {
                 if self.params.object_aware
-                    || self.impostor_bounds_reflectors
+                    || self.impostor_bounds_reflectors()
                     || !rp.cone_camera.admits(dir_camera)
                 {
                     return Some(NOT_ASKED);

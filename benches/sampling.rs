@@ -23,6 +23,9 @@
 //!   counts (1 + 1 fresh samples a pixel, 2 + 2 near the objects, with visibility), as
 //!   `pipelines/mixed-reality.toml` runs `ssrt` and its twins
 //!   `mixed-reality-{dit,vct-reuse}.toml` run `dit` and `vct`, with temporal reuse.
+//! - `sample.path/reuse/em_no_objects`: `reuse/em` with no virtual object: what the
+//!   estimator costs before any object is traced (em's own query is a table lookup),
+//!   the floor under every `reuse/<query>`.
 //! - `sample.path/no_objects`: the same with no virtual object: the real scene's
 //!   estimates alone, the floor under every case with objects.
 //! - `objects/nearest`: the BVH alone, on one thread: the frame's object queries of
@@ -415,6 +418,18 @@ fn bench_queries(
         group.bench_function(format!("sample.path/reuse/{}", query.name()), |b| {
             b.iter(|| sample_path(inputs, &p, &mut out).unwrap())
         });
+        if query == QueryKind::Em {
+            // The estimator's floor at these counts: no objects, so no primaries,
+            // shadows or reflections to trace, and em's query is a table lookup.
+            let no_objects = VirtualScene::default();
+            let bare = PathInputs {
+                objects: &no_objects,
+                ..*inputs
+            };
+            group.bench_function("sample.path/reuse/em_no_objects", |b| {
+                b.iter(|| sample_path(&bare, &p, &mut out).unwrap())
+            });
+        }
     }
 }
 

@@ -26,8 +26,8 @@
 //! - `sample.path/reuse/em_no_objects`: `reuse/em` with no virtual object: what the
 //!   estimator costs before any object is traced (em's own query is a table lookup),
 //!   the floor under every `reuse/<query>`.
-//! - `sample.path/no_objects`: the same with no virtual object: the real scene's
-//!   estimates alone, the floor under every case with objects.
+//! - `sample.path/no_objects`: `plain` with no virtual object: the real scene's
+//!   estimates alone, the floor under `plain`, `object_aware` and `tenth`.
 //! - `objects/nearest`: the BVH alone, on one thread: the frame's object queries of
 //!   `sample.path/tenth`, as its primary, real and virtual surfaces ask them.
 //! - `ssrt/one_by_one`, `ssrt/batch_Portable`, `ssrt/batch_Avx2Fma`: the screen-space

@@ -1,7 +1,8 @@
-//! The irradiance layers every renderer writes (`sample.path`, `sample.val`), so that
-//! `filter.axis_aligned` and `composite.differential` run on any of them unchanged:
-//! one type, one list of output roles, one way into the frame, and one driver that
-//! hands a renderer the rows to fill in parallel ([`shade_rows`]).
+//! The irradiance layers every renderer writes (`sample.path`, `sample.val`,
+//! `sample.dir`), so that `filter.axis_aligned` and `composite.differential` run on
+//! any of them unchanged: one type, one list of output roles, one way into the frame,
+//! one pixel result and one row writer ([`PixelLayers`], [`LayerRow`]), and one
+//! driver that hands a renderer the rows to fill in parallel ([`shade_rows`]).
 
 use crate::graph::{Frame, Port, Product, ProductKind, StageError};
 use crate::raster::{Image, LabelImage, ScalarImage, Vec3Image};
@@ -225,7 +226,7 @@ pub struct LayerRow<'a> {
 
 impl LayerRow<'_> {
     /// Writes pixel `x` of the row.
-    #[inline]
+    #[inline(always)]
     pub fn set(&mut self, x: usize, r: &PixelLayers) {
         self.e_r_dir[x] = r.e_r_dir;
         self.e_r_ind[x] = r.e_r_ind;

@@ -68,7 +68,7 @@ use crate::raster::{DepthImage, Vec3Image, depth_is_valid};
 use crate::recording::Intrinsics;
 use crate::simd::{Kernel, Portable};
 use glam::{Affine3A, Vec2, Vec3, Vec3A};
-use pixel::{PixelContext, RowOut, sampling_of};
+use pixel::{PixelContext, sampling_of};
 use raster::{DepthTarget, NO_ID, ScreenTriangle, raster_screen_triangle, screen_triangles};
 use rayon::prelude::*;
 use shade::{Biases, Maps, Sh9Irradiance};
@@ -246,8 +246,9 @@ pub struct ValInputs<'a> {
 }
 
 /// The layers [`ValRenderer::render`] writes: irradiance starts at 0 (a pixel with
-/// neither a real point nor an object has none), `exponent` stays 0 (glossy objects
-/// are shaded as diffuse) and `touched` is not written.
+/// neither a real point nor an object has none), `exponent` is 0 (glossy objects
+/// are shaded as diffuse) and `touched` is true (not an output: no pixel is known to
+/// be untouched).
 pub fn val_layers(width: u32, height: u32) -> IrradianceLayers {
     IrradianceLayers::filled(width, height, Vec3::ZERO)
 }
@@ -365,23 +366,11 @@ impl ValRenderer {
             wu,
             1,
             || (),
-            |_, y, row| {
-                let mut row = RowOut {
-                    e_r_dir: row.e_r_dir,
-                    e_r_ind: row.e_r_ind,
-                    e_rv_dir: row.e_rv_dir,
-                    e_rv_ind: row.e_rv_ind,
-                    mask: row.mask,
-                    k_v: row.k_v,
-                    position: row.world_position,
-                    normal: row.world_normal,
-                    direct_min_distance: row.direct_min_distance,
-                    indirect_min_distance: row.indirect_min_distance,
-                };
+            |_, y, mut row| {
                 #[cfg(test)]
                 if scalar_reference {
                     for x in 0..wu {
-                        row.put(x, context.pixel(x, y));
+                        row.set(x, &context.pixel(x, y));
                     }
                     return;
                 }

@@ -12,6 +12,7 @@ use crate::light::prt::{Transfer, barycentrics};
 use crate::objects::ray_triangle;
 use crate::raster::depth_is_valid;
 use crate::simd::{LANES, Lanes};
+use crate::stages::sample::layers::{LayerRow, PixelLayers};
 use glam::{Vec3, Vec3A};
 
 /// How the camera sampled the real points.
@@ -38,33 +39,18 @@ pub(super) struct PixelContext<'a> {
     pub(super) sampling: PointSampling,
 }
 
-/// One pixel's outputs.
-pub(super) struct PixelOut {
-    pub(super) e_r_dir: Vec3,
-    pub(super) e_r_ind: Vec3,
-    pub(super) e_rv_dir: Vec3,
-    pub(super) e_rv_ind: Vec3,
-    pub(super) mask: f32,
-    pub(super) k_v: Vec3,
-    pub(super) position: Vec3,
-    pub(super) normal: Vec3,
-    pub(super) direct_min_distance: f32,
-}
-
+/// Pixel `p` shows the virtual surface `v` (its mask is 0; E_R stays the real
+/// surface's behind it).
 #[cfg(test)]
-impl PixelOut {
-    /// The pixel shows the virtual surface `v` (its mask is 0; E_R stays the real
-    /// surface's behind it).
-    #[inline(always)]
-    fn show_virtual(&mut self, v: &VirtualSurface) {
-        self.e_rv_dir = v.e_rv_dir;
-        self.e_rv_ind = v.e_rv_ind;
-        self.mask = 0.0;
-        self.k_v = v.k_v;
-        self.position = v.position;
-        self.normal = v.normal;
-        self.direct_min_distance = v.direct_min_distance;
-    }
+#[inline(always)]
+fn show_virtual(p: &mut PixelLayers, v: &VirtualSurface) {
+    p.e_rv_dir = v.e_rv_dir;
+    p.e_rv_ind = v.e_rv_ind;
+    p.mask = 0.0;
+    p.k_v = v.k_v;
+    p.world_position = v.position;
+    p.world_normal = v.normal;
+    p.direct_min_distance = v.direct_min_distance;
 }
 
 /// A virtual surface seen at a pixel centre, before shading.
@@ -79,7 +65,7 @@ struct VirtualHit {
     e_ind: Vec3,
 }
 
-/// The outputs a visible virtual surface sets in [`PixelOut`].
+/// The layers a visible virtual surface sets ([`put_virtual`]).
 struct VirtualSurface {
     e_rv_dir: Vec3,
     e_rv_ind: Vec3,
@@ -89,46 +75,17 @@ struct VirtualSurface {
     direct_min_distance: f32,
 }
 
-/// One row of every output, as [`PixelContext::row`] fills it.
-pub(super) struct RowOut<'a> {
-    pub(super) e_r_dir: &'a mut [Vec3],
-    pub(super) e_r_ind: &'a mut [Vec3],
-    pub(super) e_rv_dir: &'a mut [Vec3],
-    pub(super) e_rv_ind: &'a mut [Vec3],
-    pub(super) mask: &'a mut [f32],
-    pub(super) k_v: &'a mut [Vec3],
-    pub(super) position: &'a mut [Vec3],
-    pub(super) normal: &'a mut [Vec3],
-    pub(super) direct_min_distance: &'a mut [f32],
-    pub(super) indirect_min_distance: &'a mut [f32],
-}
-
-impl RowOut<'_> {
-    #[inline(always)]
-    pub(super) fn put(&mut self, x: usize, p: PixelOut) {
-        self.e_r_dir[x] = p.e_r_dir;
-        self.e_r_ind[x] = p.e_r_ind;
-        self.e_rv_dir[x] = p.e_rv_dir;
-        self.e_rv_ind[x] = p.e_rv_ind;
-        self.mask[x] = p.mask;
-        self.k_v[x] = p.k_v;
-        self.position[x] = p.position;
-        self.normal[x] = p.normal;
-        self.direct_min_distance[x] = p.direct_min_distance;
-        self.indirect_min_distance[x] = f32::INFINITY;
-    }
-
-    /// Pixel `x` shows the virtual surface `v` ([`PixelOut::show_virtual`]).
-    #[inline(always)]
-    fn put_virtual(&mut self, x: usize, v: &VirtualSurface) {
-        self.e_rv_dir[x] = v.e_rv_dir;
-        self.e_rv_ind[x] = v.e_rv_ind;
-        self.mask[x] = 0.0;
-        self.k_v[x] = v.k_v;
-        self.position[x] = v.position;
-        self.normal[x] = v.normal;
-        self.direct_min_distance[x] = v.direct_min_distance;
-    }
+/// Pixel `x` of `row` shows the virtual surface `v` (as [`show_virtual`]; the
+/// layers of the real surface behind it stay).
+#[inline(always)]
+fn put_virtual(row: &mut LayerRow<'_>, x: usize, v: &VirtualSurface) {
+    row.e_rv_dir[x] = v.e_rv_dir;
+    row.e_rv_ind[x] = v.e_rv_ind;
+    row.mask[x] = 0.0;
+    row.k_v[x] = v.k_v;
+    row.world_position[x] = v.position;
+    row.world_normal[x] = v.normal;
+    row.direct_min_distance[x] = v.direct_min_distance;
 }
 
 /// [`PixelContext::row`] with AVX2 + FMA.
@@ -137,7 +94,7 @@ impl RowOut<'_> {
 /// The CPU must have AVX2 and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-pub(super) unsafe fn row_avx2(context: &PixelContext, y: usize, out: &mut RowOut) {
+pub(super) unsafe fn row_avx2(context: &PixelContext, y: usize, out: &mut LayerRow<'_>) {
     context.row::<crate::simd::Avx2>(y, out)
 }
 
@@ -146,7 +103,7 @@ impl PixelContext<'_> {
     /// the row's virtual surfaces [`LANES`] at a time ([`shade_points`], the same bits
     /// as the scalar `shade_point`).
     #[inline(always)]
-    pub(super) fn row<V: Lanes>(&self, y: usize, out: &mut RowOut) {
+    pub(super) fn row<V: Lanes>(&self, y: usize, out: &mut LayerRow<'_>) {
         let w = self.inputs.depth.width as usize;
         let mut virtual_hits = Vec::new();
         for x0 in (0..w).step_by(LANES) {
@@ -182,7 +139,7 @@ impl PixelContext<'_> {
                     .as_ref()
                     .filter(|_| real.is_set(l))
                     .map(|s| s.lane(l));
-                out.put(x, self.real_pixel(y * w + x, real_shaded));
+                out.set(x, &self.real_pixel(y * w + x, real_shaded));
                 let id = self.ids[y * w + x];
                 if id != NO_ID
                     && let Some(hit) = self.virtual_hit(x, y, id)
@@ -200,7 +157,7 @@ impl PixelContext<'_> {
             // The objects lie inside every frustum: always look up.
             let shaded = shade_points(&points, u64::MAX, self.lights, self.maps, self.biases);
             for (l, hit) in hits.iter().enumerate() {
-                out.put_virtual(hit.x, &self.virtual_surface(hit, shaded.lane(l)));
+                put_virtual(out, hit.x, &self.virtual_surface(hit, shaded.lane(l)));
             }
         }
     }
@@ -220,7 +177,7 @@ impl PixelContext<'_> {
     /// Every output of pixel (x, y), each surface shaded by [`shade_point`] (the
     /// reference of [`PixelContext::row`]).
     #[cfg(test)]
-    pub(super) fn pixel(&self, x: usize, y: usize) -> PixelOut {
+    pub(super) fn pixel(&self, x: usize, y: usize) -> PixelLayers {
         let i = y * self.inputs.depth.width as usize + x;
         let (real, real_normal, real_ok) = self.real_at(i);
         let real_shaded = real_ok.then(|| {
@@ -244,7 +201,7 @@ impl PixelContext<'_> {
                 maps,
                 biases,
             );
-            out.show_virtual(&self.virtual_surface(&hit, s));
+            show_virtual(&mut out, &self.virtual_surface(&hit, s));
         }
         out
     }
@@ -253,18 +210,24 @@ impl PixelContext<'_> {
     /// (`None` where it has none). Inlined into the row loops, so that the shading
     /// stays in registers.
     #[inline(always)]
-    fn real_pixel(&self, i: usize, real_shaded: Option<Shaded>) -> PixelOut {
+    fn real_pixel(&self, i: usize, real_shaded: Option<Shaded>) -> PixelLayers {
         let (real, real_normal, _) = self.real_at(i);
-        let mut out = PixelOut {
+        let mut out = PixelLayers {
             e_r_dir: Vec3::NAN,
             e_r_ind: Vec3::NAN,
             e_rv_dir: Vec3::NAN,
             e_rv_ind: Vec3::NAN,
             mask: 1.0,
             k_v: Vec3::ZERO,
-            position: real.into(),
-            normal: real_normal.into(),
+            // Glossy objects are shaded as diffuse.
+            exponent: 0.0,
+            world_position: real.into(),
+            world_normal: real_normal.into(),
             direct_min_distance: f32::INFINITY,
+            // No indirect path is traced, and none is known to miss the objects.
+            indirect_min_distance: f32::INFINITY,
+            // Not an output (see `OUTPUTS`): no pixel is known to be untouched.
+            touched: true,
         };
         if let Some(s) = real_shaded {
             let e_ind = self.sh.at(real_normal);

@@ -24,8 +24,8 @@
 //!   `pipelines/mixed-reality.toml` runs `ssrt` and its twins
 //!   `mixed-reality-{dit,vct-reuse}.toml` run `dit` and `vct`, with temporal reuse.
 //! - `sample.path/reuse/em_no_objects`: `reuse/em` with no virtual object: what the
-//!   estimator costs before any object is traced (em's own query is a table lookup),
-//!   the floor under every `reuse/<query>`.
+//!   estimator costs before any object is traced (em's own query is one impostor
+//!   lookup by direction), the floor under every `reuse/<query>`.
 //! - `sample.path/no_objects`: `plain` with no virtual object: the real scene's
 //!   estimates alone, the floor under `plain`, `object_aware` and `tenth`.
 //! - `objects/nearest`: the BVH alone, on one thread: the frame's object queries of
@@ -420,7 +420,8 @@ fn bench_queries(
         });
         if query == QueryKind::Em {
             // The estimator's floor at these counts: no objects, so no primaries,
-            // shadows or reflections to trace, and em's query is a table lookup.
+            // shadows or reflections to trace; em's query is one impostor lookup by
+            // direction.
             let no_objects = VirtualScene::default();
             let bare = PathInputs {
                 objects: &no_objects,

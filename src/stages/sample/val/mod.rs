@@ -245,10 +245,10 @@ pub struct ValInputs<'a> {
     pub transfer: Option<&'a Transfer>,
 }
 
-/// The layers [`ValRenderer::render`] writes: irradiance starts at 0 (a pixel with
-/// neither a real point nor an object has none), `exponent` is 0 (glossy objects
-/// are shaded as diffuse) and `touched` is true (not an output: no pixel is known to
-/// be untouched).
+/// Buffers for [`ValRenderer::render`], which overwrites every pixel: irradiance NaN
+/// where there is neither a real point nor an object, `exponent` 0 (glossy objects
+/// are shaded as diffuse), `indirect_min_distance` infinite and `touched` 1 (not an
+/// output: no pixel is known to be untouched).
 pub fn val_layers(width: u32, height: u32) -> IrradianceLayers {
     IrradianceLayers::filled(width, height, Vec3::ZERO)
 }

@@ -370,7 +370,7 @@ impl ValRenderer {
                 #[cfg(test)]
                 if scalar_reference {
                     for x in 0..wu {
-                        row.set(x, &context.pixel(x, y));
+                        context.pixel(x, y, &mut row);
                     }
                     return;
                 }

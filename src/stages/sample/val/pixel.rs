@@ -39,20 +39,6 @@ pub(super) struct PixelContext<'a> {
     pub(super) sampling: PointSampling,
 }
 
-/// Pixel `p` shows the virtual surface `v` (its mask is 0; E_R stays the real
-/// surface's behind it).
-#[cfg(test)]
-#[inline(always)]
-fn show_virtual(p: &mut PixelLayers, v: &VirtualSurface) {
-    p.e_rv_dir = v.e_rv_dir;
-    p.e_rv_ind = v.e_rv_ind;
-    p.mask = 0.0;
-    p.k_v = v.k_v;
-    p.world_position = v.position;
-    p.world_normal = v.normal;
-    p.direct_min_distance = v.direct_min_distance;
-}
-
 /// A virtual surface seen at a pixel centre, before shading.
 struct VirtualHit {
     x: usize,
@@ -75,8 +61,8 @@ struct VirtualSurface {
     direct_min_distance: f32,
 }
 
-/// Pixel `x` of `row` shows the virtual surface `v` (as [`show_virtual`]; the
-/// layers of the real surface behind it stay).
+/// Pixel `x` of `row` shows the virtual surface `v`: its mask is 0, and E_R stays
+/// the real surface's behind it.
 #[inline(always)]
 fn put_virtual(row: &mut LayerRow<'_>, x: usize, v: &VirtualSurface) {
     row.e_rv_dir[x] = v.e_rv_dir;
@@ -174,10 +160,10 @@ impl PixelContext<'_> {
         )
     }
 
-    /// Every output of pixel (x, y), each surface shaded by [`shade_point`] (the
-    /// reference of [`PixelContext::row`]).
+    /// Every layer of pixel (x, y) into `row`, each surface shaded by [`shade_point`]
+    /// (the reference of [`PixelContext::row`]).
     #[cfg(test)]
-    pub(super) fn pixel(&self, x: usize, y: usize) -> PixelLayers {
+    pub(super) fn pixel(&self, x: usize, y: usize, row: &mut LayerRow<'_>) {
         let i = y * self.inputs.depth.width as usize + x;
         let (real, real_normal, real_ok) = self.real_at(i);
         let real_shaded = real_ok.then(|| {
@@ -186,7 +172,7 @@ impl PixelContext<'_> {
             let (lights, maps, biases) = (self.lights, self.maps, self.biases);
             shade_point(real, real_normal, patch, lookup, lights, maps, biases)
         });
-        let mut out = self.real_pixel(i, real_shaded);
+        row.set(x, &self.real_pixel(i, real_shaded));
         let id = self.ids[i];
         if id != NO_ID
             && let Some(hit) = self.virtual_hit(x, y, id)
@@ -201,9 +187,8 @@ impl PixelContext<'_> {
                 maps,
                 biases,
             );
-            show_virtual(&mut out, &self.virtual_surface(&hit, s));
+            put_virtual(row, x, &self.virtual_surface(&hit, s));
         }
-        out
     }
 
     /// Every output of pixel `i` for its real surface, given that surface's shading

@@ -12,16 +12,18 @@ mod common;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Vec3;
-use relume::graph::{EnvCloud, Frame, Product};
+use relume::graph::{Frame, Product};
+use relume::light::EnvCloud;
 use relume::pinhole::Pinhole;
 use relume::rng;
+use relume::stages::kind;
 use std::sync::Arc;
 
 /// Frames replayed before the measured one.
 const WARM_FRAMES: usize = 12;
 
 fn bench_acquisition(c: &mut Criterion) {
-    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    // The allocation policy the relume binary runs with (crates/graph/src/memory.rs).
     relume::graph::memory::keep_freed_memory();
     let common::WarmedUp {
         pipeline,
@@ -55,7 +57,7 @@ fn bench_acquisition(c: &mut Criterion) {
         let cloud = million_samples(frame, &header);
         let mut input = frame.clone();
         let cloud_input = pipeline.stages[i].inputs["cloud"].clone();
-        input.insert(&cloud_input, Product::Cloud(Arc::new(cloud)));
+        input.insert(&cloud_input, Product::new(kind::CLOUD, Arc::new(cloud)));
         group.bench_function("gbuffer.splat/1M_samples", |b| {
             b.iter(|| {
                 let mut frame = input.clone();

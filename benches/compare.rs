@@ -39,11 +39,11 @@ fn bench_compare(c: &mut Criterion) {
     generate(&config, &path).unwrap();
     let replay = Replay::open(&path, ReplayOptions::default()).unwrap();
     let header = replay.recording.header().clone();
-    let registry = Registry::builtin();
+    let registry = relume::stages::registry();
     let mut pipelines: Vec<Pipeline> = VARIANTS.iter().map(|v| load(v, &registry)).collect();
-    let objects = pipelines[0].objects.clone();
+    let world = pipelines[0].world.clone();
     for p in &mut pipelines {
-        p.objects = objects.clone();
+        p.world = world.clone();
     }
     let labels = ["default", "fast", "dir"];
     let branches: Vec<(String, &Pipeline)> = labels

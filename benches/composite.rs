@@ -86,7 +86,7 @@ fn layers() -> Layers {
 }
 
 fn bench_composite(c: &mut Criterion) {
-    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    // The allocation policy the relume binary runs with (crates/graph/src/memory.rs).
     relume::graph::memory::keep_freed_memory();
     let layers = layers();
     let inputs = CompositeInputs {

@@ -16,8 +16,10 @@ mod common;
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Affine3A;
 use relume::pinhole::Pinhole;
+use relume::stages::kind::FrameProducts;
 use relume::stages::sample::dir::{DirInputs, DirParams, DirRenderer, MeshPoints};
 use relume::stages::sample::layers::IrradianceLayers;
+use relume::stages::world::PipelineObjects;
 
 /// Frames replayed before the measured one.
 const WARM_FRAMES: usize = 12;
@@ -46,11 +48,15 @@ fn bench_dir(c: &mut Criterion) {
             done.pose(&spec.inputs["pose"]).unwrap().matrix().as_mat4(),
         ),
         table: done.light_table(&spec.inputs["light_table"]).unwrap(),
-        objects: &pipeline.objects,
+        objects: pipeline.objects(),
         frame: WARM_FRAMES as u64,
     };
     let params = DirParams::from_params(&spec.params, 1);
-    let mesh = MeshPoints::new(&pipeline.objects, params.mesh_points as usize, params.seed);
+    let mesh = MeshPoints::new(
+        pipeline.objects(),
+        params.mesh_points as usize,
+        params.seed,
+    );
     let mut renderer = DirRenderer::default();
     let mut out = IrradianceLayers::new(depth.width, depth.height);
     let mut group = c.benchmark_group("dir_640x480");

@@ -184,7 +184,7 @@ impl Inputs {
 }
 
 fn bench_filter(c: &mut Criterion) {
-    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    // The allocation policy the relume binary runs with (crates/graph/src/memory.rs).
     relume::graph::memory::keep_freed_memory();
     let input = inputs(2);
     let mut group = c.benchmark_group("filter_640x480");

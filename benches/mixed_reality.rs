@@ -21,7 +21,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 const WARM_FRAMES: usize = 12;
 
 fn bench_mixed_reality(c: &mut Criterion) {
-    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    // The allocation policy the relume binary runs with (crates/graph/src/memory.rs).
     relume::graph::memory::keep_freed_memory();
     let common::WarmedUp {
         pipeline,

@@ -3,7 +3,7 @@
 //! the overhead of one stage hop (channel send and receive, timing, thread hand-off).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
-use relume::graph::{Frame, FrameSource, Pipeline, Registry, RunOptions, SourceFile, run};
+use relume::graph::{Frame, FrameSource, Pipeline, RunOptions, SourceFile, run};
 use relume::recording::{Header, Intrinsics, RecordingError};
 use std::hint::black_box;
 
@@ -34,15 +34,15 @@ fn noop_chain(stages: usize, capacity: usize) -> Pipeline {
             name: "bench".into(),
             text,
         },
-        &Registry::builtin(),
+        &relume::stages::registry(),
     )
     .expect("valid pipeline")
 }
 
 fn bench_hops(c: &mut Criterion) {
-    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    // The allocation policy the relume binary runs with (crates/graph/src/memory.rs).
     relume::graph::memory::keep_freed_memory();
-    let registry = Registry::builtin();
+    let registry = relume::stages::registry();
     let frames = 2000;
     let mut group = c.benchmark_group("runtime/noop_chain");
     group.throughput(Throughput::Elements(frames as u64));

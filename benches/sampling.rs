@@ -48,14 +48,16 @@ use glam::Affine3A;
 use relume::light::{ImpostorBuilder, ImpostorParams, LightTable, ValBuilder, ValParams};
 use relume::objects::{Triangle, VirtualScene};
 use relume::pinhole::Pinhole;
+use relume::stages::kind::FrameProducts;
 use relume::stages::sample::path::sampling::{Basis, cosine_hemisphere};
 use relume::stages::sample::path::{IrradianceLayers, PathInputs, PathParams, sample_path};
+use relume::stages::world::PipelineObjects;
 
 /// Frames replayed before the measured one.
 const WARM_FRAMES: usize = 12;
 
 fn bench_sampling(c: &mut Criterion) {
-    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    // The allocation policy the relume binary runs with (crates/graph/src/memory.rs).
     relume::graph::memory::keep_freed_memory();
     let common::WarmedUp {
         pipeline,
@@ -92,7 +94,7 @@ fn bench_sampling(c: &mut Criterion) {
             environment: Some(done.environment("environment").unwrap().as_ref()),
             // light.voxels' volume, for the vct query.
             voxels: Some(done.voxels("voxels").unwrap().as_ref()),
-            objects: &pipeline.objects,
+            objects: pipeline.objects(),
             object_voxels: None,
             frame: WARM_FRAMES as u64,
         };
@@ -120,7 +122,7 @@ fn bench_sampling(c: &mut Criterion) {
         // The budget case: objects covering about a tenth of the image. The
         // pipeline's objects scaled about the world origin: in the default pipeline the
         // floor point under the torus, so that they still stand on the floor.
-        let scaled = scaled_objects(&pipeline.objects, TENTH_SCALE);
+        let scaled = scaled_objects(pipeline.objects(), TENTH_SCALE);
         let inputs = PathInputs {
             objects: &scaled,
             ..inputs
@@ -187,7 +189,7 @@ fn bench_sampling(c: &mut Criterion) {
     }
     if let Some(spec) = pipeline.stages.iter().find(|s| s.kind == "light.impostor") {
         let cloud = done.cloud(&spec.inputs["cloud"]).unwrap().clone();
-        let center = pipeline.objects.bounds().center();
+        let center = pipeline.objects().bounds().center();
         let mut builder = ImpostorBuilder::new(ImpostorParams::default()).unwrap();
         eprintln!("light.impostor: a cloud of {} samples", cloud.len());
         group.bench_function("light.impostor/build", |b| {

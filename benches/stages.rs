@@ -8,6 +8,7 @@ use relume::graph::Product;
 use relume::raster::Image;
 use relume::recording::codec::{decode_color, decode_depth, wrap_image_file};
 use relume::recording::{Intrinsics, importers::redwood::REDWOOD_DEPTH_UNIT_M};
+use relume::stages::kind;
 use relume::stages::{normals, points, write};
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -25,7 +26,7 @@ fn data_dir() -> PathBuf {
 }
 
 fn bench_stages(c: &mut Criterion) {
-    // The allocation policy the relume binary runs with (src/graph/memory.rs).
+    // The allocation policy the relume binary runs with (crates/graph/src/memory.rs).
     relume::graph::memory::keep_freed_memory();
     let lr = data_dir().join("livingroom1");
     let (color, _) = wrap_image_file(std::fs::read(lr.join("color/00100.jpg")).unwrap()).unwrap();
@@ -56,8 +57,8 @@ fn bench_stages(c: &mut Criterion) {
         b.iter(|| normals::cross_normals(&pts, &normals::CrossParams::default(), &mut nrm).unwrap())
     });
     let dir = tempfile::tempdir().unwrap();
-    let normals_product = Product::Normals(nrm.clone());
-    let depth_product = Product::Depth(depth_m.clone());
+    let normals_product = Product::new(kind::NORMALS, nrm.clone());
+    let depth_product = Product::new(kind::DEPTH, depth_m.clone());
     group.bench_function("write/normals_png", |b| {
         b.iter(|| write::write_png(&normals_product, &dir.path().join("n.png")).unwrap())
     });

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Reads the light-model records (`.val`) that relume's `write` stage saves for the
 `lights` product (paper 004's area lights and SH9), and prints them as JSON: a reader
-written from the documented layout alone (src/light/record.rs), standard library only.
+written from the documented layout alone (crates/scene/src/light/record.rs), standard library only.
 
     scripts/read_val.py out/val/lights/000000.val [more.val ...]
 """

@@ -1,26 +1,19 @@
 //! relume: replay recorded RGB-D sensor logs through configurable, timed pipelines.
 //!
-//! The crate is organised as the product is:
-//! - [`recording`]: the `.relume` format, association of streams into frames, importers
-//!   of common RGB-D dataset layouts, and the synthetic scene generator with ground truth.
-//! - [`graph`]: pipeline configs, the stage registry, the threaded runtime and timing.
-//! - [`stages`]: the stage families, each as plain functions over buffers plus a thin
-//!   stage type the registry builds from config.
-//! - [`light`]: environment maps, importance-sample tables, area lights and SH9.
-//! - [`objects`]: virtual objects (meshes, primitives, materials) and ray queries.
-//! - [`raster`] and [`rng`]: the image buffer type and counter-based random numbers.
-//! - [`files`]: reading the files a user names, regular files only.
-//! - [`batch`]: batch manifests, item ids, shards and completion markers.
+//! This crate is the `relume` command line; its library is a facade over the workspace's
+//! crates, so that benches, tests and the command line name every part by one path
+//! (`relume::graph::Pipeline`). The crates, bottom to top (`ARCHITECTURE.md`):
+//! - [`relume_base`]: [`raster`], [`rng`], [`pinhole`], [`simd`], [`threads`], [`files`].
+//! - [`relume_recording`] as [`recording`]: the `.relume` format, importers, `relume synth`.
+//! - [`relume_scene`]: virtual [`objects`] and [`light`] models.
+//! - [`relume_graph`] as [`graph`]: pipeline configs, the registry, the runtime, timing.
+//! - [`relume_stages`] as [`stages`]: the stage families and the built-in registry.
+//! - [`relume_eval`] as [`eval`] and [`batch`]: scores, reports, diff and batch runs.
 
-pub mod batch;
-pub mod eval;
-pub mod files;
-pub mod graph;
-pub mod light;
-pub mod objects;
-pub mod pinhole;
-pub mod raster;
-pub mod recording;
-pub mod rng;
-pub mod simd;
-pub mod stages;
+pub use relume_base::{files, pinhole, raster, rng, simd, threads};
+pub use relume_eval as eval;
+pub use relume_eval::batch;
+pub use relume_graph as graph;
+pub use relume_recording as recording;
+pub use relume_scene::{light, objects};
+pub use relume_stages as stages;

@@ -5,7 +5,7 @@
 mod common;
 
 use relume::eval::{EvalOptions, Evaluator};
-use relume::graph::{Pipeline, Registry, RunOptions, SourceFile, run};
+use relume::graph::{Pipeline, RunOptions, SourceFile, run};
 use relume::recording::synth::{SynthConfig, generate};
 use relume::recording::{Replay, ReplayOptions};
 use serde_json::Value;
@@ -39,7 +39,7 @@ fn recording(contrast: f32) -> PathBuf {
 
 /// Runs `pipeline_toml` over `path` and returns `relume eval`'s report.
 fn evaluate(pipeline_toml: &str, path: &Path) -> Value {
-    let registry = Registry::builtin();
+    let registry = relume::stages::registry();
     let src = SourceFile {
         name: "<test pipeline>".into(),
         text: pipeline_toml.into(),

@@ -6,10 +6,11 @@ mod common;
 
 use common::{ok, run_in, stderr, stdout};
 use glam::{DMat3, Vec3};
-use relume::graph::{ConfigError, Pipeline, Registry, SourceFile};
-use relume::objects::anchor::Placement;
+use relume::graph::{ConfigError, Pipeline, SourceFile};
 use relume::pinhole::Pinhole;
 use relume::recording::{Replay, ReplayOptions, codec};
+use relume::stages::world::PipelineObjects;
+use relume::stages::world::Placement;
 use std::path::{Path, PathBuf};
 
 const DECODE: &str = "[[stage]]\nkind = \"decode\"\n";
@@ -38,7 +39,7 @@ fn parse(objects: &str) -> Result<Pipeline, ConfigError> {
         name: "a.toml".into(),
         text: format!("{DECODE}{objects}"),
     };
-    Pipeline::parse(&src, &Registry::builtin())
+    Pipeline::parse(&src, &relume::stages::registry())
 }
 
 fn place(replay: &Replay, objects: &str) -> Result<(Pipeline, Vec<Placement>), ConfigError> {
@@ -164,7 +165,7 @@ fn objects_anchored_to_the_floor_stand_on_the_true_floor() {
         placed[1]
     );
     // Standing on it: the lowest vertex of every anchored object at y = 0.
-    let scene = &pipeline.objects;
+    let scene = &pipeline.objects();
     assert_eq!(scene.materials.len(), 3);
     for material in 0..2 {
         let lowest = scene
@@ -314,13 +315,14 @@ fn an_anchored_object_not_placed_stops_the_build_instead_of_vanishing() {
         parse("[[object]]\nname = \"ball\"\nshape = \"sphere\"\nanchor = \"floor\"\n").unwrap();
     assert_eq!(pipeline.unplaced_objects(), ["ball"]);
     assert!(
-        pipeline.objects.is_empty(),
+        pipeline.objects().is_empty(),
         "not in the world scene until placed"
     );
     let header =
         relume::recording::Header::new("h", relume::recording::Intrinsics::PRIMESENSE, 0.001);
     let dir = tempfile::tempdir().unwrap();
-    let Err((stage, e)) = pipeline.build(&Registry::builtin(), &header, dir.path(), 0) else {
+    let Err((stage, e)) = pipeline.build(&relume::stages::registry(), &header, dir.path(), 0)
+    else {
         panic!("built with an unplaced object");
     };
     assert_eq!(stage, "decode");
@@ -337,7 +339,7 @@ fn an_anchored_object_not_placed_stops_the_build_instead_of_vanishing() {
     let dirs = [dir.path().join("a"), dir.path().join("b")];
     assert!(
         graph
-            .build(&Registry::builtin(), &header, &dirs, 0)
+            .build(&relume::stages::registry(), &header, &dirs, 0)
             .is_err()
     );
 }
@@ -410,7 +412,7 @@ fn runs_say_where_anchored_objects_went_and_validate_says_they_will_be() {
 fn the_objects_help_page_lists_every_key() {
     let dir = tempfile::tempdir().unwrap();
     let text = stdout(&ok(run_in(dir.path(), &["objects"])));
-    let keys = relume::objects::config::key_docs();
+    let keys = relume::stages::world::config::key_docs();
     for key in &keys {
         assert!(
             text.contains(&format!("\n  {} ({}", key.name, key.kind)),

@@ -465,7 +465,7 @@ fn a_stage_panic_is_one_clean_error_line() {
     assert_eq!(lines.len(), 1, "{err}");
     assert!(
         lines[0].starts_with(
-            "error: replay of small.relume stopped: stage `debug.fail` (debug.fail) panicked at frame 1: debug.fail was asked to panic at frame 1 (at src/stages/debug.rs:"
+            "error: replay of small.relume stopped: stage `debug.fail` (debug.fail) panicked at frame 1: debug.fail was asked to panic at frame 1 (at crates/stages/src/debug.rs:"
         ),
         "{err}"
     );

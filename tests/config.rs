@@ -1,8 +1,9 @@
 //! Pipeline configs: unknown kinds, parameters, roles, wrong types, out-of-range values
 //! and products nobody produces are load-time errors with file, line, column and hint.
 
-use relume::graph::{ConfigError, Params, Pipeline, Registry, SourceFile};
+use relume::graph::{ConfigError, Params, Pipeline, SourceFile};
 use relume::recording::{Header, Intrinsics};
+use relume::stages::world::PipelineObjects;
 
 fn load(text: &str) -> Result<Pipeline, ConfigError> {
     Pipeline::parse(
@@ -10,7 +11,7 @@ fn load(text: &str) -> Result<Pipeline, ConfigError> {
             name: "pipelines/p.toml".into(),
             text: text.into(),
         },
-        &Registry::builtin(),
+        &relume::stages::registry(),
     )
 }
 
@@ -258,7 +259,7 @@ fn structure_errors() {
 
 #[test]
 fn every_builtin_kind_builds_from_its_defaults() {
-    let registry = Registry::builtin();
+    let registry = relume::stages::registry();
     // The light stages need an environment attachment and a place for the object.
     let mut header = Header::new("t", Intrinsics::PRIMESENSE, 0.001);
     header.ground_truth = Some(relume::recording::SceneTruth {
@@ -289,7 +290,7 @@ fn every_builtin_kind_builds_from_its_defaults() {
             header: &header,
             out_dir: dir.path(),
             seed: 1,
-            objects: &Default::default(),
+            world: &relume::stages::world::world_of(relume::objects::VirtualScene::default()),
         };
         assert!(
             (info.build)(&ctx).is_ok(),
@@ -336,7 +337,7 @@ scale = 2
 "
     ))
     .unwrap();
-    let scene = &p.objects;
+    let scene = &p.objects();
     // 64 x 32 x 2 torus, 2 x 16 x 7 sphere, 12 box triangles.
     assert_eq!(scene.triangles.len(), 4096 + 224 + 12);
     assert!(scene.bvh.is_built_for(scene.triangles.len()));
@@ -365,7 +366,7 @@ scale = 2
     assert!((hit.t - 0.84).abs() < 1e-4, "{}", hit.t);
 
     // No [[object]]: an empty scene.
-    assert!(load(DECODE).unwrap().objects.is_empty());
+    assert!(load(DECODE).unwrap().objects().is_empty());
 }
 
 #[test]
@@ -385,9 +386,9 @@ fn mesh_paths_resolve_against_the_pipeline_directory() {
         ),
     )
     .unwrap();
-    let p = Pipeline::load(&pipeline, &Registry::builtin()).unwrap();
-    assert_eq!(p.objects.triangles.len(), 6, "a quad base and four sides");
-    let b = p.objects.bounds();
+    let p = Pipeline::load(&pipeline, &relume::stages::registry()).unwrap();
+    assert_eq!(p.objects().triangles.len(), 6, "a quad base and four sides");
+    let b = p.objects().bounds();
     assert_eq!(b.min.to_array(), [1.0, 0.0, 0.0]);
     assert_eq!(b.max.to_array(), [1.5, 0.5, 0.5]);
 
@@ -401,7 +402,7 @@ fn mesh_paths_resolve_against_the_pipeline_directory() {
         "{DECODE}[[object]]\nname = \"bad\"\nshape = \"mesh\"\npath = \"meshes/bad.obj\"\n"
     );
     std::fs::write(&pipeline, &text).unwrap();
-    let e = Pipeline::load(&pipeline, &Registry::builtin()).unwrap_err();
+    let e = Pipeline::load(&pipeline, &relume::stages::registry()).unwrap_err();
     let mesh = dir.path().join("meshes/bad.obj");
     assert_eq!(
         e.message,
@@ -414,7 +415,7 @@ fn mesh_paths_resolve_against_the_pipeline_directory() {
 
     // An empty file has no triangles.
     std::fs::write(dir.path().join("meshes/bad.obj"), "# nothing\n").unwrap();
-    let e = Pipeline::load(&pipeline, &Registry::builtin()).unwrap_err();
+    let e = Pipeline::load(&pipeline, &relume::stages::registry()).unwrap_err();
     assert_eq!(
         e.message,
         format!(

@@ -1,11 +1,12 @@
 //! The pipeline files relume ships: the built-in default is the mixed-reality chain, and
 //! the presets derived from it stay in step with it.
 
-use relume::graph::{Pipeline, Registry, SourceFile};
+use relume::graph::{Pipeline, SourceFile};
+use relume::stages::world::PipelineObjects;
 
 #[test]
 fn the_default_pipeline_is_the_mixed_reality_chain() {
-    let p = Pipeline::builtin_default(&Registry::builtin()).unwrap();
+    let p = Pipeline::builtin_default(&relume::stages::registry()).unwrap();
     let kinds: Vec<&str> = p.stages.iter().map(|s| s.kind).collect();
     assert_eq!(
         kinds,
@@ -28,7 +29,7 @@ fn the_default_pipeline_is_the_mixed_reality_chain() {
         ]
     );
     assert!(
-        !p.objects.is_empty(),
+        !p.objects().is_empty(),
         "the default scene has virtual objects"
     );
     let file = |name: &str| {
@@ -80,7 +81,7 @@ fn the_fast_pipeline_is_mixed_reality_with_fewer_samples_and_a_fixed_b_e() {
             name: "pipelines/mixed-reality-fast.toml".into(),
             text: fast.clone(),
         },
-        &Registry::builtin(),
+        &relume::stages::registry(),
     )
     .unwrap();
     let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
@@ -136,7 +137,7 @@ fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
                 name: format!("pipelines/{name}.toml"),
                 text,
             },
-            &Registry::builtin(),
+            &relume::stages::registry(),
         )
         .unwrap();
         let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
@@ -179,7 +180,7 @@ fn the_vct_pipeline_is_mixed_reality_with_voxel_cone_tracing() {
             name: "pipelines/mixed-reality-vct.toml".into(),
             text: text.clone(),
         },
-        &Registry::builtin(),
+        &relume::stages::registry(),
     )
     .unwrap();
     let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
@@ -192,7 +193,7 @@ fn the_vct_pipeline_is_mixed_reality_with_voxel_cone_tracing() {
             name: "p.toml".into(),
             text: without,
         },
-        &Registry::builtin(),
+        &relume::stages::registry(),
     )
     .unwrap_err()
     .to_string();
@@ -230,7 +231,7 @@ fn assert_twin(twin: &str, name: &str, swaps: &[(&str, &str)]) -> Pipeline {
             name: format!("pipelines/{name}.toml"),
             text,
         },
-        &Registry::builtin(),
+        &relume::stages::registry(),
     )
     .unwrap()
 }
@@ -420,13 +421,13 @@ fn an_impostor_query_without_an_environment_map_is_refused_at_load_time() {
         text,
     };
     // ssrt does not read it: the pipeline loads.
-    Pipeline::parse(&source(text.clone()), &Registry::builtin()).unwrap();
+    Pipeline::parse(&source(text.clone()), &relume::stages::registry()).unwrap();
     let dit = text.replacen(
         "kind = \"sample.path\"\n",
         "kind = \"sample.path\"\nparams = { query = \"dit\" }\n",
         1,
     );
-    let Err(err) = Pipeline::parse(&source(dit), &Registry::builtin()) else {
+    let Err(err) = Pipeline::parse(&source(dit), &relume::stages::registry()) else {
         panic!("a dit query with no `environment` product loaded");
     };
     let err = err.to_string();
@@ -453,7 +454,7 @@ fn set_overrides_change_parameters_and_report_their_own_line() {
         |list: &[&str]| -> Vec<ParamOverride> { list.iter().map(|s| s.parse().unwrap()).collect() };
     let p = Pipeline::parse_with(
         &src,
-        &Registry::builtin(),
+        &relume::stages::registry(),
         &set(&[
             "sample.path.query=em",
             "sample.path.direct=8",
@@ -468,7 +469,7 @@ fn set_overrides_change_parameters_and_report_their_own_line() {
     assert_eq!(path.params.int("cache_size"), 8);
     assert_eq!(path.inputs["environment"], "environment");
     let err = |list: &[&str]| {
-        Pipeline::parse_with(&src, &Registry::builtin(), &set(list))
+        Pipeline::parse_with(&src, &relume::stages::registry(), &set(list))
             .unwrap_err()
             .to_string()
     };

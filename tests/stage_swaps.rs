@@ -44,7 +44,7 @@ fn every_interchangeable_stage_swaps_in_every_shipped_pipeline() {
     };
     generate(&config, &recording).unwrap();
     let replay = Replay::open(&recording, ReplayOptions::default()).unwrap();
-    let registry = Registry::builtin();
+    let registry = relume::stages::registry();
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines");
     let mut files: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()

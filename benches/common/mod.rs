@@ -5,7 +5,7 @@
 // Each bench binary compiles this module and uses a part of it.
 #![allow(dead_code)]
 
-use relume::graph::{Frame, FrameSource, Pipeline, Product, Registry, Stage};
+use relume::graph::{Frame, FrameSource, Pipeline, Product, Stage};
 use relume::recording::synth::{SynthConfig, generate};
 use relume::recording::{Header, Replay, ReplayOptions};
 use std::collections::BTreeMap;
@@ -40,7 +40,7 @@ pub fn warm_up(default_pipeline: &str, frames: usize) -> WarmedUp {
     };
     generate(&config, &path).unwrap();
     let replay = Replay::open(&path, ReplayOptions::default()).unwrap();
-    let registry = Registry::builtin();
+    let registry = relume::stages::registry();
     let pipeline_path = std::env::var_os("RELUME_BENCH_PIPELINE")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|| {

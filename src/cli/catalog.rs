@@ -1,7 +1,8 @@
 //! `relume stages`, `relume objects` and `relume validate`.
 
 use clap::Args;
-use relume::graph::{ParamValue, Params, Pipeline, Registry};
+use relume::graph::{ParamValue, Params, Pipeline};
+use relume::stages::world::PipelineObjects;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -28,7 +29,7 @@ pub struct ValidateArgs {
 }
 
 pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
-    let registry = Registry::builtin();
+    let registry = relume::stages::registry();
     let mut docs = Vec::new();
     for info in registry.kinds() {
         let ports = (info.ports)(&Params::defaults(info.params));
@@ -120,7 +121,7 @@ surface seen at pixel (410, 300) of frame 12:
   albedo = [0.8, 0.3, 0.2]";
 
 pub fn objects(a: ObjectsArgs) -> anyhow::Result<i32> {
-    let keys = relume::objects::config::key_docs();
+    let keys = relume::stages::world::config::key_docs();
     if a.json {
         outln!("{}", serde_json::to_string_pretty(&keys)?)?;
         return Ok(0);
@@ -176,7 +177,7 @@ fn json_value(value: &ParamValue) -> serde_json::Value {
 }
 
 pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
-    let pipeline = Pipeline::load(&a.pipeline, &Registry::builtin())?;
+    let pipeline = Pipeline::load(&a.pipeline, &relume::stages::registry())?;
     // A light probe file is read when its stage is set up: read it now, so that a
     // missing or corrupt one does not pass here and stop the run.
     let probes = pipeline
@@ -219,7 +220,7 @@ pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
         )?;
     }
     for object in pipeline
-        .declared_objects
+        .declared_objects()
         .iter()
         .filter(|o| o.sites.is_some())
     {
@@ -232,7 +233,7 @@ pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
             }
         )?;
     }
-    let objects = &pipeline.objects;
+    let objects = &pipeline.objects();
     if !objects.is_empty() {
         let b = objects.bounds();
         outln!(

@@ -10,12 +10,14 @@ use clap::Parser;
 use relume::eval::report::{self, Comparison, FrameImages, StageRun, Variant, VariantImages};
 use relume::eval::sampling::ReferenceCache;
 use relume::eval::{EvalOptions, Evaluator};
-use relume::graph::{Frame, Pipeline, PipelineError, Registry, StageGraph, run_graph};
+use relume::graph::{Frame, Pipeline, PipelineError, StageGraph, run_graph};
 use relume::raster::Rgb8Image;
 use relume::recording::writer::write_file_atomic;
+use relume::stages::world::{ObjectWorld, PipelineObjects};
 use std::io::Write;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 const ABOUT: &str = "\
@@ -117,7 +119,7 @@ fn labels(pipelines: &[Pipeline]) -> Vec<String> {
 
 pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     let started = Instant::now();
-    let registry = Registry::builtin();
+    let registry = relume::stages::registry();
     let mut pipelines = Vec::new();
     for path in &a.pipelines {
         pipelines.push(Pipeline::load(path, &registry)?);
@@ -145,8 +147,11 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     }
     // Equal objects become one allocation, so that references can be shared.
     for i in 1..pipelines.len() {
-        if let Some(j) = (0..i).find(|&j| pipelines[j].objects == pipelines[i].objects) {
-            pipelines[i].objects = pipelines[j].objects.clone();
+        if let Some(j) = (0..i).find(|&j| pipelines[j].objects() == pipelines[i].objects()) {
+            pipelines[i].world = Arc::new(ObjectWorld {
+                declared: pipelines[i].declared_objects().to_vec(),
+                scene: pipelines[j].objects().clone(),
+            });
         }
     }
     let header = replay.recording.header();

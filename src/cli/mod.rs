@@ -34,6 +34,7 @@ mod progress;
 mod replay;
 
 use clap::{Parser, Subcommand};
+use relume::stages::world::PipelineObjects;
 use std::path::{Path, PathBuf};
 
 /// relume replays recorded RGB-D sensor logs (color, depth, camera pose) through

@@ -3,11 +3,11 @@
 use super::{default_recording_path, produce, progress};
 use anyhow::{Context, bail};
 use clap::{Args, Parser};
-use relume::graph::{
-    Frame, Pipeline, Product, ProductKind, Registry, RunFailure, RunOptions, RunReport, run,
-};
+use relume::graph::{Frame, Pipeline, Registry, RunFailure, RunOptions, RunReport, run};
+use relume::light::EnvCloud;
 use relume::recording::writer::write_file_atomic;
 use relume::recording::{Replay, ReplayOptions};
+use relume::stages::kind;
 use relume::stages::write::ply::ply_bytes;
 use relume::stages::write::{write_exr, write_png, write_record};
 use std::io::Write;
@@ -109,7 +109,7 @@ pub(super) struct Loaded {
 }
 
 pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
-    let registry = Registry::builtin();
+    let registry = relume::stages::registry();
     let pipeline = match &args.pipeline {
         Some(p) => Pipeline::load_with(p, &registry, &args.overrides)?,
         None => Pipeline::builtin_default_with(&registry, &args.overrides)?,
@@ -334,9 +334,9 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
     let mut sink = |frame: Frame| {
         bar.inc(1);
         if a.export_cloud.is_some()
-            && let Some((_, Product::Cloud(cloud))) = frame
+            && let Some(cloud) = frame
                 .products()
-                .find(|(_, p)| p.kind() == ProductKind::Cloud)
+                .find_map(|(_, p)| p.get::<Arc<EnvCloud>>(kind::CLOUD))
         {
             last_cloud = Some(cloud.clone());
         }
@@ -496,14 +496,14 @@ pub(super) fn save_products(
     let all = names.iter().any(|n| n == "all");
     let mut jobs = Vec::new();
     for (name, product) in frame.products() {
-        if !(all || names.iter().any(|n| n == name)) || !product.kind().is_writable() {
+        if !(all || names.iter().any(|n| n == name)) || !kind::is_writable(product.kind()) {
             continue;
         }
         let dir = out.join(name);
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("cannot create {}", dir.display()))?;
         let stem = dir.join(format!("{:06}", frame.index));
-        if !product.kind().is_image() {
+        if !kind::is_image(product.kind()) {
             jobs.push((product, stem, None));
             continue;
         }
@@ -523,7 +523,7 @@ pub(super) fn save_products(
                         .collect::<Vec<_>>()
                         .join(", ")
                 ),
-                Some(p) if !p.kind().is_writable() => {
+                Some(p) if !kind::is_writable(p.kind()) => {
                     bail!("`{n}` is a {} and cannot be saved", p.kind().name())
                 }
                 Some(_) => {}

@@ -1,11 +1,12 @@
 //! Test stages and a counting frame source for the runtime tests.
 
 use relume::graph::{
-    BuildContext, Frame, FrameSource, ParamDefault, ParamSpec, Pipeline, Ports, Product,
-    ProductKind, Registry, SourceFile, Stage, StageError, StageInfo,
+    BuildContext, Frame, FrameSource, ParamDefault, ParamSpec, Pipeline, Ports, Product, Registry,
+    SourceFile, Stage, StageError, StageInfo,
 };
 use relume::raster::Image;
 use relume::recording::{Header, Intrinsics, RecordingError};
+use relume::stages::kind;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
@@ -52,11 +53,7 @@ pub const INDEX_INFO: StageInfo = StageInfo {
     params: &[],
     ports: |_| Ports {
         inputs: vec![],
-        outputs: vec![relume::graph::Port::new(
-            "value",
-            "value",
-            &[ProductKind::Depth],
-        )],
+        outputs: vec![relume::graph::Port::new("value", "value", &[kind::DEPTH])],
     },
     build: |ctx| Ok(Box::new(IndexStage(ctx.output("value")))),
 };
@@ -67,7 +64,7 @@ impl Stage for IndexStage {
     fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
         frame.insert(
             &self.0,
-            Product::Depth(Image::filled(1, 1, frame.index as f32)),
+            Product::new(kind::DEPTH, Image::filled(1, 1, frame.index as f32)),
         );
         Ok(())
     }
@@ -85,12 +82,8 @@ pub const COPY_INFO: StageInfo = StageInfo {
     )],
     ports: |_| Ports {
         // Without the input (the first frame under `@prev`) the copy is -1.
-        inputs: vec![relume::graph::Port::new("input", "input", &[ProductKind::Depth]).optional()],
-        outputs: vec![relume::graph::Port::new(
-            "output",
-            "output",
-            &[ProductKind::Depth],
-        )],
+        inputs: vec![relume::graph::Port::new("input", "input", &[kind::DEPTH]).optional()],
+        outputs: vec![relume::graph::Port::new("output", "output", &[kind::DEPTH])],
     },
     build: |ctx: &BuildContext| {
         Ok(Box::new(CopyStage {
@@ -114,13 +107,16 @@ impl Stage for CopyStage {
             Some(_) => frame.depth(&self.input)?.data[0],
             None => -1.0,
         };
-        frame.insert(&self.output, Product::Depth(Image::filled(1, 1, value)));
+        frame.insert(
+            &self.output,
+            Product::new(kind::DEPTH, Image::filled(1, 1, value)),
+        );
         Ok(())
     }
 }
 
 pub fn registry() -> Registry {
-    let mut r = Registry::builtin();
+    let mut r = relume::stages::registry();
     r.register(INDEX_INFO);
     r.register(COPY_INFO);
     r

@@ -1,0 +1,131 @@
+//! The [`Stage`] abstraction and what the registry needs to build one.
+
+use super::frame::{Frame, ProductKind};
+use super::params::{ParamSpec, Params};
+use relume_recording::{Header, RecordingError};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// One step of a pipeline. It runs on its own thread, one frame at a time, reading its
+/// inputs from the frame and adding its outputs; it may keep state across frames.
+pub trait Stage: Send {
+    /// Processes one frame.
+    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError>;
+
+    /// Called once after the last frame (e.g. to flush a summary file).
+    fn finish(&mut self) -> Result<(), StageError> {
+        Ok(())
+    }
+}
+
+/// Why a stage failed on a frame.
+#[derive(Debug, thiserror::Error)]
+pub enum StageError {
+    #[error("input product `{0}` is missing from the frame")]
+    MissingInput(String),
+    #[error("product `{product}` is a {found}, expected a {expected}")]
+    WrongKind {
+        product: String,
+        expected: &'static str,
+        found: &'static str,
+    },
+    #[error("{0}")]
+    Failed(String),
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+}
+
+/// A named input or output of a stage kind.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Port {
+    /// The role the stage reads or writes, e.g. `points`.
+    pub role: String,
+    /// The product name used when the config does not map the role.
+    pub default_product: String,
+    /// Accepted kinds (inputs) or the one produced kind (outputs).
+    pub kinds: &'static [ProductKind],
+    /// An input the stage can run without. Only such an input may read the previous
+    /// frame (`product@prev`): the first frame of a run has none.
+    pub optional: bool,
+}
+
+impl Port {
+    pub fn new(role: &str, default_product: &str, kinds: &'static [ProductKind]) -> Port {
+        Port {
+            role: role.to_string(),
+            default_product: default_product.to_string(),
+            kinds,
+            optional: false,
+        }
+    }
+
+    /// The same input, which the stage can run without (see [`Port::optional`]).
+    pub fn optional(self) -> Port {
+        Port {
+            optional: true,
+            ..self
+        }
+    }
+}
+
+/// A stage kind's inputs and outputs for given parameters.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Ports {
+    pub inputs: Vec<Port>,
+    pub outputs: Vec<Port>,
+}
+
+/// What a stage kind's builder receives.
+pub struct BuildContext<'a> {
+    pub stage_name: &'a str,
+    pub params: &'a Params,
+    /// Role -> product name; previous-frame inputs carry the `@prev` suffix, which is
+    /// also the name under which the runtime places them in the frame.
+    pub inputs: &'a BTreeMap<String, String>,
+    pub outputs: &'a BTreeMap<String, String>,
+    /// The recording's header (intrinsics, depth unit, ground truth).
+    pub header: &'a Header,
+    /// Root directory for files the stage writes.
+    pub out_dir: &'a Path,
+    /// The run's seed for counter-based random numbers.
+    pub seed: u64,
+    /// The pipeline's world: what its `[[object]]` tables declare (see [`super::world`]).
+    pub world: &'a std::sync::Arc<dyn super::world::World>,
+}
+
+impl BuildContext<'_> {
+    /// The product name bound to input `role`.
+    pub fn input(&self, role: &str) -> String {
+        self.inputs
+            .get(role)
+            .cloned()
+            .unwrap_or_else(|| role.to_string())
+    }
+
+    /// The product name bound to output `role`.
+    pub fn output(&self, role: &str) -> String {
+        self.outputs
+            .get(role)
+            .cloned()
+            .unwrap_or_else(|| role.to_string())
+    }
+}
+
+/// A stage kind in the registry.
+#[derive(Clone, Copy)]
+pub struct StageInfo {
+    /// The name configs use, e.g. `normals.cross`.
+    pub kind: &'static str,
+    /// One line for `relume stages`.
+    pub summary: &'static str,
+    pub params: &'static [ParamSpec],
+    /// The stage's inputs and outputs given its (checked) parameters.
+    pub ports: fn(&Params) -> Ports,
+    pub build: fn(&BuildContext) -> Result<Box<dyn Stage>, StageError>,
+}

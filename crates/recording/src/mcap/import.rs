@@ -1,0 +1,389 @@
+//! `relume import mcap`: a ROS 2 or Foxglove MCAP log to a recording, in two passes:
+//! [`Scan`] learns the topics, intrinsics and transforms; the second pass converts the
+//! chosen color and depth topics' images (in parallel batches, written in file order)
+//! and stamps each color image with the camera's pose at its header stamp.
+
+use super::choose::{PoseSource, choose_images, fail, intrinsics_for, pose_source};
+use super::messages::{self, Message};
+use super::pixels::{self, ImageRole};
+use super::read::{self, Channel, Event};
+use super::scan::Scan;
+use crate::error::ImportError;
+use crate::importers::{CameraIntrinsics, ImportOptions, ImportSummary, import_header};
+use crate::types::{ColorRecord, DepthRecord, EncodedImage, Pose, PoseRecord, Record, StreamKind};
+use crate::writer::RecordingWriter;
+use rayon::prelude::*;
+use std::path::Path;
+use std::sync::Arc;
+
+/// REP 118: 16-bit depth images hold millimetres.
+pub const ROS_DEPTH_UNIT_M: f64 = 0.001;
+
+/// Options of `relume import mcap`. Topics and frames left `None` are detected.
+#[derive(Clone, Debug, Default)]
+pub struct McapOptions {
+    pub common: ImportOptions,
+    /// `--intrinsics` as given: overrides the camera infos.
+    pub intrinsics: Option<CameraIntrinsics>,
+    pub color_topic: Option<String>,
+    pub depth_topic: Option<String>,
+    /// The camera info of the color images.
+    pub info_topic: Option<String>,
+    /// A PoseStamped, Odometry or PoseInFrame topic instead of TF.
+    pub pose_topic: Option<String>,
+    /// The frame poses are given in (default: the root of the camera's TF tree).
+    pub world_frame: Option<String>,
+    /// The camera's optical frame (default: the color images' `frame_id`).
+    pub camera_frame: Option<String>,
+}
+
+/// Imports the MCAP file `file` into `out`. `progress` gets (done, total) messages.
+pub fn import(
+    file: &Path,
+    out: &Path,
+    options: &McapOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<ImportSummary, ImportError> {
+    let scan = Scan::read(file)?;
+    let mut warnings = Vec::new();
+    let color = choose_images(
+        file,
+        &scan,
+        ImageRole::Color,
+        options.color_topic.as_deref(),
+        "--color-topic",
+    )?
+    .ok_or_else(|| {
+        let unread: Vec<String> = scan
+            .images
+            .iter()
+            .filter_map(|(id, t)| {
+                t.role
+                    .as_ref()
+                    .err()
+                    .map(|e| format!("{}: {e}", scan.channels[id].topic))
+            })
+            .collect();
+        fail(
+            file,
+            format!(
+                "no color images: relume reads sensor_msgs/Image, sensor_msgs/CompressedImage, \
+                     foxglove.RawImage and foxglove.CompressedImage{}",
+                if unread.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", unread.join("; "))
+                }
+            ),
+        )
+    })?;
+    let depth = choose_images(
+        file,
+        &scan,
+        ImageRole::Depth,
+        options.depth_topic.as_deref(),
+        "--depth-topic",
+    )?;
+    let color_topic = &scan.images[&color.id];
+    let (color_k, depth_k) = match options.intrinsics {
+        Some(given) => {
+            let size = |c: Option<&Arc<Channel>>| c.and_then(|c| scan.images[&c.id].size);
+            (
+                given.for_size(size(Some(color)), size(depth)),
+                given.for_size(size(depth), size(Some(color))),
+            )
+        }
+        None => {
+            let ck = intrinsics_for(file, &scan, color, options.info_topic.as_deref())?;
+            let dk = match depth {
+                Some(d) => intrinsics_for(file, &scan, d, None)?,
+                None => None,
+            };
+            let fallback = CameraIntrinsics::default();
+            if ck.is_none() {
+                warnings.push(format!(
+                    "no camera info for {}: the primesense preset is assumed; give --intrinsics \
+                     fx,fy,cx,cy for this camera",
+                    color.topic
+                ));
+            }
+            let ck = ck.unwrap_or_else(|| fallback.for_size(color_topic.size, None));
+            let dk = dk.unwrap_or_else(|| {
+                let size = depth.and_then(|d| scan.images[&d.id].size);
+                if size.is_none() || size == Some((ck.width, ck.height)) {
+                    ck
+                } else {
+                    fallback.for_size(size, None)
+                }
+            });
+            (ck, dk)
+        }
+    };
+    let poses = pose_source(file, &scan, options, &color_topic.frame_id, &mut warnings)?;
+    if let Some(d) = depth {
+        let (depth_frame, color_frame) = (&scan.images[&d.id].frame_id, &color_topic.frame_id);
+        if !depth_frame.is_empty() && !color_frame.is_empty() && depth_frame != color_frame {
+            summary_warning_depth_frame(&mut warnings, &d.topic, depth_frame, color_frame);
+        }
+    }
+    let depth_unit_m = scan.depth_unit_m.unwrap_or(ROS_DEPTH_UNIT_M);
+    let mut streams = vec![StreamKind::Color];
+    if depth.is_some() {
+        streams.push(StreamKind::Depth);
+    }
+    if !matches!(poses, PoseSource::None) {
+        streams.push(StreamKind::Pose);
+    }
+    let mut settings = vec![("color-topic", color.topic.clone())];
+    if let Some(d) = depth {
+        settings.push(("depth-topic", d.topic.clone()));
+    }
+    if let PoseSource::Tree { world, camera, .. } = &poses {
+        settings.push(("world-frame", world.clone()));
+        settings.push(("camera-frame", camera.clone()));
+    }
+    if let Some(t) = &options.pose_topic {
+        settings.push(("pose-topic", t.clone()));
+    }
+    let mut header = import_header(
+        "mcap",
+        file,
+        &options.common,
+        &settings,
+        (
+            color_topic.size,
+            depth.and_then(|d| scan.images[&d.id].size),
+        ),
+        depth_unit_m,
+        streams,
+    );
+    header.color_intrinsics = color_k;
+    header.depth_intrinsics = depth_k;
+    if options.intrinsics.is_none() {
+        header
+            .provenance
+            .settings
+            .insert("intrinsics".into(), "camera info".into());
+    }
+    let mut writer = RecordingWriter::create(out, &header)?;
+    let mut summary = ImportSummary {
+        color: 0,
+        depth: 0,
+        poses: 0,
+        skipped_frames: 0,
+        warnings,
+    };
+    let mut batch: Vec<Pending> = Vec::new();
+    let total = scan.end.messages as usize;
+    let mut sizes = (None, None);
+    let mut zero_stamps = 0usize;
+    let mut skipped_span: Option<(i64, i64)> = None;
+    let mut flush = |batch: &mut Vec<Pending>,
+                     writer: &mut RecordingWriter,
+                     summary: &mut ImportSummary|
+     -> Result<(), ImportError> {
+        let converted: Vec<Result<(i64, EncodedImage), String>> = batch
+            .par_iter()
+            .map(|p| convert(p, depth_unit_m, options))
+            .collect();
+        for (p, result) in batch.drain(..).zip(converted) {
+            let what = format!("message {} on {}", p.index, p.topic);
+            let (stamp_ns, image) = result.map_err(|e| fail(file, format!("{what}: {e}")))?;
+            let stamp_ns = if stamp_ns == 0 && p.log_time_ns != 0 {
+                zero_stamps += 1;
+                i64::try_from(p.log_time_ns).map_err(|_| {
+                    fail(
+                        file,
+                        format!("{what}: log time {} ns is out of range", p.log_time_ns),
+                    )
+                })?
+            } else {
+                stamp_ns
+            };
+            match p.role {
+                ImageRole::Color => {
+                    check_size(file, &what, &image, &mut sizes.0)?;
+                    let pose = match &poses {
+                        PoseSource::None => None,
+                        PoseSource::Tree {
+                            tree,
+                            world,
+                            camera,
+                        } => {
+                            match tree
+                                .lookup(world, camera, stamp_ns)
+                                .map_err(|e| fail(file, e))?
+                            {
+                                Some(pose) => Some(pose),
+                                None => {
+                                    summary.skipped_frames += 1;
+                                    skipped_span = Some(match skipped_span {
+                                        None => (stamp_ns, stamp_ns),
+                                        Some((a, b)) => (a.min(stamp_ns), b.max(stamp_ns)),
+                                    });
+                                    continue;
+                                }
+                            }
+                        }
+                    };
+                    writer.write(&Record::Color(ColorRecord { stamp_ns, image }))?;
+                    summary.color += 1;
+                    if let Some(pose) = pose {
+                        check_pose(file, &what, &pose)?;
+                        writer.write(&Record::Pose(PoseRecord { stamp_ns, pose }))?;
+                        summary.poses += 1;
+                    }
+                }
+                ImageRole::Depth => {
+                    check_size(file, &what, &image, &mut sizes.1)?;
+                    writer.write(&Record::Depth(DepthRecord { stamp_ns, image }))?;
+                    summary.depth += 1;
+                }
+            }
+        }
+        Ok(())
+    };
+    let mut seen = 0usize;
+    read::stream(file, &mut |event| {
+        let Event::Message {
+            channel,
+            index,
+            log_time_ns,
+            data,
+        } = event
+        else {
+            return Ok(());
+        };
+        seen += 1;
+        let role = if channel.id == color.id {
+            ImageRole::Color
+        } else if depth.is_some_and(|d| d.id == channel.id) {
+            ImageRole::Depth
+        } else {
+            return Ok(());
+        };
+        batch.push(Pending {
+            role,
+            ty: channel
+                .ty
+                .clone()
+                .ok()
+                .flatten()
+                .expect("image topics have a type"),
+            topic: channel.topic.clone(),
+            index,
+            log_time_ns,
+            bytes: data.to_vec(),
+        });
+        if batch.len() >= BATCH {
+            flush(&mut batch, &mut writer, &mut summary)?;
+            progress(seen, total);
+        }
+        Ok(())
+    })?;
+    flush(&mut batch, &mut writer, &mut summary)?;
+    progress(total, total);
+    if let (0, Some((first, last)), PoseSource::Tree { tree, camera, .. }) =
+        (summary.color, skipped_span, &poses)
+    {
+        let s = |ns: i64| format!("{:.3} s", ns as f64 * 1e-9);
+        let span = match tree.span(camera) {
+            Some((a, b)) => format!("{} to {}", s(a), s(b)),
+            None => "none".into(),
+        };
+        return Err(fail(
+            file,
+            format!(
+                "none of the {} color images (stamped {} to {}) lies within the camera's \
+                 transforms ({span}): are the transforms stamped by another clock (sim time)? \
+                 nothing was written",
+                summary.skipped_frames,
+                s(first),
+                s(last)
+            ),
+        ));
+    }
+    writer.finish()?;
+    if zero_stamps > 0 {
+        summary.warnings.push(format!(
+            "{zero_stamps} images have a zero header stamp: they are stamped with their log time"
+        ));
+    }
+    if let Some(t) = &scan.end.truncated {
+        summary.warnings.push(t.clone());
+    }
+    if summary.skipped_frames > 0 {
+        summary.warnings.push(format!(
+            "{} color images lie outside the camera's poses (before the first transform or \
+             after the last, which tf2 would not extrapolate either): they are not imported",
+            summary.skipped_frames
+        ));
+    }
+    Ok(summary)
+}
+
+/// Images converted together (in parallel), then written in file order.
+const BATCH: usize = 16;
+
+struct Pending {
+    role: ImageRole,
+    ty: messages::MessageType,
+    topic: String,
+    index: u64,
+    log_time_ns: u64,
+    bytes: Vec<u8>,
+}
+
+fn convert(
+    p: &Pending,
+    depth_unit_m: f64,
+    options: &McapOptions,
+) -> Result<(i64, EncodedImage), String> {
+    let Message::Image(img) = messages::decode(p.ty, &p.bytes)? else {
+        unreachable!("image types decode to images");
+    };
+    let store = options.common.store;
+    let image = match p.role {
+        ImageRole::Color => pixels::color_image(&img.data, store)?,
+        ImageRole::Depth => pixels::depth_image(&img.data, depth_unit_m, store)?,
+    };
+    Ok((img.stamp_ns, image))
+}
+
+fn summary_warning_depth_frame(warnings: &mut Vec<String>, topic: &str, depth: &str, color: &str) {
+    warnings.push(format!(
+        "the depth images ({topic}) are in frame {depth:?} and the color images in {color:?}: \
+         relume takes them as one registered camera; if they are not, record depth aligned \
+         to color (e.g. a camera driver's aligned_depth_to_color topic)"
+    ));
+}
+
+/// A topic's images keep the size of its first: an error naming the file and message
+/// otherwise.
+fn check_size(
+    file: &Path,
+    what: &str,
+    image: &EncodedImage,
+    expected: &mut Option<(u32, u32)>,
+) -> Result<(), ImportError> {
+    let size = (image.width, image.height);
+    match *expected {
+        None => *expected = Some(size),
+        Some(first) if first != size => {
+            return Err(fail(
+                file,
+                format!(
+                    "{what}: the image is {}x{}, but the topic's first is {}x{}",
+                    size.0, size.1, first.0, first.1
+                ),
+            ));
+        }
+        Some(_) => {}
+    }
+    Ok(())
+}
+
+fn check_pose(file: &Path, what: &str, pose: &Pose) -> Result<(), ImportError> {
+    pose.check()
+        .map_err(|e| fail(file, format!("{what}: the camera pose {e}")))
+}

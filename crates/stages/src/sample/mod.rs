@@ -1,0 +1,58 @@
+//! The sampling stages: Monte Carlo estimates of the irradiance real surfaces and
+//! virtual objects receive, without (E_R) and with (E_RV) the virtual objects.
+//!
+//! | kind | module | what it does |
+//! |---|---|---|
+//! | `sample.path` | [`path`] | two-mode path sampling (paper 001 Sec. 5) |
+//! | `sample.val` | [`val`] | shading from virtual area lights and SH9 (paper 004 Sec. 5) |
+//! | `sample.dir` | [`dir`] | Differential Instant Radiosity: VPLs, imperfect shadow maps (paper 002 Sec. 3) |
+//!
+//! [`query`] is the radiance query the renderers ask about the real scene (paper 000
+//! Fig. 5): screen-space marching, Environment Mapping, Distance Impostor Tracing or
+//! Voxel Cone Tracing.
+//!
+//! The seams a new renderer plugs into: it writes [`layers::IrradianceLayers`] (the
+//! roles of [`layers::LAYER_OUTPUTS`]), fills its rows through [`layers::shade_rows`]
+//! (rayon's pool, per-worker state, any stride), and takes one line in the contract
+//! test (`contract_tests`: pi L under a constant environment, E_RV == E_R without
+//! objects, the same bits at any thread count and on every SIMD path).
+
+pub mod dir;
+pub mod layers;
+pub mod path;
+pub mod pyramid;
+pub mod query;
+pub mod ssrt;
+pub mod val;
+
+#[cfg(test)]
+mod contract_tests;
+
+#[cfg(test)]
+mod tests {
+    use relume_graph::{Params, Port};
+
+    fn outputs(info: &relume_graph::StageInfo) -> Vec<Port> {
+        (info.ports)(&Params::defaults(info.params)).outputs
+    }
+
+    /// The renderers write the layers of [`layers::LAYER_OUTPUTS`], under the roles'
+    /// own names: one stands in for another with a one-line change (`sample.val`
+    /// writes all but `touched`).
+    #[test]
+    fn every_renderer_writes_the_shared_layers() {
+        let roles = |ports: Vec<Port>| -> Vec<(String, String)> {
+            ports
+                .into_iter()
+                .map(|p| (p.role.to_string(), p.default_product.to_string()))
+                .collect()
+        };
+        let layers: Vec<(String, String)> = super::layers::LAYER_OUTPUTS
+            .iter()
+            .map(|(r, _)| (r.to_string(), r.to_string()))
+            .collect();
+        assert_eq!(roles(outputs(&super::path::INFO)), layers);
+        assert_eq!(roles(outputs(&super::val::INFO)), layers[..11]);
+        assert_eq!(roles(outputs(&super::dir::INFO)), layers);
+    }
+}

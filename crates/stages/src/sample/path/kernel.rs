@@ -1,0 +1,633 @@
+//! The per-pixel estimator of `sample.path` (paper 001 Sec. 5, two-mode sampling; paper
+//! 000 Sec. 7 for the object-aware differential). See the module docs of
+//! [`super`] for what each estimate means.
+
+use super::bounds::{Cone, Objects, object_pixel_bounds};
+use super::rays::WorldQuery;
+use super::sampling::{Basis, PixelRng, Stream, StreamId, strata_bounds, stratum_index};
+use super::span::{DirectRay, Drawn, IndirectRay, RealSamples};
+use super::{PathInputs, PathParams};
+use crate::sample::layers::PixelLayers;
+use crate::sample::query::{Hit, RadianceQuery, Ray, Source, cone_spread};
+use crate::sample::ssrt::{RayOrigin, ScreenTracer};
+use glam::{Mat3A, Vec3, Vec3A};
+use relume_base::raster::depth_is_valid;
+use relume_base::simd;
+use relume_scene::light::LightSample;
+use relume_scene::light::voxels::{ConeMarch, VoxelVolume};
+use relume_scene::objects::VirtualHit;
+use std::f32::consts::PI;
+
+/// Offset (metres) of rays leaving a virtual surface along its normal.
+pub(super) const SURFACE_OFFSET: f32 = 1e-4;
+/// `vct`: how many of the object volume's voxels a cone leaving a virtual surface
+/// starts off it (the solid voxelization puts the surface up to a voxel from where it
+/// is, and trilinear sampling reaches a voxel further).
+pub(super) const LEAVE_VOXELS: f32 = 1.5;
+/// The most object-aware candidates per pixel (size of the H_a index cache).
+pub const MAX_CANDIDATES: usize = 256;
+
+/// A real shading point: the pixel's depth-map point and normal.
+pub(super) struct RealPoint {
+    /// The ray origin, raised off the surface along the normal (world space, and
+    /// projected for the screen-space tracer: `None` when it leaves the image), and
+    /// the surface point itself (world).
+    pub(super) world: Vec3,
+    /// Where the world-space query's rays start: `world`, but raised a voxel
+    /// further under `vct`.
+    pub(super) query_origin: Vec3,
+    pub(super) origin: Option<RayOrigin>,
+    pub(super) surface: Vec3,
+    pub(super) normal_world: Vec3,
+    /// Basis about the camera-space normal (indirect directions are drawn in camera
+    /// space, where the screen-space tracer works).
+    pub(super) basis_camera: Basis,
+    /// The objects' cone from this point, in world and in camera space.
+    pub(super) cone_world: Cone,
+    pub(super) cone_camera: Cone,
+}
+
+/// Sums of one pixel's estimates while its samples are drawn.
+pub(super) struct Acc {
+    pub(super) r_dir: Vec3,
+    pub(super) r_ind: Vec3,
+    pub(super) rv_dir: Vec3,
+    pub(super) rv_ind: Vec3,
+    pub(super) rv_dir_n: u32,
+    pub(super) rv_ind_n: u32,
+    /// Indirect / direct samples of E_RV taken at the real point.
+    pub(super) rv_ind_real_n: u32,
+    pub(super) rv_dir_real_n: u32,
+    pub(super) direct_min: f32,
+    pub(super) indirect_min: f32,
+    pub(super) touched: bool,
+    /// Draws taken from the bounce stream so far.
+    pub(super) bounces: u64,
+}
+
+/// Everything constant over a frame.
+pub(super) struct Kernel<'a> {
+    pub(super) inputs: &'a PathInputs<'a>,
+    pub(super) params: &'a PathParams,
+    pub(super) tracer: ScreenTracer<'a>,
+    /// The world-space query (`em`, `dit`, `vct`); `None` for screen-space marching.
+    pub(super) world_query: Option<WorldQuery<'a>>,
+    /// `vct`: the objects' solid volume, whose cones give their shadows.
+    pub(super) object_volume: Option<&'a VoxelVolume>,
+    /// `vct`: the cone spreads of direct and indirect samples at real points (the
+    /// pixel's samples share the hemisphere: [`cone_spread`]).
+    pub(super) direct_spread: f32,
+    pub(super) indirect_spread: f32,
+    pub(super) to_world: Mat3A,
+    pub(super) to_camera: Mat3A,
+    pub(super) camera_position: Vec3,
+    pub(super) objects: Option<Objects<'a>>,
+    /// The objects' cone from the camera.
+    pub(super) camera_cone: Cone,
+    /// Pixel bounds [x0, y0, x1, y1] (inclusive) outside which no primary ray can meet
+    /// the objects.
+    pub(super) object_pixels: [i64; 4],
+    /// The table's strata of a pixel's direct samples: `primary` x `direct` of them,
+    /// and `near_primary` x `direct` for the pixels near the objects.
+    pub(super) strata: Vec<u32>,
+    pub(super) near_strata: Vec<u32>,
+    /// The table's strata for the object-aware direct candidates.
+    pub(super) candidate_strata: Vec<u32>,
+    /// Blocked direct samples dimmer than this (largest channel of the sample's
+    /// radiance) do not count towards `direct_min_distance`.
+    pub(super) occluder_min_radiance: f32,
+    /// The table's directions in camera space (where the screen-space tracer works).
+    pub(super) table_camera: Vec<Vec3>,
+    /// `em`: the impostor's answer per table sample (it does not depend on the ray's
+    /// origin), looked up once per frame instead of once per ray.
+    pub(super) table_em: Vec<Option<Hit>>,
+    /// How the screen-space rays are marched (the same hits with any).
+    pub(super) lanes: simd::Kernel,
+}
+
+impl<'a> Kernel<'a> {
+    pub(super) fn new(
+        inputs: &'a PathInputs<'a>,
+        params: &'a PathParams,
+        tracer: ScreenTracer<'a>,
+        world_query: Option<WorldQuery<'a>>,
+        object_volume: Option<&'a VoxelVolume>,
+        lanes: simd::Kernel,
+    ) -> Self {
+        let c2w = inputs.camera_to_world;
+        let to_world = c2w.matrix3;
+        let to_camera = to_world.transpose();
+        let camera_position = Vec3::from(c2w.translation);
+        let objects = (!inputs.objects.is_empty()).then(|| {
+            let aabb = inputs.objects.bounds();
+            let half = (aabb.max - aabb.min) * 0.5;
+            let radius = half.length() * 1.001 + 1e-4;
+            Objects {
+                scene: inputs.objects,
+                aabb,
+                center: aabb.center(),
+                radius2: radius * radius,
+            }
+        });
+        let camera_cone = objects
+            .as_ref()
+            .map_or(Cone::ALL, |o| o.cone(camera_position));
+        let object_pixels = objects
+            .as_ref()
+            .map_or([0, 0, -1, -1], |o| object_pixel_bounds(inputs, &o.aabb));
+        // Environment Mapping's answer does not depend on the ray's origin.
+        let table_em = match &world_query {
+            Some(WorldQuery::Impostor(q)) if q.iterations == 0 => inputs
+                .table
+                .samples
+                .iter()
+                .map(|ls| q.query(&Ray::unbounded(q.center, ls.direction)))
+                .collect(),
+            _ => Vec::new(),
+        };
+        Kernel {
+            inputs,
+            params,
+            tracer,
+            world_query,
+            object_volume,
+            direct_spread: cone_spread(params.primary * params.direct, 0.0),
+            indirect_spread: cone_spread(params.primary * params.indirect, 0.0),
+            to_world,
+            to_camera,
+            camera_position,
+            objects,
+            camera_cone,
+            object_pixels,
+            strata: strata_bounds(params.primary * params.direct, inputs.table.samples.len()),
+            near_strata: strata_bounds(
+                params.near_primaries() * params.direct,
+                inputs.table.samples.len(),
+            ),
+            candidate_strata: strata_bounds(params.candidates, inputs.table.samples.len()),
+            occluder_min_radiance: params.occluder_threshold
+                * inputs
+                    .table
+                    .samples
+                    .iter()
+                    .map(|s| s.radiance.max_element())
+                    .fold(0.0, f32::max),
+            table_camera: inputs
+                .table
+                .samples
+                .iter()
+                .map(|ls| Vec3::from(to_camera * Vec3A::from(ls.direction)))
+                .collect(),
+            table_em,
+            lanes,
+        }
+    }
+
+    /// `em`, `dit`: a real point's indirect rays are not asked of the impostor when
+    /// drawn (its answer brings them no light, see [`super::rays::NOT_ASKED`]); a ray
+    /// of a real primary that meets an object asks it then, to learn whether the
+    /// impostor's surface comes first ([`Kernel::before_impostor`]).
+    #[inline]
+    pub(super) fn impostor_bounds_reflectors(&self) -> bool {
+        matches!(self.world_query, Some(WorldQuery::Impostor(_)))
+    }
+
+    /// `vct`: the cone of a direct sample's aperture from `origin` along `dir` through
+    /// the objects' solid volume, up to `t_max`: its opacity is the share of the
+    /// light the objects block (paper 000 eq. 6's 1 - alpha).
+    #[inline]
+    pub(super) fn object_cone(
+        &self,
+        volume: &VoxelVolume,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> ConeMarch {
+        volume.march(origin, dir, self.direct_spread, 0.0, t_max)
+    }
+
+    /// `vct`: [`Kernel::object_cone`] leaving a virtual surface at `position` with
+    /// normal `normal`: it starts [`LEAVE_VOXELS`] of the volume's voxels off the
+    /// surface, out of the voxels that hold the surface itself.
+    #[inline]
+    pub(super) fn object_shadow(
+        &self,
+        volume: &VoxelVolume,
+        position: Vec3,
+        normal: Vec3,
+        dir: Vec3,
+    ) -> ConeMarch {
+        let origin = position + normal * (LEAVE_VOXELS * volume.voxel_size);
+        self.object_cone(volume, origin, dir, f32::INFINITY)
+    }
+
+    /// Records a blocked direct sample for the filter: its occluder at distance `t`
+    /// along a direction at `cos` to the normal stands at depth z = t cos above the
+    /// receiver (paper 001 Fig. 3c), so the cos^2(theta_occ) / z of eq. 17 is
+    /// 1 / (t / cos); the smallest t / cos is kept. Samples too dim to matter are
+    /// skipped (paper 001 Sec. 7).
+    #[inline]
+    pub(super) fn record_occluder(&self, acc: &mut Acc, radiance: Vec3, t: f32, cos: f32) {
+        if radiance.max_element() >= self.occluder_min_radiance {
+            acc.direct_min = acc.direct_min.min(t / cos);
+        }
+    }
+
+    /// All estimates of pixel (x, y) from what was drawn there (see [`Drawn`]), with
+    /// all its screen-space rays traced into `hits` (see [`super::span`]).
+    pub(super) fn shade_pixel(
+        &self,
+        x: u32,
+        y: u32,
+        drawn: &Drawn,
+        hits: &[Option<Hit>],
+    ) -> PixelLayers {
+        let Drawn {
+            real,
+            real_samples: samples,
+            primaries,
+            virtual_samples,
+        } = drawn;
+        let real = *real;
+        let inputs = self.inputs;
+        let params = self.params;
+        let p = y as usize * inputs.depth.width as usize + x as usize;
+        let rng = PixelRng::new(params.seed, inputs.frame, p as u64);
+        let mut acc = Acc {
+            r_dir: Vec3::ZERO,
+            r_ind: Vec3::ZERO,
+            rv_dir: Vec3::ZERO,
+            rv_ind: Vec3::ZERO,
+            rv_dir_n: 0,
+            rv_ind_n: 0,
+            rv_ind_real_n: 0,
+            rv_dir_real_n: 0,
+            direct_min: f32::INFINITY,
+            indirect_min: f32::INFINITY,
+            touched: false,
+            bounces: 0,
+        };
+        let (mut virtual_count, mut albedo, mut exponent) = (0u32, Vec3::ZERO, 0.0f32);
+        let (mut surfaces, mut position, mut normal) = (0u32, Vec3::ZERO, Vec3::ZERO);
+        let bounce_stream = rng.stream(StreamId::Bounce);
+        let real_samples = |j: u32, with_rv: bool, acc: &mut Acc| {
+            if let Some(rp) = real {
+                self.real_samples(rp, samples, hits, j, &bounce_stream, with_rv, acc);
+            }
+        };
+        let (direct_n, indirect_n) = (params.direct as usize, params.indirect as usize);
+        let (mut virtual_direct, mut virtual_indirect) =
+            (virtual_samples.direct, virtual_samples.indirect);
+        let primary = primaries.len() as u32;
+        for (j, virtual_hit) in (0..primary).zip(primaries.iter()) {
+            match virtual_hit {
+                None => {
+                    if let Some(rp) = real {
+                        surfaces += 1;
+                        position += rp.surface;
+                        normal += rp.normal_world;
+                    }
+                    real_samples(j, true, &mut acc);
+                }
+                Some((hit, view)) => {
+                    virtual_count += 1;
+                    albedo += hit.material.albedo;
+                    exponent += hit.material.exponent;
+                    surfaces += 1;
+                    position += hit.position;
+                    normal += hit.normal;
+                    acc.touched = true;
+                    real_samples(j, false, &mut acc);
+                    let (direct, rest) = virtual_direct.split_at(direct_n);
+                    let (indirect, rest_indirect) = virtual_indirect.split_at(indirect_n);
+                    (virtual_direct, virtual_indirect) = (rest, rest_indirect);
+                    self.virtual_samples(
+                        hit,
+                        -*view,
+                        direct,
+                        indirect,
+                        hits,
+                        &bounce_stream,
+                        &mut acc,
+                    );
+                }
+            }
+        }
+        let mut direct_differential = Vec3::ZERO;
+        if params.object_aware_direct
+            && acc.rv_dir_real_n > 0
+            && let (Some(rp), Some(objects)) = (real, &self.objects)
+            && let Some(d) = self.object_aware_direct(rp, objects, &rng, &mut acc)
+        {
+            direct_differential = d;
+            acc.touched = true;
+        }
+        let mut differential = Vec3::ZERO;
+        if params.object_aware
+            && acc.rv_ind_real_n > 0
+            && let (Some(rp), Some(objects)) = (real, &self.objects)
+            && let Some(d) = self.object_aware(rp, objects, &rng, &bounce_stream, &mut acc)
+        {
+            differential = d;
+            acc.touched = true;
+        }
+        let nan = Vec3::NAN;
+        let (dir_n, ind_n) = (primary * params.direct, primary * params.indirect);
+        let (e_r_dir, e_r_ind) = if real.is_some() {
+            (mean(acc.r_dir, dir_n, 1.0), mean(acc.r_ind, ind_n, PI))
+        } else {
+            (nan, nan)
+        };
+        let any_surface = surfaces > 0;
+        let mut e_rv_dir = if any_surface {
+            mean(acc.rv_dir, acc.rv_dir_n, 1.0)
+        } else {
+            nan
+        };
+        if acc.touched && direct_differential != Vec3::ZERO {
+            let share = acc.rv_dir_real_n as f32 / acc.rv_dir_n as f32;
+            e_rv_dir = (e_rv_dir + direct_differential * share).max(Vec3::ZERO);
+        }
+        let mut e_rv_ind = if any_surface {
+            mean(acc.rv_ind, acc.rv_ind_n, PI)
+        } else {
+            nan
+        };
+        if acc.touched && differential != Vec3::ZERO {
+            e_rv_ind += differential * (acc.rv_ind_real_n as f32 / acc.rv_ind_n as f32);
+        }
+        PixelLayers {
+            e_r_dir,
+            e_r_ind,
+            e_rv_dir,
+            e_rv_ind,
+            mask: 1.0 - virtual_count as f32 / primary as f32,
+            k_v: if virtual_count > 0 {
+                albedo / virtual_count as f32
+            } else {
+                Vec3::ZERO
+            },
+            exponent: if virtual_count > 0 {
+                exponent / virtual_count as f32
+            } else {
+                0.0
+            },
+            world_position: if any_surface {
+                position / surfaces as f32
+            } else {
+                nan
+            },
+            world_normal: normal.normalize_or_zero(),
+            direct_min_distance: acc.direct_min,
+            indirect_min_distance: acc.indirect_min,
+            touched: acc.touched,
+        }
+    }
+
+    /// The pixel's depth-map point and normal, when both are valid.
+    pub(super) fn real_point(
+        &self,
+        x: u32,
+        y: u32,
+        z: f32,
+        normal_camera: Vec3,
+    ) -> Option<RealPoint> {
+        if !depth_is_valid(z) || !normal_camera.is_finite() || normal_camera == Vec3::ZERO {
+            return None;
+        }
+        let normal_camera = normal_camera.normalize();
+        let cam = &self.inputs.camera;
+        let surface = cam.back_project(x as f32, y as f32, z);
+        // Raised by `normal_offset` pixel footprints: a ray grazing the surface then
+        // stays in front of the depth map's pixel centres.
+        let raise = z / cam.fx.max(cam.fy) * self.params.normal_offset;
+        let camera = surface + normal_camera * raise;
+        let world = self.inputs.camera_to_world.transform_point3(camera);
+        let surface = self.inputs.camera_to_world.transform_point3(surface);
+        let normal_world = Vec3::from(self.to_world * Vec3A::from(normal_camera));
+        let query_origin = match &self.world_query {
+            // Cones leave the surface's own voxel (raised a voxel along the normal,
+            // as voxel cone tracers do).
+            Some(WorldQuery::Voxels(q)) => world + normal_world * q.volume.voxel_size,
+            _ => world,
+        };
+        let (cone_world, cone_camera) = match &self.objects {
+            Some(o) => {
+                let c = o.cone(world);
+                let axis = Vec3::from(self.to_camera * Vec3A::from(c.axis));
+                (c, Cone { axis, ..c })
+            }
+            None => (Cone::ALL, Cone::ALL),
+        };
+        Some(RealPoint {
+            world,
+            query_origin,
+            origin: self.tracer.origin(camera),
+            surface,
+            normal_world,
+            basis_camera: Basis::new(normal_camera),
+            cone_world,
+            cone_camera,
+        })
+    }
+
+    /// The virtual hit of primary ray j (jittered inside the pixel) when it is nearer
+    /// than the pixel's real surface, with the ray's world direction.
+    pub(super) fn primary_hit(
+        &self,
+        stream: &Stream,
+        j: u32,
+        x: u32,
+        y: u32,
+        z: f32,
+    ) -> Option<(VirtualHit, Vec3)> {
+        let objects = self.objects.as_ref()?;
+        let (ju, jv) = stream.pair(j as u64);
+        let ray = self
+            .inputs
+            .camera
+            .ray(x as f32 + ju - 0.5, y as f32 + jv - 0.5);
+        let length = ray.length();
+        let dir = Vec3::from(self.to_world * Vec3A::from(ray / length));
+        if !self.camera_cone.admits(dir) {
+            return None;
+        }
+        let t_real = if depth_is_valid(z) {
+            z * length
+        } else {
+            f32::INFINITY
+        };
+        objects
+            .hit(self.camera_position, dir, t_real)
+            .map(|h| (h, dir))
+    }
+
+    /// The primary samples of pixel (x, y) with real point `real`: `near_primary`
+    /// where a primary may meet an object or the real point lies within
+    /// `near_distance` of the objects' box, else `primary`.
+    #[inline]
+    pub(super) fn primaries_at(&self, x: u32, y: u32, real: Option<&RealPoint>) -> u32 {
+        let params = self.params;
+        let near = params.near_primaries();
+        if near == params.primary {
+            return near;
+        }
+        let Some(objects) = &self.objects else {
+            return params.primary;
+        };
+        let [x0, y0, x1, y1] = self.object_pixels;
+        let sees_objects = (x0..=x1).contains(&(x as i64)) && (y0..=y1).contains(&(y as i64));
+        let beside_objects = real.is_some_and(|rp| {
+            let gap = (objects.aabb.min - rp.surface).max(rp.surface - objects.aabb.max);
+            gap.max(Vec3::ZERO).length() <= params.near_distance
+        });
+        if sees_objects || beside_objects {
+            near
+        } else {
+            params.primary
+        }
+    }
+
+    /// The table sample of direct sample `s` of a pixel with `primary` primary
+    /// samples, with its index, if the table has any.
+    #[inline]
+    pub(super) fn direct_sample(
+        &self,
+        stream: &Stream,
+        s: u32,
+        primary: u32,
+    ) -> Option<(usize, &'a LightSample)> {
+        let table = &self.inputs.table.samples;
+        let strata = if primary == self.params.primary {
+            &self.strata
+        } else {
+            &self.near_strata
+        };
+        let i = stratum_index(strata, s as usize, table.len(), stream.bits(s as u64))?;
+        Some((i, &table[i]))
+    }
+
+    /// Direct and indirect samples of primary j at the real point, drawn in `samples`
+    /// with their rays' `hits`: always for E_R, and for E_RV too when `with_rv` (a real
+    /// primary), with the same random numbers and paths, adding the virtual objects'
+    /// blocking and reflection.
+    #[allow(clippy::too_many_arguments)]
+    fn real_samples(
+        &self,
+        rp: &RealPoint,
+        samples: &RealSamples,
+        hits: &[Option<Hit>],
+        j: u32,
+        bounce_stream: &Stream,
+        with_rv: bool,
+        acc: &mut Acc,
+    ) {
+        let params = self.params;
+        // The objects E_RV sees from here with the correlated samples (direct ones:
+        // unless the object-aware differential stands for them).
+        let rv_objects = if with_rv { self.objects.as_ref() } else { None };
+        let rv_blockers = rv_objects.filter(|_| !params.object_aware_direct);
+        for k in 0..params.direct {
+            let s = (j * params.direct + k) as usize;
+            let mut c = Vec3::ZERO;
+            let mut c_rv = Vec3::ZERO;
+            if let Some(DirectRay { sample, cos, ray }) = samples.direct[s] {
+                let ls = &self.inputs.table.samples[sample];
+                match hits[ray] {
+                    Some(Hit {
+                        source: Source::Surface,
+                        t,
+                        ..
+                    }) => self.record_occluder(acc, ls.radiance, t, cos),
+                    arrival => {
+                        // The environment: at infinity with the table's radiance, or
+                        // where the impostor query met it (an object beyond it is
+                        // hidden: paper 000 Sec. 6.4, ray 3).
+                        let (radiance, t_light) =
+                            arrival.map_or((ls.radiance, f32::INFINITY), |h| (h.radiance, h.t));
+                        c = radiance * (cos / ls.pdf);
+                        c_rv = c;
+                        match (rv_blockers, self.object_volume) {
+                            (Some(_), Some(volume)) if rp.cone_world.admits(ls.direction) => {
+                                let cone =
+                                    self.object_cone(volume, rp.world, ls.direction, t_light);
+                                if cone.opacity > 0.0 {
+                                    c_rv = c * (1.0 - cone.opacity);
+                                    acc.touched = true;
+                                    self.record_occluder(acc, ls.radiance, cone.t_half, cos);
+                                }
+                            }
+                            (Some(o), None) if rp.cone_world.admits(ls.direction) => {
+                                if let Some(hit) = o.hit(rp.world, ls.direction, t_light) {
+                                    c_rv = Vec3::ZERO;
+                                    acc.touched = true;
+                                    self.record_occluder(acc, ls.radiance, hit.t, cos);
+                                }
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+            }
+            acc.r_dir += c;
+            if with_rv {
+                acc.rv_dir += c_rv;
+            }
+        }
+        if with_rv {
+            acc.rv_dir_n += params.direct;
+            acc.rv_ind_n += params.indirect;
+            acc.rv_ind_real_n += params.indirect;
+            acc.rv_dir_real_n += params.direct;
+        }
+        for k in 0..params.indirect {
+            let s = (j * params.indirect + k) as usize;
+            let IndirectRay { dir_camera, ray } = samples.indirect[s];
+            let (l, t_real) = match hits[ray] {
+                Some(Hit {
+                    source: Source::Surface,
+                    t,
+                    radiance,
+                }) => {
+                    acc.indirect_min = acc.indirect_min.min(t);
+                    (radiance, t)
+                }
+                // The environment is counted by direct light; an object nearer than
+                // it still reflects.
+                Some(hit) => (Vec3::ZERO, hit.t),
+                None => (Vec3::ZERO, f32::INFINITY),
+            };
+            acc.r_ind += l;
+            if with_rv {
+                let mut l_rv = l;
+                let reflector = match rv_objects {
+                    // With object-aware sampling the candidates stand for these paths.
+                    Some(o) if !params.object_aware && rp.cone_camera.admits(dir_camera) => {
+                        let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
+                        o.hit(rp.world, dir, t_real).filter(|hit| {
+                            !self.impostor_bounds_reflectors()
+                                || self.before_impostor(o, rp, dir, dir_camera, hit.t)
+                        })
+                    }
+                    _ => None,
+                };
+                if let Some(hit) = reflector {
+                    l_rv = self.object_radiance(&hit, bounce_stream, acc);
+                    acc.touched = true;
+                    acc.indirect_min = acc.indirect_min.min(hit.t);
+                }
+                acc.rv_ind += l_rv;
+            }
+        }
+    }
+}
+
+/// `sum` / `count` times `scale`, 0 for no samples.
+#[inline]
+fn mean(sum: Vec3, count: u32, scale: f32) -> Vec3 {
+    if count == 0 {
+        Vec3::ZERO
+    } else {
+        sum * (scale / count as f32)
+    }
+}

@@ -1,0 +1,148 @@
+//! The pipeline's world of virtual objects: the `[[object]]` tables of a config checked
+//! into [`ObjectSpec`](relume_scene::objects::ObjectSpec)s ([`config`]), objects anchored
+//! to the recorded scene placed on its surfaces ([`place`]), and the [`ObjectWorld`] that
+//! the runtime carries opaquely ([`relume_graph::World`]) and hands to every builder.
+//!
+//! - [`config`]: `[[object]]` tables checked key by key, errors at file, line and column.
+//! - [`floor`]: the floor plane from the first frames' depth (math only).
+//! - [`surface`]: the plane seen around one pixel (math only).
+//! - [`views`]: the frames' depth, camera models and poses read from a recording.
+//! - [`place`]: anchors resolved against a recording, with the report printed to users.
+//!
+//! This lives with the stages, not with the objects, because it needs the config's spans
+//! (`relume_graph::config`) and the plane fit of [`crate::plane_fit`].
+
+pub mod config;
+pub mod floor;
+pub mod place;
+pub mod surface;
+pub mod views;
+
+pub use config::DeclaredObject;
+pub use place::Placement;
+
+use relume_graph::config::{ConfigError, ObjectDecl, SourceFile};
+use relume_graph::{BuildContext, Pipeline, World};
+use relume_recording::Replay;
+use relume_scene::objects::VirtualScene;
+use std::any::Any;
+use std::sync::{Arc, LazyLock};
+
+/// A pipeline's virtual objects: every `[[object]]` table as declared, and the scene of
+/// those placed (in world coordinates, or anchored and placed on a recording).
+#[derive(Clone, Debug, Default)]
+pub struct ObjectWorld {
+    /// Every `[[object]]` table as declared, in order.
+    pub declared: Vec<DeclaredObject>,
+    /// The objects in world space, BVH built; anchored objects join it when
+    /// [`place_objects`] places them.
+    pub scene: Arc<VirtualScene>,
+}
+
+impl World for ObjectWorld {
+    fn unplaced(&self) -> Vec<String> {
+        self.declared
+            .iter()
+            .filter(|d| d.spec.placement_frame().is_err())
+            .map(|d| d.spec.name.clone())
+            .collect()
+    }
+
+    fn same_as(&self, other: &dyn World) -> bool {
+        match (other as &dyn Any).downcast_ref::<ObjectWorld>() {
+            Some(o) => Arc::ptr_eq(&self.scene, &o.scene) || self.scene == o.scene,
+            None => false,
+        }
+    }
+}
+
+/// The [`relume_graph::WorldResolver`] of the built-in registry.
+pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<Arc<dyn World>, ConfigError> {
+    let objects = config::resolve(decls, src)?;
+    Ok(Arc::new(ObjectWorld {
+        declared: objects.declared,
+        scene: Arc::new(objects.world_scene),
+    }))
+}
+
+/// The world of `pipeline` as objects (an empty one for a world of another kind).
+pub fn object_world(world: &Arc<dyn World>) -> &ObjectWorld {
+    static EMPTY: LazyLock<ObjectWorld> = LazyLock::new(ObjectWorld::default);
+    (world.as_ref() as &dyn Any)
+        .downcast_ref::<ObjectWorld>()
+        .unwrap_or(&EMPTY)
+}
+
+/// The virtual objects a stage's builder receives, in world space.
+pub fn objects<'a>(ctx: &BuildContext<'a>) -> &'a Arc<VirtualScene> {
+    &object_world(ctx.world).scene
+}
+
+/// Places the objects of `pipeline` anchored to the scene (`anchor = "floor"`,
+/// `at_pixel`) on `replay`'s surfaces and rebuilds its world with every object; says
+/// where each was placed. Nothing to do (and an empty list) when none is anchored.
+/// Errors stand at the anchor's keys in the config.
+pub fn place_objects(
+    pipeline: &mut Pipeline,
+    replay: &Replay,
+) -> Result<Vec<Placement>, ConfigError> {
+    let world = object_world(&pipeline.world);
+    if world.declared.iter().all(|d| d.sites.is_none()) {
+        return Ok(Vec::new());
+    }
+    let mut declared = world.declared.clone();
+    let mut placements = place::place_objects(&mut declared, replay)?;
+    let scene = place::scene_of(&declared, &pipeline.file)?;
+    for placed in &mut placements {
+        // Object k has material k (VirtualScene::from_specs).
+        let k = declared.iter().position(|d| d.spec.name == placed.object);
+        let corners = scene
+            .triangles
+            .iter()
+            .filter(|t| Some(t.material as usize) == k)
+            .flat_map(|t| t.vertices);
+        placed.bounds = corners.fold(None, |b, p| match b {
+            None => Some((p, p)),
+            Some((lo, hi)) => Some((p.min(lo), p.max(hi))),
+        });
+    }
+    pipeline.world = Arc::new(ObjectWorld {
+        declared,
+        scene: Arc::new(scene),
+    });
+    Ok(placements)
+}
+
+/// The world of `scene` alone, as builders receive it (tests and benches that build a
+/// stage by hand).
+pub fn world_of(scene: impl Into<Arc<VirtualScene>>) -> Arc<dyn World> {
+    Arc::new(ObjectWorld {
+        declared: Vec::new(),
+        scene: scene.into(),
+    })
+}
+
+/// A pipeline's objects read through its world, as the command line, eval and tests
+/// use them.
+pub trait PipelineObjects {
+    /// The objects placed so far, in world space.
+    fn objects(&self) -> &Arc<VirtualScene>;
+    /// Every `[[object]]` table as declared, in order.
+    fn declared_objects(&self) -> &[DeclaredObject];
+    /// [`place_objects`] on this pipeline.
+    fn place_objects(&mut self, replay: &Replay) -> Result<Vec<Placement>, ConfigError>;
+}
+
+impl PipelineObjects for Pipeline {
+    fn objects(&self) -> &Arc<VirtualScene> {
+        &object_world(&self.world).scene
+    }
+
+    fn declared_objects(&self) -> &[DeclaredObject] {
+        &object_world(&self.world).declared
+    }
+
+    fn place_objects(&mut self, replay: &Replay) -> Result<Vec<Placement>, ConfigError> {
+        place_objects(self, replay)
+    }
+}

@@ -2,6 +2,7 @@
 
 pub mod config;
 mod cycle;
+mod error;
 pub mod every;
 pub mod frame;
 pub mod lag;

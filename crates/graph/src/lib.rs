@@ -1,5 +1,6 @@
 //! Pipelines: config files, the registry of stage kinds, the threaded runtime and timing.
 
+mod build;
 pub mod config;
 mod cycle;
 mod error;
@@ -13,6 +14,7 @@ pub mod params;
 pub mod pipeline;
 pub mod product;
 pub mod registry;
+mod resolved;
 pub mod runtime;
 pub mod stage;
 mod stage_checks;

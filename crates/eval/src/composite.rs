@@ -48,7 +48,7 @@ impl CompositeScorer {
             encoder: GammaEncoder::new(params.gamma),
             params,
             unfiltered: sampler.map(|s| {
-                ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind"].map(|r| super::output(s, r))
+                ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind"].map(|r| super::ports::output(s, r))
             }),
             scored_frames: Vec::new(),
             squared: 0.0,
@@ -65,7 +65,7 @@ impl CompositeScorer {
         frame: &Frame,
         layers: [&relume_base::raster::Vec3Image; 4],
     ) -> Result<Rgb8Image, String> {
-        let input = |role: &str| super::input(&self.stage, role);
+        let input = |role: &str| super::ports::input(&self.stage, role);
         let e = |e: relume_graph::StageError| e.to_string();
         let radiance = frame.radiance(&input("radiance")).map_err(e)?;
         let inputs = CompositeInputs {
@@ -95,7 +95,7 @@ impl CompositeScorer {
         let Some(reference) = reference.filter(|r| r.frame == frame.index) else {
             return Ok(());
         };
-        let Ok(own) = frame.color(&super::output(&self.stage, "final")) else {
+        let Ok(own) = frame.color(&super::ports::output(&self.stage, "final")) else {
             return Ok(());
         };
         let truth = self.composite_of(

@@ -122,11 +122,11 @@ impl FilterScorer {
     }
 
     fn input(&self, role: &str) -> String {
-        super::input(&self.stage, role)
+        super::ports::input(&self.stage, role)
     }
 
     fn output(&self, role: &str) -> String {
-        super::output(&self.stage, role)
+        super::ports::output(&self.stage, role)
     }
 
     /// Scores `frame` when `reference` holds its reference layers.
@@ -296,7 +296,7 @@ fn flicker_runs(runner: &PathRunner, frame: &Frame) -> Result<Vec<IrradianceLaye
 pub fn insert_outputs(frame: &mut Frame, sampler: &ResolvedStage, run: &IrradianceLayers) {
     let names: Vec<String> = LAYER_OUTPUTS
         .iter()
-        .map(|(role, _)| super::output(sampler, role))
+        .map(|(role, _)| super::ports::output(sampler, role))
         .collect();
     run.clone().insert_into(frame, &names);
 }

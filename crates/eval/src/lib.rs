@@ -27,6 +27,7 @@ pub mod filter;
 pub mod light;
 pub mod material;
 mod normals;
+mod ports;
 pub mod renderer;
 pub mod report;
 pub mod sampling;
@@ -35,7 +36,8 @@ mod truth;
 pub use depth::forward_warp;
 pub use truth::FrameTruth;
 
-use relume_graph::{Frame, Pipeline, ResolvedStage};
+use ports::{input, output};
+use relume_graph::{Frame, Pipeline};
 use relume_recording::{Header, StreamKind};
 use serde_json::{Map, Value, json};
 
@@ -111,24 +113,6 @@ impl Default for EvalOptions {
             frames: None,
         }
     }
-}
-
-/// The product a stage writes for output `role` (the role itself unless renamed).
-pub(crate) fn output(stage: &ResolvedStage, role: &str) -> String {
-    stage
-        .outputs
-        .get(role)
-        .cloned()
-        .unwrap_or_else(|| role.into())
-}
-
-/// The product a stage reads for input `role` (the role itself unless renamed).
-pub(crate) fn input(stage: &ResolvedStage, role: &str) -> String {
-    stage
-        .inputs
-        .get(role)
-        .cloned()
-        .unwrap_or_else(|| role.into())
 }
 
 impl Evaluator {

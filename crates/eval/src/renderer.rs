@@ -26,7 +26,7 @@ impl RatioScorer {
     pub fn new(stage: &ResolvedStage) -> RatioScorer {
         RatioScorer {
             outputs: ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind", "mask"]
-                .map(|r| super::output(stage, r)),
+                .map(|r| super::ports::output(stage, r)),
             scored_frames: Vec::new(),
             near: (0, 0.0),
             all: (0, 0.0),

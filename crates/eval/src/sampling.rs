@@ -99,7 +99,7 @@ impl PathRunner {
         let params = PathParams::from_params(&stage.params, seed);
         PathRunner {
             inputs: ["depth", "normals", "pose", "radiance", "light_table"]
-                .map(|r| super::input(stage, r)),
+                .map(|r| super::ports::input(stage, r)),
             environment: stage.inputs.get("environment").cloned(),
             voxels: stage.inputs.get("voxels").cloned(),
             object_voxels: params.object_volume(&objects).map(Arc::new),
@@ -459,7 +459,7 @@ impl PathScorer {
         PathScorer {
             runner: PathRunner::new(stage, objects, intrinsics, seed),
             outputs: ["e_r_dir", "e_r_ind", "e_rv_dir", "e_rv_ind", "mask"]
-                .map(|r| super::output(stage, r)),
+                .map(|r| super::ports::output(stage, r)),
             scored_frames: Vec::new(),
             pixels: 0,
             squared: 0.0,

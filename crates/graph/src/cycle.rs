@@ -2,8 +2,8 @@
 //! runs them, so "move that stage up" would send the user round in circles. The
 //! pipeline's check names the cycle instead.
 
-use super::pipeline::{PREVIOUS_SUFFIX, ResolvedStage};
 use super::product::ProductKind;
+use super::resolved::{PREVIOUS_SUFFIX, ResolvedStage};
 use std::collections::{BTreeMap, VecDeque};
 
 /// The same-frame reads that lead from stage `from` back to stage `to`, if any, as

@@ -19,8 +19,8 @@
 //! reports such a stage's mean over all frames, its amortized cost.
 
 use super::frame::Frame;
-use super::pipeline::ResolvedStage;
 use super::product::Product;
+use super::resolved::ResolvedStage;
 use super::stage::{Stage, StageError};
 use std::sync::Arc;
 

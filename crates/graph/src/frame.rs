@@ -1,7 +1,7 @@
 //! What flows through a pipeline: a [`Frame`] holding named [`Product`]s.
 
+use super::error::StageError;
 pub use super::product::{Payload, Product, ProductKind};
-use super::stage::StageError;
 use relume_base::raster::{DepthImage, LabelImage, Rgb8Image, ScalarImage, Vec3Image};
 use relume_recording::{FrameRecords, Pose};
 use std::collections::BTreeMap;

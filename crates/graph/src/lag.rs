@@ -27,7 +27,7 @@
 //! With `every = k` as well, the stage runs on every k-th frame on its own thread.
 
 use super::frame::{Frame, Product};
-use super::panics::in_stage;
+use super::panics::{in_stage, panic_message};
 use super::stage::{Stage, StageError};
 use crossbeam_channel::{Receiver, Sender, bounded, unbounded};
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -95,7 +95,7 @@ fn work(
             Ok(Err(e)) => Err(e),
             Err(panic) => Err(StageError::Failed(format!(
                 "panicked: {}",
-                super::runtime::panic_message(panic)
+                panic_message(panic)
             ))),
         };
         let failed = outcome.is_err();

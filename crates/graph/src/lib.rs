@@ -1,7 +1,9 @@
 //! Pipelines: config files, the registry of stage kinds, the threaded runtime and timing.
 
+mod build;
 pub mod config;
 mod cycle;
+mod error;
 pub mod every;
 pub mod frame;
 pub mod lag;
@@ -12,6 +14,7 @@ pub mod params;
 pub mod pipeline;
 pub mod product;
 pub mod registry;
+mod resolved;
 pub mod runtime;
 pub mod stage;
 mod stage_checks;

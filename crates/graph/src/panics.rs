@@ -25,8 +25,24 @@ pub(super) fn in_stage<T>(f: impl FnOnce() -> T) -> T {
 }
 
 /// Where the current thread's stage panicked (`file:line:column`), once.
-pub(super) fn take_location() -> Option<String> {
+fn take_location() -> Option<String> {
     LOCATION.with(|l| l.borrow_mut().take())
+}
+
+/// A caught panic's message, with where the stage panicked when the hook recorded it
+/// (see [`quiet_in_stages`]).
+pub(super) fn panic_message(panic: Box<dyn std::any::Any + Send>) -> String {
+    let message = if let Some(s) = panic.downcast_ref::<&str>() {
+        s.to_string()
+    } else if let Some(s) = panic.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic payload".into()
+    };
+    match take_location() {
+        Some(at) => format!("{message} (at {at})"),
+        None => message,
+    }
 }
 
 /// Installs a panic hook that stays quiet for panics the runtime catches in a stage's

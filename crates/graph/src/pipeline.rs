@@ -2,53 +2,22 @@
 //! declared types and bounds, every input is produced upstream (or, with `@prev`,
 //! anywhere, as a feedback edge delivering the previous frame's value), and kinds match.
 
+use super::build::build_stage;
 use super::config::{self, ConfigError, Located, PipelineDecl, SourceFile};
 use super::frame::ProductKind;
-use super::params::{Params, a, did_you_mean};
+use super::params::{a, did_you_mean};
 use super::registry::Registry;
+pub use super::resolved::{
+    DEFAULT_CHANNEL_CAPACITY, Feedback, PREVIOUS_SUFFIX, ResolvedStage, SOURCE_PRODUCT,
+};
 use super::stage::{Stage, StageError};
 use super::stage_checks::{bind_ports, check_params, rate_key};
 use relume_recording::Header;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// The product the source puts into every frame: the frame's encoded records.
-pub const SOURCE_PRODUCT: &str = "record";
-/// Suffix of an input that reads the previous frame's value of a product.
-pub const PREVIOUS_SUFFIX: &str = "@prev";
-/// Frames buffered between two stages when the config does not say.
-pub const DEFAULT_CHANNEL_CAPACITY: usize = 2;
-
 /// The built-in default pipeline (`pipelines/default.toml`, compiled in).
 pub const DEFAULT_PIPELINE_TOML: &str = include_str!("../../../pipelines/default.toml");
-
-/// A checked stage of a pipeline.
-#[derive(Clone, Debug)]
-pub struct ResolvedStage {
-    pub name: String,
-    pub kind: &'static str,
-    pub params: Params,
-    /// Role -> product (with `@prev` for previous-frame inputs).
-    pub inputs: BTreeMap<String, String>,
-    /// Role -> product.
-    pub outputs: BTreeMap<String, String>,
-    /// Line of the stage in its file.
-    pub line: usize,
-    /// The stage runs on every `every`-th frame and lends its last products to the
-    /// frames between (see [`super::every`]); 1 = every frame.
-    pub every: u32,
-    /// The stage runs `lag` frames behind on its own thread (see [`super::lag`]); 0 =
-    /// in step.
-    pub lag: u32,
-}
-
-/// A feedback edge: `producer`'s `product` of frame t-1 goes to `consumer` at frame t.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Feedback {
-    pub producer: usize,
-    pub consumer: usize,
-    pub product: String,
-}
 
 /// A pipeline ready to build and run.
 #[derive(Clone, Debug)]
@@ -319,9 +288,24 @@ impl Pipeline {
         out_dir: &Path,
         seed: u64,
     ) -> Result<Vec<Box<dyn Stage>>, (String, StageError)> {
-        super::tree::StageGraph::linear(self)
-            .build(registry, header, &[out_dir.to_path_buf()], seed)
-            .map_err(|(node, e)| (self.stages[node].name.clone(), e))
+        // What StageGraph::linear gives each node: the pipeline's world and its first
+        // unplaced object.
+        let unplaced = self.unplaced_objects().into_iter().next();
+        self.stages
+            .iter()
+            .map(|s| {
+                build_stage(
+                    s,
+                    &self.world,
+                    unplaced.as_deref(),
+                    registry,
+                    header,
+                    out_dir,
+                    seed,
+                )
+                .map_err(|e| (s.name.clone(), e))
+            })
+            .collect()
     }
 }
 

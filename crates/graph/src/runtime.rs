@@ -16,7 +16,9 @@
 //! forever: every wait is on a channel whose other end is dropped when its thread ends.
 
 use super::frame::{Frame, Product};
-use super::pipeline::{PREVIOUS_SUFFIX, Pipeline};
+use super::panics::panic_message;
+use super::pipeline::Pipeline;
+use super::resolved::{PREVIOUS_SUFFIX, SOURCE_PRODUCT};
 use super::stage::{Stage, StageError};
 use super::timing::{FrameTiming, RunReport, StageTimings};
 use super::tree::StageGraph;
@@ -64,7 +66,7 @@ impl FrameSource for Replay {
 fn source_frame(n: usize, records: relume_recording::FrameRecords) -> Frame {
     let mut frame = Frame::new(n, records.stamp_ns);
     frame.insert(
-        super::pipeline::SOURCE_PRODUCT,
+        SOURCE_PRODUCT,
         Product::new(relume_recording::RECORD, Arc::new(records)),
     );
     frame
@@ -571,18 +573,4 @@ fn stage_loop(
         }
     }
     Some(timings)
-}
-
-pub(super) fn panic_message(panic: Box<dyn std::any::Any + Send>) -> String {
-    let message = if let Some(s) = panic.downcast_ref::<&str>() {
-        s.to_string()
-    } else if let Some(s) = panic.downcast_ref::<String>() {
-        s.clone()
-    } else {
-        "unknown panic payload".into()
-    };
-    match super::panics::take_location() {
-        Some(at) => format!("{message} (at {at})"),
-        None => message,
-    }
 }

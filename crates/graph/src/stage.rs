@@ -1,10 +1,12 @@
-//! The [`Stage`] abstraction and what the registry needs to build one.
+//! The [`Stage`] abstraction and what the registry needs to build one (its error,
+//! [`StageError`], is re-exported here from the leaf that frames use too).
 
+pub use super::error::StageError;
 use super::frame::{Frame, ProductKind};
 use super::params::{ParamSpec, Params};
-use relume_recording::{Header, RecordingError};
+use relume_recording::Header;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// One step of a pipeline. It runs on its own thread, one frame at a time, reading its
 /// inputs from the frame and adding its outputs; it may keep state across frames.
@@ -16,29 +18,6 @@ pub trait Stage: Send {
     fn finish(&mut self) -> Result<(), StageError> {
         Ok(())
     }
-}
-
-/// Why a stage failed on a frame.
-#[derive(Debug, thiserror::Error)]
-pub enum StageError {
-    #[error("input product `{0}` is missing from the frame")]
-    MissingInput(String),
-    #[error("product `{product}` is a {found}, expected a {expected}")]
-    WrongKind {
-        product: String,
-        expected: &'static str,
-        found: &'static str,
-    },
-    #[error("{0}")]
-    Failed(String),
-    #[error("{}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error(transparent)]
-    Recording(#[from] RecordingError),
 }
 
 /// A named input or output of a stage kind.

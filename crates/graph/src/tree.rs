@@ -10,12 +10,14 @@
 //! while a stage below L reads the previous-frame product (`@prev`) of a stage at or
 //! after L: a shared stage cannot take one feedback value per branch.
 
-use super::pipeline::{Pipeline, ResolvedStage};
+use super::build::build_stage;
+use super::pipeline::Pipeline;
 use super::registry::Registry;
-use super::stage::{BuildContext, Stage, StageError};
+use super::resolved::{DEFAULT_CHANNEL_CAPACITY, ResolvedStage};
+use super::stage::{Stage, StageError};
 use super::world::World;
 use relume_recording::Header;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 
 /// One stage of the tree.
@@ -74,7 +76,7 @@ impl StageGraph {
                 .iter()
                 .map(|(_, p)| p.channel_capacity)
                 .max()
-                .unwrap_or(super::pipeline::DEFAULT_CHANNEL_CAPACITY),
+                .unwrap_or(DEFAULT_CHANNEL_CAPACITY),
         };
         for (b, (_, pipeline)) in branches.iter().enumerate() {
             let mut parent = None;
@@ -183,33 +185,16 @@ impl StageGraph {
             .iter()
             .enumerate()
             .map(|(i, node)| {
-                let s = &node.stage;
-                if let Some(object) = &node.unplaced_object {
-                    let message = format!(
-                        "object `{object}` is anchored to the scene and has not been placed: relume_stages::world::place_objects places it on the recording"
-                    );
-                    return Err((i, StageError::Failed(message)));
-                }
-                let info = registry.get(s.kind).ok_or_else(|| {
-                    let message = format!("stage kind `{}` is not registered", s.kind);
-                    (i, StageError::Failed(message))
-                })?;
-                let out_dir: &Path = &out_dirs[node.branches[0]];
-                let ctx = BuildContext {
-                    stage_name: &s.name,
-                    params: &s.params,
-                    inputs: &s.inputs,
-                    outputs: &s.outputs,
+                build_stage(
+                    &node.stage,
+                    &node.world,
+                    node.unplaced_object.as_deref(),
+                    registry,
                     header,
-                    out_dir,
+                    &out_dirs[node.branches[0]],
                     seed,
-                    world: &node.world,
-                };
-                let built = (info.build)(&ctx).map_err(|e| (i, e))?;
-                let inputs = s.inputs.values().cloned().collect();
-                let outputs = s.outputs.values().cloned().collect();
-                let paced = super::every::every_k(built, s);
-                super::lag::lag_n(paced, s.lag, inputs, outputs).map_err(|e| (i, e))
+                )
+                .map_err(|e| (i, e))
             })
             .collect()
     }

@@ -20,7 +20,7 @@
 //! Unknown keys, wrong types, missing files and entries listed twice are errors naming
 //! the manifest's line and column.
 
-use super::BatchError;
+use super::error::BatchError;
 use relume_graph::ParamOverride;
 use relume_graph::config::SourceFile;
 use relume_graph::params::{a, did_you_mean};

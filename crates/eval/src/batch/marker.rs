@@ -10,7 +10,7 @@
 //! is not read again). A folder without a valid marker is cleared and the item redone.
 //! An item that failed holds [`FAILED`] (the error) instead.
 
-use super::BatchError;
+use super::error::BatchError;
 use std::path::{Path, PathBuf};
 use xxhash_rust::xxh3::{Xxh3, xxh3_64};
 

@@ -9,48 +9,19 @@
 //!   items a shard runs.
 //! - [`marker`]: an item's output folder, its `DONE` marker and the digest it holds.
 //! - [`summary`]: the status of every item of an output folder, for `--summary`.
+//! - [`BatchError`]: what each of them fails with.
 //!
 //! The command itself (running the items through the replay code) is `relume batch`,
 //! in the binary's `cli::batch`.
 
+mod error;
 pub mod manifest;
 pub mod marker;
 pub mod shard;
 pub mod summary;
 
+pub use error::BatchError;
 pub use manifest::{Item, Manifest, Settings, item_id};
 pub use marker::{Marker, MarkerState};
 pub use shard::{Shard, ShardSpec};
 pub use summary::{ItemStatus, ItemSummary};
-
-use std::path::PathBuf;
-
-/// What can go wrong in a batch, before or around the runs themselves.
-#[derive(Debug, thiserror::Error)]
-pub enum BatchError {
-    /// The manifest is wrong at a place in it (line and column).
-    #[error("{0}")]
-    Manifest(#[from] relume_graph::ConfigError),
-    /// A `--shard` value, or the scheduler variables `--shard auto` reads, are wrong.
-    #[error("{0}")]
-    Shard(String),
-    /// A file or folder of the batch could not be read or written.
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file or folder.
-        path: PathBuf,
-        /// The cause.
-        #[source]
-        source: std::io::Error,
-    },
-}
-
-impl BatchError {
-    /// An [`BatchError::Io`] about `path`.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> BatchError {
-        BatchError::Io {
-            path: path.into(),
-            source,
-        }
-    }
-}

@@ -11,7 +11,7 @@
 //!   the count, so it comes from `--shards N` or the variable [`SHARDS_VAR`]
 //!   (`RELUME_SHARDS`), the Job's `completions`.
 
-use super::BatchError;
+use super::error::BatchError;
 use xxhash_rust::xxh3::xxh3_64;
 
 /// The variable that gives `--shard auto` the shard count where the scheduler does not

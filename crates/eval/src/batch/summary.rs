@@ -4,8 +4,9 @@
 //! items, so that a summary of the folder alone also lists the items no shard has run
 //! yet.
 
+use super::error::BatchError;
+use super::manifest::Item;
 use super::marker::{self, Marker, MarkerState};
-use super::{BatchError, Item};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 

@@ -52,11 +52,7 @@ fn bench_dir(c: &mut Criterion) {
         frame: WARM_FRAMES as u64,
     };
     let params = DirParams::from_params(&spec.params, 1);
-    let mesh = MeshPoints::new(
-        pipeline.objects(),
-        params.mesh_points as usize,
-        params.seed,
-    );
+    let mesh = MeshPoints::new(pipeline.objects(), params.mesh_points as usize, params.seed);
     let mut renderer = DirRenderer::default();
     let mut out = IrradianceLayers::new(depth.width, depth.height);
     let mut group = c.benchmark_group("dir_640x480");

@@ -67,7 +67,9 @@ use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Vec3Image, depth_is_valid};
 use relume_base::simd::{Kernel, Portable};
-use relume_graph::{Frame, ParamDefault, ParamSpec, ProductKind, Stage, StageError, StageInfo};
+use relume_graph::{
+    Frame, ParamDefault, ParamSpec, Ports, ProductKind, Stage, StageError, StageInfo,
+};
 use relume_recording::Intrinsics;
 use relume_scene::light::AreaLights;
 use relume_scene::light::prt::cache::{self, CacheOutcome};
@@ -137,7 +139,7 @@ pub const INFO: StageInfo = StageInfo {
     summary: "noise-free E_R / E_RV from virtual area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5)",
     params: PARAMS,
     ports: |_| {
-        let mut ports = super::super::fixed_ports(
+        let mut ports = Ports::fixed(
             &[
                 ("depth", &[kind::DEPTH]),
                 ("normals", &[kind::NORMALS]),

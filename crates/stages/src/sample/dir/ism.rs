@@ -190,7 +190,7 @@ pub(super) fn square_bounds(
 /// a silhouette grows by less than 2^levels texels.
 ///
 /// Only the blocks of 2^levels texels that meet `splatted` (the rectangle `[x0, y0,
-/// x1, y1)` holding every depth, from [`splat`]) are visited: nothing outside them can
+/// x1, y1)` holding every depth, from [`splat`](super::splat::splat)) are visited: nothing outside them can
 /// be filled. Returns the rectangle `[x0, y0, x1, y1)` that holds every depth
 /// afterwards (`[0; 4]` when none: lookups outside it need not read the map).
 /// `scratch` is reused between calls.

@@ -1,5 +1,5 @@
 //! Splatting points into an imperfect shadow map ([`splat`]): one point at a time, or
-//! eight at a time ([`splat_points`]): where each point falls in a map and
+//! eight at a time (`splat_points`): where each point falls in a map and
 //! how many texels its splat reaches, one point per lane, operation for operation as
 //! the scalar `Projection::project`, `texel_size` and reach (the same bits). The squares
 //! are then written one point at a time (the nearest depth a texel keeps does not

@@ -296,7 +296,8 @@ fn bench_tracer(
 ) {
     use relume::simd::Kernel;
     use relume::stages::sample::path::sampling::{Basis, cosine_hemisphere};
-    use relume::stages::sample::ssrt::{ScreenTracer, TraceBatch};
+    use relume::stages::sample::ssrt::ScreenTracer;
+    use relume::stages::sample::ssrt::batch::TraceBatch;
     let tracer = ScreenTracer::new(
         inputs.depth,
         inputs.camera,

@@ -11,6 +11,7 @@ macro_rules! note {
     }};
 }
 
+use super::output;
 use super::replay::{
     Pacing, RunArgs, check_saved_products, load, save_products, some_frame_replayed,
 };
@@ -131,7 +132,7 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
             Ok(Outcome::Interrupted) => break,
             Err(e) => {
                 failed += 1;
-                note!("{prefix}: FAILED: {}", super::report(&e));
+                note!("{prefix}: FAILED: {}", output::report(&e));
             }
         }
     }
@@ -198,7 +199,7 @@ fn run_or_skip(
             Ok(Outcome::Interrupted)
         }
         Err(e) => {
-            marker::write_failed(&dir, &super::report(&e))?;
+            marker::write_failed(&dir, &output::report(&e))?;
             Err(e)
         }
     }

@@ -2,7 +2,7 @@
 //! shared first stages run once, each scored as `relume eval` scores it alone, and one
 //! report (see `relume::eval::report`).
 
-use super::place_objects;
+use super::prepare::{self, place_objects};
 use super::progress;
 use super::replay::{RunArgs, open_recording, stop_on_interrupt};
 use anyhow::{Context, bail};
@@ -142,7 +142,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
         let prefix = format!("{}: ", pipeline.file);
         place_objects(pipeline, &replay, &prefix)?;
         if !a.no_scores {
-            super::warn_every(pipeline);
+            prepare::warn_every(pipeline);
         }
     }
     // Equal objects become one allocation, so that references can be shared.

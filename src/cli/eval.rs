@@ -1,6 +1,7 @@
 //! `relume eval`: run a pipeline and score its stages against the recording's ground
 //! truth (see `relume::eval` for every key).
 
+use super::prepare;
 use super::progress;
 use super::replay::{Pacing, RunArgs, load, stop_on_interrupt};
 use anyhow::bail;
@@ -105,7 +106,7 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
         reference_stride: a.reference_stride,
         frames: Some(loaded.frames.clone()),
     };
-    super::warn_every(&loaded.pipeline);
+    prepare::warn_every(&loaded.pipeline);
     let mut evaluator = Evaluator::new(&loaded.pipeline, header, a.run.seed, &options)
         .map_err(|e| anyhow::anyhow!("{}: {e}", loaded.pipeline.file))?;
     if evaluator.is_empty() {

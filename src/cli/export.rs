@@ -1,6 +1,7 @@
 //! `relume export`: a recording (and a replay's saved products) in another format.
 
 use super::interrupt::PartialFile;
+use super::output;
 use super::progress;
 use clap::{Args, Subcommand};
 use relume::recording::mcap;
@@ -33,8 +34,8 @@ pub struct McapExportArgs {
 pub fn export(command: ExportCommand) -> anyhow::Result<i32> {
     let ExportCommand::Mcap(a) = command;
     let start = std::time::Instant::now();
-    super::check_output_file("-o", &a.out)?;
-    super::check_not_input(&a.out, &a.recording)?;
+    output::check_output_file("-o", &a.out)?;
+    output::check_not_input(&a.out, &a.recording)?;
     if let Some(dir) = &a.products
         && !dir.is_dir()
     {
@@ -64,6 +65,6 @@ pub fn export(command: ExportCommand) -> anyhow::Result<i32> {
         false => format!(", products: {}", products.join(", ")),
     };
     let counts = (summary.color, summary.depth, summary.poses);
-    super::print_wrote(&a.out, counts, &products, start)?;
+    output::print_wrote(&a.out, counts, &products, start)?;
     Ok(0)
 }

@@ -1,6 +1,7 @@
 //! `relume synth` and `relume import`: commands that produce recordings.
 
 use super::interrupt::PartialFile;
+use super::output;
 use super::progress;
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
@@ -73,7 +74,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
         depth_noise: !a.no_depth_noise,
         ..SynthConfig::default()
     };
-    super::check_output_file("-o", &a.out)?;
+    output::check_output_file("-o", &a.out)?;
     if (2..synth::camera::STEADY_COLOR_FRAMES).contains(&a.frames) {
         eprintln!(
             "warning: the camera's exposure sweeps 0.5x to 2x and back over any recording: \
@@ -307,10 +308,10 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         return Ok(0);
     }
     let out = command.out().expect("clap requires -o unless --list");
-    super::check_output_file("-o", out)?;
+    output::check_output_file("-o", out)?;
     match &command {
-        ImportCommand::Mcap(a) => super::check_not_input(out, &a.file)?,
-        ImportCommand::Scannet { file, .. } => super::check_not_input(out, file)?,
+        ImportCommand::Mcap(a) => output::check_not_input(out, &a.file)?,
+        ImportCommand::Scannet { file, .. } => output::check_not_input(out, file)?,
         _ => {}
     }
     remove_stale_partials_beside(out);
@@ -394,7 +395,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         n => format!(", {n} frames skipped"),
     };
     let counts = (summary.color, summary.depth, summary.poses);
-    super::print_wrote(out, counts, &skipped, start)?;
+    output::print_wrote(out, counts, &skipped, start)?;
     // What the recording lacks that most pipelines need, from its frames as replay
     // builds them. A dataset may lack it, so this warns rather than fails.
     let mut warnings = missing_streams(&replay.stats);

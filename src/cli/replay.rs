@@ -1,6 +1,8 @@
 //! `relume replay` and `relume bench`.
 
-use super::{default_recording_path, produce, progress};
+use super::output::{self, default_recording_path};
+use super::prepare;
+use super::{produce, progress};
 use anyhow::{Context, bail};
 use clap::{Args, Parser};
 use relume::graph::{Frame, Pipeline, Registry, RunFailure, RunOptions, RunReport, run};
@@ -116,7 +118,7 @@ pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
     };
     let (replay, frames) = open_recording(args)?;
     let mut pipeline = pipeline;
-    super::place_objects(&mut pipeline, &replay, "")?;
+    prepare::place_objects(&mut pipeline, &replay, "")?;
     Ok(Loaded {
         replay,
         pipeline,
@@ -291,7 +293,7 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
     ];
     for (i, (option, path, extensions)) in outputs.iter().enumerate() {
         let Some(path) = path else { continue };
-        super::check_output_file(option, path)?;
+        output::check_output_file(option, path)?;
         let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("");
         if !extensions.iter().any(|e| e.eq_ignore_ascii_case(extension)) {
             bail!(

@@ -60,6 +60,20 @@ pub struct Ports {
     pub outputs: Vec<Port>,
 }
 
+impl Ports {
+    /// Ports of a stage with fixed inputs and outputs, each `(role, kinds)` with the role
+    /// as its default product name.
+    pub fn fixed(
+        inputs: &[(&str, &'static [ProductKind])],
+        outputs: &[(&str, &'static [ProductKind])],
+    ) -> Ports {
+        Ports {
+            inputs: inputs.iter().map(|(r, k)| Port::new(r, r, k)).collect(),
+            outputs: outputs.iter().map(|(r, k)| Port::new(r, r, k)).collect(),
+        }
+    }
+}
+
 /// What a stage kind's builder receives.
 pub struct BuildContext<'a> {
     pub stage_name: &'a str,

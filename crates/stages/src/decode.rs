@@ -3,7 +3,8 @@
 
 use crate::kind;
 use relume_graph::{
-    BuildContext, Frame, ParamDefault, ParamSpec, Params, Product, Stage, StageError, StageInfo,
+    BuildContext, Frame, ParamDefault, ParamSpec, Params, Ports, Product, Stage, StageError,
+    StageInfo,
 };
 use relume_recording::codec::{decode_color, decode_depth};
 
@@ -16,7 +17,7 @@ pub const INFO: StageInfo = StageInfo {
         "decode color and depth at the same time on two threads",
     )],
     ports: |_| {
-        super::fixed_ports(
+        Ports::fixed(
             &[("record", &[kind::RECORD])],
             &[
                 ("color", &[kind::COLOR]),

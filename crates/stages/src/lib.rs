@@ -132,7 +132,7 @@ pub mod temporal;
 pub mod world;
 pub mod write;
 
-use relume_graph::{Port, Ports, ProductKind, Registry, StageInfo};
+use relume_graph::{Registry, StageInfo};
 
 /// The built-in registry: every stage kind of [`builtin`], and [`world::resolve`] for
 /// the configs' `[[object]]` tables.
@@ -174,15 +174,4 @@ pub fn builtin() -> Vec<StageInfo> {
         debug::SLEEP_INFO,
         debug::FAIL_INFO,
     ]
-}
-
-/// Ports of a stage with fixed inputs and outputs: (role, default product, kinds).
-pub(crate) fn fixed_ports(
-    inputs: &[(&str, &'static [ProductKind])],
-    outputs: &[(&str, &'static [ProductKind])],
-) -> Ports {
-    Ports {
-        inputs: inputs.iter().map(|(r, k)| Port::new(r, r, k)).collect(),
-        outputs: outputs.iter().map(|(r, k)| Port::new(r, r, k)).collect(),
-    }
 }

@@ -11,7 +11,7 @@ use crate::kind;
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::raster::{Image, Vec3Image};
-use relume_graph::{Frame, ParamDefault, ParamSpec, Product, Stage, StageError, StageInfo};
+use relume_graph::{Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo};
 
 const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
@@ -39,7 +39,7 @@ pub const CROSS_INFO: StageInfo = StageInfo {
     summary: "normals from the cross product of neighbouring positions (paper 002 Sec. 4.2)",
     params: PARAMS,
     ports: |_| {
-        super::fixed_ports(
+        Ports::fixed(
             &[("points", &[kind::POINTS])],
             &[
                 ("normals", &[kind::NORMALS]),

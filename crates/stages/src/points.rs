@@ -5,14 +5,14 @@ use crate::kind;
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::raster::{DepthImage, Image, Vec3Image, depth_is_valid};
-use relume_graph::{Frame, Product, Stage, StageError, StageInfo};
+use relume_graph::{Frame, Ports, Product, Stage, StageError, StageInfo};
 use relume_recording::Intrinsics;
 
 pub const INFO: StageInfo = StageInfo {
     kind: "depth.to_points",
     summary: "back-project depth (metres) to camera-space positions with the depth intrinsics",
     params: &[],
-    ports: |_| super::fixed_ports(&[("depth", &[kind::DEPTH])], &[("points", &[kind::POINTS])]),
+    ports: |_| Ports::fixed(&[("depth", &[kind::DEPTH])], &[("points", &[kind::POINTS])]),
     build: |ctx| {
         Ok(Box::new(DepthToPoints {
             depth: ctx.input("depth"),

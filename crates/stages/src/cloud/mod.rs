@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Rgb8Image, Vec3Image, depth_is_valid};
 use relume_base::rng;
-use relume_graph::{Frame, ParamDefault, ParamSpec, Product, Stage, StageError, StageInfo};
+use relume_graph::{Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo};
 use relume_recording::{Intrinsics, Pose};
 use relume_scene::light::EnvCloud;
 use std::sync::Arc;
@@ -64,7 +64,7 @@ pub const INFO: StageInfo = StageInfo {
     summary: "environment samples in a probabilistic hash grid, removed where the depth shows them gone (paper 000 Sec. 5)",
     params: PARAMS,
     ports: |_| {
-        super::fixed_ports(
+        Ports::fixed(
             &[
                 ("depth", &[kind::DEPTH]),
                 ("normals", &[kind::NORMALS]),

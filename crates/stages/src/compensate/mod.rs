@@ -27,7 +27,9 @@ use hsv::Linearize;
 use pairs::{PairMoments, PairParams};
 use rayon::prelude::*;
 use relume_base::raster::{Image, LabelImage, Rgb8Image, Vec3Image};
-use relume_graph::{Frame, ParamDefault, ParamSpec, Params, Product, Stage, StageError, StageInfo};
+use relume_graph::{
+    Frame, ParamDefault, ParamSpec, Params, Ports, Product, Stage, StageError, StageInfo,
+};
 
 const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
@@ -118,7 +120,7 @@ pub const INFO: StageInfo = StageInfo {
     summary: "color compensation c_t from camera to reference space by A_t / C_t of eq. (2) (paper 000 Sec. 4)",
     params: PARAMS,
     ports: |_| {
-        super::fixed_ports(
+        Ports::fixed(
             &[
                 ("color", &[kind::COLOR]),
                 ("reference", &[kind::RADIANCE]),

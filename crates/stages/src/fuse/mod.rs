@@ -36,7 +36,7 @@ pub use warp::{WarpParams, WarpedDepth, previous_to_current, warp_depth};
 use crate::kind;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Image, ScalarImage};
-use relume_graph::{Frame, ParamDefault, ParamSpec, Product, Stage, StageError, StageInfo};
+use relume_graph::{Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo};
 use relume_recording::{Intrinsics, Pose};
 use std::sync::Arc;
 
@@ -93,7 +93,7 @@ pub const INFO: StageInfo = StageInfo {
               (paper 002 Sec. 4.2)",
     params: PARAMS,
     ports: |_| {
-        super::fixed_ports(
+        Ports::fixed(
             &[("depth", &[kind::DEPTH]), ("pose", &[kind::POSE])],
             &[
                 ("fused_depth", &[kind::DEPTH]),

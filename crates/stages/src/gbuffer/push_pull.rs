@@ -12,7 +12,7 @@
 //! reaches stays empty (coverage 0). Filled normals are renormalized and turned towards
 //! the camera.
 
-use super::{COVERAGE_FILLED, GBuffer};
+use super::buffer::{COVERAGE_FILLED, GBuffer};
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
@@ -238,7 +238,7 @@ fn push_into_gbuffer(coarse: &Level, camera: &Pinhole, g: &mut GBuffer) {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{COVERAGE_NONE, COVERAGE_SPLAT};
+    use super::super::buffer::{COVERAGE_NONE, COVERAGE_SPLAT};
     use super::*;
     use relume_base::rng;
     use relume_recording::Intrinsics;

@@ -7,7 +7,7 @@
 
 use crate::kind;
 use crate::kind::FrameProducts;
-use relume_graph::{Frame, ParamDefault, ParamSpec, Product, Stage, StageError, StageInfo};
+use relume_graph::{Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo};
 use relume_scene::light::{EnvMap, LightTable};
 use std::sync::Arc;
 
@@ -23,7 +23,7 @@ pub const INFO: StageInfo = StageInfo {
     summary: "the table of environment importance samples, luminance x sin(theta) weighted, stratified (paper 001 Sec. 5.2)",
     params: PARAMS,
     ports: |_| {
-        super::super::fixed_ports(
+        Ports::fixed(
             &[("environment", &[kind::ENVIRONMENT])],
             &[("light_table", &[kind::LIGHT_TABLE])],
         )

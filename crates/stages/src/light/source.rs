@@ -8,7 +8,7 @@
 
 use crate::kind;
 use relume_graph::{
-    BuildContext, Frame, ParamDefault, ParamSpec, Product, Stage, StageError, StageInfo,
+    BuildContext, Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo,
 };
 use relume_scene::light::EnvMap;
 use relume_scene::light::loaders::{LoadedEnvMap, environment_from_header, load_envmap_counted};
@@ -51,7 +51,7 @@ pub const INFO: StageInfo = StageInfo {
     kind: "light.envmap",
     summary: "an HDR lat-long environment map from the recording's attachment or an EXR/.hdr file, loaded once",
     params: PARAMS,
-    ports: |_| super::super::fixed_ports(&[], &[("environment", &[kind::ENVIRONMENT])]),
+    ports: |_| Ports::fixed(&[], &[("environment", &[kind::ENVIRONMENT])]),
     build: |ctx| {
         let map = load(ctx)?;
         Ok(Box::new(EnvironmentSource {

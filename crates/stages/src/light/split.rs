@@ -5,7 +5,7 @@
 
 use crate::kind;
 use crate::kind::FrameProducts;
-use relume_graph::{Frame, ParamDefault, ParamSpec, Product, Stage, StageError, StageInfo};
+use relume_graph::{Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo};
 use relume_scene::light::EnvMap;
 use relume_scene::light::split::{map_is_consistent, split_direct_indirect};
 use std::sync::Arc;
@@ -22,7 +22,7 @@ pub const INFO: StageInfo = StageInfo {
     summary: "direct and indirect parts of the environment light by an energy ratio per channel (paper 004 Sec. 4.2)",
     params: PARAMS,
     ports: |_| {
-        super::super::fixed_ports(
+        Ports::fixed(
             &[("environment", &[kind::ENVIRONMENT])],
             &[
                 ("direct_light", &[kind::ENVIRONMENT]),

@@ -6,7 +6,7 @@
 use super::split::{check_map, same_map};
 use crate::kind;
 use crate::kind::FrameProducts;
-use relume_graph::{Frame, ParamDefault, ParamSpec, Product, Stage, StageError, StageInfo};
+use relume_graph::{Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo};
 use relume_scene::light::{AreaLights, EnvMap, LightMethod, ValBuilder, ValParams};
 use std::sync::Arc;
 
@@ -54,7 +54,7 @@ pub const INFO: StageInfo = StageInfo {
     summary: "virtual area lights by importance sampling + k-means, and SH9 of the indirect light (paper 004 Secs. 4.3-4.4)",
     params: PARAMS,
     ports: |_| {
-        super::super::fixed_ports(
+        Ports::fixed(
             &[
                 ("direct_light", &[kind::ENVIRONMENT]),
                 ("indirect_light", &[kind::ENVIRONMENT]),

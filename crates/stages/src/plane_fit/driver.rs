@@ -2,9 +2,9 @@
 //! then the rows in parallel, eight pixels at a time where the CPU has AVX2
 //! ([`super::lanes`]) and one at a time elsewhere ([`super::gather`]), with the same bits.
 
-use super::PlaneFitParams;
 use super::gather::{RowFit, RowOut, SampleGrid, covering_offsets, fit_row, margin};
 use super::lanes::fit_row_lanes;
+use super::params::PlaneFitParams;
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, LabelImage, Vec3Image};

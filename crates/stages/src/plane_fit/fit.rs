@@ -4,7 +4,7 @@
 //! only the case with the largest determinant (the method of E. Emerfeldt, "Fitting a
 //! plane to many points in 3D", 2015, cited by the paper).
 
-use super::NormalCode;
+use super::params::NormalCode;
 use glam::{BVec3A, Vec3, Vec3A, Vec3Swizzles};
 
 /// Which normal component the fit fixed to 1 (the case with the largest determinant).

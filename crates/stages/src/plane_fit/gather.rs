@@ -5,8 +5,8 @@
 //! precomputed once per pixel phase and sorted nearest first. The result is the same set
 //! of covering disks, visited in a fixed order, so the list of at most k is deterministic.
 
-use super::NormalCode;
 use super::fit::Scatter;
+use super::params::NormalCode;
 use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 use relume_base::raster::Vec3Image;

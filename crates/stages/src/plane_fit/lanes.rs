@@ -6,9 +6,9 @@
 //! the same sums in the same order), then the scalar fit (`Scatter::fit`, the case
 //! picked by selects) and `plane_along`, operation for operation: the same bits.
 
-use super::NormalCode;
 use super::fit::Scatter;
 use super::gather::{RowFit, RowOut, fit_pixel, plane_along};
+use super::params::NormalCode;
 use glam::{Vec3, Vec3A};
 use relume_base::simd::{Kernel, LANES, Lanes, Portable, dot3};
 

@@ -2,9 +2,19 @@
 //! tangent-plane depth over that ellipse ([`Raster::footprint`]), and the depth test of
 //! a footprint into a band of keys ([`draw`]).
 
-use super::{GRAZING_COS, MIN_RADIUS_PX, NEAR_M, PLANE_DEPTH_SPAN};
 use glam::{Mat3, Mat4, Vec3};
 use relume_base::pinhole::Pinhole;
+
+/// Samples nearer to the camera than this (metres) are not splatted.
+pub const NEAR_M: f32 = 0.01;
+/// The smallest screen radius in pixels: a little more than sqrt(1/2), so that the disk
+/// always contains the nearest pixel centre and every sample in view covers a pixel.
+pub const MIN_RADIUS_PX: f32 = 0.75;
+/// Below this cosine between the normal and the view direction a splat is drawn at the
+/// sample's own depth instead of along its tangent plane.
+pub const GRAZING_COS: f32 = 0.25;
+/// Tangent-plane depths are clamped to the sample depth +- this many splat radii.
+pub const PLANE_DEPTH_SPAN: f32 = 3.0;
 
 /// A sample's footprint as pass 3 draws it, set up once in pass 2: inverse depth
 /// `a x + b y + c` over the ellipse of centre (u, v) and radii (rx, ry) on rows

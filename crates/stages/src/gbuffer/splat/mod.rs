@@ -17,7 +17,7 @@
 //!    sample index, plain `min`: no atomics, the band's keys stay in cache), then turns
 //!    the winning keys into the G-buffer rows.
 
-use super::{COVERAGE_NONE, COVERAGE_SPLAT, GBuffer};
+use super::buffer::{COVERAGE_NONE, COVERAGE_SPLAT, GBuffer};
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
@@ -29,17 +29,8 @@ use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
 mod footprint;
 
 use footprint::{Footprint, Raster, draw};
+pub use footprint::{GRAZING_COS, MIN_RADIUS_PX, NEAR_M, PLANE_DEPTH_SPAN};
 
-/// Samples nearer to the camera than this (metres) are not splatted.
-pub const NEAR_M: f32 = 0.01;
-/// The smallest screen radius in pixels: a little more than sqrt(1/2), so that the disk
-/// always contains the nearest pixel centre and every sample in view covers a pixel.
-pub const MIN_RADIUS_PX: f32 = 0.75;
-/// Below this cosine between the normal and the view direction a splat is drawn at the
-/// sample's own depth instead of along its tangent plane.
-pub const GRAZING_COS: f32 = 0.25;
-/// Tangent-plane depths are clamped to the sample depth +- this many splat radii.
-pub const PLANE_DEPTH_SPAN: f32 = 3.0;
 /// Rows of a footprint band (pass 3).
 pub const BAND_ROWS: usize = 16;
 

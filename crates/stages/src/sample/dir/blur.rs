@@ -11,23 +11,13 @@
 //! same values for both, so its E_RV equals its E_R bit for bit (it is computed once and
 //! copied); `touched` is set wherever that is not so.
 
-use super::blur_lanes::{Taps, blur_span};
+use super::blur_lanes::blur_span;
+use super::blur_pass::{PLANE_TOLERANCE, PassInputs, Taps};
 use super::points::RealSurface;
 use super::shade::same_surface;
 use crate::sample::layers::{IrradianceLayers, LayerRow, shade_rows};
 use glam::Vec3;
 use relume_base::simd::Kernel;
-
-/// Metres a neighbour may lie off a pixel's tangent plane and still be averaged in.
-pub const PLANE_TOLERANCE: f32 = 0.03;
-
-/// The layers a pass reads: `input`'s light layers, `geometry`'s visible surface and
-/// mask (the raw layers), and the real surface.
-pub(super) struct PassInputs<'a> {
-    pub geometry: &'a IrradianceLayers,
-    pub input: &'a IrradianceLayers,
-    pub real: &'a RealSurface,
-}
 
 /// Blurs `raw` (the interleaved estimates, `k` x `k` classes) into `out`, through
 /// `between` (the pass along x), all of one size; with `kernel`'s lanes where all of

@@ -8,21 +8,11 @@
 //! `|(q - p) . n| <= tolerance` where `q` is not finite, so the explicit checks of the
 //! scalar code change no answer.
 
-use super::blur::{PLANE_TOLERANCE, PassInputs};
+use super::blur_pass::{PLANE_TOLERANCE, PassInputs, Taps};
 use crate::sample::layers::LayerRow;
 use relume_base::simd::xyz::{Xyz, finite_xyz, load_xyz, store_xyz, sub_xyz};
 use relume_base::simd::{Kernel, LANES, Lanes, Portable, dot3};
 use std::ops::Range;
-
-/// One pass's geometry of the row: pixel `x` of `row` is pixel `start + x` of the
-/// images, its taps those at `start + x + t stride`, t in `-lo..=hi`.
-#[derive(Clone, Copy)]
-pub(super) struct Taps {
-    pub start: usize,
-    pub stride: usize,
-    pub lo: usize,
-    pub hi: usize,
-}
 
 /// Blurs the pixels `xs` of a row (every tap of each inside the image) in groups of
 /// eight with `kernel`'s lanes; returns the first pixel it left (the rest of `xs`, fewer

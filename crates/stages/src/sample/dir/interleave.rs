@@ -5,8 +5,8 @@
 //! as virtual ones, eight at a time where lanes run (`gather_lanes.rs`, the same
 //! bits as one at a time).
 
-use super::DirInputs;
 use super::gather_lanes::gather_each;
+use super::params::DirInputs;
 use super::points::RealSurface;
 use super::shade::{Gathered, LightSet, Receiver};
 use crate::sample::layers::{LayerRow, PixelLayers};

@@ -12,9 +12,7 @@
 //! visible. Maps are plain `f32` slices of `size * size` texels (INFINITY: empty), so a
 //! frame's maps live in one buffer.
 
-use super::splat_lanes::splat_points;
 use glam::Vec3;
-use relume_base::simd::{Kernel, LANES};
 
 /// How a light's map sees the scene.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -114,60 +112,6 @@ impl Projection {
 /// The most texels a splat reaches from its centre.
 pub const MAX_SPLAT_RADIUS: i32 = 4;
 
-/// Splats `points` into `map` (`size * size` texels, cleared to INFINITY by the caller):
-/// each point that projects into the map keeps the nearest depth of the texels its patch
-/// covers. A point stands for a disc of the surface of the radius given with it (metres:
-/// a sparse subset of a surface stands for all of it); the splat is the square of texels
-/// within that radius of its texel (at most [`MAX_SPLAT_RADIUS`]), one texel when the
-/// patch is smaller than a texel. Returns the rectangle `[x0, y0, x1, y1)` of the
-/// texels written (empty: x1 <= x0).
-pub fn splat(
-    map: &mut [f32],
-    size: usize,
-    projection: &Projection,
-    points: impl Iterator<Item = (Vec3, f32)>,
-) -> [usize; 4] {
-    splat_with(None, map, size, projection, points)
-}
-
-/// [`splat`], projecting eight points at a time with `kernel`'s lanes (`None`: one at a
-/// time; the same bits).
-pub(super) fn splat_with(
-    kernel: Option<Kernel>,
-    map: &mut [f32],
-    size: usize,
-    projection: &Projection,
-    mut points: impl Iterator<Item = (Vec3, f32)>,
-) -> [usize; 4] {
-    let mut written = [size, size, 0, 0];
-    if let Some(kernel) = kernel {
-        let mut group = [(Vec3::ZERO, 0.0); LANES];
-        loop {
-            let mut n = 0;
-            for (slot, point) in group.iter_mut().zip(points.by_ref()) {
-                *slot = point;
-                n += 1;
-            }
-            if n < LANES {
-                // The last few, one at a time.
-                for &(p, radius) in &group[..n] {
-                    if let Some((texel, reach)) = project_point(projection, size, p, radius) {
-                        splat_square(map, size, texel, reach, &mut written);
-                    }
-                }
-                return written;
-            }
-            splat_points(kernel, projection, size, &group, map, &mut written);
-        }
-    }
-    for (p, radius) in points {
-        if let Some((texel, reach)) = project_point(projection, size, p, radius) {
-            splat_square(map, size, texel, reach, &mut written);
-        }
-    }
-    written
-}
-
 /// Where the point `p` standing for a patch of `radius` falls in the map, and how many
 /// texels its splat reaches; `None` outside the map.
 #[inline]
@@ -246,7 +190,7 @@ pub(super) fn square_bounds(
 /// a silhouette grows by less than 2^levels texels.
 ///
 /// Only the blocks of 2^levels texels that meet `splatted` (the rectangle `[x0, y0,
-/// x1, y1)` holding every depth, from [`splat`]) are visited: nothing outside them can
+/// x1, y1)` holding every depth, from [`splat`](super::splat::splat)) are visited: nothing outside them can
 /// be filled. Returns the rectangle `[x0, y0, x1, y1)` that holds every depth
 /// afterwards (`[0; 4]` when none: lookups outside it need not read the map).
 /// `scratch` is reused between calls.

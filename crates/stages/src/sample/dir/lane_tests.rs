@@ -1,13 +1,14 @@
 //! The lane code of `sample.dir` (`gather_lanes.rs`, `blur_lanes.rs`,
-//! `splat_lanes.rs`) against the one-at-a-time code, bit for bit, and the rectangle
+//! `splat.rs`) against the one-at-a-time code, bit for bit, and the rectangle
 //! that bounds the view rays that meet the objects.
 
 use super::gather_lanes::gather_lanes;
 use super::interleave::{object_rect, primary_hit};
+use super::ism::project_point;
 use super::ism::{Projection, frame_about};
-use super::ism::{project_point, splat_with};
 use super::shade::{Gathered, LightSet, Receiver, gather};
-use super::splat_lanes::project_points;
+use super::splat::project_points;
+use super::splat::splat_with;
 use super::tests::{RED, inputs};
 use super::vpl::{Emitter, Vpl};
 use super::*;

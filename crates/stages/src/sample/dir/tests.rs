@@ -1,8 +1,9 @@
 //! Tests of Differential Instant Radiosity: the maps, the flags and the layers over the
 //! floor scene that the other renderers' tests share.
 
-use super::ism::{Projection, fill_holes, frame_about, splat};
+use super::ism::{Projection, fill_holes, frame_about};
 use super::shade::{LightSet, Receiver, gather};
+use super::splat::splat;
 use super::vpl::{Candidate, Emitter, Vpl, resample};
 use super::*;
 use crate::sample::path::tests::{
@@ -11,6 +12,7 @@ use crate::sample::path::tests::{
 };
 use glam::Vec3;
 use relume_base::threads::with_threads;
+use relume_scene::light::LightTable;
 use relume_scene::objects::Material;
 
 /// The shared floor scene's inputs with `objects` under `table`, at `frame`.

@@ -122,7 +122,7 @@
 //! of a row at a time: the real points' direct and indirect samples, and those of the
 //! virtual primaries' hits, are drawn first, then all their rays are marched together,
 //! eight per AVX2 vector where the CPU has it (see `span` and
-//! [`crate::sample::ssrt::TraceBatch`]; the same hits as ray by ray). The few
+//! [`crate::sample::ssrt::batch::TraceBatch`]; the same hits as ray by ray). The few
 //! rays that depend on another ray's hit (the shadow ray of an object that an indirect
 //! ray met) or are object-aware candidates are traced one at a time. The virtual objects cost a cone test per ray, then a box test
 //! and the BVH only for rays inside the cone of their bounding sphere.

@@ -12,7 +12,8 @@ use super::kernel::{Kernel, RealPoint};
 use crate::sample::query::{
     Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery, Source, VoxelQuery,
 };
-use crate::sample::ssrt::{RayOrigin, TraceBatch};
+use crate::sample::ssrt::RayOrigin;
+use crate::sample::ssrt::batch::TraceBatch;
 use glam::{Vec3, Vec3A};
 use relume_base::simd;
 

@@ -13,7 +13,7 @@ use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
 use super::virtual_paths::{VirtualDirect, VirtualIndirect};
 use crate::sample::layers::PixelLayers;
 use crate::sample::query::RadianceQuery;
-use crate::sample::ssrt::TraceBatch;
+use crate::sample::ssrt::batch::TraceBatch;
 use glam::Vec3;
 use relume_scene::objects::VirtualHit;
 

@@ -33,7 +33,7 @@
 //! nearest-texel reads, not bilinear; no cone casts (the paper's coarser final fetch for
 //! a cone's solid angle): every query is a thin ray.
 
-use super::{Hit, RadianceQuery, Ray, Source};
+use super::interface::{Hit, RadianceQuery, Ray, Source};
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_scene::light::impostor::cube_texel_direction;

@@ -1,10 +1,10 @@
 //! Screen-space ray marching as a [`RadianceQuery`]: the real scene is the depth map,
 //! marched within `max_distance` ([`ScreenTracer`]); a hit brings the camera's
 //! compensated radiance of the pixel it meets. `sample.path` marches its rays in
-//! batches with the same tracer ([`crate::sample::ssrt::TraceBatch`], eight
+//! batches with the same tracer ([`crate::sample::ssrt::batch::TraceBatch`], eight
 //! lanes at a time), which gives the same hits as this query ray by ray.
 
-use super::{Hit, RadianceQuery, Ray, Source};
+use super::interface::{Hit, RadianceQuery, Ray, Source};
 use crate::sample::ssrt::{RealHit, ScreenTracer};
 use relume_base::raster::Vec3Image;
 

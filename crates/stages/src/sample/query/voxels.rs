@@ -1,7 +1,7 @@
 //! `vct`: Voxel Cone Tracing (paper 000 Secs. 6.1 and 6.5, after Crassin et al.): the
 //! ray's cone marched through the scene volume of `light.voxels`.
 
-use super::{Hit, RadianceQuery, Ray, Source};
+use super::interface::{Hit, RadianceQuery, Ray, Source};
 use relume_scene::light::voxels::VoxelVolume;
 
 /// Below this opacity a cone is taken to have met nothing (the environment at

@@ -28,12 +28,10 @@
 //! to [`FAR`] metres.
 //!
 //! Rays leaving one point share its projection: [`ScreenTracer::origin`] once, then
-//! [`ScreenTracer::trace_from`] per ray. A [`TraceBatch`] marches many rays together
+//! [`ScreenTracer::trace_from`] per ray. A [`TraceBatch`](batch::TraceBatch) marches many rays together
 //! (eight per vector with AVX2), with the same hits.
 
-mod batch;
-
-pub use batch::TraceBatch;
+pub mod batch;
 
 use super::pyramid::DepthPyramid;
 use glam::{Affine3A, Vec3};
@@ -291,7 +289,7 @@ impl<'a> ScreenTracer<'a> {
 
     /// A world-space ray as [`ScreenTracer::trace`] traces it: its projected origin
     /// (`None` where no ray from there finds anything) and its camera-space direction,
-    /// to queue in a [`TraceBatch`].
+    /// to queue in a [`TraceBatch`](batch::TraceBatch).
     #[inline]
     pub fn camera_ray(&self, origin: Vec3, dir: Vec3) -> (Option<RayOrigin>, Vec3) {
         (

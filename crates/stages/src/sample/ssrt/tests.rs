@@ -1,3 +1,4 @@
+use super::batch::TraceBatch;
 use super::*;
 use relume_base::raster::Image;
 use relume_base::rng::Counter;

@@ -43,9 +43,11 @@
 //! spaces at once, with the bits of the one-light code (tested). The rest of the time
 //! goes to the camera raster and the per-pixel outputs.
 
+mod inputs;
 mod pixel;
 mod raster;
 mod real_splat;
+mod renderer;
 #[cfg(test)]
 mod round_robin_tests;
 mod shade;
@@ -57,24 +59,21 @@ mod tests;
 mod transfer_tests;
 mod virtual_maps;
 
-use super::layers::{IrradianceLayers, LAYER_OUTPUTS, shade_rows};
+use super::layers::{IrradianceLayers, LAYER_OUTPUTS};
 use crate::kind;
 use crate::kind::FrameProducts;
-use glam::{Affine3A, Vec2, Vec3, Vec3A};
-use pixel::{PixelContext, sampling_of};
-use raster::{DepthTarget, NO_ID, ScreenTriangle, raster_screen_triangle, screen_triangles};
-use rayon::prelude::*;
+use glam::{Affine3A, Vec3};
+pub use inputs::{ValInputs, ValShadingParams};
 use relume_base::pinhole::Pinhole;
-use relume_base::raster::{DepthImage, Vec3Image, depth_is_valid};
-use relume_base::simd::{Kernel, Portable};
-use relume_graph::{Frame, ParamDefault, ParamSpec, ProductKind, Stage, StageError, StageInfo};
+use relume_graph::{
+    Frame, ParamDefault, ParamSpec, Ports, ProductKind, Stage, StageError, StageInfo,
+};
 use relume_recording::Intrinsics;
-use relume_scene::light::AreaLights;
 use relume_scene::light::prt::cache::{self, CacheOutcome};
 use relume_scene::light::prt::{Transfer, TransferParams};
 use relume_scene::objects::VirtualScene;
-use shade::{Biases, Maps, Sh9Irradiance};
-use shadow::{MAX_SHADOW_MAP_SIZE, TILE, Tile, tile_of};
+pub use renderer::ValRenderer;
+use shadow::MAX_SHADOW_MAP_SIZE;
 use std::sync::Arc;
 
 const PARAMS: &[ParamSpec] = &[
@@ -137,7 +136,7 @@ pub const INFO: StageInfo = StageInfo {
     summary: "noise-free E_R / E_RV from virtual area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5)",
     params: PARAMS,
     ports: |_| {
-        let mut ports = super::super::fixed_ports(
+        let mut ports = Ports::fixed(
             &[
                 ("depth", &[kind::DEPTH]),
                 ("normals", &[kind::NORMALS]),
@@ -210,283 +209,12 @@ fn load_transfer(stage: &str, objects: &VirtualScene, params: TransferParams) ->
     transfer
 }
 
-/// Settings of [`ValRenderer::render`] (the stage's parameters).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ValShadingParams {
-    pub shadow_map_size: usize,
-    pub virtual_bias: f32,
-    pub real_bias: f32,
-    pub slope_bias: f32,
-    pub real_occluder_reach: f32,
-    /// Lights whose shadow maps are rebuilt per frame, in turn; 0 = all.
-    pub shadow_updates: usize,
-}
-
-impl Default for ValShadingParams {
-    fn default() -> Self {
-        ValShadingParams {
-            shadow_map_size: 128,
-            virtual_bias: 0.005,
-            real_bias: 0.02,
-            slope_bias: 1.5,
-            real_occluder_reach: 1.0,
-            shadow_updates: 0,
-        }
-    }
-}
-
-/// One frame's inputs.
-#[derive(Clone, Copy)]
-pub struct ValInputs<'a> {
-    /// Metres, 0 or non-finite = missing.
-    pub depth: &'a DepthImage,
-    /// Camera-space unit normals facing the camera (zero = invalid), same size.
-    pub normals: &'a Vec3Image,
-    /// The camera of `depth` (rescaled to its size).
-    pub camera: Pinhole,
-    pub camera_to_world: Affine3A,
-    pub lights: &'a AreaLights,
-    pub objects: &'a VirtualScene,
-    /// The objects' radiance transfer (paper 004 eq. 11) for their indirect light, or
-    /// `None` for the unoccluded SH9 irradiance at the normal.
-    pub transfer: Option<&'a Transfer>,
-}
-
 /// Buffers for [`ValRenderer::render`], which overwrites every pixel: irradiance NaN
 /// where there is neither a real point nor an object, `exponent` 0 (glossy objects
 /// are shaded as diffuse), `indirect_min_distance` infinite and `touched` 1 (not an
 /// output: no pixel is known to be untouched).
 pub fn val_layers(width: u32, height: u32) -> IrradianceLayers {
     IrradianceLayers::filled(width, height, Vec3::ZERO)
-}
-
-/// Shades frames with reusable buffers (real points, camera raster, shadow maps).
-#[derive(Default)]
-pub struct ValRenderer {
-    real_points: Vec<Vec3A>,
-    real_normals: Vec<Vec3A>,
-    /// Per real point, the world size of the patch it stands for
-    /// ([`shadow::PointSampling::footprint`]; computed once, used per light).
-    real_patches: Vec<f32>,
-    camera_depth: Vec<f32>,
-    camera_ids: Vec<u32>,
-    /// The virtual triangles clipped and projected into the camera.
-    screen: Vec<ScreenTriangle>,
-    /// Bounding spheres of the real points per tile (row-major tile grid).
-    tiles: Vec<Option<Tile>>,
-    /// Per tile, bit j set when the tile's real points may be inside light j's frustum.
-    lookup: Vec<u64>,
-    maps: Vec<f32>,
-    /// The frustum each light's maps in `maps` were built with, their size, and the
-    /// calls so far (the round robin of `shadow_updates`, see `shadow.rs`).
-    map_frusta: Vec<Option<shadow::ShadowFrustum>>,
-    /// The (position, normal) of the light each map was built for.
-    map_lights: Vec<(Vec3, Vec3)>,
-    map_size: usize,
-    shadow_calls: u64,
-    /// The shading and splatting kernel; `None`: the fastest the CPU runs (all give the
-    /// same bits).
-    kernel: Option<Kernel>,
-    /// Shade every pixel with the scalar `shade_point`, and splat the real shadow maps
-    /// one light and one point at a time, instead (the kernels' reference).
-    #[cfg(test)]
-    scalar_reference: bool,
-}
-
-/// The near plane of the camera raster, metres.
-const CAMERA_NEAR: f32 = 1e-3;
-
-/// Rows per band of the parallel camera raster.
-const RASTER_BAND_ROWS: usize = 16;
-
-impl ValRenderer {
-    /// A renderer that shades with `kernel` (all kernels give the same bits).
-    pub fn with_kernel(kernel: Kernel) -> ValRenderer {
-        ValRenderer {
-            kernel: Some(kernel),
-            ..ValRenderer::default()
-        }
-    }
-
-    /// Computes every output for one frame (see the module docs for the model).
-    pub fn render(
-        &mut self,
-        inputs: &ValInputs,
-        params: &ValShadingParams,
-        out: &mut IrradianceLayers,
-    ) -> Result<(), StageError> {
-        let (w, h) = (inputs.depth.width, inputs.depth.height);
-        if !inputs.depth.same_size(inputs.normals) || out.size() != Some((w, h)) {
-            return Err(StageError::Failed(format!(
-                "sample.val: depth is {w}x{h}, normals {}x{}, outputs {}x{}",
-                inputs.normals.width, inputs.normals.height, out.mask.width, out.mask.height
-            )));
-        }
-        if (inputs.camera.width, inputs.camera.height) != (w, h) {
-            return Err(StageError::Failed(format!(
-                "sample.val: the camera is {}x{} but the depth map {w}x{h}",
-                inputs.camera.width, inputs.camera.height
-            )));
-        }
-        if !(1..=MAX_SHADOW_MAP_SIZE).contains(&params.shadow_map_size) {
-            return Err(StageError::Failed(format!(
-                "sample.val: shadow_map_size must be 1 to {MAX_SHADOW_MAP_SIZE}, not {}",
-                params.shadow_map_size
-            )));
-        }
-        let (wu, hu) = (w as usize, h as usize);
-        self.real_surface(inputs);
-        self.camera_raster(inputs);
-        self.build_tiles(wu, hu);
-        let lights = self.shadow_maps(inputs, params);
-        let size = params.shadow_map_size;
-        let maps = Maps {
-            data: &self.maps,
-            stride: 3 * size * size,
-            texels: size * size,
-        };
-        let biases = Biases {
-            virtual_bias: params.virtual_bias,
-            real_bias: params.real_bias,
-            slope: params.slope_bias,
-        };
-        let sh = Sh9Irradiance::new(&inputs.lights.sh9);
-        let kernel = self.kernel.unwrap_or_else(Kernel::detect).available();
-        #[cfg(test)]
-        let scalar_reference = self.scalar_reference;
-        let context = PixelContext {
-            inputs,
-            real_points: &self.real_points,
-            real_normals: &self.real_normals,
-            real_patches: &self.real_patches,
-            lookup: &self.lookup,
-            tiles_per_row: wu.div_ceil(TILE),
-            ids: &self.camera_ids,
-            lights: &lights,
-            maps,
-            biases,
-            sh,
-            sampling: sampling_of(inputs),
-        };
-        shade_rows(
-            out,
-            wu,
-            1,
-            || (),
-            |_, y, mut row| {
-                #[cfg(test)]
-                if scalar_reference {
-                    for x in 0..wu {
-                        context.pixel(x, y, &mut row);
-                    }
-                    return;
-                }
-                match kernel {
-                    #[cfg(target_arch = "x86_64")]
-                    // SAFETY: `kernel` came from `Kernel::available`: the CPU has AVX2 and FMA.
-                    Kernel::Avx2Fma => unsafe { pixel::row_avx2(&context, y, &mut row) },
-                    _ => context.row::<Portable>(y, &mut row),
-                }
-            },
-        );
-        Ok(())
-    }
-
-    /// World points, normals and patch sizes of the real surface (NaN / zero / NaN
-    /// where missing).
-    fn real_surface(&mut self, inputs: &ValInputs) {
-        let (w, n) = (inputs.depth.width as usize, inputs.depth.len());
-        self.real_points.resize(n, Vec3A::NAN);
-        self.real_normals.resize(n, Vec3A::ZERO);
-        self.real_patches.resize(n, f32::NAN);
-        let m = inputs.camera_to_world;
-        let camera = inputs.camera;
-        let sampling = sampling_of(inputs);
-        self.real_points
-            .par_chunks_mut(w.max(1))
-            .zip(self.real_normals.par_chunks_mut(w.max(1)))
-            .zip(self.real_patches.par_chunks_mut(w.max(1)))
-            .enumerate()
-            .for_each(|(y, ((points, normals), patches))| {
-                let row = points
-                    .iter_mut()
-                    .zip(normals.iter_mut())
-                    .zip(patches.iter_mut());
-                for (x, ((p, nrm), patch)) in row.enumerate() {
-                    let i = y * w + x;
-                    let z = inputs.depth.data[i];
-                    *p = if depth_is_valid(z) {
-                        m.transform_point3a(camera.back_project(x as f32, y as f32, z).into())
-                    } else {
-                        Vec3A::NAN
-                    };
-                    *patch = sampling.footprint(*p);
-                    let n_cam = inputs.normals.data[i];
-                    *nrm = if n_cam != Vec3::ZERO && n_cam.is_finite() {
-                        m.transform_vector3a(n_cam.into()).normalize_or_zero()
-                    } else {
-                        Vec3A::ZERO
-                    };
-                }
-            });
-    }
-
-    /// The nearest virtual triangle per pixel centre: the triangles are clipped and
-    /// projected once, then rasterized in parallel over bands of rows, each band taking
-    /// every triangle in index order (so ties resolve as in one sequential pass and the
-    /// result does not depend on the thread count).
-    fn camera_raster(&mut self, inputs: &ValInputs) {
-        let n = inputs.depth.len();
-        self.camera_depth.clear();
-        self.camera_depth.resize(n, f32::INFINITY);
-        self.camera_ids.clear();
-        self.camera_ids.resize(n, NO_ID);
-        if inputs.objects.is_empty() {
-            return;
-        }
-        let to_camera = inputs.camera_to_world.inverse();
-        let c = inputs.camera;
-        let project = |p: Vec3| Vec2::new(c.fx * p.x / p.z + c.cx, c.fy * p.y / p.z + c.cy);
-        self.screen.clear();
-        for (i, tri) in inputs.objects.triangles.iter().enumerate() {
-            let view = tri.vertices.map(|v| to_camera.transform_point3(v));
-            screen_triangles(&view, CAMERA_NEAR, project, i as u32, |t| {
-                self.screen.push(t)
-            });
-        }
-        let (width, height) = (c.width as usize, c.height as usize);
-        let band = RASTER_BAND_ROWS * width.max(1);
-        let screen = &self.screen;
-        self.camera_depth
-            .par_chunks_mut(band)
-            .zip(self.camera_ids.par_chunks_mut(band))
-            .enumerate()
-            .for_each(|(b, (depth, ids))| {
-                let mut target = DepthTarget {
-                    width,
-                    height,
-                    first_row: b * RASTER_BAND_ROWS,
-                    depth,
-                    ids: Some(ids),
-                };
-                for &(tri, id) in screen {
-                    raster_screen_triangle(&mut target, tri, id);
-                }
-            });
-    }
-
-    /// Bounding spheres of the real points per TILE x TILE block.
-    fn build_tiles(&mut self, w: usize, h: usize) {
-        let (tx, ty) = (w.div_ceil(TILE), h.div_ceil(TILE));
-        let points = &self.real_points;
-        self.tiles = (0..tx * ty)
-            .into_par_iter()
-            .map(|t| {
-                let (x0, y0) = ((t % tx) * TILE, (t / tx) * TILE);
-                tile_of(points, w, x0, (x0 + TILE).min(w), y0, (y0 + TILE).min(h))
-            })
-            .collect();
-    }
 }
 
 /// [`ValRenderer::render`] with fresh buffers (for `relume eval` and one-off use).

@@ -2,6 +2,7 @@
 
 use super::tests::{bits, camera, light, lights, real_scene, sphere};
 use super::*;
+use relume_scene::light::AreaLights;
 
 /// Four lights around the sphere, all casting its shadow on the floor or the slab.
 fn four_lights() -> AreaLights {

@@ -15,17 +15,8 @@
 //! came from, or 100 m out for a distant map, behind the room's walls) must not shadow
 //! the scene it lights.
 
-#[cfg(test)]
-use super::real_splat;
-use super::real_splat::{RealSurface, RealTarget, real_shadow_maps};
-use super::shade::PreparedLight;
-#[cfg(test)]
-use super::virtual_maps;
-use super::virtual_maps::{VirtualTarget, virtual_shadow_maps};
-use super::{ValInputs, ValRenderer, ValShadingParams};
 use glam::{Vec2, Vec3, Vec3A};
-use rayon::prelude::*;
-use relume_base::simd::{Kernel, LANES, Lanes, dot3};
+use relume_base::simd::{LANES, Lanes, dot3};
 use relume_scene::objects::Aabb;
 
 /// The largest shadow map, in texels per side: texel indices stay below 2^24, whole
@@ -284,171 +275,11 @@ impl PointSampling {
     }
 }
 
-impl ValRenderer {
-    /// Fits each light's frustum and builds its two shadow maps (in groups of up to
-    /// eight lights, the groups in parallel); returns the lights prepared for shading.
-    ///
-    /// With `shadow_updates` = u between 1 and the number of lights M, only u lights'
-    /// maps are built per call, in turn (paper 004 Sec. 5's round robin: call c builds
-    /// lights (c u + i) mod M, i < u), and those of every light that moved (position
-    /// or normal not bit for bit the one its maps were built for): the maps of the
-    /// others hold their objects' shadows still, and only their real occluders come
-    /// from an earlier frame's points (a static scene seen from elsewhere). Where
-    /// nothing was built before, or M or the map size changed, every map is built.
-    pub(super) fn shadow_maps(
-        &mut self,
-        inputs: &ValInputs,
-        params: &ValShadingParams,
-    ) -> Vec<PreparedLight> {
-        let size = params.shadow_map_size;
-        let bounds = inputs.objects.bounds();
-        let fitted: Vec<Option<ShadowFrustum>> = inputs
-            .lights
-            .lights
-            .iter()
-            .map(|l| {
-                if inputs.objects.is_empty() {
-                    return None;
-                }
-                ShadowFrustum::fit(
-                    l.position,
-                    l.normal,
-                    &bounds,
-                    size,
-                    params.real_occluder_reach,
-                )
-            })
-            .collect();
-        let m = fitted.len();
-        let updates = params.shadow_updates;
-        let round_robin =
-            (1..m).contains(&updates) && self.map_frusta.len() == m && self.map_size == size;
-        let start = (self.shadow_calls as usize).wrapping_mul(updates) % m.max(1);
-        let placed = |l: &relume_scene::light::AreaLight| (l.position, l.normal);
-        let rebuilt: Vec<bool> = (0..m)
-            .map(|j| {
-                let moved = self.map_lights.get(j) != Some(&placed(&inputs.lights.lights[j]));
-                !round_robin || moved || (j + m - start) % m < updates
-            })
-            .collect();
-        self.shadow_calls = self.shadow_calls.wrapping_add(1);
-        let frusta: Vec<Option<ShadowFrustum>> = (0..m)
-            .map(|j| {
-                if rebuilt[j] {
-                    fitted[j]
-                } else {
-                    self.map_frusta[j]
-                }
-            })
-            .collect();
-        let stride = 3 * size * size;
-        self.maps.resize(stride * m, f32::INFINITY);
-        let surface = RealSurface {
-            points: &self.real_points,
-            patches: &self.real_patches,
-            width: inputs.depth.width as usize,
-            tiles: &self.tiles,
-        };
-        let kernel = self.kernel.unwrap_or_else(Kernel::detect);
-        // The maps to build and their frusta.
-        let mut targets: Vec<(&mut [f32], &ShadowFrustum)> = self
-            .maps
-            .chunks_mut(stride)
-            .zip(&frusta)
-            .zip(&rebuilt)
-            .filter(|(_, rebuilt)| **rebuilt)
-            .filter_map(|((maps, frustum), _)| Some((maps, frustum.as_ref()?)))
-            .collect();
-        #[cfg(test)]
-        if self.scalar_reference {
-            targets.par_iter_mut().for_each(|(maps, frustum)| {
-                let (virtual_target, mut real_target) = light_targets(frustum, maps);
-                let objects = inputs.objects;
-                virtual_maps::virtual_shadow_map_reference(frustum, objects, virtual_target.map);
-                real_splat::real_shadow_map_reference(&mut real_target, &surface);
-            });
-            targets.clear();
-        }
-        // Up to eight lights per pass over the triangles and the points, in as many
-        // passes as there are threads where the lights allow (the maps do not depend on
-        // the grouping).
-        let group = targets
-            .len()
-            .div_ceil(rayon::current_num_threads())
-            .clamp(1, LANES);
-        targets.par_chunks_mut(group).for_each(|chunk| {
-            let (mut virtual_targets, mut real_targets): (Vec<_>, Vec<_>) = chunk
-                .iter_mut()
-                .map(|(maps, frustum)| light_targets(frustum, maps))
-                .unzip();
-            virtual_shadow_maps(kernel, &mut virtual_targets, inputs.objects);
-            real_shadow_maps(kernel, &mut real_targets, &surface);
-        });
-        self.map_frusta = frusta.clone();
-        self.map_lights = inputs.lights.lights.iter().map(placed).collect();
-        self.map_size = size;
-        self.prepare_lights(inputs, &frusta)
-    }
-
-    /// Which tiles need which lights' shadow maps ([`ValRenderer::lookup`]), and the
-    /// lights prepared for shading.
-    fn prepare_lights(
-        &mut self,
-        inputs: &ValInputs,
-        frusta: &[Option<ShadowFrustum>],
-    ) -> Vec<PreparedLight> {
-        // Which tiles need shadow-map lookups for which lights.
-        self.lookup = self
-            .tiles
-            .par_iter()
-            .map(|tile| {
-                let Some(tile) = tile else { return 0 };
-                let mut mask = 0u64;
-                for (j, f) in frusta.iter().enumerate().take(64) {
-                    if f.is_some_and(|f| f.may_hold(tile.centre, tile.radius, 0.0)) {
-                        mask |= 1 << j;
-                    }
-                }
-                mask
-            })
-            .collect();
-        inputs
-            .lights
-            .lights
-            .iter()
-            .zip(frusta)
-            .map(|(l, f)| PreparedLight::new(l, *f))
-            .collect()
-    }
-}
-
-/// One light's slice of [`ValRenderer`]'s maps (its virtual map, real map and the
-/// real map's scratch, size^2 each) as the targets of the map builders.
-fn light_targets<'a>(
-    frustum: &'a ShadowFrustum,
-    maps: &'a mut [f32],
-) -> (VirtualTarget<'a>, RealTarget<'a>) {
-    let texels = frustum.size * frustum.size;
-    let (virtual_map, rest) = maps.split_at_mut(texels);
-    let (map, scratch) = rest.split_at_mut(texels);
-    let virtual_target = VirtualTarget {
-        frustum,
-        map: virtual_map,
-    };
-    (
-        virtual_target,
-        RealTarget {
-            frustum,
-            map,
-            scratch,
-        },
-    )
-}
-
 /// What the map tests of this module and of `real_splat` and `virtual_maps` share.
 #[cfg(test)]
 pub(super) mod test_support {
     use super::*;
+    use relume_base::simd::Kernel;
 
     /// The objects' box the test frusta are fitted to.
     pub fn unit_box() -> Aabb {

@@ -1,8 +1,10 @@
 use super::*;
 use crate::kind;
 use glam::Mat3;
-use relume_base::raster::{Image, ScalarImage};
+use relume_base::raster::{DepthImage, Image, ScalarImage, Vec3Image};
+use relume_base::simd::Kernel;
 use relume_graph::Product;
+use relume_scene::light::AreaLights;
 use relume_scene::light::sh::project_sh9;
 use relume_scene::light::{AreaLight, EnvMap};
 use relume_scene::objects::{Material, Triangle};

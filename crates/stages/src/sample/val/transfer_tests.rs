@@ -2,6 +2,7 @@
 
 use super::tests::{camera, lights, real_scene};
 use super::*;
+use relume_base::raster::Vec3Image;
 use relume_scene::light::prt::{Transfer, TransferParams};
 use relume_scene::objects::{Material, shapes};
 

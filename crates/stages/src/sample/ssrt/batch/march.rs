@@ -1,6 +1,6 @@
 //! The AVX2 march of a [`super::TraceBatch`]: eight rays per vector, one per lane.
 
-use super::{LevelTables, Queued};
+use super::queue::{LevelTables, Queued};
 use crate::sample::ssrt::{FRACTION_BITS, ScreenTracer};
 use relume_base::simd::LANES;
 use std::arch::x86_64::*;

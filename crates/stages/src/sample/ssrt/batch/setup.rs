@@ -5,7 +5,7 @@
 //! a degenerate or far-off projection, an origin outside the image) take the scalar
 //! setup instead.
 
-use super::{Pending, Queued};
+use super::queue::{Pending, Queued};
 use crate::sample::ssrt::{FAR, FIXED_ONE, FRACTION_BITS, March, NEAR, ScreenTracer};
 use relume_base::simd::LANES;
 use std::arch::x86_64::*;

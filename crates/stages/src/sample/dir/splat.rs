@@ -1,4 +1,5 @@
-//! [`super::ism::splat`], eight points at a time: where each point falls in a map and
+//! Splatting points into an imperfect shadow map ([`splat`]): one point at a time, or
+//! eight at a time (`splat_points`): where each point falls in a map and
 //! how many texels its splat reaches, one point per lane, operation for operation as
 //! the scalar `Projection::project`, `texel_size` and reach (the same bits). The squares
 //! are then written one point at a time (the nearest depth a texel keeps does not
@@ -8,9 +9,65 @@
 //! both).
 
 use super::gather_lanes::{Projected, project};
-use super::ism::{MAX_SPLAT_RADIUS, Projection, Texel, keep_nearer, splat_square, square_bounds};
+use super::ism::{
+    MAX_SPLAT_RADIUS, Projection, Texel, keep_nearer, project_point, splat_square, square_bounds,
+};
 use glam::Vec3;
 use relume_base::simd::{Kernel, LANES, Lanes, Portable};
+
+/// Splats `points` into `map` (`size * size` texels, cleared to INFINITY by the caller):
+/// each point that projects into the map keeps the nearest depth of the texels its patch
+/// covers. A point stands for a disc of the surface of the radius given with it (metres:
+/// a sparse subset of a surface stands for all of it); the splat is the square of texels
+/// within that radius of its texel (at most [`MAX_SPLAT_RADIUS`]), one texel when the
+/// patch is smaller than a texel. Returns the rectangle `[x0, y0, x1, y1)` of the
+/// texels written (empty: x1 <= x0).
+pub fn splat(
+    map: &mut [f32],
+    size: usize,
+    projection: &Projection,
+    points: impl Iterator<Item = (Vec3, f32)>,
+) -> [usize; 4] {
+    splat_with(None, map, size, projection, points)
+}
+
+/// [`splat`], projecting eight points at a time with `kernel`'s lanes (`None`: one at a
+/// time; the same bits).
+pub(super) fn splat_with(
+    kernel: Option<Kernel>,
+    map: &mut [f32],
+    size: usize,
+    projection: &Projection,
+    mut points: impl Iterator<Item = (Vec3, f32)>,
+) -> [usize; 4] {
+    let mut written = [size, size, 0, 0];
+    if let Some(kernel) = kernel {
+        let mut group = [(Vec3::ZERO, 0.0); LANES];
+        loop {
+            let mut n = 0;
+            for (slot, point) in group.iter_mut().zip(points.by_ref()) {
+                *slot = point;
+                n += 1;
+            }
+            if n < LANES {
+                // The last few, one at a time.
+                for &(p, radius) in &group[..n] {
+                    if let Some((texel, reach)) = project_point(projection, size, p, radius) {
+                        splat_square(map, size, texel, reach, &mut written);
+                    }
+                }
+                return written;
+            }
+            splat_points(kernel, projection, size, &group, map, &mut written);
+        }
+    }
+    for (p, radius) in points {
+        if let Some((texel, reach)) = project_point(projection, size, p, radius) {
+            splat_square(map, size, texel, reach, &mut written);
+        }
+    }
+    written
+}
 
 /// Where each of eight points (position, patch radius) falls in a `size`-texel map of
 /// `projection`, and its splat's reach in texels; `None` outside the map (the tests'

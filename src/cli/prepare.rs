@@ -1,0 +1,46 @@
+//! A loaded pipeline made ready for a recording: its anchored objects placed (saying
+//! where), and a warning before scores of stages that run at their own rate.
+
+use relume::stages::world::PipelineObjects;
+
+/// Places `pipeline`'s objects anchored to the scene on `replay`, saying where (each
+/// line after `prefix`, which names the pipeline where several run).
+pub(crate) fn place_objects(
+    pipeline: &mut relume::graph::Pipeline,
+    replay: &relume::recording::Replay,
+    prefix: &str,
+) -> anyhow::Result<()> {
+    for placed in pipeline.place_objects(replay)? {
+        eprintln!("{prefix}{placed}");
+    }
+    Ok(())
+}
+
+/// A warning before scores of a pipeline with stages at their own rate (`every = k`,
+/// `lag = n`): on the frames between their runs, or always when they run behind, they
+/// and the stages after them hand on products of an earlier frame, which eval compares
+/// with the current frame's truth and references.
+pub(crate) fn warn_every(pipeline: &relume::graph::Pipeline) {
+    let slow: Vec<String> = pipeline
+        .stages
+        .iter()
+        .filter(|s| s.every > 1 || s.lag > 0)
+        .map(|s| match (s.every, s.lag) {
+            (1, lag) => format!("`{}` (lag {lag})", s.name),
+            (every, 0) => format!("`{}` (every {every})", s.name),
+            (every, lag) => format!("`{}` (every {every}, lag {lag})", s.name),
+        })
+        .collect();
+    if !slow.is_empty() {
+        let one = slow.len() == 1;
+        eprintln!(
+            "warning: {} of `{}` {} at {} own rate (every k: on every k-th frame; lag n: n frames behind): on the frames between, or behind, {} and the stages after {} are scored with products of an earlier frame against the current frame's truth and references",
+            slow.join(", "),
+            pipeline.file,
+            if one { "runs" } else { "run" },
+            if one { "its" } else { "their" },
+            if one { "it" } else { "they" },
+            if one { "it" } else { "them" },
+        );
+    }
+}

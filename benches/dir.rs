@@ -17,7 +17,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Affine3A;
 use relume::pinhole::Pinhole;
 use relume::stages::kind::FrameProducts;
-use relume::stages::sample::dir::{DirInputs, DirParams, DirRenderer, MeshPoints};
+use relume::stages::sample::instant_radiosity::{DirInputs, DirParams, DirRenderer, MeshPoints};
 use relume::stages::sample::layers::IrradianceLayers;
 use relume::stages::world::PipelineObjects;
 

@@ -19,7 +19,7 @@
 //! | `light.val` | [`light::val`] | virtual area lights (importance samples + k-means + eq. 7) and SH9 of the indirect part (paper 004 Secs. 4.3-4.4) |
 //! | `light.voxels` | [`light::voxels`] | a mip-mapped voxel volume of the environment-sample cloud, for cone tracing (paper 000 Sec. 6.1) |
 //! | `sample.path` | [`sample::path`] | two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5) |
-//! | `sample.dir` | [`sample::dir`] | E_R / E_RV from virtual point lights with real/virtual flags, imperfect shadow maps and interleaved sampling (paper 002 Sec. 3) |
+//! | `sample.dir` | [`sample::instant_radiosity`] | E_R / E_RV from virtual point lights with real/virtual flags, imperfect shadow maps and interleaved sampling (paper 002 Sec. 3) |
 //! | `sample.val` | [`sample::val`] | noise-free E_R / E_RV from the area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5) |
 //! | `temporal.accumulate` | [`temporal`] | a renderer's irradiance layers averaged over the frames that saw the same surface points (reprojection; issue 33's temporal reuse) |
 //! | `filter.axis_aligned` | [`filter`] | axis-aligned world-space Gaussian of the four irradiance layers, bandwidths of eqs. 17-18, temporal reuse (paper 001 Secs. 6-7) |
@@ -164,7 +164,7 @@ pub fn builtin() -> Vec<StageInfo> {
         light::voxels::INFO,
         sample::path::INFO,
         sample::val::INFO,
-        sample::dir::INFO,
+        sample::instant_radiosity::INFO,
         temporal::INFO,
         filter::INFO,
         material::INFO,

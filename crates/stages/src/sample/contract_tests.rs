@@ -11,7 +11,7 @@
 //! A new renderer is one line in [`RENDERERS`]: a function that renders the shared
 //! floor scene under the environment `SKY` with given objects and lanes.
 
-use super::dir::{DirInputs, DirParams, DirRenderer, MeshPoints};
+use super::instant_radiosity::{DirInputs, DirParams, DirRenderer, MeshPoints};
 use super::layers::IrradianceLayers;
 use super::path::tests::{
     SKY, SPHERE_CENTER, SPHERE_RADIUS, Scene, bits, camera, dome, floor_scene, pose, same_bits,

@@ -5,7 +5,7 @@
 //! |---|---|---|
 //! | `sample.path` | [`path`] | two-mode path sampling (paper 001 Sec. 5) |
 //! | `sample.val` | [`val`] | shading from virtual area lights and SH9 (paper 004 Sec. 5) |
-//! | `sample.dir` | [`dir`] | Differential Instant Radiosity: VPLs, imperfect shadow maps (paper 002 Sec. 3) |
+//! | `sample.dir` | [`instant_radiosity`] | Differential Instant Radiosity: VPLs, imperfect shadow maps (paper 002 Sec. 3) |
 //!
 //! [`query`] is the radiance query the renderers ask about the real scene (paper 000
 //! Fig. 5): screen-space marching, Environment Mapping, Distance Impostor Tracing or
@@ -17,7 +17,7 @@
 //! test (`contract_tests`: pi L under a constant environment, E_RV == E_R without
 //! objects, the same bits at any thread count and on every SIMD path).
 
-pub mod dir;
+pub mod instant_radiosity;
 pub mod layers;
 pub mod path;
 pub mod pyramid;
@@ -53,6 +53,6 @@ mod tests {
             .collect();
         assert_eq!(roles(outputs(&super::path::INFO)), layers);
         assert_eq!(roles(outputs(&super::val::INFO)), layers[..11]);
-        assert_eq!(roles(outputs(&super::dir::INFO)), layers);
+        assert_eq!(roles(outputs(&super::instant_radiosity::INFO)), layers);
     }
 }

@@ -38,10 +38,9 @@ use relume::recording::{Intrinsics, Pose};
 use relume::rng::{hash, unit_f32};
 use relume::simd::Kernel;
 use relume::stages::filter::lane_planes::{LaneLayout, LanePlanes};
+use relume::stages::filter::layout::{BandwidthSettings, INPUT_PLANES, PrepareInputs, X_PLANES};
 use relume::stages::filter::passes::{self, Previous, XSet};
-use relume::stages::filter::planes::{
-    self, BandwidthSettings, INPUT_PLANES, PrepareInputs, X_PLANES,
-};
+use relume::stages::filter::planes;
 use relume::stages::filter::temporal::PreviousView;
 use relume::stages::filter::{
     AxisAlignedFilter, FilterInputs, FilterOutputs, FilterParams, environment_bandwidth,

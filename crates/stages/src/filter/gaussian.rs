@@ -14,6 +14,9 @@
 
 use relume_base::simd::{LANES, Lanes};
 
+/// Largest filter radius accepted (taps per pass: 2 R + 1).
+pub const MAX_RADIUS: usize = 64;
+
 /// Arguments at or above this give a weight of exactly 0: e^-40 ~ 4e-18, far below the
 /// f32 resolution of a sum that holds the target's own weight 1 (and the products stay
 /// clear of subnormal floats, which are slow).
@@ -192,7 +195,7 @@ pub struct Window {
 }
 
 /// Most taps in a window: 2 R + 1 for the largest radius accepted.
-pub const MAX_TAPS: usize = 2 * super::MAX_RADIUS + 1;
+pub const MAX_TAPS: usize = 2 * MAX_RADIUS + 1;
 
 /// Per kind (direct, indirect), one weight vector per tap of a window:
 /// [`tap_weights`] fills it, [`accumulate`] reads it.

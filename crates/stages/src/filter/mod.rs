@@ -74,9 +74,12 @@
 pub mod bandwidth;
 pub mod gaussian;
 pub mod lane_planes;
+pub mod layout;
 pub mod passes;
 pub mod planes;
 mod prepare_lanes;
+#[cfg(test)]
+mod prepare_tests;
 pub mod spectrum;
 pub mod temporal;
 
@@ -90,8 +93,8 @@ use crate::kind;
 use crate::kind::FrameProducts;
 use glam::{Affine3A, Vec3};
 use lane_planes::LaneLayout;
+use layout::{BandwidthSettings, PrepareInputs, X_PLANES};
 use passes::{Previous, XSet};
-use planes::{BandwidthSettings, PrepareInputs, X_PLANES};
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{Image, ScalarImage, Vec3Image};
 use relume_base::simd::Kernel;
@@ -104,8 +107,7 @@ use relume_scene::light::EnvMap;
 use std::sync::Arc;
 use temporal::PreviousView;
 
-/// Largest filter radius accepted (taps per pass: 2 R + 1).
-pub const MAX_RADIUS: usize = 64;
+pub use gaussian::MAX_RADIUS;
 
 const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(

@@ -3,7 +3,7 @@
 //! pixel's.
 
 use super::lane_planes::{LanePlanes, Order};
-use super::planes::{MISSING_DISTANCE2, X_PX, X_PY, X_PZ};
+use super::layout::{MISSING_DISTANCE2, X_PX, X_PY, X_PZ};
 use glam::{Affine3A, Vec3};
 use relume_base::pinhole::Pinhole;
 use relume_base::simd::{LANES, Lanes, dot3};

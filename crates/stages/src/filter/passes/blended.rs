@@ -3,7 +3,7 @@
 
 use super::super::gaussian::{Fetch, Straddling, Window};
 use super::super::lane_planes::LanePlanes;
-use super::super::planes::X_PLANES;
+use super::super::layout::X_PLANES;
 use relume_base::simd::{LANES, Lanes};
 
 /// The lines of the previous X set that a rotated read ([`super::taps::TemporalTaps`])

@@ -9,7 +9,7 @@ use super::super::lane_planes::LanePlanes;
 #[cfg(any(test, doc))]
 use super::super::temporal::PreviousLanes;
 use super::super::temporal::{SEARCH_RADIUS, find_previous_lanes, window_offset};
-use super::Previous;
+use super::sets::Previous;
 use relume_base::simd::{LANES, Lanes};
 
 /// How the temporal taps of a group are read.

@@ -1,14 +1,18 @@
 //! Tests of the full windows: which windows the Y pass finds full, and that their sums
 //! are the bits of the general ones.
 
-use super::super::gaussian::{MAX_TAPS, VALUE_PLANES, accumulate, accumulate_full};
-use super::super::lane_planes::LaneLayout;
-use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX};
+use super::super::gaussian::{
+    Contiguous, MAX_TAPS, VALUE_PLANES, Window, accumulate, accumulate_full,
+};
+use super::super::lane_planes::{LaneLayout, LanePlanes};
+use super::super::layout::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX};
+use super::super::temporal::PreviousView;
+use super::sets::*;
 use super::*;
 use glam::Vec3;
 use relume_base::raster::{Image, Vec3Image};
 use relume_base::rng::{hash, unit_f32};
-use relume_base::simd::{Kernel, Portable};
+use relume_base::simd::{Kernel, LANES, Lanes, Portable};
 
 /// An X set of `width` x `height` with every value present except at `gaps` (pixel x,
 /// line, plane), positions on a plane 2 m away and random values.

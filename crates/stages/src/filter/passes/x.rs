@@ -7,13 +7,13 @@
 use super::super::MAX_RADIUS;
 use super::super::gaussian::{Contiguous, VALUE_PLANES, Window, accumulate};
 use super::super::lane_planes::{LaneLayout, LanePlanes, Order};
-use super::super::planes::{
+use super::super::layout::{
     B2_IND, B2X_DIR, B2Y_DIR, BandwidthSettings, DIR, IND, INPUT_PLANES, PX, PrepareInputs,
-    RowLayout, X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ, prepare_line,
-    row_scratch,
+    RowLayout, X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ,
 };
+use super::super::planes::{prepare_line, row_scratch};
 use super::super::prepare_lanes::RowOut;
-use super::{PairRing, XSet, group_kinds};
+use super::sets::{PairRing, XSet, group_kinds};
 use rayon::prelude::*;
 use relume_base::raster::ScalarImage;
 use relume_base::simd::{Kernel, LANES, Lanes, Portable};

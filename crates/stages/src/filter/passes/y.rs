@@ -13,10 +13,10 @@ use super::super::gaussian::{
     accumulate_full, tap_weights,
 };
 use super::super::lane_planes::{LanePlanes, Order};
-use super::super::planes::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ};
+use super::super::layout::{X_B2_IND, X_B2Y_DIR, X_DIR, X_IND, X_PLANES, X_PX, X_PY, X_PZ};
 use super::blended::BlendedLines;
+use super::sets::{PairRing, Previous, XSet, group_kinds};
 use super::taps::{TemporalTaps, temporal_taps};
-use super::{PairRing, Previous, XSet, group_kinds};
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::raster::Vec3Image;

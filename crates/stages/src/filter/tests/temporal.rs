@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::filter::lane_planes::{LaneLayout, LanePlanes};
-use crate::filter::planes::{X_PLANES, X_PX, X_PY, X_PZ};
+use crate::filter::layout::{X_PLANES, X_PX, X_PY, X_PZ};
 use crate::filter::temporal::{
     PreviousView, consecutive_run, find_previous_lanes, projected_pixel, run_positions,
 };

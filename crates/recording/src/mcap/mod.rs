@@ -13,11 +13,13 @@ pub mod export;
 mod export_products;
 pub mod import;
 pub mod messages;
+mod options;
 pub mod pixels;
 pub mod read;
 pub mod scan;
 pub mod tf;
 
 pub use export::{ExportOptions, ExportSummary, export};
-pub use import::{McapOptions, import};
+pub use import::import;
+pub use options::McapOptions;
 pub use scan::Scan;

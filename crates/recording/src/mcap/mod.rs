@@ -11,6 +11,7 @@ pub mod cdr;
 mod choose;
 pub mod export;
 mod export_products;
+mod export_writer;
 pub mod import;
 pub mod messages;
 mod options;

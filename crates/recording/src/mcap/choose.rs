@@ -2,8 +2,8 @@
 //! their intrinsics, and where the camera poses come from (the TF tree or a pose topic),
 //! each detected when unambiguous and otherwise asked for by its flag.
 
-use super::import::McapOptions;
 use super::messages::{self, TransformMsg};
+use super::options::McapOptions;
 use super::pixels::ImageRole;
 use super::read::Channel;
 use super::scan::Scan;

@@ -16,21 +16,19 @@
 //! import mcap` reads the depth back exactly; ROS tools read 16UC1 as millimetres.
 //! Products of frame k are stamped with the replay's k-th frame stamp.
 
+use super::export_products::write_products;
+use super::export_writer::{Out, b64, fail, time};
 use super::scan::RELUME_METADATA;
+use crate::Recording;
 use crate::codec;
 use crate::error::ImportError;
 use crate::types::{EncodedImage, ImageEncoding, Intrinsics, Record};
-use crate::{Recording, Replay, ReplayOptions};
-use base64::Engine;
-use mcap::records::MessageHeader;
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-/// The frame the camera poses are given in, and the camera's frame.
-pub const WORLD_FRAME: &str = "world";
-pub const CAMERA_FRAME: &str = "camera";
+pub use super::export_writer::{CAMERA_FRAME, WORLD_FRAME};
 
 /// What to export beside the recording.
 #[derive(Clone, Debug, Default)]
@@ -49,127 +47,6 @@ pub struct ExportSummary {
     pub products: BTreeMap<String, usize>,
     /// Files of the products folder not exported, one sentence each.
     pub warnings: Vec<String>,
-}
-
-fn fail(path: &Path, reason: impl Into<String>) -> ImportError {
-    ImportError::File {
-        path: path.to_path_buf(),
-        reason: reason.into(),
-    }
-}
-
-/// A small JSON schema naming the fields, as Foxglove matches schemas by name.
-fn schema(title: &str, properties: Value) -> Vec<u8> {
-    let s = json!({"title": title, "type": "object", "properties": properties});
-    serde_json::to_vec(&s).expect("a JSON value serializes")
-}
-
-fn time_schema() -> Value {
-    json!({"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}})
-}
-
-pub(super) fn time(stamp_ns: i64) -> Value {
-    json!({"sec": stamp_ns.div_euclid(1_000_000_000), "nsec": stamp_ns.rem_euclid(1_000_000_000)})
-}
-
-pub(super) fn b64(bytes: &[u8]) -> String {
-    base64::engine::general_purpose::STANDARD.encode(bytes)
-}
-
-/// The channels of an export, created as their first message comes.
-pub(super) struct Out<'a> {
-    writer: mcap::Writer<BufWriter<std::fs::File>>,
-    channels: BTreeMap<String, u16>,
-    schemas: BTreeMap<&'static str, u16>,
-    pub(super) path: &'a Path,
-    sequence: u32,
-}
-
-impl Out<'_> {
-    fn channel(&mut self, topic: &str, schema_name: &'static str) -> Result<u16, ImportError> {
-        if let Some(&id) = self.channels.get(topic) {
-            return Ok(id);
-        }
-        let schema_id = match self.schemas.get(schema_name) {
-            Some(&id) => id,
-            None => {
-                let data = schema_data(schema_name);
-                let id = self
-                    .writer
-                    .add_schema(schema_name, "jsonschema", &data)
-                    .map_err(|e| fail(self.path, e.to_string()))?;
-                self.schemas.insert(schema_name, id);
-                id
-            }
-        };
-        let id = self
-            .writer
-            .add_channel(schema_id, topic, "json", &BTreeMap::new())
-            .map_err(|e| fail(self.path, e.to_string()))?;
-        self.channels.insert(topic.to_string(), id);
-        Ok(id)
-    }
-
-    pub(super) fn write(
-        &mut self,
-        topic: &str,
-        schema: &'static str,
-        stamp_ns: i64,
-        msg: &Value,
-    ) -> Result<(), ImportError> {
-        let channel_id = self.channel(topic, schema)?;
-        let time = u64::try_from(stamp_ns).map_err(|_| {
-            fail(
-                self.path,
-                format!("stamp {stamp_ns} ns is negative: MCAP log times start at 0"),
-            )
-        })?;
-        let data = serde_json::to_vec(msg).expect("a JSON value serializes");
-        self.sequence += 1;
-        let header = MessageHeader {
-            channel_id,
-            sequence: self.sequence,
-            log_time: time,
-            publish_time: time,
-        };
-        self.writer
-            .write_to_known_channel(&header, &data)
-            .map_err(|e| fail(self.path, e.to_string()))
-    }
-}
-
-fn schema_data(name: &str) -> Vec<u8> {
-    let t = time_schema();
-    let vec3 = json!({"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}}});
-    let quat = json!({"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}, "w": {"type": "number"}}});
-    let bytes = json!({"type": "string", "contentEncoding": "base64"});
-    let s = json!({"type": "string"});
-    let int = json!({"type": "integer"});
-    let nums = json!({"type": "array", "items": {"type": "number"}});
-    match name {
-        "foxglove.CompressedImage" => schema(
-            name,
-            json!({"timestamp": t, "frame_id": s, "data": bytes, "format": s}),
-        ),
-        "foxglove.RawImage" => schema(
-            name,
-            json!({"timestamp": t, "frame_id": s, "width": int, "height": int, "encoding": s, "step": int, "data": bytes}),
-        ),
-        "foxglove.CameraCalibration" => schema(
-            name,
-            json!({"timestamp": t, "frame_id": s, "width": int, "height": int, "distortion_model": s, "D": nums, "K": nums, "R": nums, "P": nums}),
-        ),
-        "foxglove.FrameTransform" => schema(
-            name,
-            json!({"timestamp": t, "parent_frame_id": s, "child_frame_id": s, "translation": vec3, "rotation": quat}),
-        ),
-        "foxglove.PointCloud" => schema(
-            name,
-            json!({"timestamp": t, "frame_id": s, "pose": {"type": "object", "properties": {"position": vec3, "orientation": quat}},
-                   "point_stride": int, "fields": {"type": "array", "items": {"type": "object", "properties": {"name": s, "offset": int, "type": int}}}, "data": bytes}),
-        ),
-        _ => unreachable!("the exporter writes the schemas above"),
-    }
 }
 
 fn calibration(stamp_ns: i64, k: &Intrinsics) -> Value {
@@ -234,13 +111,7 @@ pub fn export(
             .library(format!("relume {}", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::new(file))
             .map_err(|e| fail(out, e.to_string()))?;
-        let mut o = Out {
-            writer,
-            channels: BTreeMap::new(),
-            schemas: BTreeMap::new(),
-            path: out,
-            sequence: 0,
-        };
+        let mut o = Out::new(writer, out);
         let summary = write_all(&rec, &mut o, options, progress)?;
         o.writer.finish().map_err(|e| fail(out, e.to_string()))?;
         drop(o);
@@ -322,13 +193,7 @@ fn write_all(
         progress(i + 1, n);
     }
     if let Some(dir) = &options.products {
-        super::export_products::write_products(rec, dir, o, &mut summary)?;
+        write_products(rec, dir, o, &mut summary.products, &mut summary.warnings)?;
     }
     Ok(summary)
-}
-
-/// Frame stamps of the replay of `rec` (frame k's stamp at index k).
-pub(super) fn frame_stamps(rec: &Recording) -> Result<Vec<i64>, ImportError> {
-    let replay = Replay::open(rec.path(), ReplayOptions::default())?;
-    Ok(replay.frames.iter().map(|f| f.stamp_ns).collect())
 }

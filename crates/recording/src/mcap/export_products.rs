@@ -2,10 +2,11 @@
 //! messages at their frames' stamps: PNGs as `foxglove.CompressedImage`, the
 //! environment cloud's PLY as `foxglove.PointCloud` with the PLY's own packed layout.
 
-use super::export::{CAMERA_FRAME, ExportSummary, Out, WORLD_FRAME, b64, frame_stamps, time};
-use crate::Recording;
+use super::export_writer::{CAMERA_FRAME, Out, WORLD_FRAME, b64, time};
 use crate::error::ImportError;
+use crate::{Recording, Replay, ReplayOptions};
 use serde_json::json;
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The vertex layout relume's PLY writer uses (`stages::write::ply`): 39 bytes.
@@ -87,12 +88,14 @@ fn frame_of(path: &Path) -> Option<usize> {
         .flatten()
 }
 
-/// Writes every PNG and PLY of `dir`'s product folders.
+/// Writes every PNG and PLY of `dir`'s product folders, counting the files written in
+/// `products` (by product name) and saying in `warnings` what was skipped.
 pub(super) fn write_products(
     rec: &Recording,
     dir: &Path,
     o: &mut Out,
-    summary: &mut ExportSummary,
+    products: &mut BTreeMap<String, usize>,
+    warnings: &mut Vec<String>,
 ) -> Result<(), ImportError> {
     let io = |path: &Path| {
         let path = path.to_path_buf();
@@ -136,14 +139,14 @@ pub(super) fn write_products(
                 continue;
             }
             let Some(frame) = frame_of(&file) else {
-                summary.warnings.push(format!(
+                warnings.push(format!(
                     "{}: not named by a frame (000012.{ext}): skipped",
                     file.display()
                 ));
                 continue;
             };
             let Some(&stamp_ns) = stamps.get(frame) else {
-                summary.warnings.push(format!(
+                warnings.push(format!(
                     "{}: frame {frame} is not in the recording ({} frames): skipped",
                     file.display(),
                     stamps.len()
@@ -159,7 +162,7 @@ pub(super) fn write_products(
                 let (img, _) =
                     crate::codec::wrap_image_file(bytes.clone()).map_err(|e| bad(e.to_string()))?;
                 if !sizes.contains(&(img.width, img.height)) {
-                    summary.warnings.push(format!(
+                    warnings.push(format!(
                         "{}: {}x{} is the size of neither the recording's color nor its depth \
                          images (saved from another recording?): skipped",
                         file.display(),
@@ -179,21 +182,27 @@ pub(super) fn write_products(
                     &cloud_message(stamp_ns, body),
                 )?;
             }
-            *summary.products.entry(product.clone()).or_default() += 1;
+            *products.entry(product.clone()).or_default() += 1;
         }
     }
     if other_files > 0 {
-        summary.warnings.push(format!(
+        warnings.push(format!(
             "{other_files} saved files in other formats (EXR, JSON, light records) are not \
              exported: MCAP viewers show the PNGs and the clouds"
         ));
     }
-    if summary.products.is_empty() {
-        summary.warnings.push(format!(
+    if products.is_empty() {
+        warnings.push(format!(
             "{}: no products exported: the folder should hold one folder per product with \
              files named by frame (000012.png), as `relume replay --save ... --out DIR` writes",
             dir.display()
         ));
     }
     Ok(())
+}
+
+/// Frame stamps of the replay of `rec` (frame k's stamp at index k).
+fn frame_stamps(rec: &Recording) -> Result<Vec<i64>, ImportError> {
+    let replay = Replay::open(rec.path(), ReplayOptions::default())?;
+    Ok(replay.frames.iter().map(|f| f.stamp_ns).collect())
 }

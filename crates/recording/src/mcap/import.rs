@@ -9,33 +9,17 @@ use super::pixels::{self, ImageRole};
 use super::read::{self, Channel, Event};
 use super::scan::Scan;
 use crate::error::ImportError;
-use crate::importers::{CameraIntrinsics, ImportOptions, ImportSummary, import_header};
+use crate::importers::{CameraIntrinsics, ImportSummary, import_header};
 use crate::types::{ColorRecord, DepthRecord, EncodedImage, Pose, PoseRecord, Record, StreamKind};
 use crate::writer::RecordingWriter;
 use rayon::prelude::*;
 use std::path::Path;
 use std::sync::Arc;
 
+pub use super::options::McapOptions;
+
 /// REP 118: 16-bit depth images hold millimetres.
 pub const ROS_DEPTH_UNIT_M: f64 = 0.001;
-
-/// Options of `relume import mcap`. Topics and frames left `None` are detected.
-#[derive(Clone, Debug, Default)]
-pub struct McapOptions {
-    pub common: ImportOptions,
-    /// `--intrinsics` as given: overrides the camera infos.
-    pub intrinsics: Option<CameraIntrinsics>,
-    pub color_topic: Option<String>,
-    pub depth_topic: Option<String>,
-    /// The camera info of the color images.
-    pub info_topic: Option<String>,
-    /// A PoseStamped, Odometry or PoseInFrame topic instead of TF.
-    pub pose_topic: Option<String>,
-    /// The frame poses are given in (default: the root of the camera's TF tree).
-    pub world_frame: Option<String>,
-    /// The camera's optical frame (default: the color images' `frame_id`).
-    pub camera_frame: Option<String>,
-}
 
 /// Imports the MCAP file `file` into `out`. `progress` gets (done, total) messages.
 pub fn import(

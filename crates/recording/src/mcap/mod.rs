@@ -11,13 +11,16 @@ pub mod cdr;
 mod choose;
 pub mod export;
 mod export_products;
+mod export_writer;
 pub mod import;
 pub mod messages;
+mod options;
 pub mod pixels;
 pub mod read;
 pub mod scan;
 pub mod tf;
 
 pub use export::{ExportOptions, ExportSummary, export};
-pub use import::{McapOptions, import};
+pub use import::import;
+pub use options::McapOptions;
 pub use scan::Scan;

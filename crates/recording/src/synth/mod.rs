@@ -1,10 +1,10 @@
 //! `relume synth`: a deterministic synthetic RGB-D recording with ground truth.
 //!
-//! An analytic room ([`scene`], built from [`geometry`] with [`texture`]s) is rendered
-//! along a smooth camera path ([`camera`]) with soft shadows from a warm ceiling panel
-//! and a bright window ([`render`]), seen through a camera with automatic exposure,
-//! white balance and optional contrast changes, and measured by a Kinect-like depth
-//! sensor ([`depth_noise`]).
+//! An analytic room ([`scene`], built from [`geometry`] with [`texture`]s inside the
+//! extent and surfaces of [`room`]) is rendered along a smooth camera path ([`camera`])
+//! with soft shadows from a warm ceiling panel and a bright window ([`render`]), seen
+//! through a camera with automatic exposure, white balance and optional contrast
+//! changes, and measured by a Kinect-like depth sensor ([`depth_noise`]).
 //!
 //! A recording holds, per frame `i`:
 //! - color at `round(i / fps * 1e9)` ns: 8-bit sRGB-like PNG, `camera_pixel(M_i,
@@ -32,6 +32,7 @@ pub mod camera;
 pub mod depth_noise;
 pub mod geometry;
 pub mod render;
+pub mod room;
 pub mod scene;
 pub mod texture;
 

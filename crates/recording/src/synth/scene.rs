@@ -10,38 +10,16 @@
 //! recording shows the same room.
 
 pub use super::geometry::{AxisBox, Ray, Sphere, ray_box_entry, ray_sphere, segment_crosses_box};
+pub use super::room::{ROOM_MAX, ROOM_MIN, Surface};
 pub use super::texture::BlockTexture;
 use super::texture::{BALL_ALBEDO, block_albedo, room_albedo};
 use glam::Vec3;
 
-/// Lower corner of the room's interior.
-pub const ROOM_MIN: Vec3 = Vec3::new(-2.5, 0.0, -2.5);
-/// Upper corner of the room's interior.
-pub const ROOM_MAX: Vec3 = Vec3::new(2.5, 2.6, 2.5);
 /// Centre of the free spot left for a virtual object: 0.3 m above the middle of the
 /// floor, so a sphere of radius 0.3 m placed here rests on the floor.
 pub const OBJECT_POSITION: Vec3 = Vec3::new(0.0, 0.3, 0.0);
 /// [`OBJECT_POSITION`] in double precision, as stored in the header.
 pub const OBJECT_POSITION_F64: glam::DVec3 = glam::DVec3::new(0.0, 0.3, 0.0);
-
-/// Which surface of the scene a ray hit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Surface {
-    Floor,
-    Ceiling,
-    /// The wall at x = -2.5.
-    WestWall,
-    /// The wall at x = +2.5 (holds the window).
-    EastWall,
-    /// The wall at z = -2.5.
-    NorthWall,
-    /// The wall at z = +2.5.
-    SouthWall,
-    /// Box number `i` of [`Scene::blocks`].
-    Block(usize),
-    /// The sphere standing on the floor.
-    Ball,
-}
 
 /// The first surface along a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]

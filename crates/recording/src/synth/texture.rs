@@ -2,7 +2,7 @@
 //! value noise. They are fixed functions of position: the same in every frame and for
 //! every seed.
 
-use super::scene::{ROOM_MAX, Surface};
+use super::room::{ROOM_MAX, Surface};
 use glam::Vec3;
 
 /// Procedural textures of the boxes.

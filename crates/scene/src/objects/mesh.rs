@@ -5,8 +5,9 @@
 //! gets the area-weighted mean of the normals of the faces around it, so that shading is
 //! smooth across faces that share the vertex.
 
-use super::obj_lines::{Problem, locate};
-use super::{ObjectError, Triangle, tri_normal};
+use super::error::ObjectError;
+use super::geometry::{Triangle, tri_normal};
+use super::obj_lines::{Problem, load_options, locate};
 use glam::Vec3;
 use std::path::Path;
 
@@ -88,19 +89,6 @@ fn has_area(v: &[Vec3; 3]) -> bool {
     let (e1, e2) = (b - a, c - a);
     let size = e1.abs().max(e2.abs()).max_element();
     size > 0.0 && (e1 / size).cross(e2 / size) != glam::DVec3::ZERO
-}
-
-/// How relume has tobj read a file: polygons triangulated, points and lines dropped.
-pub(crate) fn load_options() -> tobj::LoadOptions {
-    // The update keeps this compiling when features of tobj enabled elsewhere add fields.
-    #[allow(clippy::needless_update)]
-    tobj::LoadOptions {
-        single_index: false,
-        triangulate: true,
-        ignore_points: true,
-        ignore_lines: true,
-        ..Default::default()
-    }
 }
 
 /// A line of the file for an error message: trimmed, and cut after 60 characters.

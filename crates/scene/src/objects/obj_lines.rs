@@ -1,8 +1,23 @@
 //! Finding the line of an OBJ file that a load error is about. `tobj` reports what is
 //! wrong but not where; this reads the file again with tobj's own rules for the lines
-//! it rejects, so that an error can name the line (`line 12: position parse error`).
+//! it rejects, under the options relume reads with ([`load_options`]), so that an error
+//! can name the line (`line 12: position parse error`).
 
 use std::str::FromStr;
+
+/// How relume has tobj read a file (`mesh` loads with them, [`locate`] follows their
+/// rules): polygons triangulated, points and lines dropped.
+pub(crate) fn load_options() -> tobj::LoadOptions {
+    // The update keeps this compiling when features of tobj enabled elsewhere add fields.
+    #[allow(clippy::needless_update)]
+    tobj::LoadOptions {
+        single_index: false,
+        triangulate: true,
+        ignore_points: true,
+        ignore_lines: true,
+        ..Default::default()
+    }
+}
 
 /// What a line of an OBJ file is rejected for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -250,7 +265,7 @@ mod tests {
     /// as relume reads it, and the line found is the one at fault.
     #[test]
     fn the_problems_are_the_ones_tobj_reports() {
-        let options = crate::objects::mesh::load_options();
+        let options = load_options();
         for (text, problem, line) in [
             ("v 0 zero 0\n", LoadError::PositionParseError, 1),
             ("v 0 0 0 0\n", LoadError::ScalingByZeroError, 1),

@@ -4,7 +4,7 @@
 //! box and the quad carry flat normals. Vertices shared by neighbouring triangles are
 //! computed once, so the meshes are closed with no cracks along seams.
 
-use super::Triangle;
+use super::geometry::Triangle;
 use glam::{DVec3, Vec2, Vec3};
 use std::f64::consts::{PI, TAU};
 

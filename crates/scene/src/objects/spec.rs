@@ -1,4 +1,5 @@
-//! Placement and material of a virtual object, and the scene built from a list of them.
+//! Placement and material of a virtual object ([`ObjectSpec`]): its world triangles, from
+//! which [`VirtualScene::from_specs`](super::VirtualScene::from_specs) builds a scene.
 //!
 //! An object is a [`Shape`] in its own coordinates, then scaled (uniformly), rotated
 //! by R = Rz Ry Rx (about the world x axis first, then y, then z; angles in degrees) and
@@ -6,9 +7,12 @@
 //! transpose of the linear part and are renormalized.
 
 use super::anchor::{Anchor, AnchorFrame};
-use super::{Material, Triangle, VirtualScene, mesh, shapes};
+use super::geometry::{Material, Triangle};
+use super::{mesh, shapes};
 use glam::{Mat3, Vec2, Vec3};
 use std::path::PathBuf;
+
+pub use super::error::ObjectError;
 
 /// What a virtual object is made of, in its own coordinates (y up, centred on the origin
 /// except meshes, which keep the file's origin).
@@ -265,27 +269,6 @@ impl ObjectSpec {
     }
 }
 
-/// Why virtual objects could not be built.
-#[derive(Debug, thiserror::Error)]
-pub enum ObjectError {
-    #[error("cannot read the mesh `{}`: {source}", path.display())]
-    MeshUnreadable {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("the mesh `{}` is not a valid OBJ file: {reason}", path.display())]
-    MeshInvalid { path: PathBuf, reason: String },
-    #[error("the mesh `{}` has no triangles", path.display())]
-    MeshEmpty { path: PathBuf },
-    #[error(
-        "the mesh `{}` has no triangle with an area: all {count} have repeated or collinear corners",
-        path.display()
-    )]
-    MeshDegenerate { path: PathBuf, count: usize },
-    #[error("object `{object}`: {message}")]
-    InvalidSpec { object: String, message: String },
-}
-
 /// The farthest an object's origin (its `translation`) may lie from the world origin
 /// along an axis, in metres; also the bound of a light centre placed by hand.
 pub const MAX_TRANSLATION: f32 = 1e4;
@@ -296,22 +279,10 @@ pub const MAX_TRANSLATION: f32 = 1e4;
 /// the light, far from the scene.
 pub const MAX_WORLD_COORDINATE: f32 = 10.0 * MAX_TRANSLATION;
 
-impl VirtualScene {
-    /// The scene of `specs` in world space: object k uses material k; BVH built.
-    pub fn from_specs(specs: &[ObjectSpec]) -> Result<VirtualScene, ObjectError> {
-        let mut triangles = Vec::new();
-        let mut materials = Vec::with_capacity(specs.len());
-        for (k, spec) in specs.iter().enumerate() {
-            triangles.extend(spec.world_triangles(k as u32)?);
-            materials.push(spec.material);
-        }
-        Ok(VirtualScene::new(triangles, materials))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::objects::geometry::{Aabb, tri_normal};
 
     #[test]
     fn placement_scales_rotates_then_translates() {
@@ -324,15 +295,19 @@ mod tests {
         spec.scale = 0.5;
         spec.rotation_deg = Vec3::new(0.0, 90.0, 0.0);
         spec.translation = Vec3::new(1.0, 0.25, 0.0);
-        let scene = VirtualScene::from_specs(&[spec]).unwrap();
+        let triangles = spec.world_triangles(0).unwrap();
         // Local x extent 2 scaled to 1, turned by Ry(90) onto z: x in [0.75, 1.25],
         // y in [0, 0.5], z in [-0.5, 0.5].
-        let b = scene.bounds();
+        let mut b = Aabb::EMPTY;
+        triangles
+            .iter()
+            .flat_map(|t| t.vertices)
+            .for_each(|v| b.grow(v));
         assert!(b.min.abs_diff_eq(Vec3::new(0.75, 0.0, -0.5), 1e-6), "{b:?}");
         assert!(b.max.abs_diff_eq(Vec3::new(1.25, 0.5, 0.5), 1e-6), "{b:?}");
         // Normals stay unit and perpendicular to their (flat) faces.
-        for t in &scene.triangles {
-            let g = crate::objects::tri_normal(&t.vertices);
+        for t in &triangles {
+            let g = tri_normal(&t.vertices);
             assert!(g.abs_diff_eq(t.normals[0], 1e-6), "{g} vs {}", t.normals[0]);
         }
     }
@@ -355,30 +330,6 @@ mod tests {
     }
 
     #[test]
-    fn materials_follow_the_objects() {
-        let mut a = ObjectSpec::new("a", Shape::DEFAULT_BOX);
-        a.material.albedo = Vec3::new(0.8, 0.3, 0.2);
-        let mut b = ObjectSpec::new("b", Shape::DEFAULT_SPHERE);
-        b.translation = Vec3::new(0.0, 2.0, 0.0);
-        b.material.exponent = 20.0;
-        let scene = VirtualScene::from_specs(&[a, b]).unwrap();
-        assert_eq!(scene.triangles.len(), 12 + 2208);
-        assert_eq!(scene.materials.len(), 2);
-        let down = Vec3::NEG_Y;
-        let hit = scene
-            .intersect(Vec3::new(0.01, 5.0, 0.02), down, 0.0, 10.0)
-            .unwrap();
-        assert_eq!(hit.material.exponent, 20.0);
-        let surface = (0.25f32 * 0.25 - 0.01 * 0.01 - 0.02 * 0.02).sqrt();
-        assert!((hit.t - (3.0 - surface)).abs() < 1e-3, "{}", hit.t);
-        let hit = scene
-            .intersect(Vec3::new(0.05, 1.0, 0.02), down, 0.0, 10.0)
-            .unwrap();
-        assert_eq!(hit.material.albedo, Vec3::new(0.8, 0.3, 0.2));
-        assert!((hit.t - 0.85).abs() < 1e-6);
-    }
-
-    #[test]
     fn bad_specs_say_what_is_wrong() {
         let torus = Shape::Torus {
             major_radius: 0.1,
@@ -386,34 +337,34 @@ mod tests {
             segments: 8,
             minor_segments: 8,
         };
-        let e = VirtualScene::from_specs(&[ObjectSpec::new("t", torus)]).unwrap_err();
+        let e = ObjectSpec::new("t", torus).world_triangles(0).unwrap_err();
         assert_eq!(
             e.to_string(),
             "object `t`: minor_radius (0.2) must be smaller than major_radius (0.1)"
         );
         let mut s = ObjectSpec::new("s", Shape::DEFAULT_SPHERE);
         s.scale = 0.0;
-        let e = VirtualScene::from_specs(&[s.clone()]).unwrap_err();
+        let e = s.world_triangles(0).unwrap_err();
         assert_eq!(
             e.to_string(),
             "object `s`: scale must be positive and finite, got 0"
         );
         s.scale = 1.0;
         s.material.albedo = Vec3::new(0.5, 1.5, 0.5);
-        let e = VirtualScene::from_specs(&[s]).unwrap_err();
+        let e = s.world_triangles(0).unwrap_err();
         assert_eq!(
             e.to_string(),
             "object `s`: albedo must lie in [0, 1], got [0.5, 1.5, 0.5]"
         );
-        let e = VirtualScene::from_specs(&[ObjectSpec::new(
+        let e = ObjectSpec::new(
             "m",
             Shape::Mesh {
                 path: "/nonexistent/x.obj".into(),
             },
-        )])
+        )
+        .world_triangles(0)
         .unwrap_err();
         assert!(matches!(e, ObjectError::MeshUnreadable { .. }), "{e}");
-        assert!(VirtualScene::from_specs(&[]).unwrap().is_empty());
     }
 
     #[test]
@@ -425,13 +376,13 @@ mod tests {
             },
         );
         far.scale = 1e4;
-        let e = VirtualScene::from_specs(&[far.clone()]).unwrap_err();
+        let e = far.world_triangles(0).unwrap_err();
         assert_eq!(
             e.to_string(),
             "object `far`: a vertex lies at [150000, -150000, -150000] m, more than 1e5 m \
              from the origin along an axis: check the mesh's units and `scale`"
         );
         far.scale = 1e3;
-        assert!(VirtualScene::from_specs(&[far]).is_ok());
+        assert!(far.world_triangles(0).is_ok());
     }
 }

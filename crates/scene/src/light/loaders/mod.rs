@@ -340,6 +340,20 @@ mod tests {
             message.contains("broken.exr") && message.contains("OpenEXR"),
             "{message}"
         );
+        // A Radiance file cut off after its header (the decoder is tested in `rgbe`).
+        let broken_hdr = dir.path().join("broken.hdr");
+        std::fs::write(
+            &broken_hdr,
+            "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 2 +X 4\n",
+        )
+        .unwrap();
+        let message = load_envmap(&broken_hdr).unwrap_err().to_string();
+        assert!(
+            message.contains("broken.hdr")
+                && message.contains("Radiance HDR")
+                && message.contains("scanline 0"),
+            "{message}"
+        );
         // An EXR without color channels.
         use exr::prelude::WritableImage;
         let gray = dir.path().join("gray.exr");

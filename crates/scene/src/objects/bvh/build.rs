@@ -1,5 +1,6 @@
-//! Building a [`Bvh`]: a binary hierarchy by the binned surface-area heuristic, then
-//! collapsed into four-wide nodes ([`WideNode`]).
+//! Building the arrays a [`Bvh`](super::Bvh) holds ([`Tree`]): a binary hierarchy by the
+//! binned surface-area heuristic, then collapsed into the four-wide nodes
+//! ([`WideNode`]) that the traversal reads.
 //!
 //! The binary tree is built top-down (16 centroid bins per axis, leaves of at most 8
 //! triangles, costed by the packs of four that hold them, the median below a depth so
@@ -10,9 +11,12 @@
 //! a NaN coordinate, which no ray meets, stay out of the tree.
 
 use super::leaf::{PACK, TrianglePack};
-use super::{Bvh, MAX_DEPTH, WideNode};
-use crate::objects::{Aabb, Triangle};
+use crate::objects::geometry::{Aabb, Triangle};
 use glam::{Vec3, Vec4};
+
+/// Deepest wide node below the root (the binary tree's bound, which collapsing can only
+/// lower).
+pub(super) const MAX_DEPTH: usize = 64;
 
 /// Centroid bins per axis for the surface-area heuristic.
 const BINS: usize = 16;
@@ -28,6 +32,33 @@ const TRAVERSAL_COST: f32 = 1.0;
 /// The packs holding `triangles` triangles: what a leaf of them costs in the SAH.
 fn packs(triangles: usize) -> f32 {
     triangles.div_ceil(PACK) as f32
+}
+
+/// Four children's boxes, one lane each (structure of arrays), and what they are.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct WideNode {
+    /// The children's padded boxes: `planes[0][axis]` their minima along axis x, y or
+    /// z, `planes[1][axis]` their maxima.
+    pub(super) planes: [[Vec4; 3]; 2],
+    /// Per child: the wide node's index (interior), or its first pack in `packs`
+    /// (leaf).
+    pub(super) index: [u32; 4],
+    /// Per child: 0 for an interior node, else the leaf's triangles.
+    pub(super) count: [u32; 4],
+    /// Bit k set when child k exists.
+    pub(super) live: u32,
+}
+
+/// The built hierarchy's arrays, which a [`Bvh`](super::Bvh) holds.
+pub(super) struct Tree {
+    /// Wide nodes, the root first.
+    pub(super) nodes: Vec<WideNode>,
+    /// The leaves' triangles, four to a pack.
+    pub(super) packs: Vec<TrianglePack>,
+    /// The exact bounds of the vertices of the triangles in the tree.
+    pub(super) bounds: Aabb,
+    /// Levels of wide nodes below the root.
+    pub(super) depth: usize,
 }
 
 /// A node of the binary tree, in depth-first order (the first child follows its parent).
@@ -51,10 +82,11 @@ struct Builder<'a> {
 }
 
 /// Builds the hierarchy over `triangles` (single-threaded and deterministic); see
-/// [`Bvh::build`].
-pub(super) fn build(triangles: &[Triangle]) -> Bvh {
+/// [`Bvh::build`](super::Bvh::build). `None` when there is nothing to build: no
+/// triangles, too many to index, or only ones with a NaN coordinate.
+pub(super) fn build(triangles: &[Triangle]) -> Option<Tree> {
     if triangles.is_empty() || triangles.len() >= u32::MAX as usize {
-        return Bvh::default();
+        return None;
     }
     let boxes: Vec<Aabb> = triangles
         .iter()
@@ -71,7 +103,7 @@ pub(super) fn build(triangles: &[Triangle]) -> Bvh {
         .filter(|&i| !triangles[i as usize].vertices.iter().any(|v| v.is_nan()))
         .collect();
     if order.is_empty() {
-        return Bvh::default();
+        return None;
     }
     let mut scene = Aabb::EMPTY;
     for &i in &order {
@@ -122,13 +154,12 @@ pub(super) fn build(triangles: &[Triangle]) -> Bvh {
             packs.extend(leaf.chunks(PACK).map(TrianglePack::new));
         }
     }
-    Bvh {
+    Some(Tree {
         nodes,
         packs,
-        triangle_count: triangles.len(),
         bounds: scene,
         depth,
-    }
+    })
 }
 
 impl WideNode {

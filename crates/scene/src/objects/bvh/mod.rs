@@ -19,13 +19,11 @@
 mod build;
 mod leaf;
 
-use super::{Aabb, Triangle};
+use super::geometry::{Aabb, Triangle};
+use build::{MAX_DEPTH, WideNode};
 use glam::{Vec3, Vec4};
 use leaf::{PACK, PackRay, TrianglePack};
 
-/// Deepest wide node below the root (the binary tree's bound, which collapsing can only
-/// lower).
-const MAX_DEPTH: usize = 64;
 /// Traversal stack entries: a wide node visit pops one entry and pushes at most four.
 const STACK: usize = 3 * MAX_DEPTH + 4;
 /// Widens slab exits: 2 gamma(3) of PBRT (3rd ed., Sec. 3.9.2).
@@ -33,21 +31,6 @@ const EXIT_WIDENING: f32 =
     1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 /// Inverse direction components beyond this are clamped to it (see the module docs).
 const INVERSE_LIMIT: f32 = f32::MAX;
-
-/// Four children's boxes, one lane each (structure of arrays), and what they are.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct WideNode {
-    /// The children's padded boxes: `planes[0][axis]` their minima along axis x, y or
-    /// z, `planes[1][axis]` their maxima.
-    planes: [[Vec4; 3]; 2],
-    /// Per child: the wide node's index (interior), or its first pack in `packs`
-    /// (leaf).
-    index: [u32; 4],
-    /// Per child: 0 for an interior node, else the leaf's triangles.
-    count: [u32; 4],
-    /// Bit k set when child k exists.
-    live: u32,
-}
 
 /// The hierarchy of a [`super::VirtualScene`]; see the module docs. `Default` is the
 /// empty, unbuilt hierarchy.
@@ -87,7 +70,16 @@ impl Bvh {
     /// Builds the hierarchy over `triangles` (single-threaded and deterministic). Empty for
     /// an empty slice.
     pub fn build(triangles: &[Triangle]) -> Bvh {
-        build::build(triangles)
+        match build::build(triangles) {
+            Some(tree) => Bvh {
+                nodes: tree.nodes,
+                packs: tree.packs,
+                triangle_count: triangles.len(),
+                bounds: tree.bounds,
+                depth: tree.depth,
+            },
+            None => Bvh::default(),
+        }
     }
 
     /// True when the hierarchy was built over `triangle_count` triangles.

@@ -1,4 +1,4 @@
-//! Building one checked stage into the stage that runs: the unplaced-object check, the
+//! Building one checked stage into the stage that runs: the check that the world is ready, the
 //! registry's builder with its [`BuildContext`], then the `every` and `lag` wrappers
 //! ([`super::every`], [`super::lag`]). Both ways of building a run go through it, one
 //! stage at a time: a lone pipeline's chain ([`super::pipeline::Pipeline::build`]) and
@@ -13,22 +13,19 @@ use std::path::Path;
 use std::sync::Arc;
 
 /// Builds `stage` for a run over a recording with `header`, with the world of its
-/// pipeline; files it writes go under `out_dir`. Fails, before building anything, when
-/// `unplaced_object` names an object anchored to the scene that has not been placed.
+/// pipeline; files it writes go under `out_dir`. Fails, before building anything, with
+/// `waiting`: why the world cannot run yet ([`World::waiting`]).
 pub(super) fn build_stage(
     stage: &ResolvedStage,
     world: &Arc<dyn World>,
-    unplaced_object: Option<&str>,
+    waiting: Option<&str>,
     registry: &Registry,
     header: &Header,
     out_dir: &Path,
     seed: u64,
 ) -> Result<Box<dyn Stage>, StageError> {
-    if let Some(object) = unplaced_object {
-        let message = format!(
-            "object `{object}` is anchored to the scene and has not been placed: relume_stages::world::place_objects places it on the recording"
-        );
-        return Err(StageError::Failed(message));
+    if let Some(why) = waiting {
+        return Err(StageError::Failed(why.to_string()));
     }
     let info = registry.get(stage.kind).ok_or_else(|| {
         let message = format!("stage kind `{}` is not registered", stage.kind);

@@ -206,7 +206,7 @@ pub struct StageDecl {
 }
 
 /// One `[[object]]` entry as written; checked by the registry's world resolver
-/// (`relume_stages::world::config::resolve`).
+/// (`relume_stages::world::resolve`).
 #[derive(Clone, Debug)]
 pub struct ObjectDecl {
     pub entries: Vec<(Located<String>, Located<RawValue>)>,

@@ -274,9 +274,9 @@ impl Pipeline {
         })
     }
 
-    /// The names of the objects anchored to the scene that have not been placed yet.
-    pub fn unplaced_objects(&self) -> Vec<String> {
-        self.world.unplaced()
+    /// Why the pipeline cannot run yet ([`World::waiting`](super::world::World::waiting)).
+    pub fn waiting(&self) -> Vec<String> {
+        self.world.waiting()
     }
 
     /// Builds every stage for a run over a recording with `header` (the one-branch
@@ -288,16 +288,16 @@ impl Pipeline {
         out_dir: &Path,
         seed: u64,
     ) -> Result<Vec<Box<dyn Stage>>, (String, StageError)> {
-        // What StageGraph::linear gives each node: the pipeline's world and its first
-        // unplaced object.
-        let unplaced = self.unplaced_objects().into_iter().next();
+        // What StageGraph::linear gives each node: the pipeline's world and the first
+        // reason it cannot run yet.
+        let waiting = self.waiting().into_iter().next();
         self.stages
             .iter()
             .map(|s| {
                 build_stage(
                     s,
                     &self.world,
-                    unplaced.as_deref(),
+                    waiting.as_deref(),
                     registry,
                     header,
                     out_dir,

@@ -30,9 +30,9 @@ pub struct GraphNode {
     pub parent: Option<usize>,
     /// The branches (pipelines) that run it, in order; more than one for a shared stage.
     pub branches: Vec<usize>,
-    /// An object of its pipeline anchored to the scene but not yet placed on a
-    /// recording (`relume_stages::world::place_objects`): building fails rather than run without it.
-    pub unplaced_object: Option<String>,
+    /// Why its pipeline cannot run yet ([`World::waiting`]): building fails with it
+    /// rather than run without what it waits for.
+    pub waiting: Option<String>,
 }
 
 /// A feedback edge between two nodes: `producer`'s `product` of frame t-1 goes to
@@ -101,7 +101,7 @@ impl StageGraph {
                             world: pipeline.world.clone(),
                             parent,
                             branches: vec![b],
-                            unplaced_object: pipeline.unplaced_objects().into_iter().next(),
+                            waiting: pipeline.waiting().into_iter().next(),
                         });
                         graph.nodes.len() - 1
                     }
@@ -188,7 +188,7 @@ impl StageGraph {
                 build_stage(
                     &node.stage,
                     &node.world,
-                    node.unplaced_object.as_deref(),
+                    node.waiting.as_deref(),
                     registry,
                     header,
                     &out_dirs[node.branches[0]],
@@ -202,11 +202,11 @@ impl StageGraph {
 
 /// How many first stages `a` and `b` can share (see the module docs).
 fn shared_depth(a: &Pipeline, b: &Pipeline) -> usize {
-    let same_objects = Arc::ptr_eq(&a.world, &b.world) || a.world.same_as(b.world.as_ref());
-    // Unplaced objects are not in the world's scene yet: such a pipeline shares nothing, so
-    // that each of its nodes carries the flag that stops the build.
-    let placed = a.unplaced_objects().is_empty() && b.unplaced_objects().is_empty();
-    if !same_objects || !placed {
+    let same_world = Arc::ptr_eq(&a.world, &b.world) || a.world.same_as(b.world.as_ref());
+    // A pipeline whose world is not ready shares nothing, so that each of its nodes
+    // carries the reason that stops the build.
+    let ready = a.waiting().is_empty() && b.waiting().is_empty();
+    if !same_world || !ready {
         return 0;
     }
     let mut depth = a

@@ -14,9 +14,10 @@ use std::sync::Arc;
 
 /// The world of a pipeline (see the module docs).
 pub trait World: Any + Send + Sync + Debug {
-    /// The names of what waits for a recording before the pipeline can run: objects
-    /// anchored to the scene that have not been placed yet.
-    fn unplaced(&self) -> Vec<String>;
+    /// Why the pipeline cannot run yet, one message each (an object anchored to the
+    /// recorded scene and not placed on a recording, say); empty when it can. Building
+    /// fails with the first.
+    fn waiting(&self) -> Vec<String>;
 
     /// True when every stage sees the same world in `self` and `other`, so that two
     /// pipelines may share their leading stages.
@@ -28,7 +29,7 @@ pub trait World: Any + Send + Sync + Debug {
 pub struct EmptyWorld;
 
 impl World for EmptyWorld {
-    fn unplaced(&self) -> Vec<String> {
+    fn waiting(&self) -> Vec<String> {
         Vec::new()
     }
 

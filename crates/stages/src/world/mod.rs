@@ -39,12 +39,26 @@ pub struct ObjectWorld {
     pub scene: Arc<VirtualScene>,
 }
 
-impl World for ObjectWorld {
-    fn unplaced(&self) -> Vec<String> {
+impl ObjectWorld {
+    /// The names of the objects anchored to the scene that have not been placed yet.
+    pub fn unplaced(&self) -> Vec<String> {
         self.declared
             .iter()
             .filter(|d| d.spec.placement_frame().is_err())
             .map(|d| d.spec.name.clone())
+            .collect()
+    }
+}
+
+impl World for ObjectWorld {
+    fn waiting(&self) -> Vec<String> {
+        self.unplaced()
+            .into_iter()
+            .map(|object| {
+                format!(
+                    "object `{object}` is anchored to the scene and has not been placed: relume_stages::world::place_objects places it on the recording"
+                )
+            })
             .collect()
     }
 
@@ -129,6 +143,8 @@ pub trait PipelineObjects {
     fn objects(&self) -> &Arc<VirtualScene>;
     /// Every `[[object]]` table as declared, in order.
     fn declared_objects(&self) -> &[DeclaredObject];
+    /// The names of the objects anchored to the scene that have not been placed yet.
+    fn unplaced_objects(&self) -> Vec<String>;
     /// [`place_objects`] on this pipeline.
     fn place_objects(&mut self, replay: &Replay) -> Result<Vec<Placement>, ConfigError>;
 }
@@ -140,6 +156,10 @@ impl PipelineObjects for Pipeline {
 
     fn declared_objects(&self) -> &[DeclaredObject] {
         &object_world(&self.world).declared
+    }
+
+    fn unplaced_objects(&self) -> Vec<String> {
+        object_world(&self.world).unplaced()
     }
 
     fn place_objects(&mut self, replay: &Replay) -> Result<Vec<Placement>, ConfigError> {

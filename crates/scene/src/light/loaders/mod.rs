@@ -317,6 +317,25 @@ mod tests {
     }
 
     #[test]
+    fn a_radiance_hdr_loads_as_decoded_row_by_row() {
+        // decode_rgbe's own test checks the values; this one, that the loader keeps its
+        // layout: row 0 of the file is row 0 of the map, x runs along the row.
+        let value = |x: usize, y: usize| ((x / 4) as f32 + 1.0, 2f32.powi(y as i32 - 3), 0.25);
+        let bytes = super::rgbe::tests::hdr_bytes(32, 8, value, true);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("map.hdr");
+        std::fs::write(&path, &bytes).unwrap();
+        let map = load_envmap(&path).unwrap();
+        let (width, height, radiance) = decode_rgbe(&bytes).unwrap();
+        assert_eq!((map.width, map.height), (width, height));
+        assert_eq!((map.width, map.height), (32, 8));
+        assert_eq!(map.radiance, radiance);
+        let first = map.radiance[0];
+        let last = map.radiance[7 * 32 + 31];
+        assert!(first.x < last.x && first.y < last.y, "{first} {last}");
+    }
+
+    #[test]
     fn missing_unknown_and_broken_files_are_errors_naming_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let missing = dir.path().join("nope.exr");

@@ -135,7 +135,7 @@ fn rgbe_to_rgb(q: [u8; 4]) -> Vec3 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::decode_rgbe;
     use glam::Vec3;
 
@@ -153,7 +153,7 @@ mod tests {
     }
 
     /// A .hdr file of `w` x `h` texels from `value`: flat quads, or per-channel runs.
-    fn hdr_bytes(
+    pub(in crate::light::loaders) fn hdr_bytes(
         w: usize,
         h: usize,
         value: impl Fn(usize, usize) -> (f32, f32, f32),

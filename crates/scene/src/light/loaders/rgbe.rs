@@ -153,7 +153,7 @@ pub(super) mod tests {
     }
 
     /// A .hdr file of `w` x `h` texels from `value`: flat quads, or per-channel runs.
-    pub(in crate::light::loaders) fn hdr_bytes(
+    pub(crate) fn hdr_bytes(
         w: usize,
         h: usize,
         value: impl Fn(usize, usize) -> (f32, f32, f32),

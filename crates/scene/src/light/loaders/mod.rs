@@ -450,7 +450,7 @@ mod tests {
         );
     }
 
-    /// `RELUME_DATA`, else `../shared/data` beside the crate.
+    /// `RELUME_DATA`, else `../shared/data` beside the workspace.
     pub(crate) fn shared_data() -> PathBuf {
         std::env::var_os("RELUME_DATA")
             .map(PathBuf::from)

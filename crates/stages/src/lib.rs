@@ -118,6 +118,7 @@ pub mod compensate;
 pub mod composite;
 pub mod debug;
 pub mod decode;
+pub mod error;
 pub mod filter;
 pub mod fuse;
 pub mod gbuffer;
@@ -132,6 +133,7 @@ pub mod temporal;
 pub mod world;
 pub mod write;
 
+pub use error::OpError;
 use relume_graph::{Registry, StageInfo};
 
 /// The built-in registry: every stage kind of [`builtin`], and [`world::resolve`] for

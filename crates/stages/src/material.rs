@@ -5,7 +5,7 @@
 //! cosine-weighted samples, E = pi * mean(L_i) and this is the paper's
 //! rho = L / mean(L_i).
 
-use crate::kind;
+use crate::{OpError, kind};
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::raster::{Image, ScalarImage, Vec3Image};
@@ -77,7 +77,7 @@ pub fn estimate_albedo(
     mask: &ScalarImage,
     params: &AlbedoParams,
     albedo: &mut Vec3Image,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     for (name, w, h) in [
         ("e_r_dir", e_dir.width, e_dir.height),
         ("e_r_ind", e_ind.width, e_ind.height),
@@ -85,7 +85,7 @@ pub fn estimate_albedo(
         ("albedo", albedo.width, albedo.height),
     ] {
         if (w, h) != (radiance.width, radiance.height) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::SizeMismatch(format!(
                 "{name} is {w}x{h}, the camera radiance is {}x{}",
                 radiance.width, radiance.height
             )));
@@ -195,5 +195,6 @@ mod tests {
             err.to_string(),
             "e_r_dir is 1x2, the camera radiance is 2x2"
         );
+        assert!(matches!(err, OpError::SizeMismatch(_)), "{err:?}");
     }
 }

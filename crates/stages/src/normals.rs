@@ -7,7 +7,7 @@
 //! drops into a pipeline whose later stages read it: here it is the depth of the
 //! points themselves (their z; 0 where a point is missing), nothing refined.
 
-use crate::kind;
+use crate::{OpError, kind};
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::raster::{Image, Vec3Image};
@@ -86,9 +86,9 @@ pub fn cross_normals(
     points: &Vec3Image,
     params: &CrossParams,
     normals: &mut Vec3Image,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     if !points.same_size(normals) {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "normal map is {}x{}, points are {}x{}",
             normals.width, normals.height, points.width, points.height
         )));

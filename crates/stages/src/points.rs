@@ -1,7 +1,7 @@
 //! `depth.to_points`: back-projection of a depth map through the pinhole intrinsics to a
 //! camera-space position map, X = (u - cx) z / fx, Y = (v - cy) z / fy, Z = z.
 
-use crate::kind;
+use crate::{OpError, kind};
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::raster::{DepthImage, Image, Vec3Image, depth_is_valid};
@@ -28,9 +28,9 @@ pub fn depth_to_points(
     depth: &DepthImage,
     intrinsics: &Intrinsics,
     points: &mut Vec3Image,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     if !depth.same_size(points) {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "point map is {}x{}, depth is {}x{}",
             points.width, points.height, depth.width, depth.height
         )));

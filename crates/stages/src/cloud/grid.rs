@@ -9,10 +9,10 @@
 //! slot holds the index of its sample plus one (0 = empty). Removal swaps the last sample
 //! into the hole and fixes its slot through the back-pointer.
 
+use crate::OpError;
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::rng;
-use relume_graph::StageError;
 use relume_scene::light::EnvCloud;
 
 /// The largest number of slots: sample indices plus one must fit a `u32`, and 2^28
@@ -62,14 +62,14 @@ pub struct HashGrid {
 impl HashGrid {
     /// An empty grid with `capacity` slots (at most that many samples) and cubic cells of
     /// `cell_size` metres.
-    pub fn new(capacity: usize, cell_size: f32) -> Result<HashGrid, StageError> {
+    pub fn new(capacity: usize, cell_size: f32) -> Result<HashGrid, OpError> {
         if capacity == 0 || capacity > MAX_CAPACITY {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::BadParameter(format!(
                 "hash grid capacity {capacity} is outside 1..={MAX_CAPACITY}"
             )));
         }
         if !(cell_size.is_finite() && cell_size > 0.0) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::BadParameter(format!(
                 "hash grid cell size {cell_size} is not a positive length"
             )));
         }

@@ -5,8 +5,8 @@
 //! ([`grid`]), and outputs a snapshot of the cloud.
 
 use crate::compensate::Compensation;
-use crate::kind;
 use crate::kind::FrameProducts;
+use crate::{OpError, kind};
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
@@ -183,9 +183,11 @@ impl CloudBuilder {
         cell_size: f32,
         params: CloudParams,
         seed: u64,
-    ) -> Result<CloudBuilder, StageError> {
+    ) -> Result<CloudBuilder, OpError> {
         if params.step == 0 {
-            return Err(StageError::Failed("cloud step must be at least 1".into()));
+            return Err(OpError::BadParameter(
+                "cloud step must be at least 1".into(),
+            ));
         }
         Ok(CloudBuilder {
             grid: HashGrid::new(capacity, cell_size)?,
@@ -213,7 +215,7 @@ impl CloudBuilder {
     /// finite compensated color, and, with `skip_saturated`, no camera channel at 255;
     /// back-projected with its normal into world space, inserted in pixel order, the
     /// replacement drawn from `rng::hash(&[seed, frame, salt, pixel])`.
-    pub fn update(&mut self, view: &FrameView) -> Result<UpdateCounts, StageError> {
+    pub fn update(&mut self, view: &FrameView) -> Result<UpdateCounts, OpError> {
         let depth = view.depth;
         let (w, h) = (depth.width, depth.height);
         for (name, (iw, ih)) in [
@@ -225,13 +227,13 @@ impl CloudBuilder {
             ("color", (view.color.width, view.color.height)),
         ] {
             if (iw, ih) != (w, h) {
-                return Err(StageError::Failed(format!(
+                return Err(OpError::SizeMismatch(format!(
                     "{name} is {iw}x{ih}, depth is {w}x{h}"
                 )));
             }
         }
         if (view.camera.width, view.camera.height) != (w, h) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::SizeMismatch(format!(
                 "camera is {}x{}, depth is {w}x{h}",
                 view.camera.width, view.camera.height
             )));

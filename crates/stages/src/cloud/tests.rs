@@ -193,7 +193,7 @@ fn size_mismatch_is_an_error_and_empty_images_are_fine() {
     let mut b = builder(64, 1);
     assert!(matches!(
         b.update(&inputs.view(0)),
-        Err(StageError::Failed(_))
+        Err(OpError::SizeMismatch(_))
     ));
     let mut empty = Inputs::wall(2.0);
     empty.depth = Image::filled(0, 0, 0.0);

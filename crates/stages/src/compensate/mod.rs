@@ -19,7 +19,7 @@ pub mod pairs;
 #[cfg(test)]
 mod tests;
 
-use crate::kind;
+use crate::{OpError, kind};
 pub use compensation::{COMPENSATION, Compensation, PairCounts};
 use fit::{FitParams, Model};
 use glam::{Mat3, Vec3};
@@ -206,7 +206,7 @@ pub fn estimate_compensation(
     previous: &Mat3,
     linearize: &Linearize,
     params: &CompensateParams,
-) -> Result<Compensation, StageError> {
+) -> Result<Compensation, OpError> {
     let moments = match reference {
         Some((radiance, coverage)) => pairs::select_pairs(
             color,

@@ -23,10 +23,10 @@
 
 use super::compensation::PairCounts;
 use super::hsv::{Linearize, hs_point, pair_weight, value_distance};
+use crate::OpError;
 use glam::{DMat3, DVec3, Mat3, Vec3};
 use rayon::prelude::*;
 use relume_base::raster::{LabelImage, Rgb8Image, Vec3Image};
-use relume_graph::StageError;
 
 /// Rows per reduction band: partial sums are taken over fixed bands of rows and combined
 /// in band order, so the result does not depend on the number of threads.
@@ -178,13 +178,13 @@ pub fn select_pairs(
     linearize: &Linearize,
     previous: &Mat3,
     params: &PairParams,
-) -> Result<PairMoments, StageError> {
+) -> Result<PairMoments, OpError> {
     for (what, w, h) in [
         ("reference", reference.width, reference.height),
         ("reference coverage", coverage.width, coverage.height),
     ] {
         if (w, h) != (color.width, color.height) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::SizeMismatch(format!(
                 "{what} is {w}x{h}, the camera image is {}x{}",
                 color.width, color.height
             )));

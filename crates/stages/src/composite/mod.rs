@@ -31,8 +31,8 @@ mod tests;
 
 pub use encode::GammaEncoder;
 
-use crate::kind;
 use crate::kind::FrameProducts;
+use crate::{OpError, kind};
 use glam::{Mat3, Vec3, Vec3A};
 use rayon::prelude::*;
 use relume_base::raster::{Image, Rgb8Image, ScalarImage, Vec3Image};
@@ -256,7 +256,7 @@ pub fn composite<'a>(
     params: &CompositeParams,
     encoder: &GammaEncoder,
     out: &mut CompositeOutputs,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     let (w, h) = (inputs.radiance.width, inputs.radiance.height);
     let sizes = [
         ("e_r_dir", inputs.e_r_dir.width, inputs.e_r_dir.height),
@@ -275,13 +275,13 @@ pub fn composite<'a>(
     ];
     for (what, ww, hh) in sizes {
         if (ww, hh) != (w, h) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::SizeMismatch(format!(
                 "composite.differential: {what} is {ww}x{hh}, the camera image is {w}x{h}"
             )));
         }
     }
     if !inputs.inverse_compensation.is_finite() {
-        return Err(StageError::Failed(
+        return Err(OpError::BadInput(
             "composite.differential: the inverse color compensation is not finite".into(),
         ));
     }

@@ -213,6 +213,7 @@ fn size_mismatches_are_errors_naming_the_product() {
         err.to_string(),
         "composite.differential: e_rv_ind is 63x48, the camera image is 64x48"
     );
+    assert!(matches!(err, OpError::SizeMismatch(_)), "{err:?}");
 }
 
 #[test]

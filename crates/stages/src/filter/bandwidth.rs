@@ -4,10 +4,10 @@
 //! filter's size is 1 / B (paper 001 Sec. 6.4 and Fig. 7's convention: eq. 23's Gaussian
 //! exp(-2 Bbar^2 d^2) has standard deviation 1 / (2 Bbar)).
 
+use crate::OpError;
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::raster::{ScalarImage, Vec3Image};
-use relume_graph::StageError;
 
 /// World distances below this (metres) between neighbouring positions are too small to
 /// give a curvature (the positions coincide up to float noise).
@@ -136,12 +136,12 @@ pub fn screen_curvature(
     normals: &Vec3Image,
     kappa_x: &mut ScalarImage,
     kappa_y: &mut ScalarImage,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     if !positions.same_size(normals)
         || !positions.same_size(kappa_x)
         || !positions.same_size(kappa_y)
     {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "filter curvature: positions {}x{}, normals {}x{}, outputs {}x{} / {}x{} differ",
             positions.width,
             positions.height,

@@ -89,8 +89,8 @@ mod tests;
 pub use bandwidth::{direct_bandwidth, indirect_bandwidth, screen_curvature};
 pub use spectrum::environment_bandwidth;
 
-use crate::kind;
 use crate::kind::FrameProducts;
+use crate::{OpError, kind};
 use glam::{Affine3A, Vec3};
 use lane_planes::LaneLayout;
 use layout::{BandwidthSettings, PrepareInputs, X_PLANES};
@@ -229,16 +229,16 @@ impl FilterParams {
     }
 
     /// Checks the radius and bandwidths; the error names the bad value.
-    pub fn check(&self) -> Result<(), StageError> {
+    pub fn check(&self) -> Result<(), OpError> {
         if !(1..=MAX_RADIUS).contains(&self.radius) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::BadParameter(format!(
                 "filter.axis_aligned: radius is {}, expected 1..={MAX_RADIUS}",
                 self.radius
             )));
         }
         let ok = |b: f32| b.is_finite() && b >= 0.0;
         if !ok(self.b_f) || !ok(self.environment_bandwidth) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::BadParameter(format!(
                 "filter.axis_aligned: b_f {} / environment_bandwidth {} must be finite and >= 0",
                 self.b_f, self.environment_bandwidth
             )));
@@ -319,12 +319,12 @@ impl AxisAlignedFilter {
     }
 
     /// B_e for this frame: the parameter, or the (cached) spectrum bandwidth of the map.
-    fn environment_bandwidth(&mut self, map: Option<&Arc<EnvMap>>) -> Result<f32, StageError> {
+    fn environment_bandwidth(&mut self, map: Option<&Arc<EnvMap>>) -> Result<f32, OpError> {
         if self.params.environment_bandwidth > 0.0 {
             return Ok(self.params.environment_bandwidth);
         }
         let map = map.ok_or_else(|| {
-            StageError::Failed(
+            OpError::BadInput(
                 "filter.axis_aligned: no environment map given and environment_bandwidth is 0"
                     .into(),
             )
@@ -341,11 +341,7 @@ impl AxisAlignedFilter {
 
     /// Filters one frame into `out` (sized like the inputs) and keeps what the next
     /// frame's temporal filter needs.
-    pub fn filter(
-        &mut self,
-        input: &FilterInputs,
-        out: &mut FilterOutputs,
-    ) -> Result<(), StageError> {
+    pub fn filter(&mut self, input: &FilterInputs, out: &mut FilterOutputs) -> Result<(), OpError> {
         let first = input.layers[0];
         let (w, h) = (first.width, first.height);
         let sizes = [
@@ -371,7 +367,7 @@ impl AxisAlignedFilter {
             (out.width_ind.width, out.width_ind.height),
         ];
         if let Some(bad) = sizes.iter().position(|&s| s != (w, h)) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::SizeMismatch(format!(
                 "filter.axis_aligned: e_r_dir is {w}x{h} but input/output #{} is {}x{} \
                  (order: e_r_ind, e_rv_dir, e_rv_ind, world_position, world_normal, \
                  direct_min_distance, indirect_min_distance, exponent, outputs)",

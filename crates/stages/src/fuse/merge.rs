@@ -2,9 +2,9 @@
 //! frame meet the new sensor depth per pixel, as in KinectFusion's weighted running
 //! average (Newcombe et al., the paper's ref. 26).
 
+use crate::OpError;
 use rayon::prelude::*;
 use relume_base::raster::{DepthImage, ScalarImage, depth_is_valid};
-use relume_graph::StageError;
 
 /// Parameters of [`merge_depth`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -61,7 +61,7 @@ pub fn merge_depth(
     params: &MergeParams,
     fused_depth: &mut DepthImage,
     fused_weight: &mut ScalarImage,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     let sizes = [
         (warped_weight.width, warped_weight.height),
         (new_depth.width, new_depth.height),
@@ -72,7 +72,7 @@ pub fn merge_depth(
         .iter()
         .any(|&s| s != (warped_depth.width, warped_depth.height))
     {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "depth merge: warped depth is {}x{}, but (warped weight, new depth, fused \
              depth, fused weight) are {sizes:?}",
             warped_depth.width, warped_depth.height
@@ -264,7 +264,7 @@ mod tests {
         let b = Image::filled(2, 3, 1.0f32);
         let (mut d, mut w) = (a.clone(), a.clone());
         let err = merge_depth(&a, &a, &b, &MergeParams::default(), &mut d, &mut w);
-        assert!(matches!(err, Err(StageError::Failed(_))));
+        assert!(matches!(err, Err(OpError::SizeMismatch(_))));
         let empty = Image::filled(0, 0, 0.0f32);
         let (mut d, mut w) = (empty.clone(), empty.clone());
         merge_depth(

@@ -33,7 +33,7 @@ mod warp_tests;
 pub use merge::{MergeParams, merge_depth};
 pub use warp::{WarpParams, WarpedDepth, previous_to_current, warp_depth};
 
-use crate::kind;
+use crate::{OpError, kind};
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Image, ScalarImage};
 use relume_graph::{Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo};
@@ -167,7 +167,7 @@ impl DepthFusion {
         &mut self,
         depth: &DepthImage,
         pose: &Pose,
-    ) -> Result<(Arc<Product>, Arc<Product>), StageError> {
+    ) -> Result<(Arc<Product>, Arc<Product>), OpError> {
         let (w, h) = (depth.width, depth.height);
         let previous = match &self.state {
             Some(s) => match (

@@ -12,12 +12,12 @@
 
 use super::mesh::{Mesh, QuadRow, VertexRows};
 use super::mesh_lanes::rasterize_quads;
+use crate::OpError;
 use glam::{DMat4, Mat3};
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Image, ScalarImage};
 use relume_base::simd::Kernel;
-use relume_graph::StageError;
 use relume_recording::Pose;
 use std::sync::atomic::AtomicU64;
 
@@ -92,7 +92,7 @@ pub fn warp_depth(
     camera: &Pinhole,
     params: &WarpParams,
     warped: &mut WarpedDepth,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     // The portable lanes compute what one quad at a time does, only slower.
     let kernel = (Kernel::detect() == Kernel::Avx2Fma).then_some(Kernel::Avx2Fma);
     let poses = (prev_pose, cur_pose);
@@ -117,9 +117,9 @@ pub(super) fn warp_depth_by(
     camera: &Pinhole,
     params: &WarpParams,
     warped: &mut WarpedDepth,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     if !prev_depth.same_size(prev_weight) || !prev_depth.same_size(&warped.depth) {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "depth warp: previous depth is {}x{}, its weight {}x{}, the target {}x{}",
             prev_depth.width,
             prev_depth.height,
@@ -130,7 +130,7 @@ pub(super) fn warp_depth_by(
         )));
     }
     if (camera.width, camera.height) != (prev_depth.width, prev_depth.height) {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "depth warp: camera is for {}x{}, depth is {}x{}",
             camera.width, camera.height, prev_depth.width, prev_depth.height
         )));

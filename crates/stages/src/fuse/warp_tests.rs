@@ -2,11 +2,11 @@
 //! determinism, degenerate input.
 
 use super::warp::*;
+use crate::OpError;
 use glam::{DQuat, DVec3};
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Image, ScalarImage};
 use relume_base::simd::Kernel;
-use relume_graph::StageError;
 use relume_recording::Intrinsics;
 use relume_recording::Pose;
 
@@ -329,7 +329,7 @@ fn the_target_is_reusable_and_degenerate_input_does_not_panic() {
     // Sizes that do not match are an error.
     let mut small = WarpedDepth::new(20, 15);
     let err = warp_depth(&depth, &weight, &Pose::IDENTITY, &cur, &cam, &p, &mut small);
-    assert!(matches!(err, Err(StageError::Failed(_))));
+    assert!(matches!(err, Err(OpError::SizeMismatch(_))));
     let err = warp_depth(
         &depth,
         &weight,
@@ -339,5 +339,5 @@ fn the_target_is_reusable_and_degenerate_input_does_not_panic() {
         &p,
         &mut target,
     );
-    assert!(matches!(err, Err(StageError::Failed(_))));
+    assert!(matches!(err, Err(OpError::SizeMismatch(_))));
 }

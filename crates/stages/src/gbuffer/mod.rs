@@ -7,8 +7,8 @@
 //! The `cloud` input defaults to `cloud@prev`, the cloud as it stood after the previous
 //! frame; on the first frame it is absent and every output is empty.
 
-use crate::kind;
 use crate::kind::FrameProducts;
+use crate::{OpError, kind};
 use relume_base::pinhole::Pinhole;
 use relume_graph::{
     Frame, ParamDefault, ParamSpec, Port, Ports, Product, Stage, StageError, StageInfo,
@@ -120,7 +120,7 @@ impl GBufferSplat {
         &mut self,
         cloud: Option<&EnvCloud>,
         pose: &relume_recording::Pose,
-    ) -> Result<GBuffer, StageError> {
+    ) -> Result<GBuffer, OpError> {
         let mut g = GBuffer::new(self.camera.width, self.camera.height);
         if let Some(cloud) = cloud.filter(|c| !c.is_empty()) {
             splat(

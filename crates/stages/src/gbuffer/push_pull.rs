@@ -13,11 +13,11 @@
 //! the camera.
 
 use super::buffer::{COVERAGE_FILLED, GBuffer};
+use crate::OpError;
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{depth_is_valid, upsample_taps as taps};
-use relume_graph::StageError;
 
 /// One texel of a coarse level; a hole has depth 0.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -111,10 +111,10 @@ pub fn push_pull(
     camera: &Pinhole,
     max_levels: usize,
     pyramid: &mut Pyramid,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     let (w, h) = (gbuffer.width() as usize, gbuffer.height() as usize);
     if (camera.width as usize, camera.height as usize) != (w, h) || !gbuffer.is_consistent() {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "G-buffer is {w}x{h}, camera is {}x{}",
             camera.width, camera.height
         )));

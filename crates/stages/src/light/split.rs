@@ -3,8 +3,8 @@
 //! and its indirect part (low-frequency, compressed to SH9), per color channel by an
 //! energy ratio. See [`relume_scene::light::split`] for the math.
 
-use crate::kind;
 use crate::kind::FrameProducts;
+use crate::{OpError, kind};
 use relume_graph::{Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo};
 use relume_scene::light::EnvMap;
 use relume_scene::light::split::{map_is_consistent, split_direct_indirect};
@@ -58,11 +58,11 @@ pub(crate) fn same_map(a: &Arc<EnvMap>, b: &Arc<EnvMap>) -> bool {
 }
 
 /// The error for a map whose buffers do not match its size.
-pub(crate) fn check_map(name: &str, map: &EnvMap) -> Result<(), StageError> {
+pub(crate) fn check_map(name: &str, map: &EnvMap) -> Result<(), OpError> {
     if map_is_consistent(map) {
         return Ok(());
     }
-    Err(StageError::Failed(format!(
+    Err(OpError::SizeMismatch(format!(
         "environment map `{name}` is {}x{} but has {} radiance and {} distance texels",
         map.width,
         map.height,

@@ -5,11 +5,11 @@
 use super::gather::{RowFit, RowOut, SampleGrid, covering_offsets, fit_row, margin};
 use super::lanes::fit_row_lanes;
 use super::params::PlaneFitParams;
+use crate::OpError;
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, LabelImage, Vec3Image};
 use relume_base::simd::Kernel;
-use relume_graph::StageError;
 
 /// Normals by per-pixel plane fits (paper 000 Sec. 5) from the camera-space position map
 /// `points` (NaN = missing), seen by `camera` (at the size of `points`).
@@ -33,7 +33,7 @@ pub fn plane_fit_normals(
     refined_depth: &mut DepthImage,
     neighbours: &mut LabelImage,
     codes: &mut LabelImage,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     // The portable lanes compute what one pixel at a time does, only slower.
     let kernel = (Kernel::detect() == Kernel::Avx2Fma).then_some(Kernel::Avx2Fma);
     plane_fit_normals_by(
@@ -60,9 +60,9 @@ pub(super) fn plane_fit_normals_by(
     refined_depth: &mut DepthImage,
     neighbours: &mut LabelImage,
     codes: &mut LabelImage,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     let size = |what: &str, w: u32, h: u32| {
-        StageError::Failed(format!(
+        OpError::SizeMismatch(format!(
             "{what} is {w}x{h}, points are {}x{}",
             points.width, points.height
         ))

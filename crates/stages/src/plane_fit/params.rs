@@ -1,7 +1,7 @@
 //! What a plane fit is asked and what it answers per pixel: [`PlaneFitParams`] and the
 //! [`NormalCode`] of each pixel, shared by the driver, the scalar and lane fits.
 
-use relume_graph::StageError;
+use crate::OpError;
 
 // Defaults for 640x480 Kinect-like depth: every 6th pixel is a sample (8560 samples,
 // inside the 3000 to 14000 per frame of the paper's sensor), and the radius makes about
@@ -75,8 +75,8 @@ impl Default for PlaneFitParams {
 
 impl PlaneFitParams {
     /// Fails with a message when a value is out of its range.
-    pub fn check(&self) -> Result<(), StageError> {
-        let bad = |what: String| Err(StageError::Failed(what));
+    pub fn check(&self) -> Result<(), OpError> {
+        let bad = |what: String| Err(OpError::BadParameter(what));
         if !(self.radius >= 1.0 && self.radius <= 64.0) {
             return bad(format!("radius {} must lie in [1, 64]", self.radius));
         }

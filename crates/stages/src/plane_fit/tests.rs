@@ -478,6 +478,7 @@ fn size_mismatches_and_bad_parameters_are_errors() {
     )
     .unwrap_err();
     assert_eq!(err.to_string(), "code map is 40x29, points are 40x30");
+    assert!(matches!(err, crate::OpError::SizeMismatch(_)), "{err:?}");
     let mut codes = Image::filled(W, H, 0);
     let bad = PlaneFitParams {
         k: 2,
@@ -494,6 +495,7 @@ fn size_mismatches_and_bad_parameters_are_errors() {
     )
     .unwrap_err();
     assert_eq!(err.to_string(), "k 2 must lie in [3, 255]");
+    assert!(matches!(err, crate::OpError::BadParameter(_)), "{err:?}");
 }
 
 #[test]

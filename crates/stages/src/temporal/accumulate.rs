@@ -39,11 +39,11 @@
 //! surface positions are this frame's own (the accumulated estimates are of the
 //! surface the pixel shows now).
 
+use crate::OpError;
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{Image, LabelImage, ScalarImage, Vec3Image};
-use relume_graph::StageError;
 
 /// Half size of the reprojection's search window (1: 3 x 3).
 pub const SEARCH_RADIUS: i32 = 1;
@@ -176,7 +176,7 @@ pub fn accumulate(
     camera: Pinhole,
     camera_to_world: Affine3A,
     params: &AccumulateParams,
-) -> Result<Accumulated, StageError> {
+) -> Result<Accumulated, OpError> {
     let (w, h) = (camera.width, camera.height);
     let mut sizes = vec![
         (
@@ -208,7 +208,7 @@ pub fn accumulate(
         sizes.push((name, image.width, image.height));
     }
     if let Some((what, ww, hh)) = sizes.into_iter().find(|&(_, ww, hh)| (ww, hh) != (w, h)) {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "temporal.accumulate: {what} is {ww}x{hh}, the camera's image is {w}x{h}"
         )));
     }

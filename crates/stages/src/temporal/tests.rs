@@ -1,8 +1,8 @@
 use super::accumulate::*;
+use crate::OpError;
 use glam::{Affine3A, Vec3};
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{Image, LabelImage, ScalarImage, Vec3Image};
-use relume_graph::StageError;
 use relume_recording::Intrinsics;
 
 const W: u32 = 32;
@@ -247,7 +247,7 @@ fn a_layer_of_another_size_is_refused_by_name() {
         indirect_min_distance: &small,
         ..fresh.layers()
     };
-    let Err(StageError::Failed(message)) = accumulate(
+    let Err(OpError::SizeMismatch(message)) = accumulate(
         &layers,
         None,
         camera(),

@@ -23,7 +23,7 @@
 //! complete files only.
 
 use crate::compensate::Compensation;
-use crate::kind;
+use crate::{OpError, kind};
 use rayon::prelude::*;
 use relume_base::raster::{
     DepthImage, Image, LabelImage, Rgb8Image, ScalarImage, Vec3Image, depth_is_valid,
@@ -169,7 +169,8 @@ impl Stage for Write {
                     write_png(product, path)
                 }
             })
-            .collect()
+            .collect::<Result<(), OpError>>()?;
+        Ok(())
     }
 }
 
@@ -216,7 +217,7 @@ fn view(product: &Product) -> Option<W<'_>> {
 }
 
 /// Writes a product as PNG (see the module table).
-pub fn write_png(product: &Product, path: &Path) -> Result<(), StageError> {
+pub fn write_png(product: &Product, path: &Path) -> Result<(), OpError> {
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     let mm = |z: f32| {
         if depth_is_valid(z) {
@@ -294,8 +295,8 @@ pub fn write_png(product: &Product, path: &Path) -> Result<(), StageError> {
         CompressionType::Fast,
         FilterType::Adaptive,
     ))
-    .map_err(|e| StageError::Failed(format!("{}: PNG encoding failed: {e}", path.display())))?;
-    write_file_atomic(path, &bytes).map_err(|source| StageError::Io {
+    .map_err(|e| OpError::Unwritable(format!("{}: PNG encoding failed: {e}", path.display())))?;
+    write_file_atomic(path, &bytes).map_err(|source| OpError::Io {
         path: path.to_path_buf(),
         source,
     })
@@ -303,7 +304,7 @@ pub fn write_png(product: &Product, path: &Path) -> Result<(), StageError> {
 
 /// Writes a non-image product next to `stem`: a compensation as `.json`, a cloud as
 /// `.ply`.
-pub fn write_record(product: &Product, stem: &Path) -> Result<(), StageError> {
+pub fn write_record(product: &Product, stem: &Path) -> Result<(), OpError> {
     let (path, bytes) = match view(product) {
         Some(W::Compensation(c)) => (
             stem.with_extension("json"),
@@ -313,20 +314,20 @@ pub fn write_record(product: &Product, stem: &Path) -> Result<(), StageError> {
         Some(W::AreaLights(model)) => (
             stem.with_extension("val"),
             relume_scene::light::record::encode(model)
-                .map_err(|e| StageError::Failed(e.to_string()))?,
+                .map_err(|e| OpError::Unwritable(e.to_string()))?,
         ),
         _ => {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::Unwritable(format!(
                 "a {} cannot be written to a file",
                 product.kind().name()
             )));
         }
     };
-    write_file_atomic(&path, &bytes).map_err(|source| StageError::Io { path, source })
+    write_file_atomic(&path, &bytes).map_err(|source| OpError::Io { path, source })
 }
 
 /// Writes a product as EXR with f32 channels (see the module table).
-pub fn write_exr(product: &Product, path: &Path) -> Result<(), StageError> {
+pub fn write_exr(product: &Product, path: &Path) -> Result<(), OpError> {
     let channels: Vec<(&str, Vec<f32>)> = match view(product) {
         Some(W::Color(c)) => (0..3)
             .map(|i| {
@@ -352,7 +353,7 @@ pub fn write_exr(product: &Product, path: &Path) -> Result<(), StageError> {
         Some(W::Scalar(s)) => vec![("Y", s.data.clone())],
         Some(W::Labels(l)) => vec![("Y", l.data.iter().map(|&v| v as f32).collect())],
         _ => {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::Unwritable(format!(
                 "a {} cannot be written as an image",
                 product.kind().name()
             )));
@@ -364,9 +365,10 @@ pub fn write_exr(product: &Product, path: &Path) -> Result<(), StageError> {
     // 3,694,445 as plain scan lines, the difference the layout's) and took half of
     // write.hdr's time. Depth, masks, labels and colours hold runs of equal values.
     let compress = !product.is(kind::RADIANCE);
-    let bytes = exr_bytes(w, h, channels, compress)
-        .map_err(|e| StageError::Failed(format!("{}: EXR encoding failed: {e}", path.display())))?;
-    write_file_atomic(path, &bytes).map_err(|source| StageError::Io {
+    let bytes = exr_bytes(w, h, channels, compress).map_err(|e| {
+        OpError::Unwritable(format!("{}: EXR encoding failed: {e}", path.display()))
+    })?;
+    write_file_atomic(path, &bytes).map_err(|source| OpError::Io {
         path: path.to_path_buf(),
         source,
     })
@@ -400,7 +402,7 @@ pub fn exr_bytes(
     Ok(out.into_inner())
 }
 
-fn image_size(product: &Product) -> Result<(u32, u32), StageError> {
+fn image_size(product: &Product) -> Result<(u32, u32), OpError> {
     fn size<T>(i: &Image<T>) -> (u32, u32) {
         (i.width, i.height)
     }
@@ -410,7 +412,7 @@ fn image_size(product: &Product) -> Result<(u32, u32), StageError> {
         Some(W::Points(i) | W::Normals(i) | W::Radiance(i)) => Ok(size(i)),
         Some(W::Scalar(i)) => Ok(size(i)),
         Some(W::Labels(i)) => Ok(size(i)),
-        _ => Err(StageError::Failed(format!(
+        _ => Err(OpError::Unwritable(format!(
             "a {} cannot be written as an image",
             product.kind().name()
         ))),

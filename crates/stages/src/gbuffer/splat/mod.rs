@@ -18,10 +18,10 @@
 //!    the winning keys into the G-buffer rows.
 
 use super::buffer::{COVERAGE_NONE, COVERAGE_SPLAT, GBuffer};
+use crate::OpError;
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
-use relume_graph::StageError;
 use relume_recording::Pose;
 use relume_scene::light::EnvCloud;
 use std::sync::atomic::{AtomicU32, Ordering::Relaxed};
@@ -117,10 +117,10 @@ pub fn splat(
     params: &SplatParams,
     buffer: &mut SplatBuffer,
     out: &mut GBuffer,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     let (w, h) = (camera.width as usize, camera.height as usize);
     if (out.width(), out.height()) != (camera.width, camera.height) || !out.is_consistent() {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "G-buffer is {}x{}, camera is {w}x{h}",
             out.width(),
             out.height()
@@ -128,14 +128,14 @@ pub fn splat(
     }
     let n = cloud.len();
     if cloud.colors.len() != n || cloud.normals.len() != n {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "cloud has {n} positions, {} colors and {} normals",
             cloud.colors.len(),
             cloud.normals.len()
         )));
     }
     if n >= u32::MAX as usize || w * h >= u32::MAX as usize {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::BadInput(format!(
             "cloud of {n} samples or image of {w}x{h} is too large to splat"
         )));
     }
@@ -144,7 +144,7 @@ pub fn splat(
         && params.max_radius_px.is_finite()
         && params.occlusion_margin >= 0.0)
     {
-        return Err(StageError::Failed(
+        return Err(OpError::BadParameter(
             "splat radius must be finite and >= 0, the occlusion margin >= 0".into(),
         ));
     }

@@ -37,8 +37,9 @@ pub use depth::forward_warp;
 pub use truth::FrameTruth;
 
 use ports::{input, output};
-use relume_graph::{Frame, Pipeline};
+use relume_graph::{Frame, Pipeline, ResolvedStage};
 use relume_recording::{Header, StreamKind};
+use relume_stages::sample::{RENDERERS, renderer_kind};
 use serde_json::{Map, Value, json};
 
 enum Scorer {
@@ -131,30 +132,52 @@ impl Evaluator {
             .iter()
             .find(|s| s.kind == "color.compensate")
             .map(|s| (output(s, "compensated"), input(s, "color")));
-        // The renderer whose references every score takes: a sample.path stage's own
-        // math with 1024 samples, or else (sample.dir or sample.val alone) the default
-        // sample.path's on that renderer's inputs.
+        // The renderer whose references every score takes: a renderer that references
+        // itself (sample.path: its own math with 1024 samples), or else the first
+        // renderer of the registry's order in the pipeline, with the default
+        // sample.path's references on its inputs.
         let find = |kind: &str| pipeline.stages.iter().find(|s| s.kind == kind);
-        let sampler = find("sample.path")
-            .or_else(|| find("sample.dir"))
-            .or_else(|| find("sample.val"));
+        let renderers = || {
+            let by_reference = |own: bool| {
+                RENDERERS
+                    .iter()
+                    .filter(move |r| r.references_itself == own)
+                    .filter_map(|r| find(r.info.kind))
+            };
+            by_reference(true).chain(by_reference(false))
+        };
+        let sampler = renderers().next();
+        let references_itself =
+            |s: &ResolvedStage| renderer_kind(s.kind).is_some_and(|r| r.references_itself);
         let (objects, k) = (
             relume_stages::world::object_world(&pipeline.world)
                 .scene
                 .clone(),
             header.depth_intrinsics,
         );
-        let runner = sampler.map(|s| match s.kind {
-            "sample.path" => sampling::PathRunner::new(s, objects.clone(), k, seed),
-            _ => sampling::PathRunner::reference_for(s, objects.clone(), k, seed),
+        let runner = sampler.map(|s| match references_itself(s) {
+            true => sampling::PathRunner::new(s, objects.clone(), k, seed),
+            false => sampling::PathRunner::reference_for(s, objects.clone(), k, seed),
         });
-        // The filter's flicker scores re-run the sampler itself: sample.path only.
-        let resampler = sampler.filter(|s| s.kind == "sample.path");
+        // The filter's flicker scores re-run the sampler itself: one that references
+        // itself only.
+        let resampler = sampler.filter(|s| references_itself(s));
         let mut scorers: Vec<_> = pipeline
             .stages
             .iter()
             .filter_map(|s| {
                 let scorer = match s.kind {
+                    _ if references_itself(s) => Scorer::Path(Box::new(sampling::PathScorer::new(
+                        s,
+                        relume_stages::world::object_world(&pipeline.world)
+                            .scene
+                            .clone(),
+                        header.depth_intrinsics,
+                        seed,
+                    ))),
+                    k if renderer_kind(k).is_some() => {
+                        Scorer::Renderer(Box::new(renderer::RatioScorer::new(s)))
+                    }
                     "depth.fuse" => Scorer::Depth(depth::DepthScorer::new(
                         input(s, "depth"),
                         output(s, "fused_depth"),
@@ -186,17 +209,6 @@ impl Evaluator {
                         input(s, "indirect_light"),
                         output(s, "lights"),
                     )),
-                    "sample.path" => Scorer::Path(Box::new(sampling::PathScorer::new(
-                        s,
-                        relume_stages::world::object_world(&pipeline.world)
-                            .scene
-                            .clone(),
-                        header.depth_intrinsics,
-                        seed,
-                    ))),
-                    "sample.dir" | "sample.val" => {
-                        Scorer::Renderer(Box::new(renderer::RatioScorer::new(s)))
-                    }
                     "filter.axis_aligned" => Scorer::Filter(Box::new(filter::FilterScorer::new(
                         s,
                         header,

@@ -147,9 +147,9 @@ pub fn registry() -> Registry {
     r
 }
 
-/// Every built-in stage kind.
+/// Every built-in stage kind (the renderers from [`sample::RENDERERS`]).
 pub fn builtin() -> Vec<StageInfo> {
-    vec![
+    let mut all = vec![
         decode::INFO,
         compensate::INFO,
         fuse::INFO,
@@ -164,9 +164,9 @@ pub fn builtin() -> Vec<StageInfo> {
         light::split::INFO,
         light::val::INFO,
         light::voxels::INFO,
-        sample::path::INFO,
-        sample::val::INFO,
-        sample::instant_radiosity::INFO,
+    ];
+    all.extend(sample::RENDERERS.iter().map(|r| r.info));
+    all.extend([
         temporal::INFO,
         filter::INFO,
         material::INFO,
@@ -175,5 +175,30 @@ pub fn builtin() -> Vec<StageInfo> {
         debug::NOOP_INFO,
         debug::SLEEP_INFO,
         debug::FAIL_INFO,
-    ]
+    ]);
+    all
+}
+
+#[cfg(test)]
+mod tests {
+    /// The registry holds every renderer, under its own kind, in [`super::builtin`]'s
+    /// place for them (between the light stages and `temporal.accumulate`).
+    #[test]
+    fn the_registry_holds_every_renderer_in_its_place() {
+        let kinds: Vec<&str> = super::builtin().iter().map(|i| i.kind).collect();
+        let at = kinds.iter().position(|k| *k == "light.voxels").unwrap();
+        assert_eq!(
+            kinds[at + 1..at + 5],
+            [
+                "sample.path",
+                "sample.val",
+                "sample.dir",
+                "temporal.accumulate"
+            ]
+        );
+        let registry = super::registry();
+        for r in super::sample::RENDERERS {
+            assert!(registry.get(r.info.kind).is_some(), "{}", r.info.kind);
+        }
+    }
 }

@@ -4,11 +4,12 @@
 //! one pixel result and one row writer ([`PixelLayers`], [`LayerRow`]), and one
 //! driver that hands a renderer the rows to fill in parallel ([`shade_rows`]).
 
+use crate::OpError;
 use crate::kind;
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::raster::{Image, LabelImage, ScalarImage, Vec3Image};
-use relume_graph::{Frame, Port, Product, ProductKind, StageError};
+use relume_graph::{Frame, Port, Product, ProductKind};
 
 /// The output roles of a renderer, in [`IrradianceLayers`] order, with their kinds.
 /// A renderer that cannot say which pixels its objects touched writes all but the
@@ -54,17 +55,17 @@ pub fn layer_output_ports() -> Vec<Port> {
         .collect()
 }
 
-/// Refuses a renderer's inputs whose sizes differ from the depth map's (`w` x `h`):
+/// Refuses ([`OpError::SizeMismatch`]) a renderer's inputs whose sizes differ from the depth map's (`w` x `h`):
 /// `sizes` are (what, width, height); the error names `stage` and the first that
 /// differs.
 pub fn check_sizes(
     stage: &str,
     (w, h): (u32, u32),
     sizes: &[(&str, u32, u32)],
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     for &(what, ww, hh) in sizes {
         if (ww, hh) != (w, h) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::SizeMismatch(format!(
                 "{stage}: {what} is {ww}x{hh}, depth is {w}x{h}"
             )));
         }

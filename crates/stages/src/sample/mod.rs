@@ -11,19 +11,37 @@
 //! Fig. 5): screen-space marching, Environment Mapping, Distance Impostor Tracing or
 //! Voxel Cone Tracing.
 //!
-//! The seams a new renderer plugs into: it writes [`layers::IrradianceLayers`] (the
-//! roles of [`layers::LAYER_OUTPUTS`]), fills its rows through [`layers::shade_rows`]
-//! (rayon's pool, per-worker state, any stride), and takes one line in the contract
-//! test (`contract_tests`: pi L under a constant environment, E_RV == E_R without
-//! objects, the same bits at any thread count and on every SIMD path).
+//! The seams a new renderer plugs into: it implements [`renderer::Renderer`] (what it
+//! reads, how it builds, how it renders a frame; the one stage wrapper
+//! [`renderer::RendererStage`] does the rest), writes [`layers::IrradianceLayers`]
+//! (the roles of [`layers::LAYER_OUTPUTS`]), may fill its rows through
+//! [`layers::shade_rows`] (rayon's pool, per-worker state, any stride), takes one line
+//! in [`RENDERERS`] (the registry and `relume eval` find it there) and one in the
+//! contract test (`contract_tests`: pi L under a constant environment, E_RV == E_R
+//! without objects, the same bits at any thread count and on every SIMD path).
 
 pub mod instant_radiosity;
 pub mod layers;
 pub mod path;
 pub mod pyramid;
 pub mod query;
+pub mod renderer;
 pub mod ssrt;
 pub mod val;
+
+use renderer::RendererKind;
+
+/// Every built-in renderer, in registry order.
+pub const RENDERERS: &[RendererKind] = &[
+    RendererKind::of::<path::SamplePath>(),
+    RendererKind::of::<val::SampleVal>(),
+    RendererKind::of::<instant_radiosity::SampleDir>(),
+];
+
+/// The built-in renderer of stage kind `kind`, if it is one.
+pub fn renderer_kind(kind: &str) -> Option<&'static RendererKind> {
+    RENDERERS.iter().find(|r| r.info.kind == kind)
+}
 
 #[cfg(test)]
 mod contract_tests;
@@ -54,5 +72,25 @@ mod tests {
         assert_eq!(roles(outputs(&super::path::INFO)), layers);
         assert_eq!(roles(outputs(&super::val::INFO)), layers[..11]);
         assert_eq!(roles(outputs(&super::instant_radiosity::INFO)), layers);
+    }
+
+    #[test]
+    fn every_built_in_renderer_is_found_by_kind_and_only_sample_path_references_itself() {
+        let kinds: Vec<(&str, bool)> = super::RENDERERS
+            .iter()
+            .map(|r| (r.info.kind, r.references_itself))
+            .collect();
+        assert_eq!(
+            kinds,
+            [
+                ("sample.path", true),
+                ("sample.val", false),
+                ("sample.dir", false)
+            ]
+        );
+        for r in super::RENDERERS {
+            assert!(super::renderer_kind(r.info.kind).is_some());
+        }
+        assert!(super::renderer_kind("filter.axis_aligned").is_none());
     }
 }

@@ -83,82 +83,72 @@ pub use params::{DirInputs, DirParams, MAX_MAP_BYTES, MAX_SHADOW_MAP_SIZE, MAX_V
 pub use points::MeshPoints;
 pub use render::DirRenderer;
 
-use super::layers::{
-    IrradianceLayers, LAYER_OUTPUTS, RENDERER_INPUTS, layer_output_ports, renderer_input_ports,
-};
-use crate::kind::FrameProducts;
-use glam::Affine3A;
-use relume_base::pinhole::Pinhole;
-use relume_graph::{Frame, Ports, Stage, StageError, StageInfo};
-use relume_recording::Intrinsics;
+use super::layers::{IrradianceLayers, renderer_input_ports};
+use super::renderer::{self, RenderFrame, Renderer};
+use crate::OpError;
+use relume_graph::{BuildContext, ParamSpec, Params, Port, StageError, StageInfo};
 use relume_scene::objects::VirtualScene;
 use std::sync::Arc;
 
-pub const INFO: StageInfo = StageInfo {
-    kind: "sample.dir",
-    summary: "E_R / E_RV from virtual point lights with real/virtual flags, imperfect shadow maps and interleaved sampling (paper 002 Sec. 3)",
-    params: PARAMS,
-    ports: |_| Ports {
-        inputs: renderer_input_ports().collect(),
-        outputs: layer_output_ports(),
-    },
-    build: |ctx| {
-        let params = DirParams::from_params(ctx.params, ctx.seed);
-        params.check()?;
-        Ok(Box::new(DirStage {
-            inputs: RENDERER_INPUTS.map(|(role, _, _)| ctx.input(role)),
-            outputs: LAYER_OUTPUTS.map(|(role, _)| ctx.output(role)),
-            // The objects do not move: their points are spread once.
-            mesh: MeshPoints::new(
-                crate::world::objects(ctx),
-                params.mesh_points as usize,
-                params.seed,
-            ),
-            params,
-            intrinsics: ctx.header.depth_intrinsics,
-            objects: Arc::clone(crate::world::objects(ctx)),
-            renderer: DirRenderer::default(),
-        }))
-    },
-};
+pub const INFO: StageInfo = renderer::info::<SampleDir>();
 
 /// [`DirRenderer::render`] with fresh buffers and the objects' points spread for the
 /// call (for tests and one-off use).
-pub fn sample_dir(inputs: &DirInputs, params: &DirParams) -> Result<IrradianceLayers, StageError> {
+pub fn sample_dir(inputs: &DirInputs, params: &DirParams) -> Result<IrradianceLayers, OpError> {
     let mesh = MeshPoints::new(inputs.objects, params.mesh_points as usize, params.seed);
     let mut out = IrradianceLayers::new(inputs.depth.width, inputs.depth.height);
     DirRenderer::default().render(inputs, params, &mesh, &mut out)?;
     Ok(out)
 }
 
-struct DirStage {
-    inputs: [String; 5],
-    outputs: [String; 12],
+/// `sample.dir` as a [`Renderer`]: [`DirRenderer`] (its buffers kept from frame to
+/// frame) over the frame's products, with the objects' points spread once per run.
+pub struct SampleDir {
     mesh: MeshPoints,
     params: DirParams,
-    intrinsics: Intrinsics,
     objects: Arc<VirtualScene>,
     renderer: DirRenderer,
 }
 
-impl Stage for DirStage {
-    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
-        let [depth, normals, pose, radiance, table] = &self.inputs;
-        let depth = frame.depth(depth)?;
+impl Renderer for SampleDir {
+    const KIND: &'static str = "sample.dir";
+    const SUMMARY: &'static str = "E_R / E_RV from virtual point lights with real/virtual flags, imperfect shadow maps and interleaved sampling (paper 002 Sec. 3)";
+    const PARAMS: &'static [ParamSpec] = PARAMS;
+
+    fn inputs(_: &Params) -> Vec<Port> {
+        renderer_input_ports().collect()
+    }
+
+    fn build(ctx: &BuildContext) -> Result<SampleDir, StageError> {
+        let params = DirParams::from_params(ctx.params, ctx.seed);
+        params.check()?;
+        let objects = crate::world::objects(ctx);
+        Ok(SampleDir {
+            // The objects do not move: their points are spread once.
+            mesh: MeshPoints::new(objects, params.mesh_points as usize, params.seed),
+            params,
+            objects: Arc::clone(objects),
+            renderer: DirRenderer::default(),
+        })
+    }
+
+    fn render(
+        &mut self,
+        frame: &RenderFrame<'_>,
+        out: &mut IrradianceLayers,
+    ) -> Result<(), StageError> {
         let inputs = DirInputs {
-            depth,
-            normals: frame.normals(normals)?,
-            radiance: frame.radiance(radiance)?,
-            camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
-            camera_to_world: Affine3A::from_mat4(frame.pose(pose)?.matrix().as_mat4()),
-            table: frame.light_table(table)?,
+            depth: frame.depth,
+            normals: frame.normals("normals")?,
+            radiance: frame.radiance("radiance")?,
+            camera: frame.camera,
+            camera_to_world: frame.camera_to_world,
+            table: frame.light_table("light_table")?,
             objects: &self.objects,
-            frame: frame.index as u64,
+            frame: frame.index,
         };
-        let mut out = IrradianceLayers::new(depth.width, depth.height);
         self.renderer
-            .render(&inputs, &self.params, &self.mesh, &mut out)?;
-        out.insert_into(frame, &self.outputs);
+            .render(&inputs, &self.params, &self.mesh, out)?;
         Ok(())
     }
 }

@@ -2,10 +2,11 @@
 //! ([`PARAMS`], [`DirParams`]) and the frame's inputs ([`DirInputs`]), shared by the
 //! stage, the renderer and its passes.
 
+use crate::OpError;
 use glam::Affine3A;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Vec3Image};
-use relume_graph::{ParamDefault, ParamSpec, Params, StageError};
+use relume_graph::{ParamDefault, ParamSpec, Params};
 use relume_scene::light::LightTable;
 use relume_scene::objects::VirtualScene;
 
@@ -152,8 +153,8 @@ impl DirParams {
     }
 
     /// Refuses settings the renderer cannot run with.
-    pub fn check(&self) -> Result<(), StageError> {
-        let fail = |m: String| Err(StageError::Failed(format!("sample.dir: {m}")));
+    pub fn check(&self) -> Result<(), OpError> {
+        let fail = |m: String| Err(OpError::BadParameter(format!("sample.dir: {m}")));
         if self.environment_vpls > self.vpls as usize {
             return fail(format!(
                 "environment_vpls ({}) is more than vpls ({})",

@@ -35,12 +35,12 @@ use super::points::{MeshPoints, RealSurface};
 use super::shade::{LightSet, Receiver, gather};
 use super::splat::splat_with;
 use super::vpl::{Candidate, Emitter, Vpl, environment_vpls, resample};
+use crate::OpError;
 use crate::sample::layers::{IrradianceLayers, check_sizes, shade_rows};
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::rng;
 use relume_base::simd::Kernel;
-use relume_graph::StageError;
 use relume_scene::light::split::luminance;
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -112,7 +112,7 @@ impl DirRenderer {
         params: &DirParams,
         mesh: &MeshPoints,
         out: &mut IrradianceLayers,
-    ) -> Result<(), StageError> {
+    ) -> Result<(), OpError> {
         self.lights(inputs, params, mesh)?;
         self.shade(inputs, params, out)
     }
@@ -123,7 +123,7 @@ impl DirRenderer {
         inputs: &DirInputs,
         params: &DirParams,
         mesh: &MeshPoints,
-    ) -> Result<(), StageError> {
+    ) -> Result<(), OpError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
         self.lit = None;
         check_sizes(
@@ -136,7 +136,7 @@ impl DirRenderer {
             ],
         )?;
         if !inputs.camera_to_world.is_finite() {
-            return Err(StageError::Failed(
+            return Err(OpError::BadInput(
                 "sample.dir: the camera pose is not finite".into(),
             ));
         }
@@ -202,17 +202,17 @@ impl DirRenderer {
         inputs: &DirInputs,
         params: &DirParams,
         out: &mut IrradianceLayers,
-    ) -> Result<(), StageError> {
+    ) -> Result<(), OpError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
         let k = params.interleave as usize;
         if self.lit != Some(lit_frame(w, h, params)) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::BadInput(format!(
                 "sample.dir: no lights made for a {w}x{h} frame with interleave {k} and {s}x{s} maps to shade",
                 s = params.shadow_map_size
             )));
         }
         if out.size() != Some((w, h)) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::SizeMismatch(format!(
                 "sample.dir: output buffers are not all {w}x{h}"
             )));
         }

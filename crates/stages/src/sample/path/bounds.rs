@@ -2,7 +2,7 @@
 //! directions from a point that may meet the objects' bounding sphere, the bounding
 //! box, and the pixels where a primary ray may meet them.
 
-use super::PathInputs;
+use super::inputs::PathInputs;
 use glam::Vec3;
 use relume_scene::objects::{Aabb, VirtualHit, VirtualScene};
 

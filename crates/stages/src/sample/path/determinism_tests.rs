@@ -7,6 +7,7 @@ use super::tests::{
 };
 use super::*;
 use glam::Vec3;
+use relume_base::raster::Vec3Image;
 use relume_base::threads::with_threads;
 use relume_scene::objects::Material;
 

@@ -1,83 +1,67 @@
 //! The per-pixel estimator of `sample.path` (paper 001 Sec. 5, two-mode sampling; paper
-//! 000 Sec. 7 for the object-aware differential). See the module docs of
-//! [`super`] for what each estimate means.
+//! 000 Sec. 7 for the object-aware differential), whole: from what a span drew at a
+//! pixel (`records.rs`) and its rays' answers, the estimates at the real point, at the
+//! virtual primaries' hits, the objects' outgoing radiance along a ray, and the
+//! object-aware differentials. See the module docs of [`super`] for what each estimate
+//! means; `span.rs` draws the samples and traces their rays, `rays.rs` answers them.
+//!
+//! **Object-aware sampling** (paper 000 Sec. 7: eq. 9 and the scaled estimator after
+//! it): at a real point, E_RV = E_R plus a differential estimated only from the
+//! directions that may meet the objects. Of N candidate directions, those meeting the
+//! objects' bounding box form H; at most `cache_size` of them (H_a, a uniform random
+//! subset chosen by reservoir sampling, [`Reservoir`]) are traced, and their sum of
+//! L_RV - L_R is scaled by (1 + |H_b| / |H_a|) / N = |H| / (|H_a| N). The estimate is
+//! unbiased, and where no traced direction meets an object there is no differential:
+//! E_RV == E_R bit for bit.
+//! - **Indirect** ([`Kernel::object_aware`]): N cosine directions; a direction meeting
+//!   an object before the real scene brings the object's outgoing radiance instead of
+//!   the real surface's.
+//! - **Direct** ([`Kernel::object_aware_direct`]): N samples of the light table, drawn
+//!   in N equal strata of it like the direct samples; one that an object blocks before
+//!   the real scene does loses its light, L cos / pdf. The correlated direct samples
+//!   then leave E_RV^dir unblocked (they estimate E_R^dir), and the differential
+//!   carries the shadow, with many more directions tested against the box than the
+//!   pixel's direct samples. E_RV^dir is clamped at 0 per channel where the
+//!   differential exceeds the pixel's E_R^dir estimate (a noisy E_R and a large
+//!   blocked sum), which biases deep shadows slightly bright instead of showing
+//!   negative light.
 
 use super::bounds::{Cone, Objects, object_pixel_bounds};
-use super::rays::WorldQuery;
-use super::sampling::{Basis, PixelRng, Stream, StreamId, strata_bounds, stratum_index};
-use super::span::{DirectRay, Drawn, IndirectRay, RealSamples};
+use super::object_aware::Reservoir;
+use super::params::MAX_CANDIDATES;
+use super::rays::{FrameQuery, WorldQuery};
+use super::records::{
+    Acc, DirectRay, Drawn, IndirectRay, RealPoint, RealSamples, SURFACE_OFFSET, Surface,
+    VirtualDirect, VirtualIndirect,
+};
+use super::sampling::{
+    Basis, PixelRng, Stream, StreamId, below, cosine_hemisphere, phong_weight, strata_bounds,
+    stratum_index,
+};
 use super::{PathInputs, PathParams};
 use crate::sample::layers::PixelLayers;
-use crate::sample::query::{Hit, RadianceQuery, Ray, Source, cone_spread};
-use crate::sample::ssrt::{RayOrigin, ScreenTracer};
+use crate::sample::query::{Hit, Source, cone_spread};
+use crate::sample::ssrt::ScreenTracer;
 use glam::{Mat3A, Vec3, Vec3A};
 use relume_base::raster::depth_is_valid;
 use relume_base::simd;
 use relume_scene::light::LightSample;
 use relume_scene::light::voxels::{ConeMarch, VoxelVolume};
 use relume_scene::objects::VirtualHit;
-use std::f32::consts::PI;
+use std::f32::consts::{FRAC_1_PI, PI};
 
-/// Offset (metres) of rays leaving a virtual surface along its normal.
-pub(super) const SURFACE_OFFSET: f32 = 1e-4;
 /// `vct`: how many of the object volume's voxels a cone leaving a virtual surface
 /// starts off it (the solid voxelization puts the surface up to a voxel from where it
 /// is, and trilinear sampling reaches a voxel further).
 pub(super) const LEAVE_VOXELS: f32 = 1.5;
-/// The most object-aware candidates per pixel (size of the H_a index cache).
-pub const MAX_CANDIDATES: usize = 256;
-
-/// A real shading point: the pixel's depth-map point and normal.
-pub(super) struct RealPoint {
-    /// The ray origin, raised off the surface along the normal (world space, and
-    /// projected for the screen-space tracer: `None` when it leaves the image), and
-    /// the surface point itself (world).
-    pub(super) world: Vec3,
-    /// Where the world-space query's rays start: `world`, but raised a voxel
-    /// further under `vct`.
-    pub(super) query_origin: Vec3,
-    pub(super) origin: Option<RayOrigin>,
-    pub(super) surface: Vec3,
-    pub(super) normal_world: Vec3,
-    /// Basis about the camera-space normal (indirect directions are drawn in camera
-    /// space, where the screen-space tracer works).
-    pub(super) basis_camera: Basis,
-    /// The objects' cone from this point, in world and in camera space.
-    pub(super) cone_world: Cone,
-    pub(super) cone_camera: Cone,
-}
-
-/// Sums of one pixel's estimates while its samples are drawn.
-pub(super) struct Acc {
-    pub(super) r_dir: Vec3,
-    pub(super) r_ind: Vec3,
-    pub(super) rv_dir: Vec3,
-    pub(super) rv_ind: Vec3,
-    pub(super) rv_dir_n: u32,
-    pub(super) rv_ind_n: u32,
-    /// Indirect / direct samples of E_RV taken at the real point.
-    pub(super) rv_ind_real_n: u32,
-    pub(super) rv_dir_real_n: u32,
-    pub(super) direct_min: f32,
-    pub(super) indirect_min: f32,
-    pub(super) touched: bool,
-    /// Draws taken from the bounce stream so far.
-    pub(super) bounces: u64,
-}
-
 /// Everything constant over a frame.
 pub(super) struct Kernel<'a> {
     pub(super) inputs: &'a PathInputs<'a>,
     pub(super) params: &'a PathParams,
-    pub(super) tracer: ScreenTracer<'a>,
-    /// The world-space query (`em`, `dit`, `vct`); `None` for screen-space marching.
-    pub(super) world_query: Option<WorldQuery<'a>>,
+    /// How rays meet the real scene (the stage's radiance query).
+    pub(super) query: FrameQuery<'a>,
     /// `vct`: the objects' solid volume, whose cones give their shadows.
     pub(super) object_volume: Option<&'a VoxelVolume>,
-    /// `vct`: the cone spreads of direct and indirect samples at real points (the
-    /// pixel's samples share the hemisphere: [`cone_spread`]).
-    pub(super) direct_spread: f32,
-    pub(super) indirect_spread: f32,
     pub(super) to_world: Mat3A,
     pub(super) to_camera: Mat3A,
     pub(super) camera_position: Vec3,
@@ -96,11 +80,6 @@ pub(super) struct Kernel<'a> {
     /// Blocked direct samples dimmer than this (largest channel of the sample's
     /// radiance) do not count towards `direct_min_distance`.
     pub(super) occluder_min_radiance: f32,
-    /// The table's directions in camera space (where the screen-space tracer works).
-    pub(super) table_camera: Vec<Vec3>,
-    /// `em`: the impostor's answer per table sample (it does not depend on the ray's
-    /// origin), looked up once per frame instead of once per ray.
-    pub(super) table_em: Vec<Option<Hit>>,
     /// How the screen-space rays are marched (the same hits with any).
     pub(super) lanes: simd::Kernel,
 }
@@ -135,24 +114,20 @@ impl<'a> Kernel<'a> {
         let object_pixels = objects
             .as_ref()
             .map_or([0, 0, -1, -1], |o| object_pixel_bounds(inputs, &o.aabb));
-        // Environment Mapping's answer does not depend on the ray's origin.
-        let table_em = match &world_query {
-            Some(WorldQuery::Impostor(q)) if q.iterations == 0 => inputs
-                .table
-                .samples
-                .iter()
-                .map(|ls| q.query(&Ray::unbounded(q.center, ls.direction)))
-                .collect(),
-            _ => Vec::new(),
-        };
         Kernel {
             inputs,
             params,
-            tracer,
-            world_query,
+            query: FrameQuery::new(
+                tracer,
+                world_query,
+                inputs.radiance,
+                params.max_distance,
+                inputs.table,
+                to_world,
+                cone_spread(params.primary * params.direct, 0.0),
+                cone_spread(params.primary * params.indirect, 0.0),
+            ),
             object_volume,
-            direct_spread: cone_spread(params.primary * params.direct, 0.0),
-            indirect_spread: cone_spread(params.primary * params.indirect, 0.0),
             to_world,
             to_camera,
             camera_position,
@@ -172,24 +147,8 @@ impl<'a> Kernel<'a> {
                     .iter()
                     .map(|s| s.radiance.max_element())
                     .fold(0.0, f32::max),
-            table_camera: inputs
-                .table
-                .samples
-                .iter()
-                .map(|ls| Vec3::from(to_camera * Vec3A::from(ls.direction)))
-                .collect(),
-            table_em,
             lanes,
         }
-    }
-
-    /// `em`, `dit`: a real point's indirect rays are not asked of the impostor when
-    /// drawn (its answer brings them no light, see [`super::rays::NOT_ASKED`]); a ray
-    /// of a real primary that meets an object asks it then, to learn whether the
-    /// impostor's surface comes first ([`Kernel::before_impostor`]).
-    #[inline]
-    pub(super) fn impostor_bounds_reflectors(&self) -> bool {
-        matches!(self.world_query, Some(WorldQuery::Impostor(_)))
     }
 
     /// `vct`: the cone of a direct sample's aperture from `origin` along `dir` through
@@ -203,7 +162,7 @@ impl<'a> Kernel<'a> {
         dir: Vec3,
         t_max: f32,
     ) -> ConeMarch {
-        volume.march(origin, dir, self.direct_spread, 0.0, t_max)
+        volume.march(origin, dir, self.query.direct_spread, 0.0, t_max)
     }
 
     /// `vct`: [`Kernel::object_cone`] leaving a virtual surface at `position` with
@@ -234,7 +193,7 @@ impl<'a> Kernel<'a> {
     }
 
     /// All estimates of pixel (x, y) from what was drawn there (see [`Drawn`]), with
-    /// all its screen-space rays traced into `hits` (see [`super::span`]).
+    /// all its rays answered in `hits` (see `span.rs`).
     pub(super) fn shade_pixel(
         &self,
         x: u32,
@@ -405,7 +364,7 @@ impl<'a> Kernel<'a> {
         let world = self.inputs.camera_to_world.transform_point3(camera);
         let surface = self.inputs.camera_to_world.transform_point3(surface);
         let normal_world = Vec3::from(self.to_world * Vec3A::from(normal_camera));
-        let query_origin = match &self.world_query {
+        let query_origin = match &self.query.world_query {
             // Cones leave the surface's own voxel (raised a voxel along the normal,
             // as voxel cone tracers do).
             Some(WorldQuery::Voxels(q)) => world + normal_world * q.volume.voxel_size,
@@ -422,7 +381,7 @@ impl<'a> Kernel<'a> {
         Some(RealPoint {
             world,
             query_origin,
-            origin: self.tracer.origin(camera),
+            origin: self.query.tracer.origin(camera),
             surface,
             normal_world,
             basis_camera: Basis::new(normal_camera),
@@ -605,8 +564,8 @@ impl<'a> Kernel<'a> {
                     Some(o) if !params.object_aware && rp.cone_camera.admits(dir_camera) => {
                         let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
                         o.hit(rp.world, dir, t_real).filter(|hit| {
-                            !self.impostor_bounds_reflectors()
-                                || self.before_impostor(o, rp, dir, dir_camera, hit.t)
+                            !self.query.impostor_bounds_reflectors()
+                                || self.query.before_impostor(o, rp, dir, dir_camera, hit.t)
                         })
                     }
                     _ => None,
@@ -619,6 +578,282 @@ impl<'a> Kernel<'a> {
                 acc.rv_ind += l_rv;
             }
         }
+    }
+
+    /// The E_RV samples of a virtual primary's hit seen from direction `to_viewer`,
+    /// from its `direct` and `indirect` samples drawn by
+    /// `Span::draw_virtual_samples` (`span.rs`) and their rays' `hits`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn virtual_samples(
+        &self,
+        hit: &VirtualHit,
+        to_viewer: Vec3,
+        direct: &[VirtualDirect],
+        indirect: &[VirtualIndirect],
+        hits: &[Option<Hit>],
+        bounce_stream: &Stream,
+        acc: &mut Acc,
+    ) {
+        let surface = Surface::new(hit, to_viewer);
+        let table = &self.inputs.table.samples;
+        for drawn in direct {
+            let mut c = Vec3::ZERO;
+            match *drawn {
+                VirtualDirect::Unlit => {}
+                VirtualDirect::Blocked { sample, cos, t } => {
+                    self.record_occluder(acc, table[sample].radiance, t, cos);
+                }
+                VirtualDirect::Open {
+                    sample,
+                    cos,
+                    ray,
+                    visible,
+                } => {
+                    let ls = &table[sample];
+                    match hits[ray] {
+                        Some(Hit {
+                            source: Source::Surface,
+                            t,
+                            ..
+                        }) => self.record_occluder(acc, ls.radiance, t, cos),
+                        arrival => {
+                            let radiance = arrival.map_or(ls.radiance, |h| h.radiance);
+                            let lobe = if surface.glossy {
+                                phong_weight(
+                                    surface.mirror.dot(ls.direction),
+                                    hit.material.exponent,
+                                )
+                            } else {
+                                1.0
+                            };
+                            c = radiance * (cos / ls.pdf * lobe * visible);
+                        }
+                    }
+                }
+            }
+            acc.rv_dir += c;
+        }
+        acc.rv_dir_n += self.params.direct;
+        for sample in indirect {
+            if let Some(ray) = sample.ray {
+                let l = self.incoming(surface.origin, sample.dir, hits[ray], bounce_stream, acc);
+                acc.rv_ind += l * sample.weight;
+            }
+        }
+        acc.rv_ind_n += self.params.indirect;
+    }
+
+    /// Radiance arriving at a virtual surface from `dir`: the nearer of the object
+    /// (its outgoing radiance; not tested when `visibility` is off) and the real
+    /// surface `real` that the query met (its camera radiance); 0 when the ray reaches
+    /// the environment (it is counted by direct light).
+    pub(super) fn incoming(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        real: Option<Hit>,
+        bounce_stream: &Stream,
+        acc: &mut Acc,
+    ) -> Vec3 {
+        let Some(objects) = self.objects.as_ref() else {
+            return Vec3::ZERO;
+        };
+        let t_real = real.map_or(f32::INFINITY, |h| h.t);
+        if self.params.visibility
+            && let Some(hit) = objects.hit(origin, dir, t_real)
+        {
+            acc.indirect_min = acc.indirect_min.min(hit.t);
+            return self.object_radiance(&hit, bounce_stream, acc);
+        }
+        match real {
+            Some(Hit {
+                source: Source::Surface,
+                t,
+                radiance,
+            }) => {
+                acc.indirect_min = acc.indirect_min.min(t);
+                radiance
+            }
+            _ => Vec3::ZERO,
+        }
+    }
+
+    /// The outgoing radiance of a virtual surface towards the ray that hit it:
+    /// (k_V / pi) E^dir from one importance sample of the table, with virtual
+    /// (self-shadowing, when `visibility` is on) and real visibility, and the radiance
+    /// the query brings along the sample's direction. Glossy surfaces are treated as
+    /// diffuse for this bounce (as paper 000 Sec. 6.4 does); no further bounce.
+    pub(super) fn object_radiance(
+        &self,
+        hit: &VirtualHit,
+        bounce_stream: &Stream,
+        acc: &mut Acc,
+    ) -> Vec3 {
+        let table = &self.inputs.table.samples;
+        if table.is_empty() {
+            return Vec3::ZERO;
+        }
+        let h = bounce_stream.bits(acc.bounces);
+        acc.bounces += 1;
+        let ls = &table[below(h, table.len() as u32) as usize];
+        let cos = hit.normal.dot(ls.direction);
+        if !(cos > 0.0 && ls.pdf > 0.0) {
+            return Vec3::ZERO;
+        }
+        let origin = hit.position + hit.normal * SURFACE_OFFSET;
+        let mut visible = 1.0;
+        if self.params.visibility
+            && let Some(objects) = &self.objects
+        {
+            match self.object_volume {
+                Some(volume) => {
+                    visible -= self
+                        .object_shadow(volume, hit.position, hit.normal, ls.direction)
+                        .opacity;
+                }
+                None if objects.hit(origin, ls.direction, f32::INFINITY).is_some() => {
+                    return Vec3::ZERO;
+                }
+                None => {}
+            }
+        }
+        let radiance = match self.query.answer_from(origin, ls.direction) {
+            Some(Hit {
+                source: Source::Surface,
+                ..
+            }) => return Vec3::ZERO,
+            Some(h) => h.radiance,
+            None => ls.radiance,
+        };
+        hit.material.albedo * FRAC_1_PI * radiance * (cos / ls.pdf * visible)
+    }
+
+    /// The differential indirect irradiance E_RV - E_R at the real point (see the
+    /// module docs). `None` when no traced direction meets an object.
+    pub(super) fn object_aware(
+        &self,
+        rp: &RealPoint,
+        objects: &Objects,
+        rng: &PixelRng,
+        bounce_stream: &Stream,
+        acc: &mut Acc,
+    ) -> Option<Vec3> {
+        let params = self.params;
+        let n = (params.candidates as usize).min(MAX_CANDIDATES);
+        // No cosine direction can meet the sphere when its cone lies below the horizon.
+        let cone = rp.cone_camera;
+        let sin_half = (1.0 - cone.cos_half * cone.cos_half).max(0.0).sqrt();
+        if cone.cos_half > -1.0 && cone.axis.dot(rp.basis_camera.n) < -sin_half - 1e-5 {
+            return None;
+        }
+        let candidates = rng.stream(StreamId::Candidate);
+        let choices = rng.stream(StreamId::Reservoir);
+        let direction = |i: usize| {
+            let (u1, u2) = candidates.pair(i as u64);
+            rp.basis_camera.to_world(cosine_hemisphere(u1, u2))
+        };
+        let mut reservoir = Reservoir::new(params.cache_size as usize, &choices);
+        for i in 0..n {
+            let dir_camera = direction(i);
+            if !cone.admits(dir_camera) {
+                continue;
+            }
+            let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
+            if objects
+                .aabb
+                .ray_span(rp.world, dir.recip(), 0.0, f32::INFINITY)
+                .is_some()
+            {
+                reservoir.offer(i);
+            }
+        }
+        let mut sum = Vec3::ZERO;
+        let mut met = false;
+        for &i in reservoir.kept() {
+            let dir_camera = direction(i as usize);
+            let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
+            let Some(hit) = objects.scene.intersect(rp.world, dir, 0.0, f32::INFINITY) else {
+                continue;
+            };
+            let real = self.query.answer_from_real(rp, dir_camera);
+            if real.is_some_and(|r| r.t <= hit.t) {
+                continue; // the real scene is in front: no difference
+            }
+            met = true;
+            acc.indirect_min = acc.indirect_min.min(hit.t);
+            // Environment light is counted by direct light.
+            let l_real = match real {
+                Some(r) if r.source == Source::Surface => r.radiance,
+                _ => Vec3::ZERO,
+            };
+            sum += self.object_radiance(&hit, bounce_stream, acc) - l_real;
+        }
+        met.then(|| sum * reservoir.scale(n, PI))
+    }
+
+    /// The differential direct irradiance E_RV^dir - E_R^dir at the real point (see
+    /// the module docs): minus the light of the candidate table samples the objects
+    /// block. `None` when no traced candidate is blocked.
+    pub(super) fn object_aware_direct(
+        &self,
+        rp: &RealPoint,
+        objects: &Objects,
+        rng: &PixelRng,
+        acc: &mut Acc,
+    ) -> Option<Vec3> {
+        let table = &self.inputs.table.samples;
+        let n = (self.params.candidates as usize).min(MAX_CANDIDATES);
+        let candidates = rng.stream(StreamId::DirectCandidate);
+        let choices = rng.stream(StreamId::DirectReservoir);
+        let sample = |i: usize| {
+            let bits = candidates.bits(i as u64);
+            stratum_index(&self.candidate_strata, i, table.len(), bits)
+        };
+        let mut reservoir = Reservoir::new(self.params.cache_size as usize, &choices);
+        for i in 0..n {
+            let Some(s) = sample(i) else { continue };
+            let ls = &table[s];
+            let lit = rp.normal_world.dot(ls.direction) > 0.0 && ls.pdf > 0.0;
+            if lit
+                && rp.cone_world.admits(ls.direction)
+                && objects
+                    .aabb
+                    .ray_span(rp.world, ls.direction.recip(), 0.0, f32::INFINITY)
+                    .is_some()
+            {
+                reservoir.offer(i);
+            }
+        }
+        let mut sum = Vec3::ZERO;
+        let mut met = false;
+        for &i in reservoir.kept() {
+            let Some(s) = sample(i as usize) else {
+                continue;
+            };
+            let ls = &table[s];
+            let Some(hit) = objects
+                .scene
+                .intersect(rp.world, ls.direction, 0.0, f32::INFINITY)
+            else {
+                continue;
+            };
+            // The light as the real scene delivers it: none behind a real occluder,
+            // none the object can block beyond the environment's distance.
+            let radiance = match self.query.direct_arrival(rp, s) {
+                Some(Hit {
+                    source: Source::Surface,
+                    ..
+                }) => continue,
+                Some(h) if h.t <= hit.t => continue,
+                Some(h) => h.radiance,
+                None => ls.radiance,
+            };
+            met = true;
+            let cos = rp.normal_world.dot(ls.direction);
+            self.record_occluder(acc, ls.radiance, hit.t, cos);
+            sum -= radiance * (cos / ls.pdf);
+        }
+        met.then(|| sum * reservoir.scale(n, 1.0))
     }
 }
 

@@ -128,108 +128,37 @@
 //! and the BVH only for rays inside the cone of their bounding sphere.
 
 mod bounds;
+mod inputs;
 mod kernel;
 mod object_aware;
 mod params;
 mod rays;
+mod records;
 pub mod sampling;
 mod span;
-mod virtual_paths;
 
 pub use super::layers::IrradianceLayers;
 use crate::kind;
-use crate::kind::FrameProducts;
-pub use kernel::MAX_CANDIDATES;
-pub use params::{MAX_SAMPLES, PathParams};
+pub use inputs::PathInputs;
+pub use params::{MAX_CANDIDATES, MAX_SAMPLES, PathParams};
 use params::{PARAMS, query_kind};
 
-use super::layers::{
-    LAYER_OUTPUTS, RENDERER_INPUTS, check_sizes, layer_output_ports, renderer_input_ports,
-    shade_rows,
-};
+use super::layers::{check_sizes, renderer_input_ports, shade_rows};
 use super::pyramid::DepthPyramid;
 use super::query::{ImpostorQuery, QueryKind, VoxelQuery};
+use super::renderer::{self, RenderFrame, Renderer};
 use super::ssrt::ScreenTracer;
-use glam::Affine3A;
+use crate::OpError;
 use kernel::Kernel;
 use rays::WorldQuery;
-use relume_base::pinhole::Pinhole;
-use relume_base::raster::{DepthImage, Vec3Image};
 use relume_base::simd;
-use relume_graph::{Frame, Port, Ports, Stage, StageError, StageInfo};
-use relume_recording::Intrinsics;
+use relume_graph::{BuildContext, ParamSpec, Params, Port, StageError, StageInfo};
 use relume_scene::light::voxels::VoxelVolume;
-use relume_scene::light::{EnvMap, LightTable};
 use relume_scene::objects::VirtualScene;
 use span::{SPAN_PIXELS, Span};
 use std::sync::Arc;
 
-pub const INFO: StageInfo = StageInfo {
-    kind: "sample.path",
-    summary: "two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5)",
-    params: PARAMS,
-    ports: |p| Ports {
-        inputs: renderer_input_ports()
-            .chain(
-                query_kind(p)
-                    .needs_environment()
-                    .then(|| Port::new("environment", "environment", &[kind::ENVIRONMENT])),
-            )
-            .chain(
-                query_kind(p)
-                    .needs_voxels()
-                    .then(|| Port::new("voxels", "voxels", &[kind::VOXELS])),
-            )
-            .collect(),
-        outputs: layer_output_ports(),
-    },
-    build: |ctx| {
-        let params = PathParams::from_params(ctx.params, ctx.seed);
-        params.check()?;
-        Ok(Box::new(PathStage {
-            inputs: RENDERER_INPUTS.map(|(role, _, _)| ctx.input(role)),
-            environment: params
-                .query
-                .needs_environment()
-                .then(|| ctx.input("environment")),
-            voxels: params.query.needs_voxels().then(|| ctx.input("voxels")),
-            outputs: LAYER_OUTPUTS.map(|(role, _)| ctx.output(role)),
-            // The objects do not move: their solid volume is built once.
-            object_voxels: params
-                .object_volume(crate::world::objects(ctx))
-                .map(Arc::new),
-            params,
-            intrinsics: ctx.header.depth_intrinsics,
-            objects: Arc::clone(crate::world::objects(ctx)),
-        }))
-    },
-};
-
-/// What [`sample_path`] reads for one frame.
-#[derive(Clone, Copy)]
-pub struct PathInputs<'a> {
-    /// Depth in metres (0 or non-finite = missing): the real geometry.
-    pub depth: &'a DepthImage,
-    /// Camera-space unit normals facing the camera, zero = invalid.
-    pub normals: &'a Vec3Image,
-    /// Compensated linear camera radiance: what an indirect ray brings from a real hit.
-    pub radiance: &'a Vec3Image,
-    /// The depth camera, at the depth map's size.
-    pub camera: Pinhole,
-    pub camera_to_world: Affine3A,
-    /// Importance samples of the environment, in stratified order.
-    pub table: &'a LightTable,
-    /// The distance impostor the `em` and `dit` queries read (unused by the others).
-    pub environment: Option<&'a EnvMap>,
-    /// The scene's voxel volume the `vct` query reads (unused by the others).
-    pub voxels: Option<&'a VoxelVolume>,
-    pub objects: &'a VirtualScene,
-    /// `vct`: the objects' solid volume ([`PathParams::object_volume`]); built for
-    /// the call when `None`.
-    pub object_voxels: Option<&'a VoxelVolume>,
-    /// The frame index (a key of the random numbers).
-    pub frame: u64,
-}
+pub const INFO: StageInfo = renderer::info::<SamplePath>();
 
 /// Estimates E_R and E_RV (direct and indirect), the mask, k_V, the mean visible
 /// surface and the minimum hit distances of every pixel (paper 001 Sec. 5; see the
@@ -239,7 +168,7 @@ pub fn sample_path(
     inputs: &PathInputs,
     params: &PathParams,
     out: &mut IrradianceLayers,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     params.check()?;
     let pyramid = DepthPyramid::new(inputs.depth);
     sample_path_with_pyramid(inputs, params, &pyramid, out)
@@ -252,7 +181,7 @@ pub fn sample_path_with_pyramid(
     params: &PathParams,
     pyramid: &DepthPyramid,
     out: &mut IrradianceLayers,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     sample_path_with_kernel(inputs, params, pyramid, simd::Kernel::detect(), out)
 }
 
@@ -264,7 +193,7 @@ pub(crate) fn sample_path_with_kernel(
     pyramid: &DepthPyramid,
     lanes: simd::Kernel,
     out: &mut IrradianceLayers,
-) -> Result<(), StageError> {
+) -> Result<(), OpError> {
     params.check()?;
     let (w, h) = (inputs.depth.width, inputs.depth.height);
     check_sizes(
@@ -277,12 +206,12 @@ pub(crate) fn sample_path_with_kernel(
         ],
     )?;
     if out.size() != Some((w, h)) {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::SizeMismatch(format!(
             "sample.path: output buffers are not all {w}x{h}"
         )));
     }
     if !inputs.camera_to_world.is_finite() {
-        return Err(StageError::Failed(
+        return Err(OpError::BadInput(
             "sample.path: the camera pose is not finite".into(),
         ));
     }
@@ -315,7 +244,7 @@ pub(crate) fn sample_path_with_kernel(
         || Span::new(&kernel, params),
         |span, y, mut row| {
             for xs in xs.chunks(SPAN_PIXELS) {
-                kernel.shade_span(y as u32, xs, span, |x, r| row.set(x as usize, r));
+                span.shade(&kernel, y as u32, xs, |x, r| row.set(x as usize, r));
             }
         },
     );
@@ -328,13 +257,13 @@ pub(crate) fn sample_path_with_kernel(
 fn world_query<'a>(
     inputs: &PathInputs<'a>,
     params: &PathParams,
-) -> Result<Option<WorldQuery<'a>>, StageError> {
+) -> Result<Option<WorldQuery<'a>>, OpError> {
     let query = params.query.name();
     let iterations = match params.query {
         QueryKind::Ssrt => return Ok(None),
         QueryKind::Vct => {
             let Some(volume) = inputs.voxels else {
-                return Err(StageError::Failed(format!(
+                return Err(OpError::BadInput(format!(
                     "sample.path: query \"{query}\" needs a voxel volume (the `voxels` of light.voxels)"
                 )));
             };
@@ -344,56 +273,84 @@ fn world_query<'a>(
         QueryKind::Dit => params.iterations,
     };
     let Some(map) = inputs.environment else {
-        return Err(StageError::Failed(format!(
+        return Err(OpError::BadInput(format!(
             "sample.path: query \"{query}\" needs an environment map (the distance impostor of light.impostor)"
         )));
     };
     ImpostorQuery::new(map, iterations)
         .map(|q| Some(WorldQuery::Impostor(q)))
-        .map_err(|e| StageError::Failed(format!("sample.path: query \"{query}\": {e}")))
+        .map_err(|e| OpError::BadInput(format!("sample.path: query \"{query}\": {e}")))
 }
 
-struct PathStage {
-    /// Product names of depth, normals, pose, radiance, light_table.
-    inputs: [String; 5],
-    /// Product name of the distance impostor (`em`, `dit`).
-    environment: Option<String>,
-    /// Product name of the scene's voxel volume (`vct`).
-    voxels: Option<String>,
+/// `sample.path` as a [`Renderer`]: the estimator of [`sample_path`] over the
+/// frame's products, with the objects' solid volume (`vct`) built once per run.
+pub struct SamplePath {
+    params: PathParams,
+    objects: Arc<VirtualScene>,
     /// The objects' solid volume (`vct`).
     object_voxels: Option<Arc<VoxelVolume>>,
-    outputs: [String; 12],
-    params: PathParams,
-    intrinsics: Intrinsics,
-    objects: Arc<VirtualScene>,
 }
 
-impl Stage for PathStage {
-    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
-        let [depth, normals, pose, radiance, table] = &self.inputs;
-        let depth = frame.depth(depth)?;
+impl Renderer for SamplePath {
+    const KIND: &'static str = "sample.path";
+    const SUMMARY: &'static str =
+        "two-mode Monte Carlo estimates of E_R and E_RV, direct and indirect (paper 001 Sec. 5)";
+    const PARAMS: &'static [ParamSpec] = PARAMS;
+    const REFERENCES_ITSELF: bool = true;
+
+    fn inputs(p: &Params) -> Vec<Port> {
+        renderer_input_ports()
+            .chain(
+                query_kind(p)
+                    .needs_environment()
+                    .then(|| Port::new("environment", "environment", &[kind::ENVIRONMENT])),
+            )
+            .chain(
+                query_kind(p)
+                    .needs_voxels()
+                    .then(|| Port::new("voxels", "voxels", &[kind::VOXELS])),
+            )
+            .collect()
+    }
+
+    fn build(ctx: &BuildContext) -> Result<SamplePath, StageError> {
+        let params = PathParams::from_params(ctx.params, ctx.seed);
+        params.check()?;
+        let objects = crate::world::objects(ctx);
+        Ok(SamplePath {
+            // The objects do not move: their solid volume is built once.
+            object_voxels: params.object_volume(objects).map(Arc::new),
+            params,
+            objects: Arc::clone(objects),
+        })
+    }
+
+    fn render(
+        &mut self,
+        frame: &RenderFrame<'_>,
+        out: &mut IrradianceLayers,
+    ) -> Result<(), StageError> {
+        let query = self.params.query;
         let inputs = PathInputs {
-            depth,
-            normals: frame.normals(normals)?,
-            radiance: frame.radiance(radiance)?,
-            camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
-            camera_to_world: Affine3A::from_mat4(frame.pose(pose)?.matrix().as_mat4()),
-            table: frame.light_table(table)?,
-            environment: match &self.environment {
-                Some(name) => Some(frame.environment(name)?.as_ref()),
-                None => None,
+            depth: frame.depth,
+            normals: frame.normals("normals")?,
+            radiance: frame.radiance("radiance")?,
+            camera: frame.camera,
+            camera_to_world: frame.camera_to_world,
+            table: frame.light_table("light_table")?,
+            environment: match query.needs_environment() {
+                true => Some(frame.environment("environment")?),
+                false => None,
             },
-            voxels: match &self.voxels {
-                Some(name) => Some(frame.voxels(name)?.as_ref()),
-                None => None,
+            voxels: match query.needs_voxels() {
+                true => Some(frame.voxels("voxels")?),
+                false => None,
             },
             objects: &self.objects,
             object_voxels: self.object_voxels.as_deref(),
-            frame: frame.index as u64,
+            frame: frame.index,
         };
-        let mut out = IrradianceLayers::new(depth.width, depth.height);
-        sample_path(&inputs, &self.params, &mut out)?;
-        out.insert_into(frame, &self.outputs);
+        sample_path(&inputs, &self.params, out)?;
         Ok(())
     }
 }

@@ -1,16 +1,18 @@
 //! The parameters of `sample.path`: their declarations (ranges and docs, checked when
 //! a pipeline loads) and [`PathParams`], the settings the estimator runs with.
 
-use super::MAX_CANDIDATES;
+use crate::OpError;
 use crate::sample::query::{MAX_ITERATIONS, QueryKind};
 use crate::sample::ssrt::TraceParams;
-use relume_graph::{ParamDefault, ParamSpec, Params, StageError};
+use relume_graph::{ParamDefault, ParamSpec, Params};
 use relume_scene::light::voxels::VoxelVolume;
 use relume_scene::objects::VirtualScene;
 use relume_scene::objects::voxelize::solid_volume;
 
 /// Most primary, direct or indirect samples per pixel the stage accepts.
 pub const MAX_SAMPLES: u32 = 64;
+/// The most object-aware candidates per pixel (size of the H_a index cache).
+pub const MAX_CANDIDATES: usize = 256;
 /// Most voxels along a side of the objects' solid volume (`vct`).
 pub const MAX_OBJECT_VOXELS: u32 = 256;
 
@@ -249,9 +251,9 @@ impl PathParams {
     }
 
     /// Checks the counts and distances; the error names the bad value.
-    pub fn check(&self) -> Result<(), StageError> {
+    pub fn check(&self) -> Result<(), OpError> {
         let bad = |what: &str, value: String| {
-            Err(StageError::Failed(format!(
+            Err(OpError::BadParameter(format!(
                 "sample.path: {what} is {value}"
             )))
         };

@@ -12,6 +12,7 @@ use super::tests::{
 use super::*;
 use glam::Vec3;
 use relume_base::threads::with_threads;
+use relume_scene::light::LightTable;
 use relume_scene::objects::Material;
 use std::f32::consts::PI;
 

@@ -3,25 +3,28 @@
 //! marched together ([`TraceBatch`], eight lanes at a time where the CPU has AVX2); with
 //! the world-space queries ([`WorldQuery`]: the impostor's and the voxel volume's) each
 //! is answered as it is pushed, by the caller, who knows when an answer can be had for
-//! less (see `Kernel::world_direct` and [`NOT_ASKED`]). Either way [`RayBatch::hits`] holds
-//! one answer per ray, in push order. The questions the estimator asks one ray at a
-//! time (the object-aware candidates, the bounce off an object) are here too.
+//! less (see [`FrameQuery::world_direct`] and [`NOT_ASKED`]). Either way [`RayBatch::hits`] holds
+//! one answer per ray, in push order. [`FrameQuery`] is the query as the estimator
+//! asks it, for the batch and for the rays asked one at a time (the object-aware
+//! candidates, the bounce off an object).
 
 use super::bounds::Objects;
-use super::kernel::{Kernel, RealPoint};
+use super::records::RealPoint;
 use crate::sample::query::{
     Hit, ImpostorQuery, RadianceQuery, Ray, ScreenQuery, Source, VoxelQuery,
 };
-use crate::sample::ssrt::RayOrigin;
 use crate::sample::ssrt::batch::TraceBatch;
-use glam::{Vec3, Vec3A};
+use crate::sample::ssrt::{RayOrigin, ScreenTracer};
+use glam::{Mat3A, Vec3, Vec3A};
+use relume_base::raster::Vec3Image;
 use relume_base::simd;
+use relume_scene::light::LightTable;
 
 /// The answer recorded for a world-space ray whose answer cannot matter when drawn: an
 /// indirect ray from a real point outside the objects' cone (no object can be in its
 /// way), any indirect ray from a real point when the object-aware differential stands
 /// for them, and under `em` and `dit` every indirect ray from a real point (the
-/// impostor is asked only if the ray meets an object: `Kernel::before_impostor`); the
+/// impostor is asked only if the ray meets an object: [`FrameQuery::before_impostor`]); the
 /// environment brings indirect light nothing (direct light counts it).
 pub(super) const NOT_ASKED: Hit = Hit {
     t: f32::INFINITY,
@@ -116,15 +119,91 @@ impl<'t> RayBatch<'t> {
     }
 }
 
-/// The one-off questions the estimator asks the stage's query (those not batched).
-impl Kernel<'_> {
+/// The stage's radiance query over one frame, as the estimator asks it: the
+/// screen-space tracer or the world-space query, with what it answers from (the
+/// camera's radiance, the table's directions) and the cones' apertures. Constant over
+/// the frame.
+pub(super) struct FrameQuery<'a> {
+    pub(super) tracer: ScreenTracer<'a>,
+    /// The world-space query (`em`, `dit`, `vct`); `None` for screen-space marching.
+    pub(super) world_query: Option<WorldQuery<'a>>,
+    /// What a real hit of the screen-space march brings: the camera's radiance.
+    pub(super) radiance: &'a Vec3Image,
+    /// The screen-space march's reach (metres).
+    pub(super) max_distance: f32,
+    pub(super) table: &'a LightTable,
+    /// The table's directions in camera space (where the screen-space tracer works).
+    pub(super) table_camera: Vec<Vec3>,
+    /// `em`: the impostor's answer per table sample (it does not depend on the ray's
+    /// origin), looked up once per frame instead of once per ray.
+    pub(super) table_em: Vec<Option<Hit>>,
+    /// `vct`: the cone spreads of direct and indirect samples at real points (the
+    /// pixel's samples share the hemisphere: [`crate::sample::query::cone_spread`]).
+    pub(super) direct_spread: f32,
+    pub(super) indirect_spread: f32,
+    /// Camera to world rotation.
+    pub(super) to_world: Mat3A,
+}
+
+impl<'a> FrameQuery<'a> {
+    /// The query of one frame: `tracer` or `world_query` over it, the table's
+    /// directions turned into camera space by `to_camera` (and, for `em`, answered
+    /// once here).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn new(
+        tracer: ScreenTracer<'a>,
+        world_query: Option<WorldQuery<'a>>,
+        radiance: &'a Vec3Image,
+        max_distance: f32,
+        table: &'a LightTable,
+        to_world: Mat3A,
+        direct_spread: f32,
+        indirect_spread: f32,
+    ) -> FrameQuery<'a> {
+        let to_camera = to_world.transpose();
+        // Environment Mapping's answer does not depend on the ray's origin.
+        let table_em = match &world_query {
+            Some(WorldQuery::Impostor(q)) if q.iterations == 0 => table
+                .samples
+                .iter()
+                .map(|ls| q.query(&Ray::unbounded(q.center, ls.direction)))
+                .collect(),
+            _ => Vec::new(),
+        };
+        FrameQuery {
+            tracer,
+            world_query,
+            radiance,
+            max_distance,
+            table,
+            table_camera: table
+                .samples
+                .iter()
+                .map(|ls| Vec3::from(to_camera * Vec3A::from(ls.direction)))
+                .collect(),
+            table_em,
+            direct_spread,
+            indirect_spread,
+            to_world,
+        }
+    }
+
+    /// `em`, `dit`: a real point's indirect rays are not asked of the impostor when
+    /// drawn (its answer brings them no light, see [`NOT_ASKED`]); a ray of a real
+    /// primary that meets an object asks it then, to learn whether the impostor's
+    /// surface comes first ([`FrameQuery::before_impostor`]).
+    #[inline]
+    pub(super) fn impostor_bounds_reflectors(&self) -> bool {
+        matches!(self.world_query, Some(WorldQuery::Impostor(_)))
+    }
+
     /// The screen-space query over this frame's depth map.
     #[inline]
     pub(super) fn screen(&self) -> ScreenQuery<'_> {
         ScreenQuery {
             tracer: &self.tracer,
-            radiance: self.inputs.radiance,
-            max_distance: self.params.max_distance,
+            radiance: self.radiance,
+            max_distance: self.max_distance,
         }
     }
 
@@ -145,14 +224,14 @@ impl Kernel<'_> {
     fn screen_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
         let origin = rp.origin.as_ref()?;
         self.tracer
-            .trace_from(origin, dir_camera, self.params.max_distance)
+            .trace_from(origin, dir_camera, self.max_distance)
             .map(|real| self.screen().hit(real))
     }
 
-    /// What the stage's query answers along camera-space direction `dir_camera` from
-    /// the real point.
+    /// What the query answers along camera-space direction `dir_camera` from the
+    /// real point.
     #[inline]
-    pub(super) fn query_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
+    pub(super) fn answer_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
         match &self.world_query {
             Some(query) => query.query(&self.real_ray(rp, dir_camera)),
             None => self.screen_from_real(rp, dir_camera),
@@ -171,14 +250,14 @@ impl Kernel<'_> {
         match self.table_em.get(sample) {
             Some(&answer) => answer,
             None => {
-                let dir = self.inputs.table.samples[sample].direction;
+                let dir = self.table.samples[sample].direction;
                 query.query(&Ray::cone(origin, dir, self.direct_spread))
             }
         }
     }
 
-    /// What the stage's query answers along table sample `sample`'s direction from
-    /// the real point.
+    /// What the query answers along table sample `sample`'s direction from the real
+    /// point.
     #[inline]
     pub(super) fn direct_arrival(&self, rp: &RealPoint, sample: usize) -> Option<Hit> {
         match &self.world_query {
@@ -187,10 +266,10 @@ impl Kernel<'_> {
         }
     }
 
-    /// What the stage's query answers along world direction `dir` from `origin` (a
-    /// cone of a direct sample's aperture).
+    /// What the query answers along world direction `dir` from `origin` (a cone of a
+    /// direct sample's aperture).
     #[inline]
-    pub(super) fn query_world(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
+    pub(super) fn answer_from(&self, origin: Vec3, dir: Vec3) -> Option<Hit> {
         let ray = Ray::cone(origin, dir, self.direct_spread);
         match &self.world_query {
             Some(query) => query.query(&ray),
@@ -211,7 +290,7 @@ impl Kernel<'_> {
         dir_camera: Vec3,
         t: f32,
     ) -> bool {
-        match self.query_from_real(rp, dir_camera) {
+        match self.answer_from_real(rp, dir_camera) {
             None => true,
             Some(real) => t < real.t && objects.box_admits(rp.world, dir, real.t),
         }

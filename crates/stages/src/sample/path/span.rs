@@ -7,61 +7,23 @@
 //! caller.
 
 use super::PathParams;
-use super::kernel::{Kernel, RealPoint};
+use super::kernel::Kernel;
 use super::rays::{NOT_ASKED, RayBatch, WorldQuery};
-use super::sampling::{PixelRng, StreamId, cosine_hemisphere};
-use super::virtual_paths::{VirtualDirect, VirtualIndirect};
+use super::records::{
+    DirectRay, Drawn, IndirectRay, RealPoint, RealSamples, Surface, VirtualDirect, VirtualIndirect,
+    VirtualSamples,
+};
+use super::sampling::{Basis, PixelRng, Stream, StreamId, cosine_hemisphere, phong_lobe};
 use crate::sample::layers::PixelLayers;
-use crate::sample::query::RadianceQuery;
+use crate::sample::query::{RadianceQuery, Ray, cone_spread};
 use crate::sample::ssrt::batch::TraceBatch;
 use glam::Vec3;
+use relume_scene::light::voxels::OPAQUE;
 use relume_scene::objects::VirtualHit;
 
 /// Pixels per span: enough rays (about 23 per pixel) that the batch's lanes rarely wait
 /// at its end, few enough that its buffers stay in the cache (about 50 KB).
 pub(super) const SPAN_PIXELS: usize = 32;
-
-/// A direct sample whose ray is traced: its table sample, the cosine of its direction
-/// to the normal, and its ray in the batch.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct DirectRay {
-    pub(super) sample: usize,
-    pub(super) cos: f32,
-    pub(super) ray: usize,
-}
-
-/// An indirect sample: its camera-space direction and its ray in the batch.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct IndirectRay {
-    pub(super) dir_camera: Vec3,
-    pub(super) ray: usize,
-}
-
-/// One real point's samples: per direct sample s (primary j has
-/// `j * direct .. (j + 1) * direct`) its ray, `None` where it is not traced (the table
-/// is empty, or the direction is below the surface or has no density); per indirect
-/// sample likewise, always traced.
-pub(super) struct RealSamples<'a> {
-    pub(super) direct: &'a [Option<DirectRay>],
-    pub(super) indirect: &'a [IndirectRay],
-}
-
-/// The samples drawn at one pixel's virtual primaries, in primary order: `direct`
-/// per direct sample of each virtual primary, `indirect` per indirect sample.
-pub(super) struct VirtualSamples<'a> {
-    pub(super) direct: &'a [VirtualDirect],
-    pub(super) indirect: &'a [VirtualIndirect],
-}
-
-/// What was drawn at one pixel before its span's rays were traced: its real point, if
-/// any, with its samples; per primary its virtual hit and view direction, if any; and
-/// the samples of those virtual hits.
-pub(super) struct Drawn<'a> {
-    pub(super) real: Option<&'a RealPoint>,
-    pub(super) real_samples: RealSamples<'a>,
-    pub(super) primaries: &'a [Option<(VirtualHit, Vec3)>],
-    pub(super) virtual_samples: VirtualSamples<'a>,
-}
 
 /// A span's samples and rays; reused from span to span.
 pub(super) struct Span<'t> {
@@ -86,11 +48,11 @@ impl<'t> Span<'t> {
         let direct = SPAN_PIXELS * (most * params.direct) as usize;
         let indirect = SPAN_PIXELS * (most * params.indirect) as usize;
         let hits = Vec::with_capacity(direct + indirect);
-        let batch = match &kernel.world_query {
+        let batch = match &kernel.query.world_query {
             Some(query) => RayBatch::World { query, hits },
             None => RayBatch::Screen {
-                batch: Box::new(TraceBatch::new(&kernel.tracer, direct + indirect)),
-                query: kernel.screen(),
+                batch: Box::new(TraceBatch::new(&kernel.query.tracer, direct + indirect)),
+                query: kernel.query.screen(),
                 hits,
             },
         };
@@ -105,18 +67,17 @@ impl<'t> Span<'t> {
             virtual_indirect: Vec::new(),
         }
     }
-}
 
-impl Kernel<'_> {
-    /// Estimates pixels `xs` of row `y`, handing each result to `emit`.
-    pub(super) fn shade_span(
-        &self,
+    /// Estimates pixels `xs` of row `y` with `kernel`, handing each result to `emit`.
+    pub(super) fn shade(
+        &mut self,
+        kernel: &Kernel<'_>,
         y: u32,
         xs: &[u32],
-        span: &mut Span<'_>,
         mut emit: impl FnMut(u32, &PixelLayers),
     ) {
-        let inputs = self.inputs;
+        let span = self;
+        let inputs = kernel.inputs;
         span.batch.clear();
         span.real.clear();
         span.direct.clear();
@@ -127,19 +88,19 @@ impl Kernel<'_> {
         span.virtual_indirect.clear();
         for &x in xs {
             let p = y as usize * inputs.depth.width as usize + x as usize;
-            let rng = PixelRng::new(self.params.seed, inputs.frame, p as u64);
+            let rng = PixelRng::new(kernel.params.seed, inputs.frame, p as u64);
             let z = inputs.depth.data[p];
-            let real = self.real_point(x, y, z, inputs.normals.data[p]);
-            let primary = self.primaries_at(x, y, real.as_ref());
+            let real = kernel.real_point(x, y, z, inputs.normals.data[p]);
+            let primary = kernel.primaries_at(x, y, real.as_ref());
             if let Some(rp) = &real {
-                self.draw_real_samples(rp, &rng, primary, span);
+                span.draw_real_samples(kernel, rp, &rng, primary);
             }
             span.real.push(real);
             span.primary_counts.push(primary);
-            self.draw_primaries(x, y, z, &rng, primary, span);
+            span.draw_primaries(kernel, x, y, z, &rng, primary);
         }
-        span.batch.trace(self.lanes);
-        let params = self.params;
+        span.batch.trace(kernel.lanes);
+        let params = kernel.params;
         let (mut direct, mut indirect) = (&span.direct[..], &span.indirect[..]);
         let (mut virtual_direct, mut virtual_indirect) =
             (&span.virtual_direct[..], &span.virtual_indirect[..]);
@@ -181,7 +142,7 @@ impl Kernel<'_> {
                     indirect: pixel_indirect,
                 },
             };
-            let result = self.shade_pixel(x, y, &drawn, span.batch.hits());
+            let result = kernel.shade_pixel(x, y, &drawn, span.batch.hits());
             emit(x, &result);
         }
     }
@@ -189,19 +150,19 @@ impl Kernel<'_> {
     /// Finds which primaries of pixel (x, y) (depth `z`) meet the objects, and draws
     /// the samples of their virtual hits, queueing their screen-space rays.
     fn draw_primaries(
-        &self,
+        &mut self,
+        kernel: &Kernel<'_>,
         x: u32,
         y: u32,
         z: f32,
         rng: &PixelRng,
         primary: u32,
-        span: &mut Span<'_>,
     ) {
-        let [x0, y0, x1, y1] = self.object_pixels;
+        let [x0, y0, x1, y1] = kernel.object_pixels;
         let may_see_objects = (x0..=x1).contains(&(x as i64)) && (y0..=y1).contains(&(y as i64));
         if !may_see_objects {
             let real_only = (0..primary).map(|_| None);
-            span.primaries.extend(real_only);
+            self.primaries.extend(real_only);
             return;
         }
         let (primary_stream, direct_stream, indirect_stream) = (
@@ -210,47 +171,53 @@ impl Kernel<'_> {
             rng.stream(StreamId::Indirect),
         );
         for j in 0..primary {
-            let hit = self.primary_hit(&primary_stream, j, x, y, z);
+            let hit = kernel.primary_hit(&primary_stream, j, x, y, z);
             if let Some((hit, view)) = &hit {
                 self.draw_virtual_samples(
+                    kernel,
                     hit,
                     -*view,
                     j,
                     primary,
                     &direct_stream,
                     &indirect_stream,
-                    &mut span.batch,
-                    &mut span.virtual_direct,
-                    &mut span.virtual_indirect,
                 );
             }
-            span.primaries.push(hit);
+            self.primaries.push(hit);
         }
     }
 
     /// Draws the direct and indirect samples of real point `rp` (from its pixel's
     /// streams `rng`) for every primary, queueing their screen-space rays.
-    fn draw_real_samples(&self, rp: &RealPoint, rng: &PixelRng, primary: u32, span: &mut Span<'_>) {
-        let params = self.params;
+    fn draw_real_samples(
+        &mut self,
+        kernel: &Kernel<'_>,
+        rp: &RealPoint,
+        rng: &PixelRng,
+        primary: u32,
+    ) {
+        let params = kernel.params;
+        let query = &kernel.query;
         let (direct_stream, indirect_stream) =
             (rng.stream(StreamId::Direct), rng.stream(StreamId::Indirect));
         let t_max = params.max_distance;
         for s in 0..primary * params.direct {
-            let drawn = self
-                .direct_sample(&direct_stream, s, primary)
-                .and_then(|(sample, ls)| {
-                    let cos = rp.normal_world.dot(ls.direction);
-                    (cos > 0.0 && ls.pdf > 0.0).then(|| DirectRay {
-                        sample,
-                        cos,
-                        ray: span.batch.push(
-                            |q| self.world_direct(q, rp.query_origin, sample),
-                            || (rp.origin, self.table_camera[sample]),
-                            t_max,
-                        ),
-                    })
-                });
-            span.direct.push(drawn);
+            let drawn =
+                kernel
+                    .direct_sample(&direct_stream, s, primary)
+                    .and_then(|(sample, ls)| {
+                        let cos = rp.normal_world.dot(ls.direction);
+                        (cos > 0.0 && ls.pdf > 0.0).then(|| DirectRay {
+                            sample,
+                            cos,
+                            ray: self.batch.push(
+                                |q| query.world_direct(q, rp.query_origin, sample),
+                                || (rp.origin, query.table_camera[sample]),
+                                t_max,
+                            ),
+                        })
+                    });
+            self.direct.push(drawn);
         }
         for s in 0..primary * params.indirect {
             let (u1, u2) = indirect_stream.pair(s as u64);
@@ -259,18 +226,127 @@ impl Kernel<'_> {
             // their distance (see `real_samples`); the impostor's is asked there, and
             // only of the rays that do meet one.
             let world = |q: &WorldQuery| {
-                if self.params.object_aware
-                    || self.impostor_bounds_reflectors()
+                if params.object_aware
+                    || query.impostor_bounds_reflectors()
                     || !rp.cone_camera.admits(dir_camera)
                 {
                     return Some(NOT_ASKED);
                 }
-                q.query(&self.real_ray(rp, dir_camera))
+                q.query(&query.real_ray(rp, dir_camera))
             };
-            span.indirect.push(IndirectRay {
+            self.indirect.push(IndirectRay {
                 dir_camera,
-                ray: span.batch.push(world, || (rp.origin, dir_camera), t_max),
+                ray: self.batch.push(world, || (rp.origin, dir_camera), t_max),
             });
+        }
+    }
+
+    /// Draws the E_RV samples of primary j at a virtual hit seen from direction
+    /// `to_viewer`: direct samples are tested against the objects here (unless
+    /// `visibility` is off), and the rays of the open ones and of the indirect samples
+    /// are queued in the batch. `Kernel::virtual_samples` then estimates from them.
+    #[allow(clippy::too_many_arguments)]
+    fn draw_virtual_samples(
+        &mut self,
+        kernel: &Kernel<'_>,
+        hit: &VirtualHit,
+        to_viewer: Vec3,
+        j: u32,
+        primary: u32,
+        direct_stream: &Stream,
+        indirect_stream: &Stream,
+    ) {
+        let params = kernel.params;
+        let query = &kernel.query;
+        let (batch, direct, indirect) = (
+            &mut self.batch,
+            &mut self.virtual_direct,
+            &mut self.virtual_indirect,
+        );
+        let surface = Surface::new(hit, to_viewer);
+        let n = hit.normal;
+        let t_max = params.max_distance;
+        // Self-occlusion of the objects' own illumination (paper 000 Table 3's
+        // visibility test).
+        let objects = kernel.objects.as_ref().filter(|_| params.visibility);
+        for k in 0..params.direct {
+            let s = j * params.direct + k;
+            let drawn = match kernel.direct_sample(direct_stream, s, primary) {
+                Some((sample, ls)) => {
+                    let cos = n.dot(ls.direction);
+                    if cos > 0.0 && ls.pdf > 0.0 {
+                        let (blocker, visible) = match (objects, kernel.object_volume) {
+                            (Some(_), Some(volume)) => {
+                                let cone =
+                                    kernel.object_shadow(volume, hit.position, n, ls.direction);
+                                let blocked = cone.opacity >= OPAQUE;
+                                (blocked.then_some(cone.t_half), 1.0 - cone.opacity)
+                            }
+                            (Some(o), None) => (
+                                o.hit(surface.origin, ls.direction, f32::INFINITY)
+                                    .map(|b| b.t),
+                                1.0,
+                            ),
+                            _ => (None, 1.0),
+                        };
+                        match blocker {
+                            Some(t) => VirtualDirect::Blocked { sample, cos, t },
+                            None => VirtualDirect::Open {
+                                sample,
+                                cos,
+                                ray: batch.push(
+                                    |q| query.world_direct(q, surface.origin, sample),
+                                    || query.tracer.camera_ray(surface.origin, ls.direction),
+                                    t_max,
+                                ),
+                                visible,
+                            },
+                        }
+                    } else {
+                        VirtualDirect::Unlit
+                    }
+                }
+                None => VirtualDirect::Unlit,
+            };
+            direct.push(drawn);
+        }
+        let basis = Basis::new(if surface.glossy {
+            surface.mirror.normalize_or(n)
+        } else {
+            n
+        });
+        // `vct`: the cones share the lobe (narrowed to the Phong lobe when glossy).
+        let spread = if surface.glossy {
+            cone_spread(primary * params.indirect, hit.material.exponent)
+        } else {
+            query.indirect_spread
+        };
+        for k in 0..params.indirect {
+            let s = j * params.indirect + k;
+            let (u1, u2) = indirect_stream.pair(s as u64);
+            let (dir, weight) = if surface.glossy {
+                let dir = basis.to_world(phong_lobe(u1, u2, hit.material.exponent));
+                let cos = n.dot(dir);
+                let e = hit.material.exponent;
+                (
+                    dir,
+                    if cos > 0.0 {
+                        (e + 2.0) / (e + 1.0) * cos
+                    } else {
+                        0.0
+                    },
+                )
+            } else {
+                (basis.to_world(cosine_hemisphere(u1, u2)), 1.0)
+            };
+            let ray = (weight > 0.0).then(|| {
+                batch.push(
+                    |q| q.query(&Ray::cone(surface.origin, dir, spread)),
+                    || query.tracer.camera_ray(surface.origin, dir),
+                    t_max,
+                )
+            });
+            indirect.push(VirtualIndirect { dir, weight, ray });
         }
     }
 }

@@ -6,12 +6,18 @@ use super::tests::{
 };
 use super::*;
 use crate::kind;
+use crate::sample::layers::LAYER_OUTPUTS;
+use glam::Affine3A;
 use glam::Vec3;
 use glam::{DQuat, DVec3};
+use relume_base::pinhole::Pinhole;
 use relume_base::raster::Image;
+use relume_graph::Frame;
 use relume_graph::Product;
 use relume_graph::{BuildContext, Params};
+use relume_recording::Intrinsics;
 use relume_recording::{Header, Pose};
+use relume_scene::light::LightTable;
 use relume_scene::objects::Material;
 use std::collections::BTreeMap;
 

@@ -2,10 +2,15 @@
 //! and the fixtures the other test modules share.
 
 use super::*;
+use glam::Affine3A;
 use glam::Vec3;
+use relume_base::pinhole::Pinhole;
 use relume_base::raster::Image;
+use relume_base::raster::{DepthImage, Vec3Image};
+use relume_recording::Intrinsics;
 use relume_scene::light::LightSample;
 use relume_scene::light::voxels::VoxelVolume;
+use relume_scene::light::{EnvMap, LightTable};
 use relume_scene::objects::{Material, Triangle};
 use std::f32::consts::PI;
 

@@ -60,15 +60,14 @@ mod transfer_tests;
 mod virtual_maps;
 
 use super::layers::{IrradianceLayers, LAYER_OUTPUTS};
+use super::renderer::{RenderFrame, Renderer, info};
+use crate::OpError;
 use crate::kind;
-use crate::kind::FrameProducts;
-use glam::{Affine3A, Vec3};
+use glam::Vec3;
 pub use inputs::{ValInputs, ValShadingParams};
-use relume_base::pinhole::Pinhole;
 use relume_graph::{
-    Frame, ParamDefault, ParamSpec, Ports, ProductKind, Stage, StageError, StageInfo,
+    BuildContext, ParamDefault, ParamSpec, Params, Port, ProductKind, StageError, StageInfo,
 };
-use relume_recording::Intrinsics;
 use relume_scene::light::prt::cache::{self, CacheOutcome};
 use relume_scene::light::prt::{Transfer, TransferParams};
 use relume_scene::objects::VirtualScene;
@@ -131,55 +130,7 @@ const PARAMS: &[ParamSpec] = &[
 /// known to be untouched).
 const OUTPUTS: &[(&str, &[ProductKind])] = LAYER_OUTPUTS.split_at(11).0;
 
-pub const INFO: StageInfo = StageInfo {
-    kind: "sample.val",
-    summary: "noise-free E_R / E_RV from virtual area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5)",
-    params: PARAMS,
-    ports: |_| {
-        let mut ports = Ports::fixed(
-            &[
-                ("depth", &[kind::DEPTH]),
-                ("normals", &[kind::NORMALS]),
-                ("pose", &[kind::POSE]),
-                ("lights", &[kind::AREA_LIGHTS]),
-            ],
-            OUTPUTS,
-        );
-        ports.inputs[0].default_product = "refined_depth".into();
-        ports
-    },
-    build: |ctx| {
-        let p = ctx.params;
-        let transfer =
-            (p.str("transfer") == "prt" && !crate::world::objects(ctx).is_empty()).then(|| {
-                let params = TransferParams {
-                    samples: p.int("transfer_samples") as u32,
-                    seed: ctx.seed,
-                };
-                Arc::new(load_transfer(
-                    ctx.stage_name,
-                    crate::world::objects(ctx),
-                    params,
-                ))
-            });
-        Ok(Box::new(SampleVal {
-            inputs: ["depth", "normals", "pose", "lights"].map(|r| ctx.input(r)),
-            outputs: OUTPUTS.iter().map(|(r, _)| ctx.output(r)).collect(),
-            intrinsics: ctx.header.depth_intrinsics,
-            objects: crate::world::objects(ctx).clone(),
-            transfer,
-            params: ValShadingParams {
-                shadow_map_size: p.int("shadow_map_size") as usize,
-                virtual_bias: p.float("virtual_bias") as f32,
-                real_bias: p.float("real_bias") as f32,
-                slope_bias: p.float("slope_bias") as f32,
-                real_occluder_reach: p.float("real_occluder_reach") as f32,
-                shadow_updates: p.int("shadow_updates") as usize,
-            },
-            renderer: ValRenderer::default(),
-        }))
-    },
-};
+pub const INFO: StageInfo = info::<SampleVal>();
 
 /// The objects' radiance transfer from the cache, or computed (and cached), saying on
 /// stderr what it cost when it was computed and where the cache could not be written.
@@ -221,41 +172,81 @@ pub fn val_layers(width: u32, height: u32) -> IrradianceLayers {
 pub fn sample_val(
     inputs: &ValInputs,
     params: &ValShadingParams,
-) -> Result<IrradianceLayers, StageError> {
+) -> Result<IrradianceLayers, OpError> {
     let mut out = val_layers(inputs.depth.width, inputs.depth.height);
     ValRenderer::default().render(inputs, params, &mut out)?;
     Ok(out)
 }
 
-struct SampleVal {
-    inputs: [String; 4],
-    outputs: Vec<String>,
-    intrinsics: Intrinsics,
+/// `sample.val` as a [`Renderer`]: [`ValRenderer`] (its shadow maps kept from frame
+/// to frame) over the frame's products, with the objects' radiance transfer loaded
+/// once per run.
+pub struct SampleVal {
     objects: Arc<VirtualScene>,
     transfer: Option<Arc<Transfer>>,
     params: ValShadingParams,
     renderer: ValRenderer,
 }
 
-impl Stage for SampleVal {
-    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
-        let [depth, normals, pose, lights] = &self.inputs;
-        let depth = frame.depth(depth)?;
-        let normals = frame.normals(normals)?;
-        let pose = frame.pose(pose)?;
-        let lights = frame.area_lights(lights)?;
+impl Renderer for SampleVal {
+    const KIND: &'static str = "sample.val";
+    const SUMMARY: &'static str = "noise-free E_R / E_RV from virtual area lights with real and virtual shadow maps plus SH9 (paper 004 Sec. 5)";
+    const PARAMS: &'static [ParamSpec] = PARAMS;
+    const OUTPUTS: &'static [(&'static str, &'static [ProductKind])] = OUTPUTS;
+
+    fn inputs(_: &Params) -> Vec<Port> {
+        vec![
+            Port::new("depth", "refined_depth", &[kind::DEPTH]),
+            Port::new("normals", "normals", &[kind::NORMALS]),
+            Port::new("pose", "pose", &[kind::POSE]),
+            Port::new("lights", "lights", &[kind::AREA_LIGHTS]),
+        ]
+    }
+
+    fn build(ctx: &BuildContext) -> Result<SampleVal, StageError> {
+        let p = ctx.params;
+        let objects = crate::world::objects(ctx);
+        let transfer = (p.str("transfer") == "prt" && !objects.is_empty()).then(|| {
+            let params = TransferParams {
+                samples: p.int("transfer_samples") as u32,
+                seed: ctx.seed,
+            };
+            Arc::new(load_transfer(ctx.stage_name, objects, params))
+        });
+        Ok(SampleVal {
+            objects: objects.clone(),
+            transfer,
+            params: ValShadingParams {
+                shadow_map_size: p.int("shadow_map_size") as usize,
+                virtual_bias: p.float("virtual_bias") as f32,
+                real_bias: p.float("real_bias") as f32,
+                slope_bias: p.float("slope_bias") as f32,
+                real_occluder_reach: p.float("real_occluder_reach") as f32,
+                shadow_updates: p.int("shadow_updates") as usize,
+            },
+            renderer: ValRenderer::default(),
+        })
+    }
+
+    fn layers(width: u32, height: u32) -> IrradianceLayers {
+        val_layers(width, height)
+    }
+
+    fn render(
+        &mut self,
+        frame: &RenderFrame<'_>,
+        out: &mut IrradianceLayers,
+    ) -> Result<(), StageError> {
         let inputs = ValInputs {
-            depth,
-            normals,
-            camera: Pinhole::new(&self.intrinsics, depth.width, depth.height),
-            camera_to_world: Affine3A::from_mat4(pose.matrix().as_mat4()),
-            lights,
+            depth: frame.depth,
+            normals: frame.normals("normals")?,
+            camera: frame.camera,
+            camera_to_world: frame.camera_to_world,
+            lights: frame.area_lights("lights")?,
             objects: &self.objects,
             transfer: self.transfer.as_deref(),
         };
-        let mut out = val_layers(depth.width, depth.height);
-        self.renderer.render(&inputs, &self.params, &mut out)?;
-        out.insert_into(frame, &self.outputs);
+        self.renderer.render(&inputs, &self.params, out)?;
         Ok(())
     }
 }

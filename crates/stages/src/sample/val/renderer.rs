@@ -14,12 +14,12 @@ use super::shadow::{MAX_SHADOW_MAP_SIZE, TILE, Tile, tile_of};
 use super::virtual_maps::{VirtualTarget, virtual_shadow_maps};
 #[cfg(test)]
 use super::{real_splat, virtual_maps};
+use crate::OpError;
 use crate::sample::layers::{IrradianceLayers, shade_rows};
 use glam::{Vec2, Vec3, Vec3A};
 use rayon::prelude::*;
 use relume_base::raster::depth_is_valid;
 use relume_base::simd::{Kernel, LANES, Portable};
-use relume_graph::StageError;
 
 /// Shades frames with reusable buffers (real points, camera raster, shadow maps).
 #[derive(Default)]
@@ -75,22 +75,22 @@ impl ValRenderer {
         inputs: &ValInputs,
         params: &ValShadingParams,
         out: &mut IrradianceLayers,
-    ) -> Result<(), StageError> {
+    ) -> Result<(), OpError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
         if !inputs.depth.same_size(inputs.normals) || out.size() != Some((w, h)) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::SizeMismatch(format!(
                 "sample.val: depth is {w}x{h}, normals {}x{}, outputs {}x{}",
                 inputs.normals.width, inputs.normals.height, out.mask.width, out.mask.height
             )));
         }
         if (inputs.camera.width, inputs.camera.height) != (w, h) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::SizeMismatch(format!(
                 "sample.val: the camera is {}x{} but the depth map {w}x{h}",
                 inputs.camera.width, inputs.camera.height
             )));
         }
         if !(1..=MAX_SHADOW_MAP_SIZE).contains(&params.shadow_map_size) {
-            return Err(StageError::Failed(format!(
+            return Err(OpError::BadParameter(format!(
                 "sample.val: shadow_map_size must be 1 to {MAX_SHADOW_MAP_SIZE}, not {}",
                 params.shadow_map_size
             )));

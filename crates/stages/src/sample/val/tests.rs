@@ -1,8 +1,11 @@
 use super::*;
 use crate::kind;
+use glam::Affine3A;
 use glam::Mat3;
+use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Image, ScalarImage, Vec3Image};
 use relume_base::simd::Kernel;
+use relume_graph::Frame;
 use relume_graph::Product;
 use relume_scene::light::AreaLights;
 use relume_scene::light::sh::project_sh9;

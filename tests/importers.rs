@@ -282,10 +282,23 @@ fn redwood_errors_name_file_and_line() {
     for (trajectory, expected) in cases {
         assert_eq!(redwood_error(&trajectory, |_| {}), expected);
     }
+    // Names without numbers pair by position: the counts must agree.
     let e = redwood_error(IDENTITY_RECORD, |dir| {
-        std::fs::remove_file(dir.join("depth/00001.png")).unwrap()
+        std::fs::rename(dir.join("color/00000.jpg"), dir.join("color/first.jpg")).unwrap();
+        std::fs::remove_file(dir.join("depth/00001.png")).unwrap();
     });
-    assert!(e.contains("holds 2 images but"), "{e}");
+    assert!(
+        e.ends_with("/rw: color holds 2 images but depth holds 1: color and depth must pair up"),
+        "{e}"
+    );
+    // Two files of one number in a folder: which is frame 1 is not known.
+    let e = redwood_error(IDENTITY_RECORD, |dir| {
+        std::fs::copy(dir.join("depth/00001.png"), dir.join("depth/1.png")).unwrap();
+    });
+    assert_eq!(
+        e,
+        "depth: depth/00001.png and depth/1.png carry the same frame number 1: keep one"
+    );
     let e = redwood_error(IDENTITY_RECORD, |dir| std::fs::remove_dir_all(dir).unwrap());
     assert!(e.ends_with("/rw: no such directory"), "{e}");
     // Rates whose stamps k / fps would collapse to one nanosecond or overflow.
@@ -443,10 +456,77 @@ fn a_gap_in_redwood_numbering_is_a_warning_naming_it() {
     assert!(
         color.starts_with(
             "color: the file numbers jump from 1 to 5 (3 number(s) missing in all): frames are \
-             paired and stamped by position"
+             stamped by position"
         ),
         "{color}"
     );
+}
+
+/// Frame numbers without leading zeros (`0.jpg` ... `11.jpg`) order by value, not as
+/// strings (0, 1, 10, 11, 2, ...), and each frame gets the pose of its number.
+#[test]
+fn redwood_orders_frames_by_number_and_pairs_color_and_depth_by_number() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("rw");
+    std::fs::create_dir_all(dir.join("color")).unwrap();
+    std::fs::create_dir_all(dir.join("depth")).unwrap();
+    // Color 0..=11, depth 1..=12: frames 1..=11 pair; color 0 and depth 12 are alone.
+    // Each image's value is its number, so the order can be read back.
+    for i in 0..12u16 {
+        write_color(&dir.join(format!("color/{i}.jpg")), 8, 6, 10 * i as u8);
+        write_depth(
+            &dir.join(format!("depth/{}.png", i + 1)),
+            8,
+            6,
+            1000 + i + 1,
+        );
+    }
+    let trajectory: String = (0..11)
+        .map(|k| format!("{k} {k} {}\n1 0 0 {k}\n0 1 0 0\n0 0 1 0\n0 0 0 1\n", k + 1))
+        .collect();
+    std::fs::write(dir.join("trajectory.log"), trajectory).unwrap();
+    let out = tmp.path().join("r.relume");
+    let summary = redwood::import(&dir, &out, &RedwoodOptions::default(), &mut |_, _| {}).unwrap();
+    assert_eq!((summary.color, summary.depth, summary.poses), (11, 11, 11));
+    let warnings: Vec<String> = summary
+        .warnings
+        .iter()
+        .map(|w| w.replace(&format!("{}/", dir.display()), ""))
+        .collect();
+    assert_eq!(
+        warnings,
+        [
+            "color and depth pair by the numbers in their names: left out 1 file(s) with no \
+             partner in depth (the first: color/0.jpg); 1 file(s) with no partner in color \
+             (the first: depth/12.png)"
+        ]
+    );
+    let replay = Replay::open(&out, ReplayOptions::default()).unwrap();
+    let unit = replay.recording.header().depth_unit_m;
+    let frames: Vec<(f32, u8, f64)> = (0..11)
+        .map(|k| {
+            let f = replay.read_frame(k).unwrap();
+            let depth = codec::decode_depth(&f.depth.unwrap().image, unit).unwrap();
+            let color = codec::decode_color(&f.color.image).unwrap();
+            (
+                depth.data[0],
+                color.data[0][0],
+                f.pose.unwrap().matrix().w_axis.x,
+            )
+        })
+        .collect();
+    for (k, &(depth, color, x)) in frames.iter().enumerate() {
+        // Frame k is number k + 1 in both folders, with the k-th pose of the file.
+        assert!(
+            (depth - (1001 + k) as f32 / 1000.0).abs() < 1e-6,
+            "frame {k}: {depth}"
+        );
+        assert!(
+            (color as i32 - 10 * (k as i32 + 1)).abs() <= 2,
+            "frame {k}: {color}"
+        );
+        assert_eq!(x, k as f64, "frame {k}");
+    }
 }
 
 #[test]

@@ -1,12 +1,16 @@
 //! Importer of the Redwood / Open3D layout:
 //!
 //! ```text
-//! DIR/color/*.jpg|png   (or DIR/image/)   8-bit color, paired with depth by sorted name
+//! DIR/color/*.jpg|png   (or DIR/image/)   8-bit color, paired with depth by file number
 //! DIR/depth/*.png                          16-bit depth in millimetres, 0 = missing
 //! DIR/*.log                                trajectory: per frame a line of three integers,
 //!                                          then four rows of a 4x4 camera-to-world matrix
 //! ```
-//! The layout has no timestamps: frame k is stamped k / fps.
+//! The layout has no timestamps: frame k is stamped k / fps. Files are ordered by the
+//! numbers in their names (`2.png` before `10.png`), and where every name ends in a
+//! number, color and depth pair by that number (`color/000012.jpg` with
+//! `depth/000012.png`); a file without a partner is left out, with a warning. Names
+//! without numbers pair by position.
 
 use super::{
     ImportOptions, ImportSummary, check_dataset_dir, check_size, file_error, import_header,
@@ -41,7 +45,7 @@ impl Default for RedwoodOptions {
     }
 }
 
-/// The image files of `dir`, sorted by name.
+/// The image files of `dir`, in [`natural_order`].
 fn list_images(dir: &Path, extensions: &[&str]) -> Result<Vec<PathBuf>, ImportError> {
     let entries = std::fs::read_dir(dir).map_err(|source| ImportError::Io {
         path: dir.to_path_buf(),
@@ -63,13 +67,170 @@ fn list_images(dir: &Path, extensions: &[&str]) -> Result<Vec<PathBuf>, ImportEr
             files.push(path);
         }
     }
-    files.sort();
+    files.sort_by(|a, b| natural_order(a, b));
     Ok(files)
+}
+
+/// Orders file names as people number them: runs of digits by their value (`2` before
+/// `10`, `007` beside `7`), the rest by its characters; ties by the whole name.
+pub fn natural_order(a: &Path, b: &Path) -> std::cmp::Ordering {
+    fn runs(name: &str) -> Vec<(bool, &str)> {
+        let mut runs = Vec::new();
+        let mut rest = name;
+        while let Some(c) = rest.chars().next() {
+            let digit = c.is_ascii_digit();
+            let end = rest
+                .find(|c: char| c.is_ascii_digit() != digit)
+                .unwrap_or(rest.len());
+            runs.push((digit, &rest[..end]));
+            rest = &rest[end..];
+        }
+        runs
+    }
+    let name = |p: &Path| p.file_name().map(|n| n.to_string_lossy().into_owned());
+    let (na, nb) = (name(a).unwrap_or_default(), name(b).unwrap_or_default());
+    let key = |runs: Vec<(bool, &str)>| -> Vec<(bool, usize, String)> {
+        runs.into_iter()
+            .map(|(digit, run)| match digit {
+                // By value: fewer significant digits first, then digit by digit.
+                true => {
+                    let value = run.trim_start_matches('0');
+                    (true, value.len(), value.to_string())
+                }
+                false => (false, 0, run.to_string()),
+            })
+            .collect()
+    };
+    key(runs(&na))
+        .cmp(&key(runs(&nb)))
+        .then_with(|| na.cmp(&nb))
+}
+
+/// The number that ends a file's stem (`frame-000012.png`: 12), if it ends in one that
+/// fits in 64 bits.
+fn file_number(path: &Path) -> Option<u64> {
+    let stem = path.file_stem()?.to_str()?;
+    let digits = stem.len() - stem.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+    stem[stem.len() - digits..].parse().ok()
+}
+
+/// Color and depth files paired into frames, in order, and a warning on the files
+/// left out.
+struct Pairing {
+    frames: Vec<(PathBuf, PathBuf)>,
+    warning: Option<String>,
+}
+
+/// The [`Pairing`] of a dataset's color and depth files. Where every name of both folders ends in a number (unique within its
+/// folder), files pair by number and a file whose number the other folder lacks is
+/// left out; otherwise they pair by position, and the counts must agree.
+fn pair_frames(
+    (color_dir, colors): (&Path, Vec<PathBuf>),
+    (depth_dir, depths): (&Path, Vec<PathBuf>),
+) -> Result<Pairing, ImportError> {
+    let numbers = |dir: &Path, files: &[PathBuf]| -> Result<Option<Vec<u64>>, ImportError> {
+        let Some(numbers) = files
+            .iter()
+            .map(|f| file_number(f))
+            .collect::<Option<Vec<_>>>()
+        else {
+            return Ok(None);
+        };
+        // Sorted naturally, equal numbers are neighbours (`7.png`, `007.png`).
+        if let Some(i) = numbers.windows(2).position(|w| w[0] == w[1]) {
+            return Err(file_error(
+                dir,
+                format!(
+                    "{} and {} carry the same frame number {}: keep one",
+                    files[i].display(),
+                    files[i + 1].display(),
+                    numbers[i]
+                ),
+            ));
+        }
+        Ok(Some(numbers))
+    };
+    let (Some(color_numbers), Some(depth_numbers)) =
+        (numbers(color_dir, &colors)?, numbers(depth_dir, &depths)?)
+    else {
+        if colors.len() != depths.len() {
+            return Err(file_error(
+                color_dir.parent().unwrap_or(color_dir),
+                format!(
+                    "{} holds {} images but {} holds {}: color and depth must pair up",
+                    color_dir.display(),
+                    colors.len(),
+                    depth_dir.display(),
+                    depths.len()
+                ),
+            ));
+        }
+        return Ok(Pairing {
+            frames: colors.into_iter().zip(depths).collect(),
+            warning: None,
+        });
+    };
+    let depth_of: std::collections::HashMap<u64, &PathBuf> =
+        depth_numbers.iter().copied().zip(&depths).collect();
+    let color_set: std::collections::HashSet<u64> = color_numbers.iter().copied().collect();
+    let pairs: Vec<(PathBuf, PathBuf)> = color_numbers
+        .iter()
+        .zip(&colors)
+        .filter_map(|(n, c)| depth_of.get(n).map(|d| (c.clone(), (*d).clone())))
+        .collect();
+    let lone_colors: Vec<&PathBuf> = color_numbers
+        .iter()
+        .zip(&colors)
+        .filter(|(n, _)| !depth_of.contains_key(n))
+        .map(|(_, c)| c)
+        .collect();
+    let lone_depths: Vec<&PathBuf> = depth_numbers
+        .iter()
+        .zip(&depths)
+        .filter(|(n, _)| !color_set.contains(n))
+        .map(|(_, d)| d)
+        .collect();
+    if pairs.is_empty() {
+        return Err(file_error(
+            color_dir.parent().unwrap_or(color_dir),
+            format!(
+                "no image of {} has a depth image of the same number in {} (color {}..., depth {}...)",
+                color_dir.display(),
+                depth_dir.display(),
+                color_numbers[0],
+                depth_numbers[0]
+            ),
+        ));
+    }
+    let lone = |files: &[&PathBuf], partner: &Path| -> Option<String> {
+        let first = files.first()?;
+        Some(format!(
+            "{} file(s) with no partner in {} (the first: {})",
+            files.len(),
+            partner.display(),
+            first.display()
+        ))
+    };
+    let unpaired: Vec<String> = [lone(&lone_colors, depth_dir), lone(&lone_depths, color_dir)]
+        .into_iter()
+        .flatten()
+        .collect();
+    let warning = (!unpaired.is_empty()).then(|| {
+        format!(
+            "color and depth pair by the numbers in their names: left out {}",
+            unpaired.join("; ")
+        )
+    });
+    Ok(Pairing {
+        frames: pairs,
+        warning,
+    })
 }
 
 /// A sentence on the first gap in the numbers that end the file names of `files`
 /// (`000002.png`, `000004.png`: 000003 is missing), when every name ends in one.
-/// Frames are paired and stamped by position, so a gap shifts every later frame.
+/// Frames are stamped by position (the layout has no time), so a gap shifts every later
+/// frame.
 pub fn numbering_gap(folder: &Path, files: &[PathBuf]) -> Option<String> {
     let number = |p: &PathBuf| -> Option<u64> {
         let stem = p.file_stem()?.to_str()?;
@@ -85,9 +246,9 @@ pub fn numbering_gap(folder: &Path, files: &[PathBuf]) -> Option<String> {
     let first = numbers.windows(2).find(|w| w[1] > w[0].saturating_add(1))?;
     Some(format!(
         "{}: the file numbers jump from {} to {} ({missing} number(s) missing in all): \
-         frames are paired and stamped by position (frame k at k / fps, with the \
-         trajectory's k-th pose), so every frame after a gap is stamped early and may \
-         take another frame's pose",
+         frames are stamped by position (frame k at k / fps, with the trajectory's \
+         k-th pose), so every frame after a gap is stamped early and may take another \
+         frame's pose",
         folder.display(),
         first[0],
         first[1]
@@ -246,18 +407,10 @@ pub fn import(
     if colors.is_empty() {
         return Err(file_error(&color_dir, "holds no JPG or PNG images".into()));
     }
-    if colors.len() != depths.len() {
-        return Err(file_error(
-            dir,
-            format!(
-                "{} holds {} images but {} holds {}: color and depth must pair up",
-                color_dir.display(),
-                colors.len(),
-                depth_dir.display(),
-                depths.len()
-            ),
-        ));
-    }
+    let Pairing {
+        frames,
+        warning: pairing_warning,
+    } = pair_frames((&color_dir, colors.clone()), (&depth_dir, depths.clone()))?;
     let trajectory = match &options.trajectory {
         Some(p) => Some(p.clone()),
         None => find_trajectory(dir)?,
@@ -266,16 +419,16 @@ pub fn import(
         Some(p) => read_trajectory(p)?,
         None => Vec::new(),
     };
-    if poses.len() > colors.len() {
+    if poses.len() > frames.len() {
         let p = trajectory.as_deref().unwrap_or(dir);
         return Err(file_error(
             p,
-            format!("holds {} poses for {} frames", poses.len(), colors.len()),
+            format!("holds {} poses for {} frames", poses.len(), frames.len()),
         ));
     }
 
-    let first_color = read_color(&colors[0], options.common.store)?;
-    let first_depth = read_depth(&depths[0], options.common.store)?;
+    let first_color = read_color(&frames[0].0, options.common.store)?;
+    let first_depth = read_depth(&frames[0].1, options.common.store)?;
     let mut color_size = Some((first_color.width, first_color.height));
     let mut depth_size = Some((first_depth.width, first_depth.height));
     let mut streams = vec![StreamKind::Color, StreamKind::Depth];
@@ -300,7 +453,7 @@ pub fn import(
     );
     let mut writer = RecordingWriter::create(out, &header)?;
     let stamp = |k: usize| (k as f64 / options.fps * 1e9).round() as i64;
-    for (k, (color_path, depth_path)) in colors.iter().zip(&depths).enumerate() {
+    for (k, (color_path, depth_path)) in frames.iter().enumerate() {
         let color = if k == 0 {
             first_color.clone()
         } else {
@@ -327,16 +480,20 @@ pub fn import(
                 pose: *pose,
             }))?;
         }
-        progress(k + 1, colors.len());
+        progress(k + 1, frames.len());
     }
     writer.finish()?;
-    let warnings = [(&color_dir, &colors), (&depth_dir, &depths)]
+    let warnings = pairing_warning
         .into_iter()
-        .filter_map(|(folder, files)| numbering_gap(folder, files))
+        .chain(
+            [(&color_dir, &colors), (&depth_dir, &depths)]
+                .into_iter()
+                .filter_map(|(folder, files)| numbering_gap(folder, files)),
+        )
         .collect();
     Ok(ImportSummary {
-        color: colors.len(),
-        depth: depths.len(),
+        color: frames.len(),
+        depth: frames.len(),
         poses: poses.len(),
         skipped_frames: 0,
         warnings,

@@ -284,4 +284,40 @@ fn diff_names_the_first_differing_frame_and_exits_by_tolerance() {
     let unreadable = run_in(d, &["diff", "a", "nowhere"]);
     assert_eq!(unreadable.status.code(), Some(2));
     assert_eq!(stderr(&unreadable), "error: nowhere: not a folder\n");
+    // A symbolic link back up the tree is followed once, not round and round.
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("..", d.join("a/final/up")).unwrap();
+        let looped = run_in(d, &["diff", "a", "a"]);
+        assert_eq!(looped.status.code(), Some(0), "{}", stderr(&looped));
+        std::fs::remove_file(d.join("a/final/up")).unwrap();
+    }
+
+    // A frame that does not decode is unreadable (2), not a difference (1); its name
+    // is in the message.
+    std::fs::write(d.join("b/final/000001.png"), b"\x89PNG\r\n\x1a\n broken").unwrap();
+    let broken = run_in(d, &["diff", "a", "b"]);
+    assert_eq!(broken.status.code(), Some(2), "{}", stdout(&broken));
+    assert!(
+        stderr(&broken).starts_with("error: b/final/000001.png: "),
+        "{}",
+        stderr(&broken)
+    );
+
+    // A PNG whose header claims 20000 x 20000 pixels is refused before it is decoded.
+    write_png(&d.join("b/final/000001.png"), &frame);
+    let mut png = std::fs::read(d.join("b/final/000001.png")).unwrap();
+    // IHDR's width and height are bytes 16..24, its CRC 29..33 (over bytes 12..29).
+    png[16..20].copy_from_slice(&20000u32.to_be_bytes());
+    png[20..24].copy_from_slice(&20000u32.to_be_bytes());
+    let crc = crc32fast::hash(&png[12..29]);
+    png[29..33].copy_from_slice(&crc.to_be_bytes());
+    std::fs::write(d.join("b/final/000001.png"), &png).unwrap();
+    let huge = run_in(d, &["diff", "a", "b"]);
+    assert_eq!(huge.status.code(), Some(2));
+    assert_eq!(
+        stderr(&huge),
+        "error: b/final/000001.png: the image is 20000x20000: relume diff compares images \
+         of up to 16384 pixels a side and 64 megapixels\n"
+    );
 }

@@ -7,7 +7,8 @@ use std::path::PathBuf;
 
 const ABOUT: &str = "\
 Exit status: 0 when every product matches within the tolerance, 1 when one differs or
-is missing from a run, 2 when the runs cannot be read.
+is missing from a run, 2 when the runs cannot be read (a folder or file that cannot be
+read, an image that does not decode or is over 16384 pixels a side or 64 megapixels).
 
 Products are the sub-folders of each run (final/, depth/, ...), frames the files in
 them, matched by name. PNGs are compared on their own scale (8-bit levels, or 16-bit:

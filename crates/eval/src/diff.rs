@@ -7,7 +7,10 @@
 //! PNG on its own scale (0-255 for 8-bit, 0-65535 for 16-bit: millimetres for depth),
 //! EXR in its linear values (PSNR peak: the largest finite magnitude in the first run's
 //! frame, at least 1; NaN in both counts as equal). Any other file (JSON, PLY) is equal
-//! or not, byte for byte. A frame that does not decode in one run differs.
+//! or not, byte for byte. A frame that does not decode, or is larger than
+//! [`MAX_SIDE`] a side or [`MAX_PIXELS`] in all, cannot be compared: the diff stops
+//! with an error naming the file (the command exits 2, "unreadable", not 1, "differ").
+//! Folders are followed through symbolic links, each real folder once.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -17,6 +20,27 @@ use std::path::{Path, PathBuf};
 pub enum DiffError {
     #[error("{}: {message}", path.display())]
     File { path: PathBuf, message: String },
+}
+
+/// The widest or tallest image a diff decodes.
+pub const MAX_SIDE: u64 = 16384;
+/// The most pixels of one image a diff decodes (each value is held as an f64: 64
+/// megapixels of RGB are 1.5 GB).
+pub const MAX_PIXELS: u64 = 64 << 20;
+
+/// Refuses an image of `width` x `height` beyond [`MAX_SIDE`] or [`MAX_PIXELS`].
+fn check_size(path: &Path, width: u64, height: u64) -> Result<(), DiffError> {
+    if width > MAX_SIDE || height > MAX_SIDE || width * height > MAX_PIXELS {
+        return Err(file_error(
+            path,
+            format!(
+                "the image is {width}x{height}: relume diff compares images of up to \
+                 {MAX_SIDE} pixels a side and {} megapixels",
+                MAX_PIXELS >> 20
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn file_error(path: &Path, message: impl std::fmt::Display) -> DiffError {
@@ -104,11 +128,16 @@ impl RunDiff {
 
 /// The files of `root`, by the folder (relative to `root`, `/`-separated; `.` for
 /// `root` itself) that holds them. Hidden entries (a killed run's `.partial` files) are
-/// left out.
+/// left out. A folder reached twice (a symbolic link back up the tree) is read once.
 fn products(root: &Path) -> Result<BTreeMap<String, BTreeSet<String>>, DiffError> {
     let mut out = BTreeMap::new();
     let mut folders = vec![(root.to_path_buf(), String::from("."))];
+    let mut seen = BTreeSet::new();
     while let Some((dir, name)) = folders.pop() {
+        let real = std::fs::canonicalize(&dir).map_err(|e| file_error(&dir, e))?;
+        if !seen.insert(real) {
+            continue;
+        }
         let read = std::fs::read_dir(&dir).map_err(|e| file_error(&dir, e))?;
         let mut files = BTreeSet::new();
         for entry in read {
@@ -190,7 +219,15 @@ fn read_values(path: &Path) -> Result<Option<Values>, DiffError> {
     let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("");
     match extension.to_ascii_lowercase().as_str() {
         "png" => {
-            let image = image::open(path).map_err(|e| file_error(path, e))?;
+            let open = || {
+                image::ImageReader::open(path)
+                    .map_err(|e| file_error(path, e))?
+                    .with_guessed_format()
+                    .map_err(|e| file_error(path, e))
+            };
+            let (width, height) = open()?.into_dimensions().map_err(|e| file_error(path, e))?;
+            check_size(path, width as u64, height as u64)?;
+            let image = open()?.decode().map_err(|e| file_error(path, e))?;
             let color = image.color();
             let shape = format!("{}x{} {color:?}", image.width(), image.height());
             // The file's own channels: an alpha added here would always match and
@@ -215,6 +252,12 @@ fn read_values(path: &Path) -> Result<Option<Values>, DiffError> {
         }
         "exr" => {
             use exr::prelude::*;
+            let meta = exr::meta::MetaData::read_from_file(path, false)
+                .map_err(|e| file_error(path, e))?;
+            for header in &meta.headers {
+                let size = header.layer_size;
+                check_size(path, size.width() as u64, size.height() as u64)?;
+            }
             let image = read()
                 .no_deep_data()
                 .largest_resolution_level()
@@ -262,11 +305,8 @@ pub fn diff_file(a: &Path, b: &Path) -> Result<FrameDiff, DiffError> {
         psnr_db: f64::NEG_INFINITY,
         incomparable: Some(why),
     };
-    let (va, vb) = match (read_values(a), read_values(b)) {
-        (Ok(va), Ok(vb)) => (va, vb),
-        // A frame that does not decode differs; the other frames are still compared.
-        (Err(e), _) | (_, Err(e)) => return Ok(incomparable(e.to_string())),
-    };
+    // A frame that does not decode is not a difference: the runs cannot be compared.
+    let (va, vb) = (read_values(a)?, read_values(b)?);
     let (Some(va), Some(vb)) = (va, vb) else {
         let bytes = |p: &Path| std::fs::read(p).map_err(|e| file_error(p, e));
         return Ok(if bytes(a)? == bytes(b)? {

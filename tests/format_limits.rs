@@ -378,7 +378,7 @@ fn with_header(s: &Sample, edit: impl Fn(&mut relume::recording::Header)) -> std
 fn header_values_that_no_stage_can_use_are_refused_on_open() {
     let s = Sample::new();
     type Edit = fn(&mut relume::recording::Header);
-    let cases: [(Edit, &str); 6] = [
+    let cases: [(Edit, &str); 11] = [
         (
             |h| h.color_intrinsics.width = 100_000,
             "color intrinsics: image size 100000x3 is not between 1 and 16384 on each side",
@@ -402,6 +402,33 @@ fn header_values_that_no_stage_can_use_are_refused_on_open() {
         (
             |h| h.depth_unit_m = 0.0,
             "depth unit 0 m is not a finite positive length",
+        ),
+        // Finite but absurd: every depth would be 1e297 km, or a focal length of 1e-300
+        // pixels (a field of view of 180 degrees less nothing).
+        (
+            |h| h.depth_unit_m = 1e300,
+            "depth unit 1e300 m is not a depth sensor's: it must lie between 1e-6 m and 10 m \
+             per stored unit",
+        ),
+        (
+            |h| h.depth_unit_m = 1e-30,
+            "depth unit 1e-30 m is not a depth sensor's: it must lie between 1e-6 m and 10 m \
+             per stored unit",
+        ),
+        (
+            |h| h.depth_intrinsics.fx = 1e-300,
+            "depth intrinsics: fx = 1e-300 px is not a focal length for a 4x3 image: it must \
+             lie between 0.05 and 100 times the image's larger side (0.2 to 400 px)",
+        ),
+        (
+            |h| h.color_intrinsics.cx = -1e308,
+            "color intrinsics: cx = -1e308 px lies further outside the 4x3 image than its own \
+             size (it must lie between -4 and 8 px)",
+        ),
+        (
+            |h| h.color_intrinsics.fy = 1e6,
+            "color intrinsics: fy = 1000000 px is not a focal length for a 4x3 image: it must \
+             lie between 0.05 and 100 times the image's larger side (0.2 to 400 px)",
         ),
     ];
     for (edit, reason) in cases {

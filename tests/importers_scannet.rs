@@ -389,6 +389,17 @@ fn damaged_sens_files_are_refused_naming_file_and_frame() {
             "{p}frame 1: color image of 100000 bytes is larger than the {left} bytes left in the file"
         )
     );
+    // A finite but absurd depth shift: every depth would be 1e30 metres.
+    let mut shift = small_sens(3);
+    shift.depth_shift = 1e-30;
+    let (e, p) = import_error(&shift.bytes());
+    assert_eq!(
+        e,
+        format!(
+            "{p}depth shift 1.0000000031710769e-30 units per metre is not a depth sensor's: it \
+             must lie between 0.1 and 1000000 (a stored unit of 1e-6 m to 10 m)"
+        )
+    );
     let mut unknown = small_sens(3);
     unknown.color_type = 7;
     let (e, p) = import_error(&unknown.bytes());

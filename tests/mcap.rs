@@ -59,6 +59,16 @@ fn tf_at(stamp_ns: i64, k: usize) -> Tf<'static> {
 /// infos beside each image topic, a static camera mount and odom -> base_link on /tf
 /// from frame 1 on (frame 0 lies before the first transform).
 fn write_raw_bag(path: &Path, compression: Option<mcap::Compression>) {
+    let info = |_, t, frame: &str| ros2::camera_info(t, frame, W, H, 10.5, 11.0, 3.9, 2.7);
+    write_raw_bag_with_info(path, compression, info);
+}
+
+/// [`write_raw_bag`] with the color camera info of frame k (stamp t) from `info`.
+fn write_raw_bag_with_info(
+    path: &Path,
+    compression: Option<mcap::Compression>,
+    info: impl Fn(usize, i64, &str) -> Vec<u8>,
+) {
     let mut bag = Bag::create(path, compression);
     let (ct, cq) = CAMERA_IN_BASE;
     let mount = Tf {
@@ -104,7 +114,7 @@ fn write_raw_bag(path: &Path, compression: Option<mcap::Compression>) {
             "/camera/color/camera_info",
             "sensor_msgs/msg/CameraInfo",
             t as u64,
-            &ros2::camera_info(t, frame, W, H, 10.5, 11.0, 3.9, 2.7),
+            &info(k, t, frame),
         );
         let depth: Vec<u8> = depth_units(k)
             .iter()
@@ -183,6 +193,83 @@ fn ros2_raw_images_tf_and_camera_info_import_exactly() {
             );
         }
     }
+}
+
+/// A camera matrix that is not a pinhole's, or absurd values in one, are refused
+/// naming the topic; one that changes mid-stream is named in a warning.
+#[test]
+fn a_camera_info_must_be_a_pinhole_matrix_in_bounds_and_a_change_is_named() {
+    let good = [10.5, 0.0, 3.9, 0.0, 11.0, 2.7, 0.0, 0.0, 1.0];
+    let with = |i: usize, v: f64| {
+        let mut k = good;
+        k[i] = v;
+        k
+    };
+    let topic = "/camera/color/camera_info";
+    let cases = [
+        (
+            with(8, 0.0),
+            format!(
+                "the camera info on {topic}: K = {:?} is not a pinhole camera matrix without \
+                 skew ([fx 0 cx; 0 fy cy; 0 0 1]); give --intrinsics fx,fy,cx,cy",
+                with(8, 0.0)
+            ),
+        ),
+        (
+            with(1, 0.5),
+            format!(
+                "the camera info on {topic}: K = {:?} is not a pinhole camera matrix without \
+                 skew ([fx 0 cx; 0 fy cy; 0 0 1]); give --intrinsics fx,fy,cx,cy",
+                with(1, 0.5)
+            ),
+        ),
+        (
+            with(2, 1e300),
+            format!(
+                "the camera info on {topic}: cx = 1e300 px lies further outside the 8x6 image \
+                 than its own size (it must lie between -8 and 16 px)"
+            ),
+        ),
+        (
+            with(0, 1e-300),
+            format!(
+                "the camera info on {topic}: fx = 1e-300 px is not a focal length for a 8x6 \
+                 image: it must lie between 0.05 and 100 times the image's larger side (0.4 to \
+                 800 px)"
+            ),
+        ),
+    ];
+    for (k, message) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("in.mcap");
+        write_raw_bag_with_info(&path, None, |_, t, frame| {
+            ros2::camera_info_k(t, frame, W, H, k)
+        });
+        let o = run_in(dir.path(), &["import", "mcap", "in.mcap", "-o", "r.relume"]);
+        assert!(!o.status.success());
+        assert_eq!(stderr(&o), format!("error: in.mcap: {message}\n"), "{k:?}");
+        assert!(!dir.path().join("r.relume").exists());
+    }
+    // From frame 3 on (message 20 of the file) the camera is zoomed: imported with the
+    // first, and said.
+    let dir = tempfile::tempdir().unwrap();
+    write_raw_bag_with_info(&dir.path().join("in.mcap"), None, |k, t, frame| {
+        let f = if k >= 3 { 21.0 } else { 10.5 };
+        ros2::camera_info(t, frame, W, H, f, f, 3.9, 2.7)
+    });
+    let o = ok(run_in(
+        dir.path(),
+        &["import", "mcap", "in.mcap", "-o", "r.relume"],
+    ));
+    let out = stdout(&o) + &stderr(&o);
+    assert!(
+        out.contains(&format!(
+            "the camera info on {topic} changes at message 20 (8x6, K = [21.0, 0.0, 3.9, \
+             0.0, 21.0, 2.7, 0.0, 0.0, 1.0], after 8x6, K = [10.5, 0.0, 3.9, 0.0, 10.5, 2.7, \
+             0.0, 0.0, 1.0]): every frame is imported with the first"
+        )),
+        "{out}"
+    );
 }
 
 fn png_rgb(k: usize) -> Vec<u8> {

@@ -104,10 +104,22 @@ pub fn camera_info(
     cx: f64,
     cy: f64,
 ) -> Vec<u8> {
+    camera_info_k(
+        stamp_ns,
+        frame,
+        w,
+        h,
+        [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+    )
+}
+
+/// One sensor_msgs/CameraInfo with the row-major camera matrix `k` as given.
+pub fn camera_info_k(stamp_ns: i64, frame: &str, w: u32, h: u32, k: [f64; 9]) -> Vec<u8> {
+    let [fx, _, cx, _, fy, cy, _, _, _] = k;
     let mut c = Cdr::new();
     c.header(stamp_ns, frame).u32(h).u32(w).string("plumb_bob");
     c.u32(5).f64s(&[0.0; 5]);
-    c.f64s(&[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]);
+    c.f64s(&k);
     c.f64s(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]);
     c.f64s(&[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]);
     // binning_x, binning_y, roi (x_offset, y_offset, height, width, do_rectify).

@@ -46,11 +46,17 @@ impl Intrinsics {
 pub const MAX_IMAGE_SIDE: u32 = 16384;
 /// The most pixels a recording's images may declare (64 Mpx: 768 MiB of f32 RGB).
 pub const MAX_IMAGE_PIXELS: u64 = 64 << 20;
+/// The shortest and longest focal lengths a camera may declare, in multiples of its
+/// image's larger side: a field of view across that side of 168.6 degrees down to
+/// 0.57 degrees. A focal length outside them is a unit mistake (metres for pixels, a
+/// value for another image size), not a lens.
+pub const FOCAL_RANGE_IN_SIDES: (f64, f64) = (0.05, 100.0);
 
 impl Intrinsics {
     /// Why these intrinsics cannot describe a camera, if they cannot: sizes of 0 or
     /// over [`MAX_IMAGE_SIDE`] / [`MAX_IMAGE_PIXELS`], focal lengths that are not finite
-    /// and positive, a principal point that is not finite.
+    /// and positive or lie outside [`FOCAL_RANGE_IN_SIDES`], a principal point that is
+    /// not finite or lies further outside the image than its own width or height.
     pub fn check(&self) -> Result<(), String> {
         let (w, h) = (self.width, self.height);
         if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
@@ -63,19 +69,52 @@ impl Intrinsics {
                 "image size {w}x{h} is over {MAX_IMAGE_PIXELS} pixels"
             ));
         }
+        let side = w.max(h) as f64;
+        let (shortest, longest) = FOCAL_RANGE_IN_SIDES;
         for (name, f) in [("fx", self.fx), ("fy", self.fy)] {
             if !(f.is_finite() && f > 0.0) {
                 return Err(format!(
                     "{name} = {f} is not a finite positive focal length"
                 ));
             }
+            if !(shortest * side..=longest * side).contains(&f) {
+                return Err(format!(
+                    "{name} = {} px is not a focal length for a {w}x{h} image: it must lie \
+                     between {shortest} and {longest} times the image's larger side \
+                     ({} to {} px)",
+                    readable(f),
+                    shortest * side,
+                    longest * side
+                ));
+            }
         }
-        for (name, c) in [("cx", self.cx), ("cy", self.cy)] {
+        for (name, c, size) in [("cx", self.cx, w as f64), ("cy", self.cy, h as f64)] {
             if !c.is_finite() {
                 return Err(format!("{name} = {c} is not finite"));
             }
+            if !(-size..=2.0 * size).contains(&c) {
+                return Err(format!(
+                    "{name} = {} px lies further outside the {w}x{h} image than its own size \
+                     (it must lie between {} and {} px)",
+                    readable(c),
+                    -size,
+                    2.0 * size
+                ));
+            }
         }
         Ok(())
+    }
+}
+
+/// `x` for a message: plain where that is short (`525`, `0.001`), in scientific
+/// notation where it is not (`1e300`, `1e-30`), so an absurd value does not print as
+/// three hundred digits.
+pub fn readable(x: f64) -> String {
+    let magnitude = x.abs();
+    if x.is_finite() && x != 0.0 && !(1e-4..1e7).contains(&magnitude) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
     }
 }
 

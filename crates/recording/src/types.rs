@@ -70,9 +70,15 @@ pub struct Header {
 
 pub use relume_base::pinhole::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 
+/// The finest and coarsest depth units a recording may declare (metres per stored
+/// unit): a micrometre (sensors store millimetres, TUM a fifth of one) to 10 m (float
+/// depth in metres stores 1). Outside them every stored depth turns into a distance no
+/// sensor measures, or into infinity.
+pub const DEPTH_UNIT_RANGE_M: (f64, f64) = (1e-6, 10.0);
+
 impl Header {
     /// Why the header cannot describe a recording, if it cannot (see
-    /// [`Intrinsics::check`]; the depth unit must be finite and positive).
+    /// [`Intrinsics::check`]; the depth unit must lie in [`DEPTH_UNIT_RANGE_M`]).
     pub fn check(&self) -> Result<(), String> {
         self.color_intrinsics
             .check()
@@ -84,6 +90,15 @@ impl Header {
         if !(unit.is_finite() && unit > 0.0) {
             return Err(format!(
                 "depth unit {unit} m is not a finite positive length"
+            ));
+        }
+        let (finest, coarsest) = DEPTH_UNIT_RANGE_M;
+        if !(finest..=coarsest).contains(&unit) {
+            return Err(format!(
+                "depth unit {} m is not a depth sensor's: it must lie between {} m and \
+                 {coarsest} m per stored unit",
+                relume_base::pinhole::readable(unit),
+                relume_base::pinhole::readable(finest),
             ));
         }
         Ok(())

@@ -104,12 +104,16 @@ fn namespace(topic: &str) -> &str {
 
 /// The intrinsics of an image topic: `--intrinsics`, else its camera info (the named
 /// one, else one in its namespace, else one in its frame, else the only one), taken
-/// for the size it describes. `Ok(None)`: no camera info at all.
+/// for the size it describes. `Ok(None)`: no camera info at all. The camera matrix must
+/// be a pinhole's without skew, `[fx 0 cx; 0 fy cy; 0 0 1]`, within the bounds of
+/// [`Intrinsics::check`]; a camera info that changes later in the stream is named in
+/// `warnings` (the first is used for every frame).
 pub(super) fn intrinsics_for(
     path: &Path,
     scan: &Scan,
     images: &Arc<Channel>,
     named: Option<&str>,
+    warnings: &mut Vec<String>,
 ) -> Result<Option<Intrinsics>, ImportError> {
     let topic = &scan.images[&images.id];
     let infos: Vec<(&Arc<Channel>, &messages::CameraInfoMsg)> = scan
@@ -151,6 +155,19 @@ pub(super) fn intrinsics_for(
         cx: info.k[2],
         cy: info.k[5],
     };
+    let m = &info.k;
+    // Skew below a millionth of the focal length is rounding in a calibration tool.
+    let skewed = m[1].is_nan() || m[1].abs() > 1e-6 * m[0].abs();
+    if skewed || [m[3], m[6], m[7]] != [0.0; 3] || m[8] != 1.0 {
+        return Err(fail(
+            path,
+            format!(
+                "the camera info on {}: K = {:?} is not a pinhole camera matrix without skew \
+                 ([fx 0 cx; 0 fy cy; 0 0 1]); give --intrinsics fx,fy,cx,cy",
+                channel.topic, m
+            ),
+        ));
+    }
     if let Some(size) = topic.size
         && size != (info.width, info.height)
     {
@@ -167,6 +184,20 @@ pub(super) fn intrinsics_for(
         return Err(fail(
             path,
             format!("the camera info on {}: {e}", channel.topic),
+        ));
+    }
+    if let Some((index, changed)) = scan.info_changes.get(&channel.id) {
+        warnings.push(format!(
+            "the camera info on {} changes at message {index} ({}x{}, K = {:?}, after \
+             {}x{}, K = {:?}): every frame is imported with the first; give --intrinsics \
+             fx,fy,cx,cy to choose",
+            channel.topic,
+            changed.width,
+            changed.height,
+            changed.k,
+            info.width,
+            info.height,
+            info.k
         ));
     }
     Ok(Some(k))

@@ -78,9 +78,15 @@ pub fn import(
             )
         }
         None => {
-            let ck = intrinsics_for(file, &scan, color, options.info_topic.as_deref())?;
+            let ck = intrinsics_for(
+                file,
+                &scan,
+                color,
+                options.info_topic.as_deref(),
+                &mut warnings,
+            )?;
             let dk = match depth {
-                Some(d) => intrinsics_for(file, &scan, d, None)?,
+                Some(d) => intrinsics_for(file, &scan, d, None, &mut warnings)?,
                 None => None,
             };
             let fallback = CameraIntrinsics::default();

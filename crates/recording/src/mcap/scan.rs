@@ -36,6 +36,9 @@ pub struct Scan {
     pub images: BTreeMap<u16, ImageTopic>,
     /// The first camera info of each channel.
     pub infos: BTreeMap<u16, CameraInfoMsg>,
+    /// Per channel, the first camera info whose size or camera matrix differs from the
+    /// first one, with its message index (as the other messages name it).
+    pub info_changes: BTreeMap<u16, (u64, CameraInfoMsg)>,
     /// Transforms of the TF topics.
     pub tf: TfTree,
     /// Messages of the pose topics (PoseStamped, Odometry, PoseInFrame) as transforms.
@@ -103,9 +106,18 @@ impl Scan {
                         ))
                     })?;
                     match message {
-                        Message::CameraInfo(info) => {
-                            scan.infos.entry(channel.id).or_insert(info);
-                        }
+                        Message::CameraInfo(info) => match scan.infos.get(&channel.id) {
+                            None => {
+                                scan.infos.insert(channel.id, info);
+                            }
+                            Some(first)
+                                if (first.width, first.height, first.k)
+                                    != (info.width, info.height, info.k) =>
+                            {
+                                scan.info_changes.entry(channel.id).or_insert((index, info));
+                            }
+                            Some(_) => {}
+                        },
                         Message::Transforms(t)
                             if matches!(ty, MessageType::RosTf)
                                 || matches!(

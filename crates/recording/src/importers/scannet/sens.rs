@@ -208,6 +208,17 @@ pub(super) fn read_header(sens: &mut Sens) -> Result<SensHeader, String> {
             "depth shift {depth_shift} is not a finite positive number of units per metre"
         ));
     }
+    // The depth unit is 1 / shift metres: bounded as a recording's (DEPTH_UNIT_RANGE_M).
+    let (finest, coarsest) = crate::types::DEPTH_UNIT_RANGE_M;
+    let (fewest, most) = (1.0 / coarsest, 1.0 / finest);
+    if !(fewest..=most).contains(&(depth_shift as f64)) {
+        return Err(format!(
+            "depth shift {} units per metre is not a depth sensor's: it must lie between \
+             {fewest} and {most} (a stored unit of {} m to {coarsest} m)",
+            relume_base::pinhole::readable(depth_shift as f64),
+            relume_base::pinhole::readable(finest)
+        ));
+    }
     let identity = glam::Mat4::IDENTITY.to_cols_array();
     let left = sens.len - sens.pos;
     if frames == 0 || frames > left / FRAME_HEADER_BYTES {

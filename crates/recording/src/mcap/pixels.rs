@@ -152,7 +152,16 @@ pub fn compressed_file<'a>(
         ));
     }
     let f = |i: usize| f32::from_le_bytes(data[i..i + 4].try_into().expect("4 bytes"));
-    Ok((Some((f(4), f(8))), &data[12..]))
+    let (a, b) = (f(4), f(8));
+    // Only a 32FC1 image is sent quantized; a 16UC1 one carries the header unused.
+    let quantized = format.trim_start().starts_with("32fc1");
+    if quantized && !(a.is_finite() && a != 0.0 && b.is_finite()) {
+        return Err(format!(
+            "the compressedDepth header's quantization A = {a}, B = {b} cannot give a \
+             depth (depth = A / (v - B): A must be finite and not 0, B finite)"
+        ));
+    }
+    Ok((Some((a, b)), &data[12..]))
 }
 
 /// A color message as stored: JPEG/PNG kept (or decoded to raw with `StoreMode::Raw`),
@@ -388,6 +397,31 @@ mod tests {
         };
         let img = depth_image(&be, 0.001, StoreMode::Compressed).unwrap();
         assert_eq!(img.bytes, [0x02, 0x01]);
+    }
+
+    #[test]
+    fn a_compressed_depth_header_that_cannot_give_a_depth_is_refused() {
+        let header = |a: f32, b: f32| {
+            let mut data = 0i32.to_le_bytes().to_vec();
+            data.extend(a.to_le_bytes());
+            data.extend(b.to_le_bytes());
+            data.extend([0u8; 8]);
+            data
+        };
+        for (a, b) in [(f32::NAN, 1.0), (1.0, f32::INFINITY), (0.0, 1.0)] {
+            let e = compressed_file("32FC1; compressedDepth png", &header(a, b)).unwrap_err();
+            assert_eq!(
+                e,
+                format!(
+                    "the compressedDepth header's quantization A = {a}, B = {b} cannot give a \
+                     depth (depth = A / (v - B): A must be finite and not 0, B finite)"
+                )
+            );
+        }
+        // 16UC1 sends the units themselves: its header is not read.
+        let unused = header(f32::NAN, 0.0);
+        let (_, png) = compressed_file("16UC1; compressedDepth", &unused).unwrap();
+        assert_eq!(png, [0u8; 8]);
     }
 
     #[test]

@@ -472,3 +472,63 @@ fn an_image_whose_size_differs_from_the_header_names_its_frame() {
         "{err}"
     );
 }
+
+/// A named pipe given as a recording is refused at once, not waited on for a writer
+/// that never comes.
+#[cfg(unix)]
+#[test]
+fn a_named_pipe_given_as_a_recording_is_refused_at_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fifo = tmp.path().join("pipe.relume");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .expect("mkfifo");
+    assert!(made.success());
+    let mut child = common::relume()
+        .args(["inspect", fifo.to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > Duration::from_secs(10) {
+            child.kill().unwrap();
+            panic!("relume inspect waited on the pipe");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let o = child.wait_with_output().unwrap();
+    assert!(!o.status.success());
+    assert_eq!(
+        String::from_utf8_lossy(&o.stderr),
+        format!(
+            "error: {}: is not a regular file (a device, pipe or socket)\n",
+            fifo.display()
+        )
+    );
+}
+
+/// Strings of a header (name, provenance, attachments) reach the terminal with their
+/// control characters escaped: a recording cannot send escape sequences to it.
+#[test]
+fn inspect_escapes_control_characters_of_the_header() {
+    let s = Sample::new();
+    let path = with_header(&s, |h| {
+        h.name = "room\u{1b}[2J\u{7}".into();
+        h.provenance.source = "a\rb".into();
+    });
+    let o = common::relume()
+        .args(["inspect", path.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{out}");
+    assert!(
+        !out.contains('\u{1b}') && !out.contains('\u{7}') && !out.contains('\r'),
+        "{out:?}"
+    );
+    assert!(out.contains("(room\\u{1b}[2J\\u{7}, format"), "{out}");
+    assert!(out.contains("from a\\u{d}b\n"), "{out}");
+}

@@ -82,15 +82,15 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
         outln!(
             "{} ({}, format {}, {:.1} MB)",
             rec.path().display(),
-            h.name,
+            printable(&h.name),
             rec.version(),
             rec.file_len() as f64 / 1e6
         )?;
         outln!(
             "  made by   {} {} from {}",
-            h.provenance.tool,
-            h.provenance.tool_version,
-            h.provenance.source
+            printable(&h.provenance.tool),
+            printable(&h.provenance.tool_version),
+            printable(&h.provenance.source)
         )?;
         let k = &h.color_intrinsics;
         outln!(
@@ -148,15 +148,15 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
         if let Some(gt) = &h.ground_truth {
             outln!(
                 "  truth     {} (object at {:?})",
-                gt.description,
+                printable(&gt.description),
                 gt.object_position
             )?;
         }
         for att in &h.attachments {
             outln!(
                 "  attached  {} ({}, {}x{})",
-                att.name,
-                att.kind,
+                printable(&att.name),
+                printable(&att.kind),
                 att.image.width,
                 att.image.height
             )?;
@@ -177,6 +177,22 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
     }
     let damaged = a.verify && rec.damage().is_some();
     Ok(if corrupt.is_empty() && !damaged { 0 } else { 1 })
+}
+
+/// `text` from a recording's header with its control characters escaped (`\u{1b}`),
+/// so that a recording cannot move the cursor, clear the screen or retitle the terminal
+/// of the person inspecting it.
+fn printable(text: &str) -> std::borrow::Cow<'_, str> {
+    if !text.chars().any(char::is_control) {
+        return text.into();
+    }
+    text.chars()
+        .map(|c| match c.is_control() {
+            true => c.escape_unicode().to_string(),
+            false => c.to_string(),
+        })
+        .collect::<String>()
+        .into()
 }
 
 /// Reads record `i` and decodes its image, if it has one: what is wrong with it.

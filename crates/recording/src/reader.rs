@@ -29,7 +29,9 @@ impl Recording {
     /// header is unreadable; a damaged body opens with the complete records recovered and
     /// the damage reported by [`Recording::damage`].
     pub fn open(path: &Path) -> Result<Recording, RecordingError> {
-        let file = File::open(path).map_err(|e| RecordingError::io(path, e))?;
+        // A named pipe or device would block or read without end: refused first.
+        let file =
+            relume_base::files::open_regular(path).map_err(|e| RecordingError::io(path, e))?;
         let file_len = file
             .metadata()
             .map_err(|e| RecordingError::io(path, e))?

@@ -348,6 +348,27 @@ fn bad_shard_specs_and_manifests_say_what_and_where() {
         e.starts_with("error: bad.toml:4:10: frame range \"3..1\" is empty"),
         "{e}"
     );
+    let e = manifest(
+        "out = \"/\"\nrecordings = [\"data/r1.relume\"]\npipelines = [\"pipes/geometry.toml\"]\n",
+    );
+    assert!(
+        e.starts_with(
+            "error: bad.toml:1:7: `out` = \"/\" is the root of a file system: give a folder \
+             of its own for the batch's items"
+        ),
+        "{e}"
+    );
+    // A shard count far beyond the items: said, not silently empty.
+    let o = batch(d, &["batch", "m.toml", "--shard", "5/1000000000000"], &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(
+            "warning: 1000000000000 shards for 6 items: at least 999999999994 shards have \
+             nothing to run, this one among them"
+        ),
+        "{}",
+        stderr(&o)
+    );
     let e = manifest("recordings = [\"data/r1.relume\"]\n");
     assert!(
         e.starts_with("error: bad.toml:1:1: the manifest has no `pipelines`"),

@@ -119,6 +119,20 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
         manifest.items.len(),
         out.display()
     );
+    if shard.count > manifest.items.len() as u64 {
+        note!(
+            "warning: {} shards for {} items: at least {} shards have nothing to run{}; a \
+             job array as large as the item count is enough",
+            shard.count,
+            manifest.items.len(),
+            shard.count - manifest.items.len() as u64,
+            if mine.is_empty() {
+                ", this one among them"
+            } else {
+                ""
+            }
+        );
+    }
     let stop = super::replay::stop_on_interrupt();
     let (mut ran, mut skipped, mut failed) = (0, 0, 0);
     for (k, item) in mine.iter().enumerate() {

@@ -182,7 +182,25 @@ impl Manifest {
         check_keys(src, &doc, KEYS, "key in the manifest")?;
         let base = path.parent().map_or(PathBuf::new(), Path::to_path_buf);
         let out = match doc.get("out") {
-            Some(v) => base.join(string(src, v, "out")?),
+            Some(v) => {
+                let out = base.join(string(src, v, "out")?);
+                // Items and the shard's lists are written and cleared there: never a
+                // file system's root.
+                if out.parent().is_none() {
+                    return Err(src
+                        .error(
+                            v.span(),
+                            format!(
+                                "`out` = {:?} is the root of a file system: give a folder of \
+                                 its own for the batch's items",
+                                out.display().to_string()
+                            ),
+                            None,
+                        )
+                        .into());
+                }
+                out
+            }
             None => {
                 let stem = path
                     .file_stem()

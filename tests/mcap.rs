@@ -486,6 +486,20 @@ fn damaged_and_unreadable_files_name_what_is_wrong_and_write_nothing() {
         "{}",
         stderr(&o)
     );
+    // One bit flipped inside a chunk (a pixel of frame 2): imported before as other
+    // pixels with exit 0; the chunk's CRC no longer matches.
+    let row = &color_pixels(2)[..(W * 3) as usize];
+    let at = bytes
+        .windows(row.len())
+        .position(|w| w == row)
+        .expect("frame 2's first row is in the file");
+    let mut flipped = bytes.clone();
+    flipped[at + 5] ^= 0x10;
+    std::fs::write(d.join("flip.mcap"), &flipped).unwrap();
+    fails(
+        &["import", "mcap", "flip.mcap", "-o", "r.relume"],
+        "flip.mcap: the file is damaged: ",
+    );
     // A message whose byte count runs past its end.
     let mut bag = Bag::create(&d.join("bad.mcap"), None);
     let mut img = ros2::image(T0, "cam", W, H, "rgb8", W * 3, &color_pixels(0));

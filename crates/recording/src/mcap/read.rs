@@ -2,6 +2,13 @@
 //! chunks (zstd, lz4 or none) are decompressed as they come, nothing but one chunk is
 //! held in memory, and files without a summary section (a recorder killed before it
 //! closed the file) read as far as they go.
+//!
+//! Every checksum the format has is checked where the writer filled it in (0 means
+//! none): each chunk's CRC at the chunk's end (a damaged chunk stops the import; a
+//! file cut inside a chunk still gives the messages before the cut), the data
+//! section's and the summary section's. The summary's statistics, where present, must count the
+//! messages read: a chunk that lost its messages (a compressed chunk declaring an
+//! uncompressed size of 0) is an error, not a shorter import.
 
 use super::messages::MessageType;
 use crate::error::ImportError;
@@ -76,7 +83,11 @@ pub fn stream(
     let mut file = relume_base::files::open_regular(path).map_err(io)?;
     let file_len = file.metadata().map_err(io)?.len();
     let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default().with_record_length_limit(record_limit(file_len)),
+        LinearReaderOptions::default()
+            .with_record_length_limit(record_limit(file_len))
+            .with_validate_chunk_crcs(true)
+            .with_validate_data_section_crc(true)
+            .with_validate_summary_section_crc(true),
     );
     let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
     let mut channels: BTreeMap<u16, Arc<Channel>> = BTreeMap::new();
@@ -92,6 +103,16 @@ pub fn stream(
                     end.messages
                 ));
                 break;
+            }
+            Err(
+                e @ (mcap::McapError::BadChunkCrc { .. }
+                | mcap::McapError::BadDataCrc { .. }
+                | mcap::McapError::BadSummaryCrc { .. }),
+            ) => {
+                return Err(bad(format!(
+                    "the file is damaged: {e} (after {} messages, {bytes_read} bytes in)",
+                    end.messages
+                )));
             }
             Err(e) => {
                 return Err(bad(format!(
@@ -166,6 +187,13 @@ pub fn stream(
                         name: &m.name,
                         values: &m.metadata,
                     })?,
+                    Record::Statistics(stats) if stats.message_count != end.messages => {
+                        return Err(bad(format!(
+                            "the file is damaged: its statistics count {} messages but its \
+                             chunks hold {}",
+                            stats.message_count, end.messages
+                        )));
+                    }
                     _ => {}
                 }
             }

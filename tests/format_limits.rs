@@ -532,3 +532,76 @@ fn inspect_escapes_control_characters_of_the_header() {
     assert!(out.contains("(room\\u{1b}[2J\\u{7}, format"), "{out}");
     assert!(out.contains("from a\\u{d}b\n"), "{out}");
 }
+
+/// The sample with a footer listing `entries` (CRC-valid, trailer pointing at it).
+fn with_index(s: &Sample, name: &str, entries: &[IndexEntry]) -> std::path::PathBuf {
+    let mut bytes = s.bytes[..s.footer_at as usize].to_vec();
+    bytes.extend(frame(
+        Tag::Index,
+        0,
+        &rmp_serde::to_vec_named(entries).unwrap(),
+    ));
+    bytes.extend_from_slice(&s.footer_at.to_le_bytes());
+    bytes.extend_from_slice(&TRAILER_MAGIC);
+    s.variant(name, &bytes)
+}
+
+/// A footer whose checksum holds but which does not list the records as they lie
+/// (one listed twice, one left out, two swapped) is damage: the records are found by a
+/// scan, every one once, and `inspect --verify` says so.
+#[test]
+fn a_checksummed_footer_that_lies_about_the_records_is_damage() {
+    let s = Sample::new();
+    let true_index = Recording::open(&s.path).unwrap().index().to_vec();
+    let n = true_index.len();
+    let mut doubled = true_index.clone();
+    doubled.insert(3, true_index[2]);
+    let mut short = true_index.clone();
+    short.remove(4);
+    let mut swapped = true_index.clone();
+    swapped.swap(1, 2);
+    let all_at_one: Vec<IndexEntry> = vec![true_index[0]; 1000];
+    for (name, entries, reason) in [
+        (
+            "doubled",
+            &doubled,
+            "index entry 3 says a record starts at byte",
+        ),
+        (
+            "short",
+            &short,
+            "index entry 4 says a record starts at byte",
+        ),
+        (
+            "swapped",
+            &swapped,
+            "index entry 1 says a record starts at byte",
+        ),
+        (
+            "one",
+            &all_at_one,
+            "index entry 1 says a record starts at byte",
+        ),
+    ] {
+        let path = with_index(&s, &format!("{name}.relume"), entries);
+        let rec = quickly(|| Recording::open(&path)).unwrap();
+        assert_eq!(
+            rec.index(),
+            &true_index[..],
+            "{name}: the scan finds each record once"
+        );
+        let damage = rec.damage().map(|d| d.to_string()).unwrap_or_default();
+        assert!(damage.contains(reason), "{name}: {damage}");
+        let o = common::relume()
+            .args(["inspect", path.to_str().unwrap(), "--verify"])
+            .output()
+            .unwrap();
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert_eq!(o.status.code(), Some(1), "{name}: {out}");
+        assert!(
+            out.contains(&format!("verified  {n} records, 0 corrupt")),
+            "{out}"
+        );
+        assert!(out.contains("DAMAGED"), "{out}");
+    }
+}

@@ -310,6 +310,33 @@ impl Recording {
                 ));
             }
         }
+        // The records lie back to back between the header and the footer, so a true
+        // index tiles that span exactly, in order: an entry listed twice, one left out
+        // or two swapped break the tiling (checked in one pass, no record read).
+        let mut expected = body_start;
+        for (i, e) in index.iter().enumerate() {
+            if e.offset != expected {
+                return Err(self.corrupt(
+                    footer_at,
+                    format!(
+                        "index entry {i} says a record starts at byte {}, but the records \
+                         before it end at byte {expected}: the footer does not list the \
+                         records as they lie",
+                        e.offset
+                    ),
+                ));
+            }
+            expected = e.offset + FRAME_HEADER_LEN + e.len as u64;
+        }
+        if expected != footer_at {
+            return Err(self.corrupt(
+                footer_at,
+                format!(
+                    "the index lists records up to byte {expected}, but they run on to the \
+                     footer at byte {footer_at}: the footer leaves records out"
+                ),
+            ));
+        }
         Ok(index)
     }
 

@@ -329,6 +329,16 @@ pub(super) fn pose_source(
             tree
         }
     };
+    if let Some(cycle) = tree.loop_above(&camera) {
+        return Err(fail(
+            path,
+            format!(
+                "the transform tree has a loop above the camera frame: {}; tf2 refuses such \
+                 a tree, and no world frame can be chosen",
+                cycle.join(" -> ")
+            ),
+        ));
+    }
     let world = match &options.world_frame {
         Some(w) => frame_name(w).to_string(),
         None => tree
@@ -344,6 +354,18 @@ pub(super) fn pose_source(
         warnings.push(format!(
             "the transforms give the frame {child:?} two parents, {first:?} and {other:?}: \
              the first is kept, as tf2 would not accept the tree"
+        ));
+    }
+    for child in &tree.mixed {
+        warnings.push(format!(
+            "the transform to frame {child:?} is sent both on /tf_static and on /tf: the \
+             static one holds at all times and the moving samples are not used (as in tf2)"
+        ));
+    }
+    for (child, n) in &tree.repeated_stamps {
+        warnings.push(format!(
+            "{n} transform(s) to frame {child:?} repeat a stamp with another pose: the last \
+             sent is used (as in tf2)"
         ));
     }
     Ok(PoseSource::Tree {

@@ -26,6 +26,12 @@ pub struct TfTree {
     edges: BTreeMap<String, Edge>,
     /// Children whose messages named more than one parent: (child, first, other).
     pub conflicts: Vec<(String, String, String)>,
+    /// Children sent both on `/tf_static` and on `/tf`: the static transform replaces
+    /// the trajectory (as in tf2), which is said.
+    pub mixed: Vec<String>,
+    /// Per child, how many of its dynamic samples repeated a stamp with another pose
+    /// (the last sent is kept, as in tf2), counted by [`TfTree::finish`].
+    pub repeated_stamps: BTreeMap<String, usize>,
 }
 
 /// ROS 1 habits: frame names with a leading slash name the same frame.
@@ -81,6 +87,10 @@ impl TfTree {
                 }
                 continue;
             }
+            let mixes = is_static != edge.is_static && !edge.samples.is_empty();
+            if mixes && !self.mixed.iter().any(|c| c == child) {
+                self.mixed.push(child.into());
+            }
             if is_static {
                 // The latest static transform wins, as in tf2.
                 edge.is_static = true;
@@ -92,19 +102,39 @@ impl TfTree {
         Ok(())
     }
 
-    /// Sorts each edge's samples by stamp (stable: of equal stamps the last sent wins).
+    /// Sorts each edge's samples by stamp (stable: of equal stamps the last sent wins,
+    /// and a repeat with another pose is counted in `repeated_stamps`).
     pub fn finish(&mut self) {
-        for edge in self.edges.values_mut() {
+        for (child, edge) in self.edges.iter_mut() {
             edge.samples.sort_by_key(|s| s.0);
             let mut kept: Vec<(i64, Pose)> = Vec::with_capacity(edge.samples.len());
+            let mut repeated = 0;
             for s in edge.samples.drain(..) {
                 match kept.last_mut() {
-                    Some(last) if last.0 == s.0 => *last = s,
+                    Some(last) if last.0 == s.0 => {
+                        repeated += usize::from(last.1 != s.1);
+                        *last = s;
+                    }
                     _ => kept.push(s),
                 }
             }
             edge.samples = kept;
+            if repeated > 0 {
+                *self.repeated_stamps.entry(child.clone()).or_default() += repeated;
+            }
         }
+    }
+
+    /// The frames of a loop on the way from `frame` to its root (`[a, b, a]`), if the
+    /// tree has one there: tf2 refuses such a tree, and no world frame can be chosen.
+    pub fn loop_above(&self, frame: &str) -> Option<Vec<String>> {
+        let path = self.path_to_root(frame);
+        let last = path.last()?;
+        let parent = &self.edges.get(last)?.parent;
+        let start = path.iter().position(|f| f == parent)?;
+        let mut cycle = path[start..].to_vec();
+        cycle.push(parent.clone());
+        Some(cycle)
     }
 
     /// Adds the edges of `other` whose child this tree has no edge for.
@@ -286,6 +316,38 @@ mod tests {
         let p = tree.lookup("world", "cam", 10).unwrap().unwrap();
         assert_eq!(p.translation, t);
         assert_eq!(p.rotation, q.to_array());
+    }
+
+    #[test]
+    fn loops_mixed_static_and_dynamic_edges_and_repeated_stamps_are_found() {
+        let mut tree = TfTree::default();
+        let id = DQuat::IDENTITY;
+        tree.add(&[tf(0, "odom", "base", [0.0; 3], id)], false)
+            .unwrap();
+        tree.add(&[tf(0, "base", "cam", [0.0; 3], id)], true)
+            .unwrap();
+        // A second sample at stamp 0 with another pose, and one repeating the first.
+        tree.add(&[tf(0, "odom", "base", [1.0; 3], id)], false)
+            .unwrap();
+        tree.add(&[tf(0, "odom", "base", [1.0; 3], id)], false)
+            .unwrap();
+        // The static edge base -> cam sent again on /tf: mixed, and said.
+        tree.add(&[tf(5, "base", "cam", [0.0; 3], id)], false)
+            .unwrap();
+        tree.finish();
+        assert_eq!(tree.mixed, ["cam"]);
+        assert_eq!(
+            tree.repeated_stamps,
+            BTreeMap::from([("base".to_string(), 1)])
+        );
+        assert_eq!(tree.loop_above("cam"), None);
+        // odom -> base -> cam, and now odom's parent is cam: a loop.
+        tree.add(&[tf(0, "cam", "odom", [0.0; 3], id)], true)
+            .unwrap();
+        assert_eq!(
+            tree.loop_above("cam").unwrap(),
+            ["cam", "base", "odom", "cam"]
+        );
     }
 
     #[test]

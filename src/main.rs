@@ -10,7 +10,9 @@ fn main() {
         Err(e) if cli::is_broken_pipe(&e) => std::process::exit(0),
         Err(e) => {
             eprintln!("error: {}", cli::report(&e));
-            std::process::exit(1);
+            // A failure caused by an interrupt (set-up work that gave up) is the
+            // interrupt's exit status.
+            std::process::exit(if relume::cancel::requested() { 130 } else { 1 });
         }
     }
 }

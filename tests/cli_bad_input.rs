@@ -496,3 +496,51 @@ fn validate_reads_the_light_probe_file() {
         stderr(&o)
     );
 }
+
+/// The one SIGTERM a scheduler sends before SIGKILL stops a run that is still setting
+/// up: sample.val's radiance transfer precomputation (here a million directions per
+/// vertex, minutes of work) gives up at once, and the exit status is 130.
+#[test]
+fn an_interrupt_during_a_long_set_up_stops_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    common::ok(run_in(
+        d,
+        &[
+            "synth", "-o", "r.relume", "--frames", "2", "--size", "64x48",
+        ],
+    ));
+    let child = common::relume()
+        .args([
+            "replay",
+            "r.relume",
+            "-p",
+            &common::pipeline("mixed-reality-val.toml"),
+            "--set",
+            "sample.val.transfer_samples=1000000",
+            "--out",
+            "out",
+        ])
+        .env("RELUME_CACHE", "off")
+        .current_dir(d)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Loading a 2-frame recording takes well under this, even beside other tests; the
+    // precomputation takes minutes.
+    std::thread::sleep(std::time::Duration::from_secs(5));
+    let start = std::time::Instant::now();
+    let o = common::signal_and_wait(child, "-TERM");
+    assert!(
+        start.elapsed().as_secs() < 10,
+        "took {:?} to stop",
+        start.elapsed()
+    );
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("interrupted while computing the objects' radiance transfer"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -42,6 +42,8 @@ fn handle() {
         if stop.swap(true, Ordering::SeqCst) {
             std::process::exit(130);
         }
+        // Set-up work before the frames flow (a transfer precomputation) gives up too.
+        relume::cancel::request();
         eprintln!("\nstopping after the frames in flight (interrupt again to abort) ...");
         return;
     }

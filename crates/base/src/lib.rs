@@ -9,6 +9,7 @@
 //! - [`payload`]: what a pipeline product holds: the [`payload::Payload`] trait and kinds.
 //! - [`files`]: reading the files a user names, regular files only.
 
+pub mod cancel;
 pub mod files;
 pub mod payload;
 pub mod pinhole;

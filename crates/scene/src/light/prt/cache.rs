@@ -21,6 +21,7 @@
 
 use super::{Transfer, TransferParams};
 use crate::objects::VirtualScene;
+use relume_base::cancel::Cancelled;
 use relume_base::rng;
 use relume_recording::writer::write_file_atomic;
 use std::path::{Path, PathBuf};
@@ -164,14 +165,15 @@ pub fn decode(bytes: &[u8], digest: &str, triangles: usize) -> Result<Transfer, 
 }
 
 /// The transfer of `scene` from the cache in `dir` when a valid file is there, else
-/// computed (and written there when `dir` is given).
+/// computed (and written there when `dir` is given); [`Cancelled`] when the computation
+/// was asked to stop (nothing is written then).
 pub fn load_or_compute(
     scene: &VirtualScene,
     params: TransferParams,
     dir: Option<&Path>,
-) -> (Transfer, CacheOutcome) {
+) -> Result<(Transfer, CacheOutcome), Cancelled> {
     let Some(dir) = dir else {
-        return (Transfer::compute(scene, params), CacheOutcome::Disabled);
+        return Ok((Transfer::compute(scene, params)?, CacheOutcome::Disabled));
     };
     let digest = digest(scene, params);
     let path = cache_path(dir, &digest);
@@ -185,9 +187,9 @@ pub fn load_or_compute(
     if let Some(bytes) = &existing
         && let Ok(transfer) = decode(bytes, &digest, scene.triangles.len())
     {
-        return (transfer, CacheOutcome::Loaded(path));
+        return Ok((transfer, CacheOutcome::Loaded(path)));
     }
-    let transfer = Transfer::compute(scene, params);
+    let transfer = Transfer::compute(scene, params)?;
     let written = std::fs::create_dir_all(dir)
         .and_then(|_| write_file_atomic(&path, &encode(&transfer, &digest)));
     let outcome = match written {
@@ -200,5 +202,5 @@ pub fn load_or_compute(
             reason: e.to_string(),
         },
     };
-    (transfer, outcome)
+    Ok((transfer, outcome))
 }

@@ -35,6 +35,7 @@ use super::sh::sh9_basis;
 use crate::objects::VirtualScene;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
+use relume_base::cancel::{self, Cancelled};
 use relume_base::rng;
 use std::collections::HashMap;
 
@@ -111,7 +112,10 @@ impl Transfer {
     /// vector: it receives no indirect light. Rays leave from the vertex moved along its
     /// normal by 1e-4 of the scene's diagonal (at least 1e-5 m), so that the triangles
     /// around it do not shadow it.
-    pub fn compute(scene: &VirtualScene, params: TransferParams) -> Transfer {
+    ///
+    /// Gives up with [`Cancelled`] when the process is asked to stop
+    /// ([`relume_base::cancel`]), checked before each vertex.
+    pub fn compute(scene: &VirtualScene, params: TransferParams) -> Result<Transfer, Cancelled> {
         let (vertices, corner_vertex) = scene_vertices(scene);
         let n = params.samples.max(1) as u64;
         let bounds = scene.bounds();
@@ -120,9 +124,12 @@ impl Transfer {
             .par_iter()
             .enumerate()
             .map(|(v, &(position, normal))| {
+                if cancel::requested() {
+                    return None;
+                }
                 let normal = normal.normalize_or_zero().as_dvec3();
                 if normal == DVec3::ZERO || !normal.is_finite() {
-                    return [0.0; 9];
+                    return Some([0.0; 9]);
                 }
                 let origin = position + normal.as_vec3() * offset;
                 let mut sum = [0.0f64; 9];
@@ -139,13 +146,14 @@ impl Transfer {
                         *s += y;
                     }
                 }
-                sum.map(|s| (s * std::f64::consts::PI / n as f64) as f32)
+                Some(sum.map(|s| (s * std::f64::consts::PI / n as f64) as f32))
             })
-            .collect();
-        Transfer {
+            .collect::<Option<Vec<_>>>()
+            .ok_or(Cancelled)?;
+        Ok(Transfer {
             corner_vertex,
             vectors,
-        }
+        })
     }
 
     /// True when this transfer was made for a scene of `triangles` triangles.

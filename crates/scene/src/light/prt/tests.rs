@@ -56,7 +56,7 @@ fn brute_force(scene: &VirtualScene, p: Vec3, n: Vec3, sh: &[Vec3; 9], side: u64
 fn an_unoccluded_vertex_gets_the_clamped_cosine_irradiance() {
     // Every vertex of a sphere sees its whole hemisphere.
     let sphere = scene(shapes::sphere(0.2, 16));
-    let transfer = Transfer::compute(&sphere, TransferParams::default());
+    let transfer = Transfer::compute(&sphere, TransferParams::default()).unwrap();
     let (vertices, _) = scene_vertices(&sphere);
     let sh = light();
     for (vector, &(_, normal)) in transfer.vectors.iter().zip(&vertices) {
@@ -70,7 +70,7 @@ fn an_unoccluded_vertex_gets_the_clamped_cosine_irradiance() {
 #[test]
 fn transfer_is_within_two_percent_of_brute_force_occluded_irradiance() {
     let torus = torus();
-    let transfer = Transfer::compute(&torus, TransferParams::default());
+    let transfer = Transfer::compute(&torus, TransferParams::default()).unwrap();
     let (vertices, _) = scene_vertices(&torus);
     let sh = light();
     let (mut worst, mut occluded) = (0.0f64, 0);
@@ -127,7 +127,7 @@ fn barycentrics_of_a_hit_are_the_ray_tests() {
 #[test]
 fn interpolation_weights_the_corners() {
     let torus = torus();
-    let transfer = Transfer::compute(&torus, TransferParams::default());
+    let transfer = Transfer::compute(&torus, TransferParams::default()).unwrap();
     let corner = |c: usize| transfer.vectors[transfer.corner_vertex[3 * 10 + c] as usize];
     assert_eq!(transfer.at(10, 0.0, 0.0), corner(0));
     assert_eq!(transfer.at(10, 1.0, 0.0), corner(1));
@@ -154,7 +154,7 @@ fn the_cache_writes_once_then_loads_the_same_vectors() {
     let dir = temp_dir("roundtrip");
     let torus = torus();
     let params = FEW;
-    let (computed, outcome) = cache::load_or_compute(&torus, params, Some(&dir));
+    let (computed, outcome) = cache::load_or_compute(&torus, params, Some(&dir)).unwrap();
     let CacheOutcome::Written { path, replaced } = outcome else {
         panic!("{outcome:?}")
     };
@@ -163,7 +163,7 @@ fn the_cache_writes_once_then_loads_the_same_vectors() {
     assert_eq!(name, format!("prt-{}.bin", cache::digest(&torus, params)));
     // Only the file: no temporary left behind.
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
-    let (loaded, outcome) = cache::load_or_compute(&torus, params, Some(&dir));
+    let (loaded, outcome) = cache::load_or_compute(&torus, params, Some(&dir)).unwrap();
     assert!(
         matches!(outcome, CacheOutcome::Loaded(ref p) if *p == path),
         "{outcome:?}"
@@ -196,7 +196,7 @@ fn a_damaged_cache_file_is_recomputed_and_replaced() {
     let dir = temp_dir("damaged");
     let torus = torus();
     let params = FEW;
-    let (good, _) = cache::load_or_compute(&torus, params, Some(&dir));
+    let (good, _) = cache::load_or_compute(&torus, params, Some(&dir)).unwrap();
     let digest = cache::digest(&torus, params);
     let path = cache::cache_path(&dir, &digest);
     let bytes = std::fs::read(&path).unwrap();
@@ -239,7 +239,7 @@ fn a_damaged_cache_file_is_recomputed_and_replaced() {
     );
 
     std::fs::write(&path, truncated).unwrap();
-    let (again, outcome) = cache::load_or_compute(&torus, params, Some(&dir));
+    let (again, outcome) = cache::load_or_compute(&torus, params, Some(&dir)).unwrap();
     assert!(
         matches!(outcome, CacheOutcome::Written { replaced: true, .. }),
         "{outcome:?}"

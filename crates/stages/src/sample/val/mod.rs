@@ -133,11 +133,22 @@ const OUTPUTS: &[(&str, &[ProductKind])] = LAYER_OUTPUTS.split_at(11).0;
 pub const INFO: StageInfo = info::<SampleVal>();
 
 /// The objects' radiance transfer from the cache, or computed (and cached), saying on
-/// stderr what it cost when it was computed and where the cache could not be written.
-fn load_transfer(stage: &str, objects: &VirtualScene, params: TransferParams) -> Transfer {
+/// stderr what it cost when it was computed and where the cache could not be written;
+/// an error when the computation was interrupted.
+fn load_transfer(
+    stage: &str,
+    objects: &VirtualScene,
+    params: TransferParams,
+) -> Result<Transfer, StageError> {
     let started = std::time::Instant::now();
     let dir = cache::cache_dir_from_env();
-    let (transfer, outcome) = cache::load_or_compute(objects, params, dir.as_deref());
+    let (transfer, outcome) =
+        cache::load_or_compute(objects, params, dir.as_deref()).map_err(|_| {
+            StageError::Failed(format!(
+                "stage `{stage}` (sample.val): interrupted while computing the objects' \
+                 radiance transfer"
+            ))
+        })?;
     let computed = format!(
         "stage `{stage}` (sample.val): radiance transfer of {} object vertices ({} directions each) computed in {:.1} s",
         transfer.vectors.len(),
@@ -157,7 +168,7 @@ fn load_transfer(stage: &str, objects: &VirtualScene, params: TransferParams) ->
         }
         CacheOutcome::Disabled => eprintln!("{computed} (cache off)"),
     }
-    transfer
+    Ok(transfer)
 }
 
 /// Buffers for [`ValRenderer::render`], which overwrites every pixel: irradiance NaN
@@ -206,13 +217,16 @@ impl Renderer for SampleVal {
     fn build(ctx: &BuildContext) -> Result<SampleVal, StageError> {
         let p = ctx.params;
         let objects = crate::world::objects(ctx);
-        let transfer = (p.str("transfer") == "prt" && !objects.is_empty()).then(|| {
-            let params = TransferParams {
-                samples: p.int("transfer_samples") as u32,
-                seed: ctx.seed,
-            };
-            Arc::new(load_transfer(ctx.stage_name, objects, params))
-        });
+        let transfer = match p.str("transfer") == "prt" && !objects.is_empty() {
+            true => {
+                let params = TransferParams {
+                    samples: p.int("transfer_samples") as u32,
+                    seed: ctx.seed,
+                };
+                Some(Arc::new(load_transfer(ctx.stage_name, objects, params)?))
+            }
+            false => None,
+        };
         Ok(SampleVal {
             objects: objects.clone(),
             transfer,

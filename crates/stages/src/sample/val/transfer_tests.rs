@@ -24,7 +24,7 @@ fn the_transfer_darkens_the_objects_where_they_occlude_themselves_and_nothing_el
     let scene = torus();
     // No area lights: the constant sky's SH9 is all the light.
     let sky = lights(Vec::new());
-    let transfer = Transfer::compute(&scene, TransferParams::default());
+    let transfer = Transfer::compute(&scene, TransferParams::default()).unwrap();
     let render = |transfer: Option<&Transfer>| {
         let inputs = ValInputs {
             depth: &depth,

@@ -104,16 +104,16 @@ fn an_unwritable_output_folder_is_named_with_its_cause_once() {
         .lines()
         .find(|l| l.starts_with("error: "))
         .unwrap_or_default();
-    let cause = std::fs::create_dir_all(d.join("a_file/out/depth")).unwrap_err();
+    // The run takes --out for itself first (a lock in it): that is where it fails.
+    let cause = std::fs::create_dir_all(d.join("a_file/out")).unwrap_err();
     // Nothing ran: no empty timing table before the error.
     assert_eq!(stdout(&o), "", "{err}");
     assert_eq!(
         line,
-        format!(
-            "error: replay of small.relume stopped: p.toml:3: stage `write` could not be set up: a_file/out/depth: {cause}"
-        ),
+        format!("error: cannot create a_file/out: {cause}"),
         "{err}"
     );
+    assert_eq!(err.matches("Not a directory").count(), 1, "{err}");
 }
 
 #[test]
@@ -543,4 +543,48 @@ fn an_interrupt_during_a_long_set_up_stops_it() {
         "{}",
         stderr(&o)
     );
+}
+
+/// Two runs into one --out: the second is refused at once, naming the first; the
+/// lock goes with the process (here a replay stopped by SIGKILL leaves none behind).
+#[test]
+fn a_second_run_into_one_out_folder_is_refused_naming_the_first() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    common::ok(run_in(
+        d,
+        &[
+            "synth", "-o", "r.relume", "--frames", "2", "--size", "64x48",
+        ],
+    ));
+    let val = common::pipeline("mixed-reality-val.toml");
+    // The first holds out/ while it sets up for minutes.
+    let first = common::relume()
+        .args(["replay", "r.relume", "-p", &val, "--out", "out"])
+        .args(["--set", "sample.val.transfer_samples=1000000"])
+        .env("RELUME_CACHE", "off")
+        .current_dir(d)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    let second = run_in(d, &["replay", "r.relume", "-p", &val, "--out", "out"]);
+    assert_eq!(second.status.code(), Some(1));
+    let e = stderr(&second);
+    assert!(
+        e.starts_with(&format!(
+            "error: --out out is in use by another relume run (pid {}: ",
+            first.id()
+        )) && e.ends_with("): wait for it to finish, or give another --out\n"),
+        "{e}"
+    );
+    let o = common::signal_and_wait(first, "-KILL");
+    assert!(!o.status.success());
+    // Another folder, or the same once the holder is gone, is free.
+    let geometry = common::pipeline("geometry.toml");
+    common::ok(run_in(
+        d,
+        &["replay", "r.relume", "-p", &geometry, "--out", "out"],
+    ));
 }

@@ -183,6 +183,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     let out_dirs: Vec<PathBuf> = labels.iter().map(|l| a.out.join("runs").join(l)).collect();
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let _lock = super::lock::lock_output(&a.out, "--out")?;
     super::out_dir::remove_stale_partials(&a.out, 5);
     let stages = graph
         .build(&registry, header, &out_dirs, a.seed)

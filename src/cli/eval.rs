@@ -120,6 +120,10 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     }
     let scratch = std::env::temp_dir().join(format!("relume-eval-{}", std::process::id()));
     let out_dir = a.out.clone().unwrap_or_else(|| scratch.clone());
+    let _lock = match &a.out {
+        Some(out) => Some(super::lock::lock_output(out, "--out")?),
+        None => None,
+    };
     let stop = stop_on_interrupt();
     let bar = progress::bar(loaded.frames.len() as u64, "evaluating", "frames");
     let mut truth_error = None;

@@ -28,6 +28,7 @@ mod eval;
 mod export;
 mod inspect;
 mod interrupt;
+mod lock;
 mod out_dir;
 mod output;
 mod prepare;

@@ -324,8 +324,13 @@ pub fn replay(a: ReplayArgs) -> anyhow::Result<i32> {
             loaded.pipeline.name
         );
     }
-    super::out_dir::remove_stale_partials(&a.out, 3);
     let folders = super::out_dir::frame_folders(&loaded.pipeline, &a.out, &a.save);
+    // A run that writes into --out holds it: another one there would mix the two.
+    let _lock = match folders.is_empty() && a.export_cloud.is_none() {
+        true => None,
+        false => Some(super::lock::lock_output(&a.out, "--out")?),
+    };
+    super::out_dir::remove_stale_partials(&a.out, 3);
     super::out_dir::earlier_frames(&folders, &loaded.frames, a.clean_out)?;
     let stop = stop_on_interrupt();
     let bar = progress::bar(loaded.frames.len() as u64, "replaying", "frames");

@@ -17,7 +17,7 @@
 //!   primary (4 + 4 by default, 16 + 16 per pixel).
 //! - **Direct light** (units: irradiance, a constant environment L unoccluded gives
 //!   pi L): E^dir = mean of L V cos+ / pdf over samples of the importance table
-//!   ([`LightTable`], Sec. 5.2). Direct sample (j, k) reads stratum j * direct + k of
+//!   ([`LightTable`](relume_scene::light::LightTable), Sec. 5.2). Direct sample (j, k) reads stratum j * direct + k of
 //!   `primary * direct` equal strata of the table (the table is in stratified order), at
 //!   an offset hashed per pixel. V is 0 when the screen-space tracer meets a real
 //!   surface within `max_distance`, and for E_RV also when an object is hit at any

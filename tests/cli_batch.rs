@@ -525,3 +525,90 @@ fn a_batch_killed_mid_run_resumes_without_redoing_finished_items() {
     ok(batch(fresh.path(), &["batch", "m.toml"], &[]));
     assert_eq!(tree(&out), tree(&fresh.path().join("m-out")));
 }
+
+/// Two runs of one shard (a resubmitted job array): the second leaves the item the first
+/// is running to it, naming the first, and clears nothing of it; the item's lock file
+/// is gone when its holder ends, so a later run takes the item.
+#[test]
+fn a_second_run_of_an_item_leaves_it_to_the_first() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    ok(batch(
+        d,
+        &[
+            "synth", "-o", "r.relume", "--frames", "2", "--size", "64x48",
+        ],
+        &[],
+    ));
+    std::fs::copy(
+        common::pipeline("mixed-reality-val.toml"),
+        d.join("val.toml"),
+    )
+    .unwrap();
+    // The item sets up for minutes (sample.val's transfer precomputation).
+    std::fs::write(
+        d.join("m.toml"),
+        "recordings = [\"r.relume\"]\npipelines = [\"val.toml\"]\n\n[settings]\n\
+         frames = \"0..1\"\nset = [\"sample.val.transfer_samples=1000000\"]\n",
+    )
+    .unwrap();
+    let mut first = relume();
+    for v in SCHEDULER_VARS {
+        first.env_remove(v);
+    }
+    let first = first
+        .args(["batch", "m.toml", "--out", "runs"])
+        .env("RELUME_CACHE", "off")
+        .current_dir(d)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let id = relume::batch::manifest::item_id("r.relume", "val.toml");
+    let lock = d.join("runs").join(format!(".{id}.lock"));
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !std::fs::read_to_string(&lock).is_ok_and(|s| s.starts_with("pid")) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the first run never took the item"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let second = batch(d, &["batch", "m.toml", "--out", "runs"], &[]);
+    let e = stderr(&second);
+    assert_eq!(second.status.code(), Some(0), "{e}");
+    assert!(
+        e.contains(&format!(
+            "[1/1] {id}: being run by another relume process (pid {}: ",
+            first.id()
+        )) && e.contains("): left to it\n"),
+        "{e}"
+    );
+    assert!(
+        e.ends_with(
+            "shard 0/1: 1 item(s): ran 0, skipped 0 (done earlier), failed 0, 1 left to \
+             another run that holds them (see their DONE or FAILED there)\n"
+        ),
+        "{e}"
+    );
+    assert!(!d.join("runs").join(&id).join("FAILED").exists(), "{e}");
+    let killed = common::signal_and_wait(first, "-KILL");
+    assert_eq!(killed.status.code(), None);
+    // SIGKILL leaves the lock file, but not the lock: the next run takes the item (a
+    // quick pipeline under the same name, so that it ends here).
+    assert!(lock.exists());
+    std::fs::copy(common::pipeline("geometry.toml"), d.join("val.toml")).unwrap();
+    std::fs::write(
+        d.join("m.toml"),
+        "recordings = [\"r.relume\"]\npipelines = [\"val.toml\"]\n[settings]\nframes = \"0..1\"\n",
+    )
+    .unwrap();
+    let third = ok(batch(d, &["batch", "m.toml", "--out", "runs"], &[]));
+    assert!(
+        stderr(&third).contains("ran 1, skipped 0"),
+        "{}",
+        stderr(&third)
+    );
+    assert!(!lock.exists(), "the lock file goes with its item");
+    assert!(d.join("runs").join(&id).join("DONE").exists());
+}

@@ -134,7 +134,7 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
         );
     }
     let stop = super::replay::stop_on_interrupt();
-    let (mut ran, mut skipped, mut failed) = (0, 0, 0);
+    let (mut ran, mut skipped, mut failed, mut busy) = (0, 0, 0, 0);
     for (k, item) in mine.iter().enumerate() {
         if stop.load(Ordering::SeqCst) {
             break;
@@ -143,6 +143,7 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
         match run_or_skip(item, &manifest.settings, &out, &stop, &prefix) {
             Ok(Outcome::Skipped) => skipped += 1,
             Ok(Outcome::Ran) => ran += 1,
+            Ok(Outcome::Busy) => busy += 1,
             Ok(Outcome::Interrupted) => break,
             Err(e) => {
                 failed += 1;
@@ -150,10 +151,15 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
             }
         }
     }
-    let line = format!(
+    let mut line = format!(
         "shard {shard}: {} item(s): ran {ran}, skipped {skipped} (done earlier), failed {failed}",
         mine.len()
     );
+    if busy > 0 {
+        line.push_str(&format!(
+            ", {busy} left to another run that holds them (see their DONE or FAILED there)"
+        ));
+    }
     if stop.load(Ordering::SeqCst) {
         note!("{line}; interrupted: the others were not run");
         return Ok(130);
@@ -165,6 +171,8 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
 enum Outcome {
     Skipped,
     Ran,
+    /// Another process holds the item's lock.
+    Busy,
     Interrupted,
 }
 
@@ -178,6 +186,15 @@ fn run_or_skip(
     prefix: &str,
 ) -> anyhow::Result<Outcome> {
     let dir = out.join(&item.id);
+    // Before the marker is read: another run of this item (a resubmitted job array, two
+    // shards that overlap) would clear the folder under this one, or this one under it.
+    let _lock = match super::lock::lock_item(out, &item.id)? {
+        Ok(lock) => lock,
+        Err(holder) => {
+            note!("{prefix}: being run by another relume process ({holder}): left to it");
+            return Ok(Outcome::Busy);
+        }
+    };
     let pipeline_text = relume::files::read_regular_to_string(&item.pipeline_path)
         .with_context(|| format!("cannot read {}", item.pipeline_path.display()))?;
     let recording = marker::recording_digest(&item.recording_path)

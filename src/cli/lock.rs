@@ -1,10 +1,14 @@
 //! Locks on the places a run writes, so that two runs never write into one place at
 //! once: a replay, eval or compare into one `--out` (the folder would mix two runs, and
-//! each would clear the other's frames).
+//! each would clear the other's frames), and a batch item's folder (two runs of one
+//! shard, such as a resubmitted job array, would clear each other's items).
 //!
-//! A lock is `flock(2)` on a hidden file (`.relume.lock` in the output folder) holding
-//! the holder's process id and command line. The kernel releases it when the holder exits, however it exits (a crash or
-//! SIGKILL included): no lock outlives its process, and nothing needs cleaning up.
+//! A lock is `flock(2)` on a hidden file holding the holder's process id and command
+//! line: `.relume.lock` in an output folder, `.ID.lock` beside batch item `ID`'s folder.
+//! The kernel releases it when the holder exits, however it exits (a crash or SIGKILL
+//! included): no lock outlives its process. An item's lock file is removed when the
+//! item ends, so a finished batch folder holds only its items; a taker checks that the
+//! file it locked is still the one at the path, so removal cannot let two runs in.
 
 use anyhow::{Context, bail};
 use std::fs::File;
@@ -15,6 +19,32 @@ use std::path::{Path, PathBuf};
 /// A lock held until dropped (or the process ends).
 pub struct Lock {
     _file: File,
+}
+
+/// A batch item's lock: held until dropped, when its file is removed.
+pub struct ItemLock {
+    path: PathBuf,
+    _lock: Lock,
+}
+
+impl Drop for ItemLock {
+    fn drop(&mut self) {
+        // Removed while still held: a run that opened the file before the removal finds,
+        // once it has the lock, that the path no longer names its file, and takes again.
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// The lock file of batch item `id` in batch folder `out`.
+pub fn item_lock_path(out: &Path, id: &str) -> PathBuf {
+    out.join(format!(".{id}.lock"))
+}
+
+/// Takes the lock of batch item `id` in `out`, or gives the description of the process
+/// that holds it ("pid 123: relume batch ...").
+pub fn lock_item(out: &Path, id: &str) -> anyhow::Result<Result<ItemLock, String>> {
+    let path = item_lock_path(out, id);
+    Ok(take(&path)?.map(|lock| ItemLock { path, _lock: lock }))
 }
 
 /// The lock file of output folder `dir`.
@@ -40,6 +70,33 @@ pub fn lock_output(dir: &Path, option: &str) -> anyhow::Result<Lock> {
 /// The lock at `path`, or (when another process holds it) that process's
 /// description: "pid 123: relume replay ...".
 fn take(path: &Path) -> anyhow::Result<Result<Lock, String>> {
+    // A file removed (by its holder, as it let go) between our open and our lock is
+    // locked in vain: take the new one. Two tries are rare; a few are plenty.
+    for _ in 0..8 {
+        match take_once(path)? {
+            Taken::Locked(file) if still_at(&file, path) => return Ok(Ok(Lock { _file: file })),
+            Taken::Locked(_) => continue,
+            Taken::Held(holder) => return Ok(Err(holder)),
+        }
+    }
+    bail!("cannot lock {}: it keeps being replaced", path.display())
+}
+
+enum Taken {
+    Locked(File),
+    Held(String),
+}
+
+/// Whether `path` still names the file `file` has open.
+fn still_at(file: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (file.metadata(), std::fs::metadata(path)) {
+        (Ok(open), Ok(named)) => open.dev() == named.dev() && open.ino() == named.ino(),
+        _ => false,
+    }
+}
+
+fn take_once(path: &Path) -> anyhow::Result<Taken> {
     let mut file = File::options()
         .read(true)
         .write(true)
@@ -57,7 +114,7 @@ fn take(path: &Path) -> anyhow::Result<Result<Lock, String>> {
         let mut holder = String::new();
         let _ = file.read_to_string(&mut holder);
         let holder = holder.trim();
-        return Ok(Err(if holder.is_empty() {
+        return Ok(Taken::Held(if holder.is_empty() {
             "a process that has not said which yet".to_string()
         } else {
             holder.to_string()
@@ -73,5 +130,5 @@ fn take(path: &Path) -> anyhow::Result<Result<Lock, String>> {
         .and_then(|_| file.rewind())
         .and_then(|_| file.write_all(me.as_bytes()));
     written.with_context(|| format!("cannot write the lock file {}", path.display()))?;
-    Ok(Ok(Lock { _file: file }))
+    Ok(Taken::Locked(file))
 }

@@ -378,7 +378,7 @@ fn with_header(s: &Sample, edit: impl Fn(&mut relume::recording::Header)) -> std
 fn header_values_that_no_stage_can_use_are_refused_on_open() {
     let s = Sample::new();
     type Edit = fn(&mut relume::recording::Header);
-    let cases: [(Edit, &str); 11] = [
+    let cases: [(Edit, &str); 13] = [
         (
             |h| h.color_intrinsics.width = 100_000,
             "color intrinsics: image size 100000x3 is not between 1 and 16384 on each side",
@@ -429,6 +429,27 @@ fn header_values_that_no_stage_can_use_are_refused_on_open() {
             |h| h.color_intrinsics.fy = 1e6,
             "color intrinsics: fy = 1000000 px is not a focal length for a 4x3 image: it must \
              lie between 0.05 and 100 times the image's larger side (0.2 to 400 px)",
+        ),
+        // Where the virtual object goes: a NaN would place it nowhere, silently.
+        (
+            |h| {
+                h.ground_truth = Some(relume::recording::SceneTruth {
+                    object_position: [0.0, f64::NAN, 1.0],
+                    description: String::new(),
+                })
+            },
+            "ground truth: the object position [0, NaN, 1] is not a point of a room: each \
+             coordinate must be finite and within 10000 m",
+        ),
+        (
+            |h| {
+                h.ground_truth = Some(relume::recording::SceneTruth {
+                    object_position: [0.0, 0.0, -1e9],
+                    description: String::new(),
+                })
+            },
+            "ground truth: the object position [0, 0, -1000000000] is not a point of a room: \
+             each coordinate must be finite and within 10000 m",
         ),
     ];
     for (edit, reason) in cases {

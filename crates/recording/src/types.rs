@@ -76,6 +76,10 @@ pub use relume_base::pinhole::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE};
 /// sensor measures, or into infinity.
 pub const DEPTH_UNIT_RANGE_M: (f64, f64) = (1e-6, 10.0);
 
+/// The largest world coordinate (metres) a recording's ground truth may name: recordings
+/// are of rooms and buildings, and beyond this f32 positions lose their millimetres.
+pub const MAX_SCENE_COORDINATE_M: f64 = 1e4;
+
 impl Header {
     /// Why the header cannot describe a recording, if it cannot (see
     /// [`Intrinsics::check`]; the depth unit must lie in [`DEPTH_UNIT_RANGE_M`]).
@@ -100,6 +104,19 @@ impl Header {
                 relume_base::pinhole::readable(unit),
                 relume_base::pinhole::readable(finest),
             ));
+        }
+        if let Some(truth) = &self.ground_truth {
+            let p = truth.object_position;
+            if !p
+                .iter()
+                .all(|c| c.is_finite() && c.abs() <= MAX_SCENE_COORDINATE_M)
+            {
+                return Err(format!(
+                    "ground truth: the object position [{}, {}, {}] is not a point of a \
+                     room: each coordinate must be finite and within {MAX_SCENE_COORDINATE_M} m",
+                    p[0], p[1], p[2]
+                ));
+            }
         }
         Ok(())
     }

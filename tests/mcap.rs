@@ -291,7 +291,11 @@ fn png_depth(k: usize) -> Vec<u8> {
 /// PNG color on a CompressedImage topic, compressedDepth depth on two topics, camera
 /// poses from nav_msgs/Odometry of base_link, mounted by /tf_static.
 fn write_compressed_bag(path: &Path) {
-    let mut bag = Bag::create(path, Some(mcap::Compression::Zstd));
+    write_compressed_bag_with(path, Some(mcap::Compression::Zstd));
+}
+
+fn write_compressed_bag_with(path: &Path, compression: Option<mcap::Compression>) {
+    let mut bag = Bag::create(path, compression);
     let (ct, cq) = CAMERA_IN_BASE;
     let mount = Tf {
         stamp_ns: 0,
@@ -846,4 +850,94 @@ fn a_pose_stamped_topic_gives_the_camera_poses_when_named() {
         // The camera's own pose, as sent: bit for bit at the message's stamp.
         assert_eq!(got, want, "frame {k}");
     }
+}
+
+/// Writes the seed corpus of the `mcap` fuzz target (`fuzz/seeds/mcap`): the raw and the
+/// compressed-image bags of these tests, with uncompressed chunks (so the target can
+/// recompute their CRCs after a mutation) and one zstd bag. Run with
+/// `cargo test --test mcap write_fuzz_seeds -- --ignored`.
+#[test]
+#[ignore = "writes files into fuzz/seeds/mcap"]
+fn write_fuzz_seeds() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/mcap");
+    std::fs::create_dir_all(&dir).unwrap();
+    write_raw_bag(&dir.join("raw-images-tf"), None);
+    write_compressed_bag_with(&dir.join("compressed-images-odometry"), None);
+    write_compressed_bag(&dir.join("zstd-chunks"));
+}
+
+/// A depth topic in an encoding relume does not read (8UC1) is named with the reason,
+/// not only "no depth images".
+#[test]
+fn an_unreadable_depth_topic_is_named_with_its_encoding() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bag = Bag::create(&dir.path().join("in.mcap"), None);
+    for k in 0..2 {
+        let t = T0 + k as i64 * DT;
+        let frame = "cam";
+        bag.put(
+            "/cam/color/image_raw",
+            "sensor_msgs/msg/Image",
+            t as u64,
+            &ros2::image(t, frame, W, H, "rgb8", W * 3, &color_pixels(k)),
+        );
+        bag.put(
+            "/cam/depth/image_raw",
+            "sensor_msgs/msg/Image",
+            t as u64,
+            &ros2::image(t, frame, W, H, "8UC1", W, &vec![7u8; (W * H) as usize]),
+        );
+    }
+    bag.finish();
+    let o = ok(run_in(
+        dir.path(),
+        &["import", "mcap", "in.mcap", "-o", "r.relume"],
+    ));
+    let e = stderr(&o);
+    assert!(
+        e.contains(
+            "no depth topic was read; image topics that were not: /cam/depth/image_raw: raw \
+             encoding `8UC1` is not read (color: rgb8, bgr8, rgba8, bgra8, mono8; depth: "
+        ),
+        "{e}"
+    );
+}
+
+/// A channel record of a few bytes whose topic says it is 3 GB long (found by the `mcap`
+/// fuzz target): refused by its length, not by a 3 GB allocation. Under a 2 GB address
+/// space ceiling the allocation aborted the process.
+#[test]
+fn a_string_longer_than_its_record_is_refused_without_allocating_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut file = b"\x89MCAP0\r\n".to_vec();
+    let mut record = |opcode: u8, body: &[u8]| {
+        file.push(opcode);
+        file.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        file.extend_from_slice(body);
+    };
+    record(0x01, &[0; 8]);
+    let mut channel = vec![1, 0, 0, 0];
+    channel.extend_from_slice(&3_086_843_275u32.to_le_bytes());
+    channel.extend_from_slice(b"/cam");
+    record(0x04, &channel);
+    std::fs::write(dir.path().join("big.mcap"), &file).unwrap();
+    let o = std::process::Command::new("sh")
+        .args([
+            "-c",
+            "ulimit -v 2000000 && exec \"$0\" import mcap big.mcap -o r.relume",
+            env!("CARGO_BIN_EXE_relume"),
+        ])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(
+            "big.mcap: record 0x04 after 0 messages is damaged: its topic says it is \
+             3086843275 bytes long, but only 4 bytes of the record follow"
+        ),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.path().join("r.relume").exists());
 }

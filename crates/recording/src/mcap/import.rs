@@ -68,6 +68,24 @@ pub fn import(
         options.depth_topic.as_deref(),
         "--depth-topic",
     )?;
+    if depth.is_none() {
+        // Image topics whose messages relume cannot read: one of them may be the depth
+        // the user recorded (an 8UC1 or 32FC3 topic), which deserves more than "no depth".
+        let unread: Vec<String> = scan
+            .images
+            .iter()
+            .filter_map(|(id, t)| {
+                let why = t.role.as_ref().err()?;
+                Some(format!("{}: {why}", scan.channels[id].topic))
+            })
+            .collect();
+        if !unread.is_empty() {
+            warnings.push(format!(
+                "no depth topic was read; image topics that were not: {}",
+                unread.join("; ")
+            ));
+        }
+    }
     let color_topic = &scan.images[&color.id];
     let (color_k, depth_k) = match options.intrinsics {
         Some(given) => {

@@ -116,7 +116,8 @@ pub fn stream(
             }
             Err(e) => {
                 return Err(bad(format!(
-                    "not a readable MCAP file: {e} (after {} messages, {bytes_read} bytes in)",
+                    "not a readable MCAP file: {} (after {} messages, {bytes_read} bytes in)",
+                    super::describe(&e),
                     end.messages
                 )));
             }
@@ -129,6 +130,12 @@ pub fn stream(
                 bytes_read += got as u64;
             }
             LinearReadEvent::Record { data, opcode } => {
+                super::lengths::strings_fit(opcode, data).map_err(|why| {
+                    bad(format!(
+                        "record {opcode:#04x} after {} messages is damaged: {why}",
+                        end.messages
+                    ))
+                })?;
                 let record = mcap::parse_record(opcode, data).map_err(|e| {
                     bad(format!(
                         "record {opcode:#04x} after {} messages is damaged: {e}",

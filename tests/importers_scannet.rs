@@ -400,6 +400,17 @@ fn damaged_sens_files_are_refused_naming_file_and_frame() {
              must lie between 0.1 and 1000000 (a stored unit of 1e-6 m to 10 m)"
         )
     );
+    // Depth that inflates to more than its image: said in words, not "HasMoreOutput".
+    let mut long = small_sens(3);
+    long.frames[1].depth = zlib_depth(&[1000; 96]);
+    let (e, p) = import_error(&long.bytes());
+    assert_eq!(
+        e,
+        format!(
+            "{p}frame 1: depth: cannot inflate the zlib data: it inflates to more than the 96 \
+             bytes the image's size allows"
+        )
+    );
     let mut unknown = small_sens(3);
     unknown.color_type = 7;
     let (e, p) = import_error(&unknown.bytes());
@@ -517,4 +528,16 @@ fn zero_stamps_are_k_over_fps_and_the_files_stamps_are_used() {
         warnings.len() == 1 && warnings[0].contains("frame 2 has a stamp no later than"),
         "{warnings:?}"
     );
+}
+
+/// Writes the seed corpus of the `sens` fuzz target (`fuzz/seeds/sens`): two and three
+/// small frames. Run with
+/// `cargo test --test importers_scannet write_fuzz_seeds -- --ignored`.
+#[test]
+#[ignore = "writes files into fuzz/seeds/sens"]
+fn write_fuzz_seeds() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/sens");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("two-frames"), small_sens(2).bytes()).unwrap();
+    std::fs::write(dir.join("three-frames"), small_sens(3).bytes()).unwrap();
 }

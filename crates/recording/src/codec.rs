@@ -139,6 +139,13 @@ fn decode_file(img: &EncodedImage) -> Result<DynamicImage, CodecError> {
         _ => unreachable!("decode_file is called for PNG and JPEG only"),
     };
     checked_len(img, 1)?;
+    // The JPEG decoder fills a truncated image with gray and says nothing.
+    if img.encoding == ImageEncoding::Jpeg && !jpeg_reaches_its_end(&img.bytes) {
+        return err(
+            "the JPEG is truncated or damaged: its marker segments do not reach \
+             the end-of-image marker",
+        );
+    }
     let mut reader = image::ImageReader::with_format(std::io::Cursor::new(&img.bytes), format);
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(MAX_PIXELS * 8);
@@ -156,6 +163,76 @@ fn decode_file(img: &EncodedImage) -> Result<DynamicImage, CodecError> {
         ));
     }
     Ok(decoded)
+}
+
+/// Whether the JPEG `bytes` can be walked from its start-of-image marker through its
+/// marker segments and entropy-coded scans to an end-of-image marker (ITU T.81, B.1).
+/// Bytes after the end (some cameras append a trailer) are allowed. Segments are skipped
+/// by their lengths, so markers inside an EXIF thumbnail do not count.
+pub fn jpeg_reaches_its_end(bytes: &[u8]) -> bool {
+    const SOS: u8 = 0xDA;
+    const EOI: u8 = 0xD9;
+    if !bytes.starts_with(&[0xFF, 0xD8]) {
+        return false;
+    }
+    let mut at = 2;
+    loop {
+        // Fill bytes (0xFF) may precede a marker.
+        while bytes.get(at) == Some(&0xFF) && bytes.get(at + 1) == Some(&0xFF) {
+            at += 1;
+        }
+        let (Some(&0xFF), Some(&marker)) = (bytes.get(at), bytes.get(at + 1)) else {
+            return false;
+        };
+        at += 2;
+        match marker {
+            EOI => return true,
+            // Markers without a length: TEM and the restart markers.
+            0x01 | 0xD0..=0xD7 => continue,
+            _ => {}
+        }
+        let Some(len) = bytes
+            .get(at..at + 2)
+            .map(|b| u16::from_be_bytes([b[0], b[1]]))
+        else {
+            return false;
+        };
+        if len < 2 {
+            return false;
+        }
+        at += len as usize;
+        if marker == SOS {
+            // Entropy-coded data: 0xFF is followed by 0x00 (a stuffed byte) or a restart
+            // marker inside it; any other marker ends the scan.
+            loop {
+                match bytes.get(at..at + 2) {
+                    None => return false,
+                    Some([0xFF, 0x00 | 0xD0..=0xD7]) => at += 2,
+                    Some([0xFF, _]) => break,
+                    Some(_) => at += 1,
+                }
+            }
+        }
+    }
+}
+
+/// Why a deflate or zlib stream meant to hold `expected` bytes would not inflate, in
+/// words (the error's `Debug` would print every byte inflated so far).
+pub fn inflate_failure(e: &miniz_oxide::inflate::DecompressError, expected: usize) -> String {
+    use miniz_oxide::inflate::TINFLStatus;
+    let so_far = e.output.len();
+    match e.status {
+        TINFLStatus::HasMoreOutput => {
+            format!("it inflates to more than the {expected} bytes the image's size allows")
+        }
+        TINFLStatus::NeedsMoreInput | TINFLStatus::FailedCannotMakeProgress => {
+            format!("the compressed data ends early (truncated after {so_far} of {expected} bytes)")
+        }
+        TINFLStatus::Adler32Mismatch => {
+            "the zlib checksum does not match the inflated bytes (damaged data)".to_string()
+        }
+        _ => format!("the compressed data is invalid (after {so_far} of {expected} bytes)"),
+    }
 }
 
 /// Decodes a color image to 8-bit RGB.
@@ -271,7 +348,12 @@ pub fn decode_floats(img: &EncodedImage) -> Result<Vec<f32>, CodecError> {
     };
     let expected = checked_len(img, size as u64)?;
     let shuffled = miniz_oxide::inflate::decompress_to_vec_with_limit(&img.bytes, expected)
-        .map_err(|e| CodecError(format!("corrupt float data: {e:?}")))?;
+        .map_err(|e| {
+            CodecError(format!(
+                "corrupt float data: {}",
+                inflate_failure(&e, expected)
+            ))
+        })?;
     if shuffled.len() != expected {
         return err(format!(
             "float data holds {} bytes, expected {expected}",
@@ -303,6 +385,76 @@ mod tests {
         for (a, b) in halfs.iter().zip(&samples) {
             assert!((a - b).abs() <= 2e-3 * b.abs().max(1.0), "{a} vs {b}");
         }
+    }
+
+    fn jpeg_of(w: u32, h: u32) -> Vec<u8> {
+        let img =
+            image::RgbImage::from_fn(w, h, |x, y| image::Rgb([(x * 7) as u8, (y * 5) as u8, 99]));
+        let mut out = std::io::Cursor::new(Vec::new());
+        img.write_to(&mut out, image::ImageFormat::Jpeg).unwrap();
+        out.into_inner()
+    }
+
+    #[test]
+    fn a_truncated_jpeg_is_refused_though_the_decoder_would_fill_it() {
+        let whole = jpeg_of(32, 24);
+        assert!(jpeg_reaches_its_end(&whole));
+        let encoded = |bytes: Vec<u8>| EncodedImage {
+            encoding: ImageEncoding::Jpeg,
+            width: 32,
+            height: 24,
+            channels: 3,
+            bytes,
+        };
+        assert!(decode_color(&encoded(whole.clone())).is_ok());
+        // Every cut inside the file is refused, the headers and the scan alike.
+        for cut in 0..whole.len() {
+            assert!(
+                !jpeg_reaches_its_end(&whole[..cut]),
+                "cut at {cut} of {}",
+                whole.len()
+            );
+        }
+        let cut = whole[..whole.len() * 2 / 3].to_vec();
+        assert_eq!(
+            decode_color(&encoded(cut)).unwrap_err().to_string(),
+            "the JPEG is truncated or damaged: its marker segments do not reach the \
+             end-of-image marker"
+        );
+        // A trailer after the end is allowed; a whole thumbnail inside an APP1 segment
+        // does not make a cut image whole.
+        let mut trailer = whole.clone();
+        trailer.extend_from_slice(b"camera trailer");
+        assert!(jpeg_reaches_its_end(&trailer));
+        let thumb = jpeg_of(4, 4);
+        let mut with_thumb = vec![0xFF, 0xD8, 0xFF, 0xE1];
+        with_thumb.extend_from_slice(&(thumb.len() as u16 + 2).to_be_bytes());
+        with_thumb.extend_from_slice(&thumb);
+        with_thumb.extend_from_slice(&whole[2..]);
+        assert!(jpeg_reaches_its_end(&with_thumb));
+        assert!(!jpeg_reaches_its_end(&with_thumb[..with_thumb.len() - 40]));
+    }
+
+    #[test]
+    fn damaged_float_data_is_described_in_words_not_bytes() {
+        let samples: Vec<f32> = (0..4096).map(|i| i as f32).collect();
+        let good = encode_floats(64, 64, 1, &samples, false);
+        let mut cut = good.clone();
+        cut.bytes.truncate(good.bytes.len() / 2);
+        let e = decode_floats(&cut).unwrap_err().to_string();
+        assert!(
+            e.starts_with("corrupt float data: the compressed data ends early (truncated after ")
+                && e.ends_with(" of 16384 bytes)")
+                && e.len() < 120,
+            "{e}"
+        );
+        let mut small = good.clone();
+        small.width = 32;
+        let e = decode_floats(&small).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "corrupt float data: it inflates to more than the 8192 bytes the image's size allows"
+        );
     }
 
     #[test]

@@ -158,7 +158,10 @@ fn decode_depth(bytes: Vec<u8>, h: &SensHeader, store: StoreMode) -> Result<Enco
     let raw_len = w as usize * ht as usize * 2;
     let bytes = if h.depth_type == 1 {
         let inflated = miniz_oxide::inflate::decompress_to_vec_zlib_with_limit(&bytes, raw_len)
-            .map_err(|e| format!("cannot inflate the zlib depth: {:?}", e.status))?;
+            .map_err(|e| {
+                let why = crate::codec::inflate_failure(&e, raw_len);
+                format!("cannot inflate the zlib data: {why}")
+            })?;
         if inflated.len() != raw_len {
             return Err(format!(
                 "the zlib depth inflates to {} bytes, but {w}x{ht} u16 take {raw_len}",

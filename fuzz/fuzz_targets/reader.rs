@@ -1,6 +1,9 @@
 //! Fuzzes the `.relume` reader: arbitrary bytes are written to a file, opened with
 //! `Recording::open`, every indexed record is read, and the file is replayed frame by
-//! frame with and without `skip_corrupt`. Nothing may panic (errors are fine).
+//! frame with and without `skip_corrupt`. Nothing may panic (errors are fine). Each
+//! input is tried twice: as it is, and with every record's CRC recomputed, so that
+//! mutated payloads reach the decoders (structure-aware: most raw mutations stop at
+//! the first checksum).
 //!
 //! Run from the repository root (cargo-fuzz and a nightly toolchain needed:
 //! `cargo install cargo-fuzz`, `rustup toolchain install nightly`):
@@ -20,7 +23,19 @@ use libfuzzer_sys::fuzz_target;
 use relume::recording::{Recording, Replay, ReplayOptions};
 use std::io::Write;
 
+#[path = "common.rs"]
+mod common;
+
 fuzz_target!(|data: &[u8]| {
+    read_everything(data);
+    let mut fixed = data.to_vec();
+    common::fix_relume_crcs(&mut fixed);
+    if fixed != data {
+        read_everything(&fixed);
+    }
+});
+
+fn read_everything(data: &[u8]) {
     let mut file = tempfile::NamedTempFile::new().expect("temporary file");
     file.write_all(data).expect("write the input");
     let path = file.path();
@@ -46,4 +61,4 @@ fuzz_target!(|data: &[u8]| {
             }
         }
     }
-});
+}

@@ -482,4 +482,43 @@ mod tests {
         let integral = crate::light::pdf_integral(&dist);
         assert!((integral - 1.0).abs() < 1e-3, "{integral}");
     }
+
+    /// Writes the seed corpus of the `envmap` fuzz target (`fuzz/seeds/envmap`): small
+    /// scanline EXRs (uncompressed, ZIP, RLE, PIZ), and Radiance `.hdr` files flat and
+    /// run-length encoded. Run with
+    /// `cargo test -p relume-scene write_fuzz_seeds -- --ignored`.
+    #[test]
+    #[ignore = "writes files into fuzz/seeds/envmap"]
+    fn write_fuzz_seeds() {
+        use exr::prelude::*;
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/seeds/envmap");
+        std::fs::create_dir_all(&dir).unwrap();
+        for (name, compression) in [
+            ("scanline-uncompressed.exr", Compression::Uncompressed),
+            ("scanline-zip.exr", Compression::ZIP1),
+            ("scanline-rle.exr", Compression::RLE),
+            ("scanline-piz.exr", Compression::PIZ),
+        ] {
+            let channels = SpecificChannels::rgb(|p: Vec2<usize>| texel_value(p.x(), p.y()));
+            let layer = Layer::new(
+                Vec2(8usize, 4usize),
+                LayerAttributes::default(),
+                Encoding {
+                    compression,
+                    blocks: Blocks::ScanLines,
+                    line_order: LineOrder::Increasing,
+                },
+                channels,
+            );
+            Image::from_layer(layer)
+                .write()
+                .to_file(dir.join(name))
+                .unwrap();
+        }
+        let value = |x: usize, y: usize| (x as f32 + 0.5, y as f32 * 0.25, 1.0);
+        for (name, rle) in [("flat.hdr", false), ("rle.hdr", true)] {
+            let bytes = super::rgbe::tests::hdr_bytes(16, 4, value, rle);
+            std::fs::write(dir.join(name), bytes).unwrap();
+        }
+    }
 }

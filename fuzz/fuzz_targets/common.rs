@@ -50,8 +50,14 @@ pub fn fix_mcap_crcs(bytes: &mut [u8]) {
     if !bytes.starts_with(MAGIC) {
         return;
     }
-    let u64_at = |b: &[u8], i: usize| b.get(i..i + 8).map(|s| u64::from_le_bytes(s.try_into().unwrap()));
-    let u32_at = |b: &[u8], i: usize| b.get(i..i + 4).map(|s| u32::from_le_bytes(s.try_into().unwrap()));
+    let u64_at = |b: &[u8], i: usize| {
+        b.get(i..i + 8)
+            .map(|s| u64::from_le_bytes(s.try_into().unwrap()))
+    };
+    let u32_at = |b: &[u8], i: usize| {
+        b.get(i..i + 4)
+            .map(|s| u32::from_le_bytes(s.try_into().unwrap()))
+    };
     let mut at = MAGIC.len();
     while let (Some(&op), Some(len)) = (bytes.get(at), u64_at(bytes, at + 1)) {
         let body = at + 9;
@@ -66,12 +72,16 @@ pub fn fix_mcap_crcs(bytes: &mut [u8]) {
             // compression string, records (u64 length + bytes).
             0x06 => {
                 let crc_at = body + 24;
-                let Some(name_len) = u32_at(bytes, crc_at + 4) else { return };
+                let Some(name_len) = u32_at(bytes, crc_at + 4) else {
+                    return;
+                };
                 let records_len_at = crc_at + 8 + name_len as usize;
                 if name_len == 0 {
                     if let Some(n) = u64_at(bytes, records_len_at) {
                         let start = records_len_at + 8;
-                        if let Some(stop) = usize::try_from(n).ok().and_then(|n| start.checked_add(n)) {
+                        if let Some(stop) =
+                            usize::try_from(n).ok().and_then(|n| start.checked_add(n))
+                        {
                             if stop <= end {
                                 let crc = crc32fast::hash(&bytes[start..stop]);
                                 bytes[crc_at..crc_at + 4].copy_from_slice(&crc.to_le_bytes());

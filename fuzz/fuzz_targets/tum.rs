@@ -16,7 +16,10 @@ fuzz_target!(|data: &[u8]| {
     let root = dir.path().join("tum");
     std::fs::create_dir(&root).expect("folder");
     let parts = common::sections(data, 3);
-    for (name, text) in ["rgb.txt", "depth.txt", "groundtruth.txt"].iter().zip(&parts) {
+    for (name, text) in ["rgb.txt", "depth.txt", "groundtruth.txt"]
+        .iter()
+        .zip(&parts)
+    {
         if !text.is_empty() {
             std::fs::write(root.join(name), text).expect("write a listing");
         }

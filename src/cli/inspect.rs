@@ -145,6 +145,13 @@ pub fn inspect(a: InspectArgs) -> anyhow::Result<i32> {
                 s.max_pose_gap_ns.unwrap_or(0) as f64 * 1e-6
             )?;
         }
+        if let Some(stamp) = s.first_duplicate_stamp_ns {
+            outln!(
+                "  stamps    {} color records share their stamp with the one before (the \
+                 first at {stamp} ns): each replays as a frame of its own",
+                s.duplicate_color_stamps
+            )?;
+        }
         if let Some(gt) = &h.ground_truth {
             outln!(
                 "  truth     {} (object at {:?})",

@@ -159,6 +159,15 @@ pub(super) fn open_recording(args: &RunArgs) -> anyhow::Result<(Replay, Range<us
             stats.max_pose_gap_ns.unwrap_or(0) as f64 * 1e-6
         );
     }
+    if let Some(stamp) = stats.first_duplicate_stamp_ns {
+        eprintln!(
+            "warning: {}: {} color record(s) share their stamp with the one before (the \
+             first at {stamp} ns): each is replayed as a frame of its own, with the same \
+             depth and pose",
+            path.display(),
+            stats.duplicate_color_stamps,
+        );
+    }
     if let Some(damage) = replay.recording.damage() {
         eprintln!(
             "warning: {damage}; replaying the {} complete frames it holds",

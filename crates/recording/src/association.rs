@@ -84,6 +84,11 @@ pub struct AssociationStats {
     pub frames_in_pose_gaps: usize,
     /// That gap, ns (`None`: no pose stream to interpolate).
     pub max_pose_gap_ns: Option<i64>,
+    /// Frames whose color stamp is the previous frame's (a writer that stamped twice):
+    /// each is still a frame of its own, with the same depth and pose.
+    pub duplicate_color_stamps: usize,
+    /// The first such stamp, ns.
+    pub first_duplicate_stamp_ns: Option<i64>,
 }
 
 /// Stamps and index positions of one stream, sorted by stamp.
@@ -217,6 +222,13 @@ pub fn associate(
         }
         stats.frames_with_pose += frame.pose.is_some() as usize;
         stats.frames_with_truth += frame.truth.is_some() as usize;
+        if frames
+            .last()
+            .is_some_and(|f: &FrameRef| f.stamp_ns == stamp_ns)
+        {
+            stats.duplicate_color_stamps += 1;
+            stats.first_duplicate_stamp_ns.get_or_insert(stamp_ns);
+        }
         frames.push(frame);
     }
     stats.frames = frames.len();
@@ -257,6 +269,23 @@ mod tests {
         assert_eq!(frames[1].depth, Some(6));
         assert_eq!(stats.skipped_no_depth, 1);
         assert_eq!(stats.frames_with_pose, 0);
+        assert_eq!(stats.duplicate_color_stamps, 0);
+    }
+
+    #[test]
+    fn color_records_sharing_a_stamp_are_counted() {
+        let ms = 1_000_000;
+        let index = vec![
+            entry(StreamKind::Color, 100 * ms),
+            entry(StreamKind::Color, 200 * ms),
+            entry(StreamKind::Color, 200 * ms),
+            entry(StreamKind::Color, 200 * ms),
+            entry(StreamKind::Color, 300 * ms),
+        ];
+        let (frames, stats) = associate(&index, &[], false, DEFAULT_TOLERANCE_NS, None);
+        assert_eq!(frames.len(), 5, "each record stays a frame");
+        assert_eq!(stats.duplicate_color_stamps, 2);
+        assert_eq!(stats.first_duplicate_stamp_ns, Some(200 * ms));
     }
 
     #[test]

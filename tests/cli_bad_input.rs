@@ -588,3 +588,24 @@ fn a_second_run_into_one_out_folder_is_refused_naming_the_first() {
         &["replay", "r.relume", "-p", &geometry, "--out", "out"],
     ));
 }
+
+/// A NUL byte in a write stage's `dir` is refused by validate, not first at replay.
+#[test]
+fn a_nul_byte_in_a_write_folder_is_refused_by_validate() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    std::fs::write(
+        d.join("w.toml"),
+        "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"write\"\nparams = { dir = \"a\\u0000b\", products = [\"color\"] }\n",
+    )
+    .unwrap();
+    let o = run_in(d, &["validate", "w.toml"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).starts_with(
+            "error: w.toml:5:18: dir = \"a\\0b\" holds a NUL byte, which no folder name can\n"
+        ),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -61,8 +61,14 @@ const PARAMS: &[ParamSpec] = &[
     ParamSpec::new("every", ParamDefault::Int(1), "write every n-th frame only").range(1.0, 1e9),
 ];
 
-/// `dir` is a folder under --out: an absolute path or `..` would write elsewhere.
+/// `dir` is a folder under --out: an absolute path or `..` would write elsewhere, and
+/// no file system takes a NUL byte in a name.
 fn check_dir(dir: &str) -> Result<(), String> {
+    if dir.contains('\0') {
+        return Err(format!(
+            "dir = {dir:?} holds a NUL byte, which no folder name can"
+        ));
+    }
     let inside = Path::new(dir).components().all(|c| {
         matches!(
             c,

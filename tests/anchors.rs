@@ -358,7 +358,8 @@ fn runs_say_where_anchored_objects_went_and_validate_says_they_will_be() {
     let o = ok(run_in(dir.path(), &["validate", "p.toml"]));
     assert!(
         stdout(&o).contains(
-            "  object `ball`: anchored to the recording's floor, placed when a run opens it\n"
+            "  object `ball`: anchored to the recording's floor, placed when a run opens it \
+             (`--recording REC` places it now)\n"
         ),
         "{}",
         stdout(&o)
@@ -399,10 +400,40 @@ fn runs_say_where_anchored_objects_went_and_validate_says_they_will_be() {
         &["replay", "room.relume", "-p", "bad.toml", "--out", "o2"],
     );
     assert_eq!(o.status.code(), Some(1));
+    let past_the_end = "bad.toml:7:9: object `ball`: frame 9 is past the end of `room.relume`, which has 6 frames\n  |\n7 | frame = 9\n  |         ^";
+    assert!(stderr(&o).contains(past_the_end), "{}", stderr(&o));
+    // validate alone cannot know the recording; given it, validate says the same before
+    // any run, and a pixel outside its images too.
+    ok(run_in(dir.path(), &["validate", "bad.toml"]));
+    let o = run_in(
+        dir.path(),
+        &["validate", "bad.toml", "--recording", "room.relume"],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains(past_the_end), "{}", stderr(&o));
+    std::fs::write(
+        dir.path().join("bad.toml"),
+        format!("{DECODE}[[object]]\nname = \"ball\"\nshape = \"sphere\"\nat_pixel = [500, 5]\n"),
+    )
+    .unwrap();
+    let o = run_in(
+        dir.path(),
+        &["validate", "bad.toml", "--recording", "room.relume"],
+    );
+    assert_eq!(o.status.code(), Some(1));
     assert!(
         stderr(&o).contains(
-            "bad.toml:7:9: object `ball`: frame 9 is past the end of `room.relume`, which has 6 frames\n  |\n7 | frame = 9\n  |         ^"
+            "bad.toml:6:12: object `ball`: pixel (500, 5) lies outside `room.relume`'s 320x240 color images"
         ),
+        "{}",
+        stderr(&o)
+    );
+    let o = ok(run_in(
+        dir.path(),
+        &["validate", "p.toml", "--recording", "room.relume"],
+    ));
+    assert!(
+        stderr(&o).contains("object `ball`: anchored on the floor (a plane through "),
         "{}",
         stderr(&o)
     );

@@ -26,6 +26,11 @@ pub struct ObjectsArgs {
 pub struct ValidateArgs {
     /// The pipeline file (TOML).
     pipeline: PathBuf,
+    /// Also check what depends on a recording: objects anchored to its surfaces (their
+    /// `frame` within it, `at_pixel` within its images, a floor or surface found there),
+    /// placed as `relume replay` would place them.
+    #[arg(long, value_name = "REC")]
+    recording: Option<PathBuf>,
 }
 
 pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
@@ -177,7 +182,11 @@ fn json_value(value: &ParamValue) -> serde_json::Value {
 }
 
 pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
-    let pipeline = Pipeline::load(&a.pipeline, &relume::stages::registry())?;
+    let mut pipeline = Pipeline::load(&a.pipeline, &relume::stages::registry())?;
+    if let Some(rec) = &a.recording {
+        let replay = relume::recording::Replay::open(rec, Default::default())?;
+        super::prepare::place_objects(&mut pipeline, &replay, "")?;
+    }
     // A light probe file is read when its stage is set up: read it now, so that a
     // missing or corrupt one does not pass here and stop the run.
     let probes = pipeline
@@ -222,10 +231,11 @@ pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
     for object in pipeline
         .declared_objects()
         .iter()
-        .filter(|o| o.sites.is_some())
+        .filter(|o| o.sites.is_some() && a.recording.is_none())
     {
         outln!(
-            "  object `{}`: anchored to the recording's {}, placed when a run opens it",
+            "  object `{}`: anchored to the recording's {}, placed when a run opens it \
+             (`--recording REC` places it now)",
             object.spec.name,
             match object.spec.anchor {
                 relume::objects::anchor::Anchor::Floor { .. } => "floor",

@@ -609,3 +609,47 @@ fn a_nul_byte_in_a_write_folder_is_refused_by_validate() {
         stderr(&o)
     );
 }
+
+/// A thread the system will not start (here: each stack reserves 1 GB, under a 3 GB
+/// address-space ceiling) ends the run with an error naming the stage, not a panic.
+#[test]
+fn a_stage_thread_the_system_refuses_is_an_error_naming_the_stage() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    ok(run_in(
+        d,
+        &[
+            "synth", "-o", "r.relume", "--frames", "2", "--size", "64x48",
+        ],
+    ));
+    let o = std::process::Command::new("sh")
+        .args([
+            "-c",
+            "ulimit -v 3000000 && exec \"$0\" replay r.relume -p \"$1\" --out out",
+            env!("CARGO_BIN_EXE_relume"),
+            &common::pipeline("geometry.toml"),
+        ])
+        .env("RUST_MIN_STACK", "1000000000")
+        .current_dir(d)
+        .output()
+        .unwrap();
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(ends_with_a_thread_error(&e), "{e}");
+}
+
+/// Whether `stderr` ends with the thread error for some stage of the geometry pipeline.
+fn ends_with_a_thread_error(stderr: &str) -> bool {
+    let Some(line) = stderr.lines().last() else {
+        return false;
+    };
+    ["decode", "depth.to_points", "normals.cross", "write"]
+        .iter()
+        .any(|stage| {
+            line.starts_with(&format!(
+                "error: replay of r.relume stopped: cannot start the thread of stage `{stage}` \
+                 (each stage runs on a thread of its own: a pipeline this large needs a higher \
+                 thread or memory limit, or fewer stages): "
+            ))
+        })
+}

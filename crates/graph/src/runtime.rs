@@ -123,6 +123,16 @@ pub enum PipelineError {
         #[source]
         source: StageError,
     },
+    #[error(
+        "cannot start the thread of {what} (each stage runs on a thread of its own: a \
+         pipeline this large needs a higher thread or memory limit, or fewer stages): {source}"
+    )]
+    Thread {
+        /// "stage `name`" or "the recording's reader".
+        what: String,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("cannot read frame {frame}: {source}")]
     Source {
         frame: usize,
@@ -306,6 +316,8 @@ pub fn run_graph(
     let mut latencies = Vec::new();
     let mut interrupted = false;
     let stage_timings = std::thread::scope(|scope| {
+        // A thread the system refuses is an error of the run: what was not started is
+        // dropped with its channels, so the threads that did start see their inputs end.
         let source_handle = std::thread::Builder::new()
             .name("relume-source".into())
             .spawn_scoped(scope, || {
@@ -319,22 +331,37 @@ pub fn run_graph(
                     &skipped,
                 )
             })
-            .expect("spawn source thread");
+            .map_err(|source| {
+                record_error(PipelineError::Thread {
+                    what: "the recording's reader".into(),
+                    source,
+                })
+            })
+            .ok();
         let mut handles = Vec::new();
         for (n, (stage, wires)) in stages.into_iter().zip(wiring).enumerate() {
+            if source_handle.is_none() {
+                break;
+            }
             let record_error = &record_error;
             let node = StageNode {
                 name: &graph.nodes[n].stage.name,
                 kind: graph.nodes[n].stage.kind,
                 branch: graph.branch_label(n),
             };
-            let handle = std::thread::Builder::new()
+            let what = format!("stage `{}`", node.name);
+            let spawned = std::thread::Builder::new()
                 .name(format!("relume-{}", node.name))
                 .spawn_scoped(scope, move || {
                     stage_loop(stage, wires, &node, t0, record_error)
-                })
-                .expect("spawn stage thread");
-            handles.push(handle);
+                });
+            match spawned {
+                Ok(handle) => handles.push(handle),
+                Err(source) => {
+                    record_error(PipelineError::Thread { what, source });
+                    break;
+                }
+            }
         }
         let mut last_index = None;
         'frames: loop {
@@ -363,9 +390,10 @@ pub fn run_graph(
         // Branches still running stop at their next send.
         drop(sink_rx);
         drop(token_tx);
-        let (source_timing, was_interrupted) = source_handle
-            .join()
-            .expect("the source thread catches its panics");
+        let (source_timing, was_interrupted) = match source_handle {
+            Some(h) => h.join().expect("the source thread catches its panics"),
+            None => (StageTimings::new("source", "read"), false),
+        };
         interrupted = was_interrupted;
         let mut all = vec![source_timing];
         all.extend(handles.into_iter().enumerate().map(|(n, h)| {

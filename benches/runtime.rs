@@ -1,6 +1,9 @@
 //! The runtime's own cost: frames with no products through chains of `debug.noop`
 //! stages. The difference between a chain of 9 and of 1 no-op stage, divided by 8, is
 //! the overhead of one stage hop (channel send and receive, timing, thread hand-off).
+//! `runtime/parse` times reading a generated pipeline of thousands of stages, each
+//! writing a product of its own (what `relume validate` does): linear since issue 59
+//! (16,000 stages took 55 s and 18 GB, now under 0.1 s).
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use relume::graph::{Frame, FrameSource, Pipeline, RunOptions, SourceFile, run};
@@ -73,5 +76,34 @@ fn bench_hops(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_hops);
+/// `stages` `depth.to_points` stages after a decode, each writing its own product.
+fn wide_pipeline_text(stages: usize) -> String {
+    let mut text = String::from("[[stage]]\nkind = \"decode\"\n");
+    for i in 0..stages {
+        text.push_str(&format!(
+            "[[stage]]\nkind = \"depth.to_points\"\nname = \"p{i}\"\n\
+             outputs = {{ points = \"points{i}\" }}\n"
+        ));
+    }
+    text
+}
+
+fn bench_parse(c: &mut Criterion) {
+    let registry = relume::stages::registry();
+    let mut group = c.benchmark_group("runtime/parse");
+    group.sample_size(10);
+    for stages in [1000, 4000, 16000] {
+        let source = SourceFile {
+            name: "bench".into(),
+            text: wide_pipeline_text(stages),
+        };
+        group.throughput(Throughput::Elements(stages as u64));
+        group.bench_with_input(BenchmarkId::from_parameter(stages), &source, |b, s| {
+            b.iter(|| Pipeline::parse(s, &registry).expect("valid pipeline"))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_hops, bench_parse);
 criterion_main!(benches);

@@ -85,6 +85,28 @@ impl SourceFile {
     }
 }
 
+/// Line numbers of byte offsets in a text, by binary search over its line starts: for
+/// callers that ask for many (one per stage), where [`SourceFile::line_col`] would scan
+/// the text each time.
+pub struct LineIndex {
+    starts: Vec<usize>,
+}
+
+impl LineIndex {
+    pub fn new(text: &str) -> LineIndex {
+        let newlines = text.bytes().enumerate().filter(|&(_, b)| b == b'\n');
+        let starts = std::iter::once(0)
+            .chain(newlines.map(|(i, _)| i + 1))
+            .collect();
+        LineIndex { starts }
+    }
+
+    /// The 1-based line of byte offset `at`.
+    pub fn line_of(&self, at: usize) -> usize {
+        self.starts.partition_point(|&s| s <= at)
+    }
+}
+
 /// An error in a pipeline config, located in its file.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct ConfigError {
@@ -133,15 +155,16 @@ impl std::fmt::Display for ConfigError {
                 self.file, self.line, self.column, self.message
             )?;
             let gutter = self.line.to_string().len();
+            let (shown, caret, width) = snippet(&self.source_line, self.column - 1, self.width);
             write!(
                 f,
                 "\n{:gutter$} |\n{} | {}\n{:gutter$} | {}{}",
                 "",
                 self.line,
-                self.source_line,
+                shown,
                 "",
-                " ".repeat(self.column - 1),
-                "^".repeat(self.width)
+                " ".repeat(caret),
+                "^".repeat(width)
             )?;
         }
         if let Some(h) = &self.hint {
@@ -152,6 +175,35 @@ impl std::fmt::Display for ConfigError {
 }
 
 impl std::error::Error for ConfigError {}
+
+/// The longest source line an error shows whole; a longer one is cut to a window of
+/// this many bytes around the error, so that a 5,000-character line (a generated
+/// config, a pasted blob) does not fill the terminal.
+const SNIPPET_BYTES: usize = 100;
+
+/// The part of `line` to show for an error at byte `column` (0-based) spanning `width`
+/// bytes: the text, and the caret's offset and width within it.
+fn snippet(line: &str, column: usize, width: usize) -> (String, usize, usize) {
+    if line.len() <= SNIPPET_BYTES {
+        return (line.to_string(), column, width);
+    }
+    let floor = |mut i: usize| {
+        while !line.is_char_boundary(i) {
+            i -= 1;
+        }
+        i
+    };
+    let column = floor(column.min(line.len()));
+    let start = floor(column.saturating_sub(SNIPPET_BYTES / 3));
+    let end = floor((start + SNIPPET_BYTES).min(line.len()));
+    let (before, after) = (
+        if start > 0 { "..." } else { "" },
+        if end < line.len() { "..." } else { "" },
+    );
+    let shown = format!("{before}{}{after}", &line[start..end]);
+    let width = width.min(end.saturating_sub(column)).max(1);
+    (shown, before.len() + column - start, width)
+}
 
 /// A value with the byte span it came from.
 #[derive(Clone, Debug, PartialEq)]
@@ -517,6 +569,38 @@ fn parse_float(text: &str) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_line_index_agrees_with_line_col() {
+        let text = "a\n\nbb\nccc\n";
+        let index = LineIndex::new(text);
+        for at in 0..=text.len() {
+            assert_eq!(index.line_of(at), src(text).line_col(at).0, "offset {at}");
+        }
+    }
+
+    #[test]
+    fn a_long_line_is_shown_as_a_window_around_the_error() {
+        let value = "x".repeat(5000);
+        let text = format!("name = \"{value}\" bad\n");
+        let at = text.find("bad").unwrap();
+        let e = src(&text)
+            .error(at..at + 3, "expected a newline", None)
+            .to_string();
+        let lines: Vec<&str> = e.lines().collect();
+        assert_eq!(lines[0], format!("p.toml:1:{}: expected a newline", at + 1));
+        let shown = format!("...{}\" bad", "x".repeat(31));
+        assert_eq!(lines[2], format!("1 | {shown}"));
+        assert_eq!(lines[3], format!("  | {}^^^", " ".repeat(shown.len() - 3)));
+        // The start of a long line: no leading cut; a short line: whole.
+        let e = src(&text).error(0..4, "m", None).to_string();
+        assert_eq!(
+            e.lines().nth(2).unwrap(),
+            format!("1 | name = \"{}...", "x".repeat(92))
+        );
+        let e = src("a = 1\n").error(4..5, "m", None).to_string();
+        assert_eq!(e.lines().nth(2).unwrap(), "1 | a = 1");
+    }
 
     fn src(text: &str) -> SourceFile {
         SourceFile {

@@ -110,9 +110,12 @@ impl Pipeline {
                 ));
             }
         };
-        // Pass 1: kinds, names, parameters, ports.
-        let mut stages = Vec::new();
+        // Pass 1: kinds, names, parameters, ports. (Linear in the stage count: a map of
+        // names, line numbers by search; a pipeline may be generated with thousands.)
+        let mut stages: Vec<ResolvedStage> = Vec::new();
         let mut port_sets = Vec::new();
+        let mut names: std::collections::HashMap<String, usize> = Default::default();
+        let lines = config::LineIndex::new(&src.text);
         for d in &decl.stages {
             let info = registry.get(&d.kind.value).ok_or_else(|| {
                 let hint =
@@ -140,7 +143,7 @@ impl Pipeline {
                     Some(format!("leave `name` out to use the kind, `{}`", info.kind)),
                 ));
             }
-            if let Some(prev) = stages.iter().find(|s: &&ResolvedStage| s.name == name) {
+            if let Some(prev) = names.get(&name).map(|&k| &stages[k]) {
                 let span = d
                     .name
                     .as_ref()
@@ -160,13 +163,14 @@ impl Pipeline {
             let outputs = bind_ports(src, &d.outputs, &ports.outputs, &name, "output")?;
             let every = rate_key(src, &d.every, &name, "every", 1..=super::every::MAX_EVERY)?;
             let lag = rate_key(src, &d.lag, &name, "lag", 0..=super::lag::MAX_LAG)?;
+            names.insert(name.clone(), stages.len());
             stages.push(ResolvedStage {
                 name,
                 kind: info.kind,
                 params,
                 inputs,
                 outputs,
-                line: src.line_col(d.span.start).0,
+                line: lines.line_of(d.span.start),
                 every,
                 lag,
             });
@@ -175,13 +179,11 @@ impl Pipeline {
         // Pass 2: every product is produced once, and inputs are produced upstream or
         // (with @prev) anywhere in the pipeline.
         let mut producers: BTreeMap<String, (usize, ProductKind)> = BTreeMap::new();
-        let mut available: Vec<BTreeMap<String, (usize, ProductKind)>> = Vec::new();
         producers.insert(
             SOURCE_PRODUCT.into(),
             (usize::MAX, relume_recording::RECORD),
         );
         for (i, (stage, ports)) in stages.iter().zip(&port_sets).enumerate() {
-            available.push(producers.clone());
             for port in &ports.outputs {
                 let product = &stage.outputs[&port.role];
                 if let Some(&(p, _)) = producers.get(product) {
@@ -217,22 +219,21 @@ impl Pipeline {
                     Some(p) => (p, true),
                     None => (bound.as_str(), false),
                 };
-                let found = if previous {
-                    producers.get(product)
-                } else {
-                    available[i].get(product)
+                // Upstream of stage i: the source and stages 0..i (each product has
+                // one producer, so its index says whether it runs before i).
+                let upstream = |&(p, _): &(usize, ProductKind)| p == usize::MAX || p < i;
+                let found = match previous {
+                    true => producers.get(product),
+                    false => producers.get(product).filter(|e| upstream(e)),
                 };
                 let Some(&(producer, kind)) = found else {
+                    let available: BTreeMap<String, (usize, ProductKind)> = producers
+                        .iter()
+                        .filter(|(_, e)| upstream(e))
+                        .map(|(k, e)| (k.clone(), *e))
+                        .collect();
                     return Err(missing_product(
-                        src,
-                        span,
-                        &stages,
-                        &available[i],
-                        &producers,
-                        i,
-                        port,
-                        product,
-                        previous,
+                        src, span, &stages, &available, &producers, i, port, product, previous,
                     ));
                 };
                 if !port.kinds.contains(&kind) {

@@ -110,12 +110,12 @@ pub fn export(
             .profile("")
             .library(format!("relume {}", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::new(file))
-            .map_err(|e| fail(out, super::describe(&e)))?;
+            .map_err(|e| fail(out, super::failure::describe(&e)))?;
         let mut o = Out::new(writer, out);
         let summary = write_all(&rec, &mut o, options, progress)?;
         o.writer
             .finish()
-            .map_err(|e| fail(out, super::describe(&e)))?;
+            .map_err(|e| fail(out, super::failure::describe(&e)))?;
         drop(o);
         std::fs::rename(&tmp, &target).map_err(|source| ImportError::Io {
             path: out.to_path_buf(),

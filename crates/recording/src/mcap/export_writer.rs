@@ -75,7 +75,7 @@ impl<'a> Out<'a> {
                 let id = self
                     .writer
                     .add_schema(schema_name, "jsonschema", &data)
-                    .map_err(|e| fail(self.path, super::describe(&e)))?;
+                    .map_err(|e| fail(self.path, super::failure::describe(&e)))?;
                 self.schemas.insert(schema_name, id);
                 id
             }
@@ -83,7 +83,7 @@ impl<'a> Out<'a> {
         let id = self
             .writer
             .add_channel(schema_id, topic, "json", &BTreeMap::new())
-            .map_err(|e| fail(self.path, super::describe(&e)))?;
+            .map_err(|e| fail(self.path, super::failure::describe(&e)))?;
         self.channels.insert(topic.to_string(), id);
         Ok(id)
     }
@@ -112,7 +112,7 @@ impl<'a> Out<'a> {
         };
         self.writer
             .write_to_known_channel(&header, &data)
-            .map_err(|e| fail(self.path, super::describe(&e)))
+            .map_err(|e| fail(self.path, super::failure::describe(&e)))
     }
 }
 

@@ -117,7 +117,7 @@ pub fn stream(
             Err(e) => {
                 return Err(bad(format!(
                     "not a readable MCAP file: {} (after {} messages, {bytes_read} bytes in)",
-                    super::describe(&e),
+                    super::failure::describe(&e),
                     end.messages
                 )));
             }

@@ -941,3 +941,34 @@ fn a_string_longer_than_its_record_is_refused_without_allocating_it() {
     );
     assert!(!dir.path().join("r.relume").exists());
 }
+
+/// An attachment record whose body ends before its data length and CRC (found by the
+/// `mcap` fuzz target): the `mcap` crate slices between them and panicked; now refused.
+#[test]
+fn an_attachment_without_room_for_its_crc_is_refused_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let string = |s: &str| [&(s.len() as u32).to_le_bytes()[..], s.as_bytes()].concat();
+    let body = [
+        &[0u8; 16][..],
+        &string("a.png"),
+        &string("image/png"),
+        &[0u8; 8],
+    ]
+    .concat();
+    let mut file = b"\x89MCAP0\r\n".to_vec();
+    file.push(0x09);
+    file.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    file.extend_from_slice(&body);
+    std::fs::write(dir.path().join("a.mcap"), &file).unwrap();
+    let o = run_in(dir.path(), &["import", "mcap", "a.mcap", "-o", "r.relume"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(
+            "a.mcap: record 0x09 after 0 messages is damaged: its data length and CRC take 12 \
+             bytes, but only 8 bytes of the record follow its name and media type"
+        ),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.path().join("r.relume").exists());
+}

@@ -4,12 +4,15 @@
 //! a few bytes whose topic says it is 3 GB long takes 3 GB before the read fails (found
 //! by `fuzz/fuzz_targets/mcap.rs`). Here every string of the records that hold strings
 //! must fit in what is left of the record's body. Maps and arrays are read element by
-//! element, without a reservation, so only the strings inside them are checked.
-//! Layouts: the MCAP specification, "Records".
+//! element, without a reservation, so only the strings inside them are checked. An
+//! attachment must also hold its data length and CRC, which the crate slices between.
+//! Chunks are not here: the crate's reader parses their headers itself and bounds their
+//! compression string. Layouts: the MCAP specification, "Records".
 
 use mcap::records::op;
 
-/// Why a field of record `opcode` says it is longer than the rest of `body`, if one does.
+/// Why a field of record `opcode` says it is longer than the rest of `body` (or does not
+/// fit in it), if one does.
 pub fn strings_fit(opcode: u8, body: &[u8]) -> Result<(), String> {
     let mut r = Fields { body, at: 0 };
     match opcode {
@@ -28,10 +31,6 @@ pub fn strings_fit(opcode: u8, body: &[u8]) -> Result<(), String> {
             r.string("message encoding")?;
             r.string_map("metadata")?;
         }
-        op::CHUNK => {
-            r.skip(8 + 8 + 8 + 4)?;
-            r.string("compression")?;
-        }
         op::CHUNK_INDEX => {
             r.skip(8 + 8 + 8 + 8)?;
             let offsets = r.u32()? as usize;
@@ -43,6 +42,15 @@ pub fn strings_fit(opcode: u8, body: &[u8]) -> Result<(), String> {
             r.skip(8 + 8)?;
             r.string("name")?;
             r.string("media type")?;
+            // The crate slices the data as `body[after the length..len - 4]`, which
+            // panics when the length and the CRC do not both fit (a fuzz finding).
+            if r.left() < 8 + 4 {
+                return Err(format!(
+                    "its data length and CRC take 12 bytes, but only {} bytes of the record \
+                     follow its name and media type",
+                    r.left()
+                ));
+            }
         }
         op::ATTACHMENT_INDEX => {
             r.skip(8 * 5)?;
@@ -164,5 +172,22 @@ mod tests {
         assert_eq!(strings_fit(op::MESSAGE, &[0xFF; 8]), Ok(()));
         // A body cut short is the crate's to report.
         assert_eq!(strings_fit(op::HEADER, &[4, 0]), Ok(()));
+        // An attachment must hold its data length and CRC after its strings: the crate
+        // slices between them and panics otherwise.
+        let mut attachment = vec![0; 16];
+        attachment.extend(string("a.png"));
+        attachment.extend(string("image/png"));
+        assert_eq!(
+            strings_fit(op::ATTACHMENT, &[&attachment[..], &[0; 11]].concat()),
+            Err(
+                "its data length and CRC take 12 bytes, but only 11 bytes of the record \
+                 follow its name and media type"
+                    .into()
+            )
+        );
+        assert_eq!(
+            strings_fit(op::ATTACHMENT, &[&attachment[..], &[0; 12]].concat()),
+            Ok(())
+        );
     }
 }

@@ -203,11 +203,13 @@ pub fn jpeg_reaches_its_end(bytes: &[u8]) -> bool {
         at += len as usize;
         if marker == SOS {
             // Entropy-coded data: 0xFF is followed by 0x00 (a stuffed byte) or a restart
-            // marker inside it; any other marker ends the scan.
+            // marker inside it, maybe after fill bytes (0xFF); any other marker ends the
+            // scan.
             loop {
                 match bytes.get(at..at + 2) {
                     None => return false,
                     Some([0xFF, 0x00 | 0xD0..=0xD7]) => at += 2,
+                    Some([0xFF, 0xFF]) => at += 1,
                     Some([0xFF, _]) => break,
                     Some(_) => at += 1,
                 }
@@ -433,6 +435,20 @@ mod tests {
         with_thumb.extend_from_slice(&whole[2..]);
         assert!(jpeg_reaches_its_end(&with_thumb));
         assert!(!jpeg_reaches_its_end(&with_thumb[..with_thumb.len() - 40]));
+        // Fill bytes may precede a restart marker inside a scan (T.81, B.1.1.2), as they
+        // may precede any marker; the scan goes on after it.
+        let scan = |between: &[u8]| {
+            let head = [0xFF, 0xD8, 0xFF, 0xDA, 0x00, 0x02, 0x12, 0x34];
+            [
+                &head[..],
+                between,
+                &[0x56, 0xFF, 0x00, 0x78, 0xFF, 0xFF, 0xD9],
+            ]
+            .concat()
+        };
+        assert!(jpeg_reaches_its_end(&scan(&[0xFF, 0xD0])));
+        assert!(jpeg_reaches_its_end(&scan(&[0xFF, 0xFF, 0xFF, 0xD3])));
+        assert!(!jpeg_reaches_its_end(&scan(&[0xFF, 0xFF])[..14]));
     }
 
     #[test]

@@ -48,8 +48,10 @@ Shards: an item belongs to shard xxh3(id) mod N, whatever its place in the manif
 JOB_COMPLETION_INDEX with the count from --shards N or RELUME_SHARDS (Kubernetes sets no
 count variable). deploy/slurm.sbatch and deploy/k8s-indexed-job.yaml are examples.
 
-Exit status: 0 when every item of the shard is done, 1 when one failed, 130 when
-interrupted. --summary: 0 when every item is done, 1 otherwise.";
+Exit status: 0 when every item of the shard is done, 1 when one failed, 75 when none
+failed but another relume run still holds some (a resubmitted job still running them:
+wait for it, or run again later), 130 when interrupted. --summary: 0 when every item is
+done, 1 otherwise.";
 
 #[derive(Parser, Debug)]
 #[command(after_help = MANIFEST)]
@@ -165,7 +167,19 @@ pub fn batch(a: BatchArgs) -> anyhow::Result<i32> {
         return Ok(130);
     }
     note!("{line}");
-    Ok(if failed > 0 { 1 } else { 0 })
+    Ok(exit_status(failed, busy))
+}
+
+/// EX_TEMPFAIL (sysexits.h): the items left to another run are not done yet, so a
+/// scheduler's "after this job succeeded" must not fire on this run.
+const ITEMS_HELD_ELSEWHERE: i32 = 75;
+
+fn exit_status(failed: usize, busy: usize) -> i32 {
+    match (failed, busy) {
+        (0, 0) => 0,
+        (0, _) => ITEMS_HELD_ELSEWHERE,
+        _ => 1,
+    }
 }
 
 enum Outcome {

@@ -96,6 +96,14 @@ fn still_at(file: &File, path: &Path) -> bool {
     }
 }
 
+/// Whether `flock` failed because the file system has no locks, not because of a holder.
+fn cannot_lock_here(e: &std::io::Error) -> bool {
+    matches!(
+        e.raw_os_error(),
+        Some(libc::ENOSYS | libc::EOPNOTSUPP | libc::ENOLCK)
+    )
+}
+
 fn take_once(path: &Path) -> anyhow::Result<Taken> {
     let mut file = File::options()
         .read(true)
@@ -108,6 +116,19 @@ fn take_once(path: &Path) -> anyhow::Result<Taken> {
     // SAFETY: flock on a file descriptor this function owns, open for its whole call.
     if unsafe { libc::flock(file.as_raw_fd(), operation) } != 0 {
         let e = std::io::Error::last_os_error();
+        if cannot_lock_here(&e) {
+            // Lustre without -o flock, some NFS mounts: running unguarded is better
+            // than failing every run; said once per process.
+            static SAID: std::sync::Once = std::sync::Once::new();
+            SAID.call_once(|| {
+                eprintln!(
+                    "warning: {}: this file system does not take locks ({e}): two relume \
+                     runs into one folder would not be kept apart here",
+                    path.display()
+                )
+            });
+            return Ok(Taken::Locked(file));
+        }
         if e.kind() != std::io::ErrorKind::WouldBlock {
             return Err(e).with_context(|| format!("cannot lock {}", path.display()));
         }
@@ -131,4 +152,26 @@ fn take_once(path: &Path) -> anyhow::Result<Taken> {
         .and_then(|_| file.write_all(me.as_bytes()));
     written.with_context(|| format!("cannot write the lock file {}", path.display()))?;
     Ok(Taken::Locked(file))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::cannot_lock_here;
+    use std::io::Error;
+
+    #[test]
+    fn a_file_system_without_locks_is_told_from_a_held_lock() {
+        for errno in [libc::ENOSYS, libc::EOPNOTSUPP, libc::ENOLCK] {
+            assert!(
+                cannot_lock_here(&Error::from_raw_os_error(errno)),
+                "{errno}"
+            );
+        }
+        for errno in [libc::EWOULDBLOCK, libc::EBADF, libc::EINTR] {
+            assert!(
+                !cannot_lock_here(&Error::from_raw_os_error(errno)),
+                "{errno}"
+            );
+        }
+    }
 }

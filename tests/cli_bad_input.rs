@@ -653,3 +653,23 @@ fn ends_with_a_thread_error(stderr: &str) -> bool {
             ))
         })
 }
+
+/// validate checks the pipeline a replay with the same `--set` would run, and
+/// `--max-pose-gap` means something only with the recording it associates.
+#[test]
+fn validate_takes_the_overrides_a_replay_would() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    let geometry = common::pipeline("geometry.toml");
+    ok(run_in(d, &["validate", &geometry]));
+    let o = run_in(d, &["validate", &geometry, "--set", "normals.cross.step=0"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("parameter `step` = 0 is out of range (1 to 16)"),
+        "the override is checked: {}",
+        stderr(&o)
+    );
+    let o = run_in(d, &["validate", &geometry, "--max-pose-gap", "100"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--recording <REC>"), "{}", stderr(&o));
+}

@@ -31,6 +31,14 @@ pub struct ValidateArgs {
     /// placed as `relume replay` would place them.
     #[arg(long, value_name = "REC")]
     recording: Option<PathBuf>,
+    /// With --recording: the pose gap a replay would be given (placing an object needs
+    /// its anchor frame's pose); see `relume replay --help`.
+    #[arg(long, value_name = "MS", value_parser = super::replay::parse_gap_ms, requires = "recording")]
+    max_pose_gap: Option<i64>,
+    /// Check the pipeline as `relume replay --set` would change it: STAGE.PARAM=VALUE,
+    /// repeatable.
+    #[arg(long = "set", value_name = "STAGE.PARAM=VALUE")]
+    overrides: Vec<relume::graph::ParamOverride>,
 }
 
 pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
@@ -182,9 +190,13 @@ fn json_value(value: &ParamValue) -> serde_json::Value {
 }
 
 pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
-    let mut pipeline = Pipeline::load(&a.pipeline, &relume::stages::registry())?;
+    let mut pipeline = Pipeline::load_with(&a.pipeline, &relume::stages::registry(), &a.overrides)?;
     if let Some(rec) = &a.recording {
-        let replay = relume::recording::Replay::open(rec, Default::default())?;
+        let options = relume::recording::ReplayOptions {
+            max_pose_gap_ns: a.max_pose_gap,
+            ..Default::default()
+        };
+        let replay = relume::recording::Replay::open(rec, options)?;
         super::prepare::place_objects(&mut pipeline, &replay, "")?;
     }
     // A light probe file is read when its stage is set up: read it now, so that a

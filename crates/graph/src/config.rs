@@ -182,8 +182,19 @@ impl std::error::Error for ConfigError {}
 const SNIPPET_BYTES: usize = 100;
 
 /// The part of `line` to show for an error at byte `column` (0-based) spanning `width`
-/// bytes: the text, and the caret's offset and width within it.
+/// bytes: the text, and the caret's offset and width within it in characters (what a
+/// terminal lines up; an `é` before the error is two bytes but one column).
 fn snippet(line: &str, column: usize, width: usize) -> (String, usize, usize) {
+    let (shown, caret, width) = snippet_bytes(line, column, width);
+    let chars =
+        |bytes: Option<&str>, fallback: usize| bytes.map_or(fallback, |s| s.chars().count());
+    let caret_chars = chars(shown.get(..caret), caret);
+    let width_chars = chars(shown.get(caret..caret + width), width).max(1);
+    (shown, caret_chars, width_chars)
+}
+
+/// [`snippet`] in bytes.
+fn snippet_bytes(line: &str, column: usize, width: usize) -> (String, usize, usize) {
     if line.len() <= SNIPPET_BYTES {
         return (line.to_string(), column, width);
     }
@@ -600,6 +611,14 @@ mod tests {
         );
         let e = src("a = 1\n").error(4..5, "m", None).to_string();
         assert_eq!(e.lines().nth(2).unwrap(), "1 | a = 1");
+        // The caret counts characters, not bytes.
+        let text = "a = \"éé\" xy\n";
+        let at = text.find("xy").unwrap();
+        let e = src(text).error(at..at + 2, "m", None).to_string();
+        assert_eq!(
+            e.lines().nth(3).unwrap(),
+            format!("  | {}^^", " ".repeat(9))
+        );
     }
 
     fn src(text: &str) -> SourceFile {

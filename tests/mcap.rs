@@ -972,3 +972,46 @@ fn an_attachment_without_room_for_its_crc_is_refused_not_a_panic() {
     );
     assert!(!dir.path().join("r.relume").exists());
 }
+
+/// A chunk inside a chunk whose compression string says it is 2.5 GB long (found by the
+/// `mcap` fuzz target): the reader hands the inner chunk over as a record, and parsing
+/// it reserved the string's length; now refused by its length.
+#[test]
+fn a_nested_chunk_with_an_overlong_compression_is_refused_without_allocating_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = |opcode: u8, body: &[u8]| {
+        [&[opcode][..], &(body.len() as u64).to_le_bytes(), body].concat()
+    };
+    let chunk = |compression_len: u32, records: &[u8]| {
+        let mut body = vec![0u8; 8 + 8];
+        body.extend_from_slice(&(records.len() as u64).to_le_bytes());
+        body.extend_from_slice(&0u32.to_le_bytes()); // no CRC
+        body.extend_from_slice(&compression_len.to_le_bytes());
+        body.extend_from_slice(&(records.len() as u64).to_le_bytes());
+        body.extend_from_slice(records);
+        record(0x06, &body)
+    };
+    let inner = chunk(2_587_895_296, b"zstd");
+    let mut file = b"\x89MCAP0\r\n".to_vec();
+    file.extend(record(0x01, &[0; 8]));
+    file.extend(chunk(0, &inner));
+    std::fs::write(dir.path().join("nested.mcap"), &file).unwrap();
+    let o = std::process::Command::new("sh")
+        .args([
+            "-c",
+            "ulimit -v 2000000 && exec \"$0\" import mcap nested.mcap -o r.relume",
+            env!("CARGO_BIN_EXE_relume"),
+        ])
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(
+            "nested.mcap: record 0x06 after 0 messages is damaged: its compression says it is \
+             2587895296 bytes long, but only 12 bytes of the record follow"
+        ),
+        "{}",
+        stderr(&o)
+    );
+}

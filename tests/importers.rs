@@ -291,6 +291,14 @@ fn redwood_errors_name_file_and_line() {
         e.ends_with("/rw: color holds 2 images but depth holds 1: color and depth must pair up"),
         "{e}"
     );
+    // A depth folder without PNGs (found by the redwood fuzz target: numbered color
+    // beside an empty depth folder indexed an empty list, a panic).
+    let e = redwood_error(IDENTITY_RECORD, |dir| {
+        for i in 0..2 {
+            std::fs::remove_file(dir.join(format!("depth/{i:05}.png"))).unwrap();
+        }
+    });
+    assert_eq!(e, "depth: holds no PNG images");
     // Two files of one number in a folder: which is frame 1 is not known.
     let e = redwood_error(IDENTITY_RECORD, |dir| {
         std::fs::copy(dir.join("depth/00001.png"), dir.join("depth/1.png")).unwrap();

@@ -194,11 +194,11 @@ fn pair_frames(
         return Err(file_error(
             color_dir.parent().unwrap_or(color_dir),
             format!(
-                "no image of {} has a depth image of the same number in {} (color {}..., depth {}...)",
+                "no image of {} has a depth image of the same number in {} (color {}, depth {})",
                 color_dir.display(),
                 depth_dir.display(),
-                color_numbers[0],
-                depth_numbers[0]
+                first_of(&color_numbers),
+                first_of(&depth_numbers)
             ),
         ));
     }
@@ -225,6 +225,13 @@ fn pair_frames(
         frames: pairs,
         warning,
     })
+}
+
+/// "7..." for numbers from 7 on, for an error; "none" for no numbers.
+fn first_of(numbers: &[u64]) -> String {
+    numbers
+        .first()
+        .map_or("none".to_string(), |n| format!("{n}..."))
 }
 
 /// A sentence on the first gap in the numbers that end the file names of `files`
@@ -406,6 +413,9 @@ pub fn import(
     let depths = list_images(&depth_dir, &["png"])?;
     if colors.is_empty() {
         return Err(file_error(&color_dir, "holds no JPG or PNG images".into()));
+    }
+    if depths.is_empty() {
+        return Err(file_error(&depth_dir, "holds no PNG images".into()));
     }
     let Pairing {
         frames,

@@ -69,7 +69,11 @@ fn write_raw_bag_with_info(
     compression: Option<mcap::Compression>,
     info: impl Fn(usize, i64, &str) -> Vec<u8>,
 ) {
-    let mut bag = Bag::create(path, compression);
+    fill_raw_bag(Bag::create(path, compression), info);
+}
+
+/// Writes [`write_raw_bag`]'s messages into `bag`.
+fn fill_raw_bag(mut bag: Bag, info: impl Fn(usize, i64, &str) -> Vec<u8>) {
     let (ct, cq) = CAMERA_IN_BASE;
     let mount = Tf {
         stamp_ns: T0,
@@ -1014,4 +1018,142 @@ fn a_nested_chunk_with_an_overlong_compression_is_refused_without_allocating_it(
         "{}",
         stderr(&o)
     );
+}
+
+/// The body (start and length) of the top-level chunk holding the message logged at
+/// `log_time` on `topic`, found by walking the file's records.
+fn chunk_holding(bytes: &[u8], topic: &str, log_time: u64) -> (usize, usize) {
+    let mut at = 8;
+    let mut channels = std::collections::BTreeMap::new();
+    while at + 9 <= bytes.len() {
+        let opcode = bytes[at];
+        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+        let body = &bytes[at + 9..at + 9 + len];
+        if let Ok(mcap::records::Record::Chunk { header, data }) = mcap::parse_record(opcode, body)
+        {
+            for record in mcap::read::ChunkReader::new(header, &data).unwrap() {
+                match record.unwrap() {
+                    mcap::records::Record::Channel(c) => {
+                        channels.insert(c.id, c.topic);
+                    }
+                    mcap::records::Record::Message { header, .. }
+                        if header.log_time == log_time
+                            && channels.get(&header.channel_id).map(String::as_str)
+                                == Some(topic) =>
+                    {
+                        return (at + 9, len);
+                    }
+                    _ => {}
+                }
+            }
+        }
+        at += 9 + len;
+    }
+    panic!("no chunk holds {topic} at {log_time}");
+}
+
+/// `--skip-corrupt`: a chunk whose CRC or compression fails is passed over, named in a
+/// warning with its byte offset, and the other chunks' frames import exactly; without
+/// the flag the same file stops the import. Issue 59's first item.
+#[test]
+fn skip_corrupt_passes_over_a_damaged_chunk_and_imports_the_rest_exactly() {
+    for compression in [
+        None,
+        Some(mcap::Compression::Zstd),
+        Some(mcap::Compression::Lz4),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let info = |_, t, frame: &str| ros2::camera_info(t, frame, W, H, 10.5, 11.0, 3.9, 2.7);
+        fill_raw_bag(
+            Bag::create_chunked(&d.join("in.mcap"), compression, Some(1)),
+            info,
+        );
+        // An undamaged file reads the same either way (the chunks opened by relume or
+        // by the crate).
+        std::fs::write(d.join("decode.toml"), DECODE_ONLY).unwrap();
+        ok(run_in(d, &["import", "mcap", "in.mcap", "-o", "a.relume"]));
+        ok(run_in(
+            d,
+            &[
+                "import",
+                "mcap",
+                "in.mcap",
+                "-o",
+                "b.relume",
+                "--skip-corrupt",
+            ],
+        ));
+        let strict_hashes = decoded_hashes(d, "a.relume");
+        assert_eq!(strict_hashes.len(), 4, "{strict_hashes:?}");
+        assert_eq!(strict_hashes, decoded_hashes(d, "b.relume"));
+        let mut bytes = std::fs::read(d.join("in.mcap")).unwrap();
+        let frame2 = (T0 + 2 * DT) as u64;
+        let (body, len) = chunk_holding(&bytes, "/camera/color/image_raw", frame2);
+        // A byte in the middle of the chunk's (compressed) records.
+        bytes[body + len - len / 4] ^= 0x5A;
+        std::fs::write(d.join("in.mcap"), &bytes).unwrap();
+        let strict = run_in(d, &["import", "mcap", "in.mcap", "-o", "r.relume"]);
+        assert_eq!(strict.status.code(), Some(1), "{compression:?}");
+        assert!(
+            stderr(&strict).contains("in.mcap: the file is damaged: ")
+                && stderr(&strict).contains("--skip-corrupt passes over a damaged chunk"),
+            "{compression:?}: {}",
+            stderr(&strict)
+        );
+        assert!(!d.join("r.relume").exists());
+        let o = ok(run_in(
+            d,
+            &[
+                "import",
+                "mcap",
+                "in.mcap",
+                "-o",
+                "r.relume",
+                "--skip-corrupt",
+            ],
+        ));
+        let want = format!(
+            "skipped 1 damaged chunk (--skip-corrupt): chunk {} at byte {} after ",
+            count_chunks_before(&bytes, body - 9) + 1,
+            body - 9
+        );
+        assert!(
+            stderr(&o).contains(&want),
+            "{compression:?}: want {want:?} in {}",
+            stderr(&o)
+        );
+        let replay = Replay::open(&d.join("r.relume"), ReplayOptions::default()).unwrap();
+        let stamps: Vec<i64> = replay.frames.iter().map(|f| f.stamp_ns).collect();
+        assert_eq!(
+            stamps,
+            [1, 3, 4].map(|k| T0 + k * DT),
+            "{compression:?}: frame 2's color was in the damaged chunk"
+        );
+        for (i, k) in [1usize, 3, 4].into_iter().enumerate() {
+            let rec = replay.read_frame(i).unwrap();
+            let rgb = codec::decode_color(&rec.color.image).unwrap();
+            let flat: Vec<u8> = rgb.data.iter().flatten().copied().collect();
+            assert_eq!(flat, color_pixels(k), "frame {k} color");
+            let units = codec::decode_depth_units(&rec.depth.unwrap().image).unwrap();
+            assert_eq!(units.data, depth_units(k), "frame {k} depth");
+            assert_pose_near(
+                &rec.pose.unwrap(),
+                &expected_camera_pose(k),
+                &format!("frame {k}"),
+            );
+        }
+    }
+}
+
+/// How many top-level chunk records start before byte `end`.
+fn count_chunks_before(bytes: &[u8], end: usize) -> usize {
+    let mut at = 8;
+    let mut n = 0;
+    while at < end {
+        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+        n += usize::from(bytes[at] == 0x06);
+        at += 9 + len;
+    }
+    n
 }

@@ -230,6 +230,11 @@ pub struct McapArgs {
     /// Keep images compressed as found (decoded on replay) or store raw pixels.
     #[arg(long, value_enum, default_value_t = StoreMode::Compressed)]
     store: StoreMode,
+    /// Pass over a damaged chunk (its CRC, size or compression does not check out),
+    /// naming it and counting what it cost, instead of stopping. Damage outside the
+    /// chunks still stops the import.
+    #[arg(long)]
+    skip_corrupt: bool,
 }
 
 impl McapArgs {
@@ -246,6 +251,7 @@ impl McapArgs {
             pose_topic: self.pose_topic.clone(),
             world_frame: self.world_frame.clone(),
             camera_frame: self.camera_frame.clone(),
+            skip_corrupt: self.skip_corrupt,
         }
     }
 }
@@ -303,7 +309,10 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     if let ImportCommand::Mcap(a) = &command
         && a.list
     {
-        let scan = mcap::Scan::read(&a.file)?;
+        let read = mcap::read::ReadOptions {
+            skip_corrupt: a.skip_corrupt,
+        };
+        let scan = mcap::Scan::read(&a.file, read)?;
         outln!("{}", scan.listing().trim_end())?;
         return Ok(0);
     }

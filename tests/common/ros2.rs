@@ -178,8 +178,23 @@ pub struct Bag {
 
 impl Bag {
     pub fn create(path: &Path, compression: Option<mcap::Compression>) -> Bag {
+        Bag::create_chunked(path, compression, None)
+    }
+
+    /// A bag whose chunks close once they pass `chunk_size` bytes (`Some(1)`: about one
+    /// message each); `None` keeps the writer's default.
+    pub fn create_chunked(
+        path: &Path,
+        compression: Option<mcap::Compression>,
+        chunk_size: Option<u64>,
+    ) -> Bag {
         let file = std::fs::File::create(path).unwrap();
-        let writer = mcap::WriteOptions::new()
+        let options = mcap::WriteOptions::new();
+        let options = match chunk_size {
+            Some(size) => options.chunk_size(Some(size)),
+            None => options,
+        };
+        let writer = options
             .compression(compression)
             .profile("ros2")
             .create(std::io::BufWriter::new(file))

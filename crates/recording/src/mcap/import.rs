@@ -6,7 +6,7 @@
 use super::choose::{PoseSource, choose_images, fail, intrinsics_for, pose_source};
 use super::messages::{self, Message};
 use super::pixels::{self, ImageRole};
-use super::read::{self, Channel, Event};
+use super::read::{self, Channel, Event, ReadOptions};
 use super::scan::Scan;
 use crate::error::ImportError;
 use crate::importers::{CameraIntrinsics, ImportSummary, import_header};
@@ -28,7 +28,10 @@ pub fn import(
     options: &McapOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<ImportSummary, ImportError> {
-    let scan = Scan::read(file)?;
+    let read_options = ReadOptions {
+        skip_corrupt: options.skip_corrupt,
+    };
+    let scan = Scan::read(file, read_options)?;
     let mut warnings = Vec::new();
     let color = choose_images(
         file,
@@ -252,7 +255,7 @@ pub fn import(
         Ok(())
     };
     let mut seen = 0usize;
-    read::stream(file, &mut |event| {
+    let end = read::stream(file, read_options, &mut |event| {
         let Event::Message {
             channel,
             index,
@@ -319,6 +322,9 @@ pub fn import(
     }
     if let Some(t) = &scan.end.truncated {
         summary.warnings.push(t.clone());
+    }
+    if let Some(s) = end.skipped() {
+        summary.warnings.push(s);
     }
     if summary.skipped_frames > 0 {
         summary.warnings.push(format!(

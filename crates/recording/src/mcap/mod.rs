@@ -9,6 +9,7 @@
 
 pub mod cdr;
 mod choose;
+mod chunk;
 pub mod export;
 mod export_products;
 mod export_writer;

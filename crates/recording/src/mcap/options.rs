@@ -19,4 +19,6 @@ pub struct McapOptions {
     pub world_frame: Option<String>,
     /// The camera's optical frame (default: the color images' `frame_id`).
     pub camera_frame: Option<String>,
+    /// `--skip-corrupt`: pass over damaged chunks, saying which, instead of stopping.
+    pub skip_corrupt: bool,
 }

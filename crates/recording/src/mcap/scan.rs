@@ -4,7 +4,7 @@
 
 use super::messages::{self, CameraInfoMsg, Message, MessageType, TransformMsg};
 use super::pixels::{self, ImageRole};
-use super::read::{self, Channel, Event, StreamEnd};
+use super::read::{self, Channel, Event, ReadOptions, StreamEnd};
 use super::tf::TfTree;
 use crate::error::ImportError;
 use std::collections::BTreeMap;
@@ -54,14 +54,14 @@ fn is_static_tf(topic: &str) -> bool {
 
 impl Scan {
     /// Reads `path` once, decoding every message but the images (only the first of each
-    /// image topic).
-    pub fn read(path: &Path) -> Result<Scan, ImportError> {
+    /// image topic). `options` says what a damaged chunk does.
+    pub fn read(path: &Path, options: ReadOptions) -> Result<Scan, ImportError> {
         let mut scan = Scan::default();
         let bad = |reason: String| ImportError::File {
             path: path.to_path_buf(),
             reason,
         };
-        let end = read::stream(path, &mut |event| {
+        let end = read::stream(path, options, &mut |event| {
             match event {
                 Event::Channel(c) => {
                     scan.channels.insert(c.id, c.clone());
@@ -225,6 +225,9 @@ impl Scan {
         }
         if let Some(t) = &self.end.truncated {
             let _ = writeln!(out, "warning: {t}");
+        }
+        if let Some(s) = self.end.skipped() {
+            let _ = writeln!(out, "warning: {s}");
         }
         out
     }

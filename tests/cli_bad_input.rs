@@ -673,3 +673,43 @@ fn validate_takes_the_overrides_a_replay_would() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("--recording <REC>"), "{}", stderr(&o));
 }
+
+/// An EXR light probe whose data window runs backwards (x from 788529152 to 7): the exr
+/// crate sized one block's buffer from it at 9.4 GB and relume aborted under a memory
+/// limit (found by the `envmap` fuzz target). Now refused from its header.
+#[test]
+fn an_exr_whose_data_window_runs_backwards_is_refused_without_allocating_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let path = d.join("probe.exr");
+    exr::prelude::write_rgb_file(&path, 8, 4, |x, y| (x as f32, y as f32, 1.0)).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let key = b"dataWindow\0box2i\0";
+    let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len() + 4;
+    bytes[at..at + 4].copy_from_slice(&0x2f00_0000i32.to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    std::fs::write(
+        d.join("env.toml"),
+        "[[stage]]\nkind = \"light.envmap\"\nparams = { source = \"file\", path = \"probe.exr\" }\n",
+    )
+    .unwrap();
+    let o = std::process::Command::new("sh")
+        .args([
+            "-c",
+            "ulimit -v 2000000 && exec \"$0\" validate env.toml",
+            env!("CARGO_BIN_EXE_relume"),
+        ])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("probe.exr"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(
+            "probe.exr: cannot read the OpenEXR environment map: a layer's data window is \
+             788529146x4 pixels: over 16384 a side"
+        ),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -15,6 +15,9 @@
 use super::EnvMap;
 use glam::Vec3;
 use relume_recording::codec::{MAX_PIXELS, decode_floats};
+
+/// The largest side of a map read from a file, as for images elsewhere.
+const MAX_SIDE: usize = 16_384;
 use relume_recording::{Attachment, Header};
 use rgbe::decode_rgbe;
 use std::path::{Path, PathBuf};
@@ -107,6 +110,23 @@ pub fn sanitize(radiance: &mut [Vec3]) -> usize {
 /// level (tiled multi-resolution files keep their full map there).
 fn read_exr(bytes: &[u8]) -> Result<(u32, u32, Vec<Vec3>), String> {
     use exr::prelude::*;
+    // The headers first: the exr crate sizes its decompression buffers by each layer's
+    // data window, and a window whose minimum lies past its maximum made it ask for
+    // gigabytes (a fuzz finding: x from 788529152 to 7, 9.4 GB for one block).
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
+        .map_err(|e| e.to_string())?;
+    for header in meta.headers.iter() {
+        let size = header.layer_size;
+        let area = size.width() as u64 * size.height() as u64;
+        if size.width() > MAX_SIDE || size.height() > MAX_SIDE || area > MAX_PIXELS {
+            return Err(format!(
+                "a layer's data window is {}x{} pixels: over {MAX_SIDE} a side or {MAX_PIXELS} \
+                 pixels (a damaged header?)",
+                size.width(),
+                size.height()
+            ));
+        }
+    }
     struct Pixels {
         width: usize,
         data: Vec<Vec3>,

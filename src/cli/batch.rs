@@ -36,6 +36,7 @@ Manifest (TOML; paths relative to its folder):
   [settings]                           optional, for every run, as replay takes them:
   frames = \"0..50\"                     save = [\"normals\"]    save_format = [\"png\"]
   seed = 1    skip_corrupt = false     set = [\"STAGE.PARAM=VALUE\"]    max_pose_gap_ms = 100
+  run_programs = false                 true lets pipelines with external stages start programs
 
 Items: every recording through every pipeline, id <recording stem>__<pipeline stem>__<hash>
 (hash: 8 hex digits of xxh3 of the two paths as written, ./ and // removed). Each writes
@@ -268,6 +269,14 @@ fn run_item(
         max_pose_gap: settings.max_pose_gap_ns,
     };
     let loaded = load(&run_args)?;
+    let programs = relume::stages::external::programs(&loaded.pipeline.stages);
+    if let Some((stage, command)) = programs.first().filter(|_| !settings.run_programs) {
+        anyhow::bail!(
+            "{}: stage `{stage}` would start `{command}`: a batch starts programs only when \
+             its manifest's [settings] say run_programs = true",
+            item.pipeline
+        );
+    }
     check_saved_products(&loaded.pipeline, &settings.save)?;
     let bar = super::progress::bar(loaded.frames.len() as u64, "replaying", "frames");
     let mut hashes = Vec::new();

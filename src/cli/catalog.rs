@@ -232,6 +232,9 @@ pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
         pipeline.stages.len(),
         chain.join(" -> ")
     )?;
+    for (stage, command) in relume::stages::external::programs(&pipeline.stages) {
+        outln!("  starts a program: stage `{stage}` runs `{command}`")?;
+    }
     for fb in &pipeline.feedback {
         outln!(
             "  feedback: `{}` from stage `{}` reaches stage `{}` one frame later",

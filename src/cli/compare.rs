@@ -122,7 +122,9 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     let registry = relume::stages::registry();
     let mut pipelines = Vec::new();
     for path in &a.pipelines {
-        pipelines.push(Pipeline::load(path, &registry)?);
+        let pipeline = Pipeline::load(path, &registry)?;
+        super::prepare::announce_programs(&pipeline);
+        pipelines.push(pipeline);
     }
     let labels = labels(&pipelines);
     if a.out.exists() && !a.out.is_dir() {

@@ -1,5 +1,6 @@
 //! A loaded pipeline made ready for a recording: its anchored objects placed (saying
-//! where), and a warning before scores of stages that run at their own rate.
+//! where), the programs it will start named, and a warning before scores of stages
+//! that run at their own rate.
 
 use relume::stages::world::PipelineObjects;
 
@@ -14,6 +15,24 @@ pub(crate) fn place_objects(
         eprintln!("{prefix}{placed}");
     }
     Ok(())
+}
+
+/// Names the programs `pipeline`'s external stages start, before anything runs: a
+/// pipeline file from someone else can run programs, and the user should see which.
+pub(crate) fn announce_programs(pipeline: &relume::graph::Pipeline) {
+    let programs = relume::stages::external::programs(&pipeline.stages);
+    if programs.is_empty() {
+        return;
+    }
+    let list: Vec<String> = programs
+        .iter()
+        .map(|(stage, command)| format!("stage `{stage}` runs `{command}`"))
+        .collect();
+    eprintln!(
+        "pipeline `{}` starts programs: {}",
+        pipeline.name,
+        list.join("; ")
+    );
 }
 
 /// A warning before scores of a pipeline with stages at their own rate (`every = k`,

@@ -31,7 +31,8 @@ pub struct ParamSpec {
     /// file's directory when the config is loaded, as mesh paths do.
     pub is_file_path: bool,
     /// A check of a string's form beyond its choices (e.g. "x,y,z"), run when the
-    /// config is loaded; the error says what is wrong with the value.
+    /// config is loaded, on each item of a string list; the error says what is wrong
+    /// with the value.
     pub check: Option<StrCheck>,
     pub doc: &'static str,
 }

@@ -172,6 +172,11 @@ fn check_value(
                 match &item.value {
                     RawValue::Str(s) => {
                         choice(s, &item.span)?;
+                        if let Some(check) = spec.check {
+                            check(s).map_err(|message| {
+                                src.error(item.span.clone(), message, Some(spec.doc.to_string()))
+                            })?;
+                        }
                         // A list names things (products to save, formats): twice would
                         // do the same work twice, and two writers race for one file.
                         if out.contains(s) {

@@ -119,6 +119,7 @@ pub mod composite;
 pub mod debug;
 pub mod decode;
 pub mod error;
+pub mod external;
 pub mod filter;
 pub mod fuse;
 pub mod gbuffer;
@@ -175,6 +176,7 @@ pub fn builtin() -> Vec<StageInfo> {
         debug::NOOP_INFO,
         debug::SLEEP_INFO,
         debug::FAIL_INFO,
+        external::INFO,
     ]);
     all
 }

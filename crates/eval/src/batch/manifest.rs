@@ -15,6 +15,7 @@
 //! skip_corrupt = false
 //! set = ["normals.plane_fit.radius=0.03"]   # like --set STAGE.PARAM=VALUE
 //! max_pose_gap_ms = 100.0
+//! run_programs = false                # pipelines with external stages run only when true
 //! ```
 //!
 //! Unknown keys, wrong types, missing files and entries listed twice are errors naming
@@ -61,6 +62,10 @@ pub struct Settings {
     pub set: Vec<ParamOverride>,
     /// `--max-pose-gap` in nanoseconds.
     pub max_pose_gap_ns: Option<i64>,
+    /// Whether pipelines that start programs (external stages) may run: a manifest
+    /// says so, since a batch runs unattended. Not part of [`Settings::canonical`]: it
+    /// changes no output.
+    pub run_programs: bool,
 }
 
 impl Settings {
@@ -154,6 +159,7 @@ const SETTING_KEYS: &[&str] = &[
     "skip_corrupt",
     "set",
     "max_pose_gap_ms",
+    "run_programs",
 ];
 
 impl Manifest {
@@ -439,6 +445,12 @@ fn settings(src: &SourceFile, v: &Value<'_>) -> Result<Settings, BatchError> {
             _ => None,
         }
         .ok_or_else(|| wrong(src, v, "seed", "a whole number"))?;
+    }
+    if let Some(v) = table.get("run_programs") {
+        s.run_programs = match v.get_ref() {
+            DeValue::Boolean(b) => *b,
+            _ => return Err(wrong(src, v, "run_programs", "a boolean")),
+        };
     }
     if let Some(v) = table.get("skip_corrupt") {
         s.skip_corrupt = match v.get_ref() {

@@ -1,0 +1,498 @@
+//! `external`: a stage that is a user's program, in any language, started once per run
+//! and fed one frame at a time over its standard input and output (protocol 1,
+//! `docs/external-stages.md`; the Python side is `python/relume_stage`).
+//!
+//! The pipeline table declares the ports, so `relume validate` checks an external stage
+//! as it checks a built-in one:
+//!
+//! ```toml
+//! [[stage]]
+//! kind = "external"
+//! name = "scale"
+//! inputs = { image = "depth" }
+//! params = { interpreter = "python3", program = "scale.py",
+//!            input_kinds = ["image=depth"], output_kinds = ["scaled=depth"],
+//!            settings = ["gain=0.5"] }
+//! ```
+//!
+//! Not yet: the reply's `compute_ms` (the program's own time) reported apart from
+//! transport, shared memory for large images (a pipe moves 15 MB in 10-30 ms here),
+//! products other than images, and ports declared by the program.
+
+mod images;
+mod program;
+pub mod protocol;
+
+use program::{Program, Stopped};
+use protocol::{ImageMeta, Layout, ReadError, Reply, Request};
+use relume_graph::{
+    BuildContext, Frame, ParamDefault, ParamSpec, Params, Port, Ports, Stage, StageError, StageInfo,
+};
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::time::Duration;
+
+pub const INFO: StageInfo = StageInfo {
+    kind: "external",
+    summary: "a program of your own, in any language, fed one frame at a time \
+              (docs/external-stages.md)",
+    params: &[
+        ParamSpec::new(
+            "program",
+            ParamDefault::Str(""),
+            "the program (or the script its interpreter runs), relative to the pipeline \
+             file; required",
+        )
+        .file_path(),
+        ParamSpec::new(
+            "interpreter",
+            ParamDefault::Str(""),
+            "what runs `program` (e.g. python3, found on PATH); empty: run `program` itself",
+        )
+        .checked(one_word),
+        ParamSpec::new(
+            "input_kinds",
+            ParamDefault::StrList(&[]),
+            "the images the program reads, each `role=kind`; kinds: color, depth, points, \
+             normals, radiance, scalar, labels",
+        )
+        .checked(port_declaration),
+        ParamSpec::new(
+            "output_kinds",
+            ParamDefault::StrList(&[]),
+            "the images the program writes, each `role=kind` (kinds as for input_kinds)",
+        )
+        .checked(port_declaration),
+        ParamSpec::new(
+            "settings",
+            ParamDefault::StrList(&[]),
+            "the program's own parameters, each `name=value`, sent to it as written",
+        )
+        .checked(setting),
+        ParamSpec::new(
+            "timeout_s",
+            ParamDefault::Float(60.0),
+            "seconds the program may take on a frame (and to start) before it is stopped",
+        )
+        .range(0.001, 86_400.0),
+    ],
+    ports,
+    build,
+};
+
+fn one_word(s: &str) -> Result<(), String> {
+    if s.chars().any(char::is_whitespace) {
+        return Err(format!(
+            "{s:?} is more than one word: name one program (its arguments go in `settings`)"
+        ));
+    }
+    Ok(())
+}
+
+/// `role=kind`, the role a name and the kind one relume sends.
+fn port_declaration(s: &str) -> Result<(), String> {
+    let (role, kind) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?} is not `role=kind`"))?;
+    if role.is_empty() || !role.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+        return Err(format!(
+            "the role {role:?} must be letters, digits and underscores"
+        ));
+    }
+    if Layout::of(kind).is_none() {
+        let kinds: Vec<&str> = protocol::LAYOUTS.iter().map(|l| l.name).collect();
+        return Err(format!(
+            "{kind:?} is not a kind an external stage exchanges: {}",
+            kinds.join(", ")
+        ));
+    }
+    Ok(())
+}
+
+fn setting(s: &str) -> Result<(), String> {
+    match s.split_once('=') {
+        Some((name, _)) if !name.is_empty() => Ok(()),
+        _ => Err(format!("{s:?} is not `name=value`")),
+    }
+}
+
+/// The declared ports: `role=kind` items, checked when the pipeline was loaded.
+fn declared(params: &Params, name: &str) -> Vec<(String, Layout)> {
+    params
+        .str_list(name)
+        .iter()
+        .filter_map(|d| {
+            let (role, kind) = d.split_once('=')?;
+            Some((role.to_string(), Layout::of(kind)?))
+        })
+        .collect()
+}
+
+fn ports(params: &Params) -> Ports {
+    let port =
+        |(role, layout): (String, Layout)| Port::new(&role, &role, images::product_kind(&layout));
+    Ports {
+        inputs: declared(params, "input_kinds")
+            .into_iter()
+            .map(port)
+            .collect(),
+        outputs: declared(params, "output_kinds")
+            .into_iter()
+            .map(port)
+            .collect(),
+    }
+}
+
+/// The programs a pipeline's stages start: (stage name, command line), in stage order.
+/// A run names them before it starts them; `relume validate` lists them.
+pub fn programs(stages: &[relume_graph::ResolvedStage]) -> Vec<(String, String)> {
+    stages
+        .iter()
+        .filter(|s| s.kind == INFO.kind)
+        .map(|s| (s.name.clone(), command(&s.params).join(" ")))
+        .collect()
+}
+
+/// The command line an external stage's parameters run: interpreter, then program.
+pub fn command(params: &Params) -> Vec<String> {
+    let mut command = Vec::new();
+    if !params.str("interpreter").is_empty() {
+        command.push(params.str("interpreter").to_string());
+    }
+    // `program` is a path (resolved against the pipeline's folder): one without a
+    // slash must not be looked up on PATH.
+    let program = params.str("program");
+    if std::path::Path::new(program).components().count() == 1 && !program.starts_with('/') {
+        command.push(format!("./{program}"));
+    } else {
+        command.push(program.to_string());
+    }
+    command
+}
+
+fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
+    let params = ctx.params;
+    if params.str("program").is_empty() {
+        return Err(StageError::Failed(
+            "parameter `program` is required: the program to run, or the script its \
+             `interpreter` runs"
+                .into(),
+        ));
+    }
+    let inputs: Vec<Bound> = declared(params, "input_kinds")
+        .into_iter()
+        .map(|(role, layout)| Bound {
+            product: ctx.input(&role),
+            role,
+            layout,
+        })
+        .collect();
+    let outputs: Vec<Bound> = declared(params, "output_kinds")
+        .into_iter()
+        .map(|(role, layout)| Bound {
+            product: ctx.output(&role),
+            role,
+            layout,
+        })
+        .collect();
+    let kinds = |bound: &[Bound]| -> BTreeMap<String, String> {
+        bound
+            .iter()
+            .map(|b| (b.role.clone(), b.layout.name.to_string()))
+            .collect()
+    };
+    let settings = params
+        .str_list("settings")
+        .iter()
+        .filter_map(|s| s.split_once('='))
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let hello = Request::Hello {
+        protocol: protocol::VERSION,
+        stage: ctx.stage_name.to_string(),
+        settings,
+        inputs: kinds(&inputs),
+        outputs: kinds(&outputs),
+        seed: ctx.seed,
+    };
+    let timeout = Duration::from_secs_f64(params.float("timeout_s"));
+    let mut program =
+        Program::start(ctx.stage_name, &command(params)).map_err(StageError::Failed)?;
+    let reply = program.within(timeout, |p| {
+        let stdin = p.stdin.as_mut().expect("open until the end");
+        protocol::write_meta(stdin, &hello)
+            .and_then(|()| stdin.flush())
+            .map_err(ReadError::Io)?;
+        protocol::read_meta::<Reply>(&mut p.stdout)
+    });
+    let fail = |why: String| StageError::Failed(format!("`{}`: {why}", program.command_line));
+    match reply {
+        Ok(Ok(Reply::Ready { protocol })) if protocol == protocol::VERSION => {}
+        Ok(Ok(Reply::Ready { protocol })) => {
+            return Err(fail(format!(
+                "the program speaks protocol {protocol}; this relume speaks {}: update one \
+                 of the two",
+                protocol::VERSION
+            )));
+        }
+        Ok(Ok(Reply::Error { message })) => {
+            return Err(fail(format!("the program refused to start: {message}")));
+        }
+        Ok(Ok(other)) => {
+            return Err(fail(format!(
+                "the program answered `hello` with {other:?}, not `ready`"
+            )));
+        }
+        Ok(Err(ReadError::Malformed(why))) => {
+            return Err(fail(format!("the program's answer to `hello` is {why}")));
+        }
+        Ok(Err(ReadError::Closed { .. } | ReadError::Io(_))) => {
+            let death = program.death();
+            return Err(StageError::Failed(format!(
+                "`{}`: {death}",
+                program.command_line
+            )));
+        }
+        Err(Stopped::TimedOut) => {
+            let tail = program.stderr_tail();
+            return Err(fail(format!(
+                "the program did not answer `hello` within {} s (timeout_s) and was \
+                 stopped{tail}",
+                params.float("timeout_s")
+            )));
+        }
+        Err(Stopped::Interrupted) => {
+            return Err(fail(
+                "interrupted while the program started: it was stopped".into(),
+            ));
+        }
+    }
+    let (width, height) = (
+        ctx.header.color_intrinsics.width,
+        ctx.header.color_intrinsics.height,
+    );
+    Ok(Box::new(External {
+        stage: ctx.stage_name.to_string(),
+        seed: ctx.seed,
+        program: Some(program),
+        inputs,
+        outputs,
+        timeout,
+        size: (width, height),
+    }))
+}
+
+/// A declared port and the product it is bound to.
+struct Bound {
+    role: String,
+    product: String,
+    layout: Layout,
+}
+
+struct External {
+    stage: String,
+    seed: u64,
+    /// `None` once the program failed: it was stopped.
+    program: Option<Program>,
+    inputs: Vec<Bound>,
+    outputs: Vec<Bound>,
+    timeout: Duration,
+    /// The frame's image size, which every output must have.
+    size: (u32, u32),
+}
+
+/// The per-frame seed a program is given: hash(run seed, frame, stage name).
+pub fn frame_seed(run_seed: u64, frame: u64, stage: &str) -> u64 {
+    let stage = xxhash_rust::xxh3::xxh3_64(stage.as_bytes());
+    relume_base::rng::hash(&[run_seed, frame, stage])
+}
+
+impl Stage for External {
+    fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
+        let mut metas = Vec::with_capacity(self.inputs.len());
+        let mut blobs = Vec::with_capacity(self.inputs.len());
+        for input in &self.inputs {
+            let product = frame
+                .get(&input.product)
+                .ok_or_else(|| StageError::MissingInput(input.product.clone()))?;
+            let (meta, bytes) =
+                images::to_bytes(product, &input.role, &input.layout).ok_or_else(|| {
+                    StageError::WrongKind {
+                        product: input.product.clone(),
+                        expected: images::product_kind(&input.layout)[0].name(),
+                        found: product.kind().name(),
+                    }
+                })?;
+            metas.push(meta);
+            blobs.push(bytes);
+        }
+        let index = frame.index as u64;
+        let request = Request::Frame {
+            index,
+            stamp_ns: frame.stamp_ns,
+            seed: frame_seed(self.seed, index, &self.stage),
+            inputs: metas,
+        };
+        let program = self.program.as_mut().ok_or_else(|| {
+            StageError::Failed("the program was stopped by an earlier error".into())
+        })?;
+        let outputs = &self.outputs;
+        let size = self.size;
+        let exchange = program.within(self.timeout, |p| -> Result<_, Fault> {
+            let stdin = p.stdin.as_mut().expect("open until the end");
+            let sent = protocol::write_meta(stdin, &request).and_then(|()| {
+                for blob in &blobs {
+                    stdin.write_all(blob)?;
+                }
+                stdin.flush()
+            });
+            sent.map_err(|e| Fault::Read(ReadError::Io(e)))?;
+            let reply = protocol::read_meta::<Reply>(&mut p.stdout).map_err(Fault::Read)?;
+            let metas = match reply {
+                Reply::Frame {
+                    index: i, outputs, ..
+                } if i == index => outputs,
+                Reply::Frame { index: i, .. } => {
+                    return Err(Fault::Reply(format!(
+                        "the reply is for frame {i}, not {index}"
+                    )));
+                }
+                Reply::Error { message } => {
+                    return Err(Fault::Reply(format!("the program failed: {message}")));
+                }
+                Reply::Ready { .. } => {
+                    return Err(Fault::Reply(
+                        "the program answered a frame with `ready`".into(),
+                    ));
+                }
+            };
+            let ports = check_outputs(&metas, outputs, size).map_err(Fault::Reply)?;
+            // The images follow in the reply's order.
+            let mut products = Vec::with_capacity(metas.len());
+            for (meta, port) in metas.iter().zip(ports) {
+                let bound = &outputs[port];
+                let product =
+                    images::from_reader(meta, &bound.layout, &mut p.stdout).map_err(Fault::Read)?;
+                products.push((bound.product.clone(), product));
+            }
+            Ok(products)
+        });
+        let products = match exchange {
+            Ok(Ok(products)) => products,
+            Ok(Err(fault)) => {
+                let mut program = self.program.take().expect("present above");
+                let why = match fault {
+                    Fault::Read(ReadError::Closed { .. } | ReadError::Io(_)) => program.death(),
+                    Fault::Read(ReadError::Malformed(why)) => format!("its reply is {why}"),
+                    Fault::Reply(why) => why,
+                };
+                return Err(StageError::Failed(format!(
+                    "`{}`: {why}",
+                    program.command_line
+                )));
+            }
+            Err(Stopped::TimedOut) => {
+                let program = self.program.take().expect("present above");
+                return Err(StageError::Failed(format!(
+                    "`{}`: no reply within {} s (timeout_s): the program was stopped{}",
+                    program.command_line,
+                    self.timeout.as_secs_f64(),
+                    program.stderr_tail()
+                )));
+            }
+            Err(Stopped::Interrupted) => {
+                let program = self.program.take().expect("present above");
+                return Err(StageError::Failed(format!(
+                    "`{}`: interrupted while the program worked: it was stopped",
+                    program.command_line
+                )));
+            }
+        };
+        for (name, product) in products {
+            frame.insert(&name, product);
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), StageError> {
+        let Some(mut program) = self.program.take() else {
+            return Ok(());
+        };
+        let sent = program.within(self.timeout, |p| {
+            let stdin = p.stdin.as_mut().expect("open until the end");
+            protocol::write_meta(stdin, &Request::End).and_then(|()| stdin.flush())
+        });
+        let status = program.finish();
+        match (sent, status) {
+            (Ok(Ok(())), Some(status)) if status.success() => Ok(()),
+            (_, Some(status)) => Err(StageError::Failed(format!(
+                "`{}`: after the last frame the program {}{}",
+                program.command_line,
+                program::describe(status),
+                program.stderr_tail()
+            ))),
+            (_, None) => Err(StageError::Failed(format!(
+                "`{}`: the program did not exit after the last frame and was stopped",
+                program.command_line
+            ))),
+        }
+    }
+}
+
+/// What went wrong in an exchange.
+enum Fault {
+    Read(ReadError),
+    Reply(String),
+}
+
+/// For each image of the reply, in its order, the index of the declared output it is:
+/// every declared output once, each of its declared kind and the frame's size;
+/// otherwise what is wrong.
+fn check_outputs(
+    metas: &[ImageMeta],
+    outputs: &[Bound],
+    (width, height): (u32, u32),
+) -> Result<Vec<usize>, String> {
+    let mut ports = Vec::with_capacity(metas.len());
+    for meta in metas {
+        meta.byte_len()?;
+        let Some(port) = outputs.iter().position(|o| o.role == meta.role) else {
+            let declared: Vec<&str> = outputs.iter().map(|o| o.role.as_str()).collect();
+            return Err(format!(
+                "the reply holds `{}`, which is not a declared output ({})",
+                meta.role,
+                declared.join(", ")
+            ));
+        };
+        if ports.contains(&port) {
+            return Err(format!("the reply holds `{}` twice", meta.role));
+        }
+        let layout = &outputs[port].layout;
+        if meta.kind != layout.name
+            || meta.channels != layout.channels
+            || meta.dtype != layout.dtype
+        {
+            return Err(format!(
+                "`{}` is {} with {} {} channels; it is declared {} ({} {} channels)",
+                meta.role,
+                meta.kind,
+                meta.channels,
+                meta.dtype.name(),
+                layout.name,
+                layout.channels,
+                layout.dtype.name()
+            ));
+        }
+        if (meta.width, meta.height) != (width, height) {
+            return Err(format!(
+                "`{}` is {}x{}; the frame's images are {width}x{height}",
+                meta.role, meta.width, meta.height
+            ));
+        }
+        ports.push(port);
+    }
+    if let Some(missing) = outputs.iter().enumerate().find(|(i, _)| !ports.contains(i)) {
+        return Err(format!("the reply lacks the output `{}`", missing.1.role));
+    }
+    Ok(ports)
+}

@@ -1,0 +1,648 @@
+//! External stages (`kind = "external"`, docs/external-stages.md): a numpy program run
+//! through relume's Python package, its outputs arriving bit for bit and the same on
+//! every run and thread count; and each fault a program can commit, with its error.
+//!
+//! The Python side runs in a virtual environment made once under the target folder by
+//! `pip install ./python` (numpy, msgpack), with `PYTHONPATH` on the working tree's
+//! package so that edits to it count.
+
+mod common;
+
+use common::{ok, relume, stderr, stdout};
+use relume::graph::Product;
+use relume::raster::Image;
+use relume::stages::kind;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+const W: u32 = 32;
+const H: u32 = 24;
+
+/// The bin folder of a virtual environment with relume's Python package installed.
+fn python_bin() -> &'static Path {
+    static BIN: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    let made = BIN.get_or_init(|| {
+        let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("python-venv");
+        let bin = venv.join("bin");
+        let works = |bin: &Path| {
+            Command::new(bin.join("python3"))
+                .args(["-c", "import numpy, msgpack, relume_stage"])
+                .output()
+                .is_ok_and(|o| o.status.success())
+        };
+        if works(&bin) {
+            return Ok(bin);
+        }
+        let fresh = venv.with_extension(format!("making-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&fresh);
+        let run = |cmd: &mut Command| -> Result<(), String> {
+            let o = cmd.output().map_err(|e| format!("{cmd:?}: {e}"))?;
+            if !o.status.success() {
+                return Err(format!("{cmd:?}: {}", String::from_utf8_lossy(&o.stderr)));
+            }
+            Ok(())
+        };
+        run(Command::new("python3").args(["-m", "venv"]).arg(&fresh))?;
+        run(Command::new(fresh.join("bin/pip"))
+            .args(["install", "--quiet", "--disable-pip-version-check"])
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python")))?;
+        let _ = std::fs::remove_dir_all(&venv);
+        std::fs::rename(&fresh, &venv).map_err(|e| e.to_string())?;
+        // A venv's scripts name its folder: the moved one runs its python by path.
+        if works(&bin) {
+            Ok(bin)
+        } else {
+            Err(format!(
+                "{} does not import relume_stage after installing it",
+                venv.display()
+            ))
+        }
+    });
+    match made {
+        Ok(bin) => bin,
+        Err(why) => panic!(
+            "the external-stage tests need Python 3 with venv and pip, and PyPI (or a wheel \
+             cache) for numpy and msgpack: {why}"
+        ),
+    }
+}
+
+/// `relume ARGS` in `dir` with the environment's python3 first on PATH.
+fn relume_py(dir: &Path, args: &[&str]) -> Output {
+    relume_py_cmd(dir, args).output().expect("run relume")
+}
+
+fn relume_py_cmd(dir: &Path, args: &[&str]) -> Command {
+    let path = format!(
+        "{}:{}",
+        python_bin().display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let mut cmd = relume();
+    cmd.args(args).current_dir(dir).env("PATH", path).env(
+        "PYTHONPATH",
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("python"),
+    );
+    cmd
+}
+
+/// A folder with a small synthetic recording `r.relume` (5 frames of 32x24).
+fn folder() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    ok(relume()
+        .args(["synth", "-o", "r.relume", "--frames", "5", "--size"])
+        .arg(format!("{W}x{H}"))
+        .current_dir(dir.path())
+        .output()
+        .unwrap());
+    dir
+}
+
+/// Writes `prog.py` and `p.toml`: decode, then the program as stage `prog` reading
+/// the depth as `image` and writing `scaled` (depth), with `params` added.
+fn setup(dir: &Path, program: &str, params: &str) {
+    std::fs::write(dir.join("prog.py"), program).unwrap();
+    std::fs::write(
+        dir.join("p.toml"),
+        format!(
+            "[pipeline]\nname = \"ext\"\n\n[[stage]]\nkind = \"decode\"\n\n[[stage]]\n\
+             kind = \"external\"\nname = \"prog\"\ninputs = {{ image = \"depth\" }}\n\
+             params = {{ interpreter = \"python3\", program = \"prog.py\", \
+             input_kinds = [\"image=depth\"], output_kinds = [\"scaled=depth\"], \
+             timeout_s = 20{params} }}\n"
+        ),
+    )
+    .unwrap();
+}
+
+/// A replay of `p.toml` that must fail: its stderr.
+fn fails(dir: &Path) -> String {
+    let o = relume_py(dir, &["replay", "r.relume", "-p", "p.toml", "--out", "o"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    stderr(&o)
+}
+
+fn assert_has(text: &str, want: &str) {
+    assert!(text.contains(want), "want {want:?} in:\n{text}");
+}
+
+/// The numpy stage of the tests: scaled = 0.5 depth plus noise drawn from the frame's
+/// seed, and a mask (labels) of the far pixels; each output's bytes also written to
+/// `dump/` as the program sent them.
+const DUMP: &str = r#"
+import os, sys
+import numpy as np
+import relume_stage
+
+def process(frame, settings):
+    depth = frame.inputs["image"]
+    rng = np.random.default_rng(frame.seed)
+    noise = rng.standard_normal(depth.shape).astype(np.float32)
+    scaled = depth * np.float32(settings["gain"]) + np.float32(1e-3) * noise
+    mask = ((depth[:, :, 0] > 2.0) * 255).astype(np.uint8)
+    os.makedirs("dump", exist_ok=True)
+    for name, a in (("scaled", scaled), ("mask", mask)):
+        with open(f"dump/{frame.index}-{name}", "wb") as f:
+            f.write(np.ascontiguousarray(a).tobytes())
+    print(f"frame {frame.index} done")
+    return {"scaled": scaled, "mask": mask}
+
+sys.exit(relume_stage.run(process, settings={"gain": 1.0}))
+"#;
+
+/// Scales the depth by `gain` and leaves a file `ran` behind.
+const SCALE_AND_MARK: &str = r#"
+import sys
+import relume_stage
+
+def process(frame, settings):
+    open("ran", "w").close()
+    return {"scaled": frame.inputs["image"] * settings["gain"]}
+
+sys.exit(relume_stage.run(process, settings={"gain": 1.0}))
+"#;
+
+#[test]
+fn a_numpy_stage_gives_its_bytes_exactly_and_the_same_on_every_run_and_thread_count() {
+    let dir = folder();
+    let d = dir.path();
+    setup(
+        d,
+        DUMP,
+        ", output_kinds = [\"scaled=depth\", \"mask=labels\"], settings = [\"gain=0.5\"]",
+    );
+    // Two outputs in place of the default one (TOML refuses a key twice).
+    let toml = std::fs::read_to_string(d.join("p.toml"))
+        .unwrap()
+        .replace("output_kinds = [\"scaled=depth\"], ", "");
+    std::fs::write(d.join("p.toml"), toml).unwrap();
+    let run = |threads: &str| {
+        let o = relume_py_cmd(
+            d,
+            &["replay", "r.relume", "-p", "p.toml", "--hash", "--out", "o"],
+        )
+        .env("RAYON_NUM_THREADS", threads)
+        .output()
+        .unwrap();
+        (stdout(&ok(o.clone())), stderr(&o))
+    };
+    let (first, err) = run("1");
+    assert_has(
+        &err,
+        "pipeline `ext` starts programs: stage `prog` runs `python3 ",
+    );
+    assert_has(&err, "[prog] frame 4 done");
+    let lines: Vec<&str> = first.lines().collect();
+    assert_eq!(lines.len(), 5, "{first}");
+    for (index, line) in lines.iter().enumerate() {
+        let digest = |name: &str| -> String {
+            line.split(' ')
+                .find_map(|w| w.strip_prefix(&format!("{name}=")))
+                .unwrap_or_else(|| panic!("no {name} in {line}"))
+                .to_string()
+        };
+        let bytes = |name: &str| std::fs::read(d.join(format!("dump/{index}-{name}"))).unwrap();
+        let scaled: Vec<f32> = bytes("scaled")
+            .chunks(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+        let sent = Product::new(kind::DEPTH, Image::from_vec(W, H, scaled).unwrap());
+        assert_eq!(
+            digest("scaled"),
+            format!("{:016x}", sent.digest()),
+            "frame {index}"
+        );
+        let mask = Product::new(kind::LABELS, Image::from_vec(W, H, bytes("mask")).unwrap());
+        assert_eq!(
+            digest("mask"),
+            format!("{:016x}", mask.digest()),
+            "frame {index}"
+        );
+    }
+    assert_eq!(run("1").0, first, "a second run");
+    assert_eq!(run("2").0, first, "two threads");
+}
+
+#[test]
+fn validate_checks_the_declared_ports_and_names_the_program() {
+    let dir = folder();
+    let d = dir.path();
+    setup(d, DUMP, "");
+    let o = ok(relume_py(d, &["validate", "p.toml"]));
+    assert_has(&stdout(&o), "starts a program: stage `prog` runs `python3 ");
+    // A kind no external stage exchanges, at its line and column.
+    let toml = std::fs::read_to_string(d.join("p.toml")).unwrap();
+    std::fs::write(
+        d.join("p.toml"),
+        toml.replace("scaled=depth", "scaled=light"),
+    )
+    .unwrap();
+    let o = relume_py(d, &["validate", "p.toml"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_has(
+        &stderr(&o),
+        "\"light\" is not a kind an external stage exchanges: color, depth, points, normals, \
+         radiance, scalar, labels",
+    );
+    assert_has(&stderr(&o), "p.toml:11:105:");
+    // An input bound to a product of another kind: the same check as a built-in stage's.
+    std::fs::write(
+        d.join("p.toml"),
+        toml.replace("image=depth", "image=radiance"),
+    )
+    .unwrap();
+    let o = relume_py(d, &["validate", "p.toml"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_has(&stderr(&o), "depth");
+}
+
+#[test]
+fn a_missing_program_is_named_with_the_fix() {
+    let dir = folder();
+    setup(dir.path(), DUMP, "");
+    let toml = std::fs::read_to_string(dir.path().join("p.toml")).unwrap();
+    std::fs::write(
+        dir.path().join("p.toml"),
+        toml.replace(
+            "interpreter = \"python3\", program = \"prog.py\"",
+            "program = \"nope\"",
+        ),
+    )
+    .unwrap();
+    let err = fails(dir.path());
+    assert_has(&err, "stage `prog`");
+    assert_has(
+        &err,
+        "nope`: No such file or directory (os error 2) (no such program",
+    );
+}
+
+#[test]
+fn a_program_that_is_not_executable_is_named_with_the_fix() {
+    let dir = folder();
+    setup(dir.path(), DUMP, "");
+    let toml = std::fs::read_to_string(dir.path().join("p.toml")).unwrap();
+    std::fs::write(
+        dir.path().join("p.toml"),
+        toml.replace("interpreter = \"python3\", ", ""),
+    )
+    .unwrap();
+    let err = fails(dir.path());
+    assert_has(
+        &err,
+        "./prog.py`: Permission denied (os error 13) (not executable: `chmod +x` it, or name its `interpreter`)",
+    );
+}
+
+#[test]
+fn a_program_exiting_at_start_gives_its_status_and_last_words() {
+    let dir = folder();
+    setup(
+        dir.path(),
+        "import sys\nprint('cannot load the model weights', file=sys.stderr)\nsys.exit(3)\n",
+        "",
+    );
+    let err = fails(dir.path());
+    assert_has(&err, "stage `prog`");
+    assert_has(
+        &err,
+        "the program exited with status 3; its last lines of standard error:\n  cannot load \
+         the model weights",
+    );
+}
+
+#[test]
+fn a_program_exiting_mid_run_gives_the_frame_status_and_last_words() {
+    let dir = folder();
+    setup(
+        dir.path(),
+        r#"
+import os, sys
+import relume_stage
+
+def process(frame, settings):
+    if frame.index == 2:
+        print("out of memory on frame 2", file=sys.stderr, flush=True)
+        os._exit(4)
+    return {"scaled": frame.inputs["image"]}
+
+sys.exit(relume_stage.run(process))
+"#,
+        "",
+    );
+    let err = fails(dir.path());
+    assert_has(&err, "stage `prog` (external) failed at frame 2");
+    assert_has(
+        &err,
+        "the program exited with status 4; its last lines of standard error:\n  out of memory \
+         on frame 2",
+    );
+}
+
+#[test]
+fn a_hanging_program_is_stopped_after_its_timeout() {
+    let dir = folder();
+    setup(
+        dir.path(),
+        r#"
+import sys, time
+import relume_stage
+
+def process(frame, settings):
+    if frame.index == 1:
+        time.sleep(600)
+    return {"scaled": frame.inputs["image"]}
+
+sys.exit(relume_stage.run(process))
+"#,
+        ", timeout_s = 1",
+    );
+    let toml = std::fs::read_to_string(dir.path().join("p.toml")).unwrap();
+    std::fs::write(
+        dir.path().join("p.toml"),
+        toml.replace("timeout_s = 20, ", ""),
+    )
+    .unwrap();
+    let start = Instant::now();
+    let err = fails(dir.path());
+    assert!(
+        start.elapsed() < Duration::from_secs(30),
+        "{:?}",
+        start.elapsed()
+    );
+    assert_has(&err, "stage `prog` (external) failed at frame 1");
+    assert_has(
+        &err,
+        "no reply within 1 s (timeout_s): the program was stopped",
+    );
+}
+
+/// A program speaking the protocol by hand (msgpack alone): `reply(request)` gives the
+/// bytes it writes for each frame request.
+fn raw(reply: &str) -> String {
+    format!(
+        r#"
+import struct, sys
+import msgpack
+
+inp, out = sys.stdin.buffer, sys.stdout.buffer
+
+def read():
+    head = inp.read(8)
+    if len(head) < 8:
+        sys.exit(0)
+    meta = msgpack.unpackb(inp.read(struct.unpack("<I", head[4:])[0]))
+    for image in meta["inputs"] if meta["type"] == "frame" else []:
+        inp.read(image["width"] * image["height"] * image["channels"] * (4 if image["dtype"] == "f32" else 1))
+    return meta
+
+def send(meta, blob=b""):
+    body = msgpack.packb(meta)
+    out.write(b"RLX1" + struct.pack("<I", len(body)) + body + blob)
+    out.flush()
+
+def image(width, height, channels, dtype):
+    meta = dict(role="scaled", kind="depth", width=width, height=height, channels=channels, dtype=dtype)
+    return meta, bytes(width * height * channels * (4 if dtype == "f32" else 1))
+
+hello = read()
+{reply}
+"#
+    )
+}
+
+const READY: &str = "send(dict(type=\"ready\", protocol=1))\n";
+
+#[test]
+fn bytes_that_are_not_a_message_are_named() {
+    let dir = folder();
+    let program = raw(&format!(
+        "{READY}read()\nout.write(b'hello world, a stray print\\n'); out.flush()\nread()\n"
+    ));
+    setup(dir.path(), &program, "");
+    let err = fails(dir.path());
+    assert_has(&err, "failed at frame 0");
+    assert_has(
+        &err,
+        "its reply is a message starts with \"hello wo\", not \"RLX1\" (does the program \
+         print to its standard output?",
+    );
+}
+
+#[test]
+fn an_oversized_reply_is_refused_before_it_is_read() {
+    let dir = folder();
+    let program = raw(&format!(
+        "{READY}read()\nout.write(b'RLX1' + struct.pack('<I', 0xFFFFFFFF)); out.flush()\nread()\n"
+    ));
+    setup(dir.path(), &program, "");
+    let err = fails(dir.path());
+    assert_has(&err, "a meta of 4294967295 bytes, over the 1048576 allowed");
+    let program = raw(&format!(
+        "{READY}read()\nm, _ = image(20000, 20000, 1, 'f32')\n\
+         send(dict(type='frame', index=0, outputs=[m]))\nread()\n"
+    ));
+    setup(dir.path(), &program, "");
+    let err = fails(dir.path());
+    assert_has(
+        &err,
+        "`scaled` is 20000x20000: over 16384 a side or 67108864 pixels",
+    );
+}
+
+#[test]
+fn a_missing_output_is_named() {
+    let dir = folder();
+    let program = raw(&format!(
+        "{READY}read()\nsend(dict(type='frame', index=0, outputs=[]))\nread()\n"
+    ));
+    setup(dir.path(), &program, "");
+    assert_has(&fails(dir.path()), "the reply lacks the output `scaled`");
+}
+
+#[test]
+fn an_output_of_the_wrong_size_is_named() {
+    let dir = folder();
+    let program = raw(&format!(
+        "{READY}read()\nm, b = image(4, 4, 1, 'f32')\n\
+         send(dict(type='frame', index=0, outputs=[m]), b)\nread()\n"
+    ));
+    setup(dir.path(), &program, "");
+    assert_has(
+        &fails(dir.path()),
+        "`scaled` is 4x4; the frame's images are 32x24",
+    );
+}
+
+#[test]
+fn an_output_of_the_wrong_channels_or_type_is_named() {
+    let dir = folder();
+    let program = raw(&format!(
+        "{READY}read()\nm, b = image(32, 24, 3, 'f32')\n\
+         send(dict(type='frame', index=0, outputs=[m]), b)\nread()\n"
+    ));
+    setup(dir.path(), &program, "");
+    assert_has(
+        &fails(dir.path()),
+        "`scaled` is depth with 3 f32 channels; it is declared depth (1 f32 channels)",
+    );
+    let program = raw(&format!(
+        "{READY}read()\nm, b = image(32, 24, 1, 'u8')\n\
+         send(dict(type='frame', index=0, outputs=[m]), b)\nread()\n"
+    ));
+    setup(dir.path(), &program, "");
+    assert_has(
+        &fails(dir.path()),
+        "`scaled` is depth with 1 u8 channels; it is declared depth (1 f32 channels)",
+    );
+}
+
+#[test]
+fn another_protocol_version_is_refused_at_start() {
+    let dir = folder();
+    let program = raw("send(dict(type='ready', protocol=2))\nread()\n");
+    setup(dir.path(), &program, "");
+    assert_has(
+        &fails(dir.path()),
+        "the program speaks protocol 2; this relume speaks 1: update one of the two",
+    );
+}
+
+#[test]
+fn an_error_in_the_program_stops_the_run_with_its_message() {
+    let dir = folder();
+    setup(
+        dir.path(),
+        r#"
+import sys
+import relume_stage
+
+def process(frame, settings):
+    if frame.index == 3:
+        raise relume_stage.StageError("the denoiser diverged")
+    return {"scaled": frame.inputs["image"] * settings["gain"]}
+
+sys.exit(relume_stage.run(process, settings={"gain": 1.0}))
+"#,
+        "",
+    );
+    let err = fails(dir.path());
+    assert_has(&err, "stage `prog` (external) failed at frame 3");
+    assert_has(&err, "the program failed: the denoiser diverged");
+    // An unknown setting: refused by the package at start, with what it takes.
+    let toml = std::fs::read_to_string(dir.path().join("p.toml")).unwrap();
+    std::fs::write(
+        dir.path().join("p.toml"),
+        toml.replace("timeout_s = 20", "timeout_s = 20, settings = [\"gian=2\"]"),
+    )
+    .unwrap();
+    assert_has(
+        &fails(dir.path()),
+        "the program refused to start: unknown setting 'gian' (this stage takes: gain)",
+    );
+}
+
+#[test]
+fn an_interrupt_stops_a_busy_program() {
+    let dir = folder();
+    setup(
+        dir.path(),
+        r#"
+import os, sys, time
+import relume_stage
+
+def process(frame, settings):
+    with open("busy", "w") as f:
+        f.write(str(os.getpid()))
+    time.sleep(600)
+
+sys.exit(relume_stage.run(process))
+"#,
+        "",
+    );
+    let child = relume_py_cmd(
+        dir.path(),
+        &["replay", "r.relume", "-p", "p.toml", "--out", "o"],
+    )
+    .stdout(std::process::Stdio::piped())
+    .stderr(std::process::Stdio::piped())
+    .spawn()
+    .unwrap();
+    let busy = dir.path().join("busy");
+    let start = Instant::now();
+    while !busy.exists() {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "the program never started"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let pid = std::fs::read_to_string(&busy).unwrap();
+    // SIGTERM to relume alone, as a scheduler sends it: the program is stopped too.
+    let o = common::signal_and_wait(child, "-TERM");
+    assert_ne!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        start.elapsed() < Duration::from_secs(30),
+        "{:?}",
+        start.elapsed()
+    );
+    let alive = Command::new("kill")
+        .args(["-0", pid.trim()])
+        .status()
+        .unwrap()
+        .success();
+    assert!(
+        !alive,
+        "the program (pid {pid}) outlived the run: {}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn a_batch_starts_programs_only_when_its_manifest_says_so() {
+    let dir = folder();
+    let d = dir.path();
+    setup(d, SCALE_AND_MARK, "");
+    std::fs::write(
+        d.join("m.toml"),
+        "recordings = [\"r.relume\"]\npipelines = [\"p.toml\"]\n[settings]\nframes = \"0..2\"\n",
+    )
+    .unwrap();
+    let o = relume_py(d, &["batch", "m.toml"]);
+    assert_ne!(o.status.code(), Some(0));
+    let all = format!("{}{}", stdout(&o), stderr(&o));
+    assert_has(&all, "stage `prog` would start `python3 ");
+    assert_has(&all, "run_programs = true");
+    assert!(!d.join("ran").exists(), "the program ran");
+    std::fs::write(
+        d.join("m.toml"),
+        "recordings = [\"r.relume\"]\npipelines = [\"p.toml\"]\n[settings]\nframes = \"0..2\"\n\
+         run_programs = true\n",
+    )
+    .unwrap();
+    ok(relume_py(d, &["batch", "m.toml"]));
+    assert!(d.join("ran").exists());
+}
+
+/// The shipped example pipeline runs on the built-in recording's kind of input.
+#[test]
+fn the_shipped_example_runs() {
+    let dir = folder();
+    let pipeline = Path::new(env!("CARGO_MANIFEST_DIR")).join("python/examples/scale.toml");
+    let o = ok(relume_py(
+        dir.path(),
+        &[
+            "replay",
+            "r.relume",
+            "-p",
+            pipeline.to_str().unwrap(),
+            "--hash",
+            "--out",
+            "o",
+        ],
+    ));
+    assert_eq!(stdout(&o).lines().count(), 5);
+    assert_has(&stdout(&o), " scaled=");
+}

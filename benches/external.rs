@@ -58,34 +58,6 @@ fn bench(c: &mut Criterion) {
     );
     std::fs::write(dir.path().join("identity.py"), IDENTITY).unwrap();
 
-    let mut params = Params::defaults(external::INFO.params);
-    let text = |s: &str| relume::graph::ParamValue::Str(s.to_string());
-    let list = |v: Vec<String>| relume::graph::ParamValue::StrList(v);
-    params.set("interpreter", text(&python));
-    params.set(
-        "program",
-        text(dir.path().join("identity.py").to_str().unwrap()),
-    );
-    let ports: Vec<String> = LAYERS.iter().map(|l| format!("{l}=radiance")).collect();
-    params.set("input_kinds", list(ports.clone()));
-    params.set("output_kinds", list(ports));
-    let roles: BTreeMap<String, String> = LAYERS
-        .iter()
-        .map(|l| (l.to_string(), l.to_string()))
-        .collect();
-    let world: Arc<dyn relume::graph::world::World> = Arc::new(EmptyWorld);
-    let ctx = BuildContext {
-        stage_name: "identity",
-        params: &params,
-        inputs: &roles,
-        outputs: &roles,
-        header,
-        out_dir: dir.path(),
-        seed: 1,
-        world: &world,
-    };
-    let mut stage = (external::INFO.build)(&ctx).expect("the identity program starts");
-
     let mut frame = Frame::new(0, 0);
     for (i, layer) in LAYERS.iter().enumerate() {
         let data = (0..w * h)
@@ -96,15 +68,46 @@ fn bench(c: &mut Criterion) {
     }
     let mut group = c.benchmark_group("external");
     group.sample_size(30);
-    group.bench_function("identity/4_radiance_640x480", |b| {
-        b.iter(|| {
-            let mut f = frame.clone();
-            stage.process(&mut f).unwrap();
-            f
-        })
-    });
+    // `auto`: shared memory (relume_stage maps it); `pipe`: every byte over the pipe.
+    for transport in ["auto", "pipe"] {
+        let mut params = Params::defaults(external::INFO.params);
+        let text = |s: &str| relume::graph::ParamValue::Str(s.to_string());
+        let list = |v: Vec<String>| relume::graph::ParamValue::StrList(v);
+        params.set("interpreter", text(&python));
+        params.set(
+            "program",
+            text(dir.path().join("identity.py").to_str().unwrap()),
+        );
+        params.set("transport", text(transport));
+        let ports: Vec<String> = LAYERS.iter().map(|l| format!("{l}=radiance")).collect();
+        params.set("input_kinds", list(ports.clone()));
+        params.set("output_kinds", list(ports));
+        let roles: BTreeMap<String, String> = LAYERS
+            .iter()
+            .map(|l| (l.to_string(), l.to_string()))
+            .collect();
+        let world: Arc<dyn relume::graph::world::World> = Arc::new(EmptyWorld);
+        let ctx = BuildContext {
+            stage_name: "identity",
+            params: &params,
+            inputs: &roles,
+            outputs: &roles,
+            header,
+            out_dir: dir.path(),
+            seed: 1,
+            world: &world,
+        };
+        let mut stage = (external::INFO.build)(&ctx).expect("the identity program starts");
+        group.bench_function(format!("identity_4_radiance_640x480/{transport}"), |b| {
+            b.iter(|| {
+                let mut f = frame.clone();
+                stage.process(&mut f).unwrap();
+                f
+            })
+        });
+        stage.finish().unwrap();
+    }
     group.finish();
-    stage.finish().unwrap();
 }
 
 criterion_group!(benches, bench);

@@ -146,7 +146,7 @@ def process(frame, settings):
     for name, a in (("scaled", scaled), ("mask", mask)):
         with open(f"dump/{frame.index}-{name}", "wb") as f:
             f.write(np.ascontiguousarray(a).tobytes())
-    print(f"frame {frame.index} done")
+    print(f"frame {frame.index} done ({frame.transport})")
     return {"scaled": scaled, "mask": mask}
 
 sys.exit(relume_stage.run(process, settings={"gain": 1.0}))
@@ -173,10 +173,12 @@ fn a_numpy_stage_gives_its_bytes_exactly_and_the_same_on_every_run_and_thread_co
         DUMP,
         ", output_kinds = [\"scaled=depth\", \"mask=labels\"], settings = [\"gain=0.5\"]",
     );
-    // Two outputs in place of the default one (TOML refuses a key twice).
+    // Two outputs in place of the default one (TOML refuses a key twice); a stage name
+    // of its own, to look for its shared memory.
     let toml = std::fs::read_to_string(d.join("p.toml"))
         .unwrap()
-        .replace("output_kinds = [\"scaled=depth\"], ", "");
+        .replace("output_kinds = [\"scaled=depth\"], ", "")
+        .replace("name = \"prog\"", "name = \"exact\"");
     std::fs::write(d.join("p.toml"), toml).unwrap();
     let run = |threads: &str| {
         let o = relume_py_cmd(
@@ -191,9 +193,9 @@ fn a_numpy_stage_gives_its_bytes_exactly_and_the_same_on_every_run_and_thread_co
     let (first, err) = run("1");
     assert_has(
         &err,
-        "pipeline `ext` starts programs: stage `prog` runs `python3 ",
+        "pipeline `ext` starts programs: stage `exact` runs `python3 ",
     );
-    assert_has(&err, "[prog] frame 4 done");
+    assert_has(&err, "[exact] frame 4 done (shm)");
     let lines: Vec<&str> = first.lines().collect();
     assert_eq!(lines.len(), 5, "{first}");
     for (index, line) in lines.iter().enumerate() {
@@ -223,6 +225,27 @@ fn a_numpy_stage_gives_its_bytes_exactly_and_the_same_on_every_run_and_thread_co
     }
     assert_eq!(run("1").0, first, "a second run");
     assert_eq!(run("2").0, first, "two threads");
+    // The images went through shared memory (the package maps it); over the pipe they
+    // are the same bytes.
+    let shared = std::fs::read_to_string(d.join("p.toml")).unwrap();
+    std::fs::write(
+        d.join("p.toml"),
+        shared.replace("timeout_s = 20", "timeout_s = 20, transport = \"pipe\""),
+    )
+    .unwrap();
+    let (piped, err) = run("1");
+    assert_has(&err, "[exact] frame 4 done (pipe)");
+    assert_eq!(piped, first, "over the pipe");
+    // No shared memory file is left behind.
+    let left: Vec<String> = std::fs::read_dir("/dev/shm")
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok()?.file_name().into_string().ok())
+                .filter(|n| n.starts_with("relume-") && n.contains("-exact-"))
+                .collect()
+        })
+        .unwrap_or_default();
+    assert!(left.is_empty(), "{left:?}");
 }
 
 #[test]
@@ -449,6 +472,20 @@ fn an_oversized_reply_is_refused_before_it_is_read() {
     assert_has(
         &err,
         "`scaled` is 20000x20000: over 16384 a side or 67108864 pixels",
+    );
+}
+
+#[test]
+fn an_output_outside_the_shared_memory_is_named() {
+    let dir = folder();
+    let program = raw(&format!(
+        "{READY}read()\nm, _ = image(32, 24, 1, 'f32')\nm['offset'] = 10**9\n\
+         send(dict(type='frame', index=0, outputs=[m]))\nread()\n"
+    ));
+    setup(dir.path(), &program, "");
+    assert_has(
+        &fails(dir.path()),
+        "`scaled` lies at bytes 1000000000..+3072 of a shared memory of 0 bytes",
     );
 }
 

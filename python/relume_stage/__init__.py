@@ -18,6 +18,7 @@ program prints goes to standard error, which relume shows prefixed with the stag
 name; standard output belongs to the protocol.
 """
 
+import mmap
 import struct
 import sys
 import time
@@ -43,16 +44,32 @@ DTYPE_NAMES = {np.dtype("u1"): "u8", np.dtype("<f4"): "f32"}
 NAME_DTYPES = {"u8": np.dtype("u1"), "f32": np.dtype("<f4")}
 
 
+class _Shared:
+    """The shared memory relume offers: inputs are read in place, outputs copied in."""
+
+    def __init__(self, offer):
+        with open(offer["path"], "r+b") as f:
+            self.map = mmap.mmap(f.fileno(), offer["size"])
+        self.size = offer["size"]
+        self.output_offset = offer["output_offset"]
+
+    def array(self, offset, shape, dtype):
+        count = int(np.prod(shape))
+        return np.frombuffer(self.map, dtype=dtype, count=count, offset=offset).reshape(shape)
+
+
 class Frame:
     """One frame as the stage sees it.
 
     ``index``: the frame's number in the run; ``stamp_ns``: its time stamp;
+    ``transport``: "shm" when the images came through shared memory, else "pipe";
     ``seed``: a number fixed by (run seed, frame, stage name), for random numbers that
     are the same on every run (``numpy.random.default_rng(frame.seed)``); ``inputs``:
     role -> array of shape (height, width, channels).
     """
 
-    def __init__(self, index, stamp_ns, seed, inputs):
+    def __init__(self, index, stamp_ns, seed, inputs, transport="pipe"):
+        self.transport = transport
         self.index = index
         self.stamp_ns = stamp_ns
         self.seed = seed
@@ -154,9 +171,28 @@ def _output(role, kind, array, height, width):
     return meta, memoryview(array).cast("B")
 
 
+def _into_shared(shared, replies):
+    """Copies the outputs into the shared memory's output region, where they fit; the
+    rest go by pipe."""
+    offset = shared.output_offset
+    out = []
+    for meta, view in replies:
+        n = len(view)
+        if offset + n <= shared.size:
+            shared.map[offset : offset + n] = view
+            meta = dict(meta, offset=offset)
+            offset += n
+            view = b""
+        out.append((meta, view))
+    return out
+
+
 def run(process, settings=None):
     """Serves relume's requests until the end of the stream, calling
     ``process(frame, settings)`` for each frame.
+
+    Input arrays may be views of shared memory that the next frame overwrites: copy
+    what you keep across frames.
 
     ``settings``: the stage's own parameters with their defaults (name -> bool, int,
     float or str); the pipeline's ``settings = ["name=value"]`` override them, typed as
@@ -180,7 +216,16 @@ def run(process, settings=None):
         _write_message(stdout, {"type": "error", "message": str(e)})
         return 1
     outputs = hello.get("outputs", {})
-    _write_message(stdout, {"type": "ready", "protocol": PROTOCOL})
+    shared = None
+    if hello.get("shm"):
+        try:
+            shared = _Shared(hello["shm"])
+        except OSError as e:
+            print(f"relume_stage: shared memory unusable ({e}); using the pipe", file=sys.stderr)
+    ready = {"type": "ready", "protocol": PROTOCOL}
+    if shared is not None:
+        ready["transport"] = "shm"
+    _write_message(stdout, ready)
     while True:
         try:
             request = _read_message(stdin)
@@ -191,12 +236,18 @@ def run(process, settings=None):
         inputs = {}
         height = width = 0
         for meta in request["inputs"]:
-            channels, dtype = LAYOUTS[meta["kind"]]
+            channels = meta["channels"]
             height, width = meta["height"], meta["width"]
-            array = np.empty((height, width, channels), dtype=NAME_DTYPES[meta["dtype"]])
-            _read_into(stdin, array)
+            shape, dtype = (height, width, channels), NAME_DTYPES[meta["dtype"]]
+            if meta.get("offset") is not None:
+                # A view of the shared memory: valid until the next frame.
+                array = shared.array(meta["offset"], shape, dtype)
+            else:
+                array = np.empty(shape, dtype=dtype)
+                _read_into(stdin, array)
             inputs[meta["role"]] = array
-        frame = Frame(request["index"], request["stamp_ns"], request["seed"], inputs)
+        transport = "shm" if any(m.get("offset") is not None for m in request["inputs"]) else "pipe"
+        frame = Frame(request["index"], request["stamp_ns"], request["seed"], inputs, transport)
         start = time.perf_counter()
         try:
             result = process(frame, values)
@@ -216,6 +267,8 @@ def run(process, settings=None):
             _write_message(stdout, {"type": "error", "message": traceback.format_exc().rstrip()})
             return 1
         compute_ms = (time.perf_counter() - start) * 1e3
+        if shared is not None:
+            replies = _into_shared(shared, replies)
         _write_message(
             stdout,
             {

@@ -63,6 +63,7 @@ pub fn to_bytes<'p>(
         height,
         channels: layout.channels,
         dtype: layout.dtype,
+        offset: None,
     };
     Some((meta, bytes))
 }

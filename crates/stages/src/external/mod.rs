@@ -15,19 +15,21 @@
 //!            settings = ["gain=0.5"] }
 //! ```
 //!
-//! Not yet: the reply's `compute_ms` (the program's own time) reported apart from
-//! transport, shared memory for large images (a pipe moves 15 MB in 10-30 ms here),
-//! products other than images, and ports declared by the program.
+//! Images travel through shared memory (`shm`) when the program maps it, else over the
+//! pipe. Not yet: the reply's `compute_ms` (the program's own time) reported apart from
+//! transport, products other than images, and ports declared by the program.
 
 mod images;
 mod program;
 pub mod protocol;
+mod shm;
 
 use program::{Program, Stopped};
-use protocol::{ImageMeta, Layout, ReadError, Reply, Request};
+use protocol::{ImageMeta, Layout, ReadError, Reply, Request, ShmOffer};
 use relume_graph::{
     BuildContext, Frame, ParamDefault, ParamSpec, Params, Port, Ports, Stage, StageError, StageInfo,
 };
+use shm::SharedMemory;
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::time::Duration;
@@ -69,6 +71,13 @@ pub const INFO: StageInfo = StageInfo {
             "the program's own parameters, each `name=value`, sent to it as written",
         )
         .checked(setting),
+        ParamSpec::new(
+            "transport",
+            ParamDefault::Str("auto"),
+            "how images travel: auto offers shared memory (used when the program maps it, \
+             as relume_stage does), pipe sends every byte over the pipe",
+        )
+        .choices(&["auto", "pipe"]),
         ParamSpec::new(
             "timeout_s",
             ParamDefault::Float(60.0),
@@ -207,6 +216,38 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
         .filter_map(|s| s.split_once('='))
         .map(|(k, v)| (k.to_string(), v.to_string()))
         .collect();
+    let (width, height) = (
+        ctx.header.color_intrinsics.width,
+        ctx.header.color_intrinsics.height,
+    );
+    let frame_bytes = |bound: &[Bound]| -> usize {
+        bound
+            .iter()
+            .map(|b| {
+                (width as usize * height as usize)
+                    * (b.layout.channels as u64 * b.layout.dtype.size()) as usize
+            })
+            .sum()
+    };
+    let (input_bytes, output_bytes) = (frame_bytes(&inputs), frame_bytes(&outputs));
+    let mut shm = match params.str("transport") {
+        "auto" if input_bytes + output_bytes > 0 => Some(
+            SharedMemory::create(ctx.stage_name, input_bytes, output_bytes).map_err(|e| {
+                StageError::Failed(format!(
+                    "cannot make shared memory for the program (transport = \"pipe\" does \
+                     without): {e}"
+                ))
+            })?,
+        ),
+        _ => None,
+    };
+    let offer = shm.as_ref().and_then(|m| {
+        Some(ShmOffer {
+            path: m.path()?.to_string_lossy().into_owned(),
+            size: m.len() as u64,
+            output_offset: m.output_offset as u64,
+        })
+    });
     let hello = Request::Hello {
         protocol: protocol::VERSION,
         stage: ctx.stage_name.to_string(),
@@ -214,6 +255,7 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
         inputs: kinds(&inputs),
         outputs: kinds(&outputs),
         seed: ctx.seed,
+        shm: offer,
     };
     let timeout = Duration::from_secs_f64(params.float("timeout_s"));
     let mut program =
@@ -227,8 +269,19 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
     });
     let fail = |why: String| StageError::Failed(format!("`{}`: {why}", program.command_line));
     match reply {
-        Ok(Ok(Reply::Ready { protocol })) if protocol == protocol::VERSION => {}
-        Ok(Ok(Reply::Ready { protocol })) => {
+        Ok(Ok(Reply::Ready {
+            protocol,
+            transport,
+        })) if protocol == protocol::VERSION => {
+            // Mapped by the program, or not wanted: either way the file can go.
+            if transport.as_deref() != Some("shm") {
+                shm = None;
+            }
+            if let Some(shm) = &mut shm {
+                shm.unlink();
+            }
+        }
+        Ok(Ok(Reply::Ready { protocol, .. })) => {
             return Err(fail(format!(
                 "the program speaks protocol {protocol}; this relume speaks {}: update one \
                  of the two",
@@ -267,10 +320,6 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
             ));
         }
     }
-    let (width, height) = (
-        ctx.header.color_intrinsics.width,
-        ctx.header.color_intrinsics.height,
-    );
     Ok(Box::new(External {
         stage: ctx.stage_name.to_string(),
         seed: ctx.seed,
@@ -279,6 +328,7 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
         outputs,
         timeout,
         size: (width, height),
+        shm,
     }))
 }
 
@@ -299,6 +349,8 @@ struct External {
     timeout: Duration,
     /// The frame's image size, which every output must have.
     size: (u32, u32),
+    /// The shared memory the program mapped, if it did.
+    shm: Option<SharedMemory>,
 }
 
 /// The per-frame seed a program is given: hash(run seed, frame, stage name).
@@ -326,6 +378,18 @@ impl Stage for External {
             metas.push(meta);
             blobs.push(bytes);
         }
+        if let Some(shm) = &mut self.shm {
+            // Declared inputs at the frame's size fit the region; others go by pipe.
+            let mut offset = 0;
+            for (meta, bytes) in metas.iter_mut().zip(&mut blobs) {
+                if offset + bytes.len() <= shm.output_offset {
+                    shm.write(offset, bytes);
+                    meta.offset = Some(offset as u64);
+                    offset += bytes.len();
+                    *bytes = &[];
+                }
+            }
+        }
         let index = frame.index as u64;
         let request = Request::Frame {
             index,
@@ -338,6 +402,7 @@ impl Stage for External {
         })?;
         let outputs = &self.outputs;
         let size = self.size;
+        let shm = &self.shm;
         let exchange = program.within(self.timeout, |p| -> Result<_, Fault> {
             let stdin = p.stdin.as_mut().expect("open until the end");
             let sent = protocol::write_meta(stdin, &request).and_then(|()| {
@@ -371,8 +436,25 @@ impl Stage for External {
             let mut products = Vec::with_capacity(metas.len());
             for (meta, port) in metas.iter().zip(ports) {
                 let bound = &outputs[port];
-                let product =
-                    images::from_reader(meta, &bound.layout, &mut p.stdout).map_err(Fault::Read)?;
+                let product = match meta.offset {
+                    None => images::from_reader(meta, &bound.layout, &mut p.stdout),
+                    Some(offset) => {
+                        let len = meta.byte_len().map_err(Fault::Reply)?;
+                        let bytes = shm
+                            .as_ref()
+                            .and_then(|m| m.slice(usize::try_from(offset).ok()?, len))
+                            .ok_or_else(|| {
+                                Fault::Reply(format!(
+                                    "`{}` lies at bytes {offset}..+{len} of a shared memory \
+                                     of {} bytes",
+                                    meta.role,
+                                    shm.as_ref().map_or(0, |m| m.len())
+                                ))
+                            })?;
+                        images::from_reader(meta, &bound.layout, &mut &bytes[..])
+                    }
+                }
+                .map_err(Fault::Read)?;
                 products.push((bound.product.clone(), product));
             }
             Ok(products)

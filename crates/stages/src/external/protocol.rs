@@ -91,6 +91,19 @@ pub struct ImageMeta {
     pub height: u32,
     pub channels: u32,
     pub dtype: Dtype,
+    /// Where the bytes lie in the shared memory, when that transport is in use; without
+    /// it they follow the meta on the pipe.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub offset: Option<u64>,
+}
+
+/// The shared memory relume offers in `hello`: a file the program maps whole. Inputs
+/// lie before `output_offset`; the program writes its outputs from there on.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShmOffer {
+    pub path: String,
+    pub size: u64,
+    pub output_offset: u64,
 }
 
 impl ImageMeta {
@@ -135,6 +148,9 @@ pub enum Request {
         outputs: BTreeMap<String, String>,
         /// The run's seed.
         seed: u64,
+        /// Shared memory the program may use instead of the pipe for image bytes.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        shm: Option<ShmOffer>,
     },
     /// One frame: its images follow the meta.
     Frame {
@@ -153,8 +169,13 @@ pub enum Request {
 #[derive(Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Reply {
-    /// To `hello`: the protocol it speaks.
-    Ready { protocol: u32 },
+    /// To `hello`: the protocol it speaks, and `"shm"` when it mapped the offered
+    /// shared memory (absent: everything over the pipe).
+    Ready {
+        protocol: u32,
+        #[serde(default)]
+        transport: Option<String>,
+    },
     /// To `frame`: its images follow the meta. `compute_ms` is the program's own time
     /// on the frame, apart from transport.
     Frame {
@@ -243,6 +264,7 @@ mod tests {
                 height: 1,
                 channels: 3,
                 dtype: Dtype::F32,
+                offset: None,
             }],
         };
         let mut bytes = Vec::new();
@@ -307,6 +329,7 @@ mod tests {
             height,
             channels,
             dtype: Dtype::F32,
+            offset: None,
         };
         assert_eq!(meta(640, 480, 3).byte_len(), Ok(640 * 480 * 12));
         assert_eq!(

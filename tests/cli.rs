@@ -119,7 +119,7 @@ fn livingroom1_imports_inspects_and_replays() {
     let csv = std::fs::read_to_string(d.join("t.csv")).unwrap();
     assert_eq!(
         csv.lines().next(),
-        Some("stage,kind,frame,start_ms,wait_in_ms,process_ms,wait_out_ms")
+        Some("stage,kind,frame,start_ms,wait_in_ms,process_ms,wait_out_ms,program_ms")
     );
     assert_eq!(
         csv.lines().count(),

@@ -196,6 +196,9 @@ fn a_numpy_stage_gives_its_bytes_exactly_and_the_same_on_every_run_and_thread_co
         "pipeline `ext` starts programs: stage `exact` runs `python3 ",
     );
     assert_has(&err, "[exact] frame 4 done (shm)");
+    // The program's reported time apart from the rest, under the timing table.
+    assert_has(&err, "\nexact: the program's own time median ");
+    assert_has(&err, " ms, transport median ");
     let lines: Vec<&str> = first.lines().collect();
     assert_eq!(lines.len(), 5, "{first}");
     for (index, line) in lines.iter().enumerate() {

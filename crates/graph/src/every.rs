@@ -38,6 +38,7 @@ pub fn every_k(stage: Box<dyn Stage>, resolved: &ResolvedStage) -> Box<dyn Stage
         every: resolved.every as usize,
         outputs: resolved.outputs.values().cloned().collect(),
         last: None,
+        ran: false,
     })
 }
 
@@ -54,12 +55,15 @@ struct EveryK {
     outputs: Vec<String>,
     /// Its products of its last run (`None` for a product it did not write then).
     last: Option<Vec<(String, Option<Arc<Product>>)>>,
+    /// Whether the last frame ran the stage (its program time is then the stage's).
+    ran: bool,
 }
 
 impl Stage for EveryK {
     fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
         match &self.last {
             Some(last) if !runs_on(frame.index, self.every, true) => {
+                self.ran = false;
                 for (name, product) in last {
                     if let Some(product) = product {
                         frame.insert_shared(name, Arc::clone(product));
@@ -68,6 +72,7 @@ impl Stage for EveryK {
                 Ok(())
             }
             _ => {
+                self.ran = true;
                 self.inner.process(frame)?;
                 let kept = self
                     .outputs
@@ -78,6 +83,10 @@ impl Stage for EveryK {
                 Ok(())
             }
         }
+    }
+
+    fn program_ns(&self) -> Option<u64> {
+        self.ran.then(|| self.inner.program_ns()).flatten()
     }
 
     fn finish(&mut self) -> Result<(), StageError> {

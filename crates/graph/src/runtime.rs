@@ -501,6 +501,7 @@ fn source_loop(
             wait_in_ns: 0,
             process_ns: (processed - start).as_nanos() as u64,
             wait_out_ns: (sent - processed).as_nanos() as u64,
+            program_ns: None,
         });
     }
     (timings, false)
@@ -540,6 +541,7 @@ fn stage_loop(
             super::panics::in_stage(|| stage.process(&mut frame))
         }));
         let processed = Instant::now();
+        let program_ns = stage.program_ns();
         let error = match result {
             Ok(Ok(())) => None,
             Ok(Err(source)) => Some(PipelineError::Stage {
@@ -579,6 +581,7 @@ fn stage_loop(
             wait_in_ns: (start - wait_start).as_nanos() as u64,
             process_ns: (processed - start).as_nanos() as u64,
             wait_out_ns: (sent - processed).as_nanos() as u64,
+            program_ns,
         });
     }
     // Close our channels before finishing, so neighbours are never held up by `finish`.

@@ -14,6 +14,13 @@ pub trait Stage: Send {
     /// Processes one frame.
     fn process(&mut self, frame: &mut Frame) -> Result<(), StageError>;
 
+    /// How much of the last [`Stage::process`] call was spent by a program outside
+    /// relume on its own work, as it reported (an external stage's `compute_ms`): the
+    /// timing table reports it apart from the rest, the transport.
+    fn program_ns(&self) -> Option<u64> {
+        None
+    }
+
     /// Called once after the last frame (e.g. to flush a summary file).
     fn finish(&mut self) -> Result<(), StageError> {
         Ok(())

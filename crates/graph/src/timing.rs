@@ -16,6 +16,10 @@ pub struct FrameTiming {
     pub process_ns: u64,
     /// Waiting for room in the output channel after processing.
     pub wait_out_ns: u64,
+    /// The part of `process_ns` a program outside relume says it computed (an external
+    /// stage's reply); the rest of it is transport. `None` for relume's own stages.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub program_ns: Option<u64>,
 }
 
 /// All frames of one stage.
@@ -41,6 +45,23 @@ impl StageTimings {
     }
 
     /// Summary of waiting times (input plus output).
+    /// The program's own time and the rest of processing (transport), for a stage
+    /// whose frames report it ([`FrameTiming::program_ns`]).
+    pub fn program_and_transport(&self) -> Option<(Stats, Stats)> {
+        let split: Vec<(u64, u64)> = self
+            .frames
+            .iter()
+            .filter_map(|f| Some((f.program_ns?, f.process_ns.saturating_sub(f.program_ns?))))
+            .collect();
+        if split.is_empty() {
+            return None;
+        }
+        Some((
+            Stats::of(split.iter().map(|s| s.0)),
+            Stats::of(split.iter().map(|s| s.1)),
+        ))
+    }
+
     pub fn wait(&self) -> Stats {
         Stats::of(self.frames.iter().map(|f| f.wait_in_ns + f.wait_out_ns))
     }
@@ -141,6 +162,15 @@ impl RunReport {
                 s.wait().median_ms
             );
         }
+        for s in &self.stages {
+            if let Some((program, transport)) = s.program_and_transport() {
+                let _ = writeln!(
+                    out,
+                    "{}: the program's own time median {:.3} ms, transport median {:.3} ms",
+                    s.name, program.median_ms, transport.median_ms
+                );
+            }
+        }
         let l = self.latency();
         let _ = writeln!(
             out,
@@ -161,20 +191,24 @@ impl RunReport {
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
         let bytes = if csv {
-            let mut out =
-                String::from("stage,kind,frame,start_ms,wait_in_ms,process_ms,wait_out_ms\n");
+            let mut out = String::from(
+                "stage,kind,frame,start_ms,wait_in_ms,process_ms,wait_out_ms,program_ms\n",
+            );
             for s in &self.stages {
                 for f in &s.frames {
                     let _ = writeln!(
                         out,
-                        "{},{},{},{:.6},{:.6},{:.6},{:.6}",
+                        "{},{},{},{:.6},{:.6},{:.6},{:.6},{}",
                         s.name,
                         s.kind,
                         f.frame,
                         f.start_ns as f64 * 1e-6,
                         f.wait_in_ns as f64 * 1e-6,
                         f.process_ns as f64 * 1e-6,
-                        f.wait_out_ns as f64 * 1e-6
+                        f.wait_out_ns as f64 * 1e-6,
+                        f.program_ns
+                            .map(|ns| format!("{:.6}", ns as f64 * 1e-6))
+                            .unwrap_or_default()
                     );
                 }
             }
@@ -214,7 +248,12 @@ impl RunReport {
             .iter()
             .map(|s| {
                 let p = s.process();
-                (s.name.clone(), serde_json::json!({ "kind": s.kind, "frames": s.frames.len(), "median_ms": p.median_ms, "p95_ms": p.p95_ms, "max_ms": p.max_ms, "wait_median_ms": s.wait().median_ms }))
+                let mut stage = serde_json::json!({ "kind": s.kind, "frames": s.frames.len(), "median_ms": p.median_ms, "p95_ms": p.p95_ms, "max_ms": p.max_ms, "wait_median_ms": s.wait().median_ms });
+                if let Some((program, transport)) = s.program_and_transport() {
+                    stage["program_median_ms"] = program.median_ms.into();
+                    stage["transport_median_ms"] = transport.median_ms.into();
+                }
+                (s.name.clone(), stage)
             })
             .collect();
         serde_json::json!({ "stages": stages, "fps": self.fps(), "frames": self.frames_out, "latency": self.latency() })

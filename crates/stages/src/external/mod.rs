@@ -16,8 +16,9 @@
 //! ```
 //!
 //! Images travel through shared memory (`shm`) when the program maps it, else over the
-//! pipe. Not yet: the reply's `compute_ms` (the program's own time) reported apart from
-//! transport, products other than images, and ports declared by the program.
+//! pipe. The reply's `compute_ms` (the program's own time) is reported apart from the
+//! rest, the transport. Not yet: products other than images, and ports declared by the
+//! program.
 
 mod images;
 mod program;
@@ -329,6 +330,7 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
         timeout,
         size: (width, height),
         shm,
+        program_ns: None,
     }))
 }
 
@@ -351,6 +353,8 @@ struct External {
     size: (u32, u32),
     /// The shared memory the program mapped, if it did.
     shm: Option<SharedMemory>,
+    /// The program's own time on the last frame, from its reply.
+    program_ns: Option<u64>,
 }
 
 /// The per-frame seed a program is given: hash(run seed, frame, stage name).
@@ -413,10 +417,12 @@ impl Stage for External {
             });
             sent.map_err(|e| Fault::Read(ReadError::Io(e)))?;
             let reply = protocol::read_meta::<Reply>(&mut p.stdout).map_err(Fault::Read)?;
-            let metas = match reply {
+            let (metas, compute_ms) = match reply {
                 Reply::Frame {
-                    index: i, outputs, ..
-                } if i == index => outputs,
+                    index: i,
+                    outputs,
+                    compute_ms,
+                } if i == index => (outputs, compute_ms),
                 Reply::Frame { index: i, .. } => {
                     return Err(Fault::Reply(format!(
                         "the reply is for frame {i}, not {index}"
@@ -457,10 +463,16 @@ impl Stage for External {
                 .map_err(Fault::Read)?;
                 products.push((bound.product.clone(), product));
             }
-            Ok(products)
+            Ok((products, compute_ms))
         });
         let products = match exchange {
-            Ok(Ok(products)) => products,
+            Ok(Ok((products, compute_ms))) => {
+                // A time the program cannot have taken is not reported.
+                self.program_ns = compute_ms
+                    .filter(|ms| ms.is_finite() && *ms >= 0.0 && *ms < 86_400_000.0)
+                    .map(|ms| (ms * 1e6) as u64);
+                products
+            }
             Ok(Err(fault)) => {
                 let mut program = self.program.take().expect("present above");
                 let why = match fault {
@@ -494,6 +506,10 @@ impl Stage for External {
             frame.insert(&name, product);
         }
         Ok(())
+    }
+
+    fn program_ns(&self) -> Option<u64> {
+        self.program_ns
     }
 
     fn finish(&mut self) -> Result<(), StageError> {

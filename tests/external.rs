@@ -258,6 +258,18 @@ fn validate_checks_the_declared_ports_and_names_the_program() {
     setup(d, DUMP, "");
     let o = ok(relume_py(d, &["validate", "p.toml"]));
     assert_has(&stdout(&o), "starts a program: stage `prog` runs `python3 ");
+    // `relume stages` lists the declared ports of a pipeline's external stages.
+    let o = ok(relume_py(d, &["stages", "--pipeline", "p.toml"]));
+    assert_has(
+        &stdout(&o),
+        "prog (line 7)\n    runs: python3 ./prog.py\n    reads: image = depth (depth map)   \
+         writes: scaled (depth map)\n",
+    );
+    let o = ok(relume_py(d, &["stages", "--pipeline", "p.toml", "--json"]));
+    let json: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(json["external"][0]["outputs"][0]["kind"], "depth map");
+    assert_eq!(json["external"][0]["inputs"][0]["product"], "depth");
+    assert!(json["kinds"].as_array().unwrap().len() > 20);
     // A kind no external stage exchanges, at its line and column.
     let toml = std::fs::read_to_string(d.join("p.toml")).unwrap();
     std::fs::write(

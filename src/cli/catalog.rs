@@ -12,6 +12,12 @@ pub struct StagesArgs {
     /// of that type), min, max, choices, doc}.
     #[arg(long)]
     json: bool,
+    /// Also list the external stages of this pipeline file: the program each runs, the
+    /// ports its table declares (role and kind) and its settings. With --json the
+    /// output is then {kinds: [...], external: [{stage, line, command, inputs,
+    /// outputs, settings}]}.
+    #[arg(long, value_name = "PIPELINE")]
+    pipeline: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -92,10 +98,100 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
         }
         docs.push(serde_json::json!({ "kind": info.kind, "summary": info.summary, "inputs": port_list(&ports.inputs), "outputs": port_list(&ports.outputs), "params": params }));
     }
+    let external = match &a.pipeline {
+        Some(path) => external_stages(&Pipeline::load(path, &registry)?, !a.json)?,
+        None => Vec::new(),
+    };
     if a.json {
-        outln!("{}", serde_json::to_string_pretty(&docs)?)?;
+        let out = match a.pipeline {
+            Some(_) => serde_json::json!({ "kinds": docs, "external": external }),
+            None => serde_json::Value::Array(docs),
+        };
+        outln!("{}", serde_json::to_string_pretty(&out)?)?;
     }
     Ok(0)
+}
+
+/// The external stages of `pipeline` with their declared ports, printed when `print`,
+/// and as JSON.
+fn external_stages(pipeline: &Pipeline, print: bool) -> anyhow::Result<Vec<serde_json::Value>> {
+    let info = relume::stages::external::INFO;
+    let mut out = Vec::new();
+    let stages = pipeline.stages.iter().filter(|s| s.kind == info.kind);
+    if print {
+        outln!(
+            "external stages of {} ({}):",
+            pipeline.file,
+            pipeline
+                .stages
+                .iter()
+                .filter(|s| s.kind == info.kind)
+                .count()
+        )?;
+    }
+    for stage in stages {
+        let ports = (info.ports)(&stage.params);
+        let described =
+            |ports: &[relume::graph::Port], bound: &std::collections::BTreeMap<String, String>| {
+                ports
+                    .iter()
+                    .map(|p| {
+                        let product = bound
+                            .get(&p.role)
+                            .cloned()
+                            .unwrap_or_else(|| p.role.clone());
+                        (p.role.clone(), product, p.kinds[0].name())
+                    })
+                    .collect::<Vec<_>>()
+            };
+        let inputs = described(&ports.inputs, &stage.inputs);
+        let outputs = described(&ports.outputs, &stage.outputs);
+        let command = relume::stages::external::command(&stage.params).join(" ");
+        let settings = stage.params.str_list("settings").to_vec();
+        if print {
+            let show = |ports: &[(String, String, &str)]| {
+                if ports.is_empty() {
+                    return "-".to_string();
+                }
+                ports
+                    .iter()
+                    .map(|(role, product, kind)| {
+                        if role == product {
+                            format!("{role} ({kind})")
+                        } else {
+                            format!("{role} = {product} ({kind})")
+                        }
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            outln!(
+                "{} (line {})
+    runs: {command}",
+                stage.name,
+                stage.line
+            )?;
+            outln!("    reads: {}   writes: {}", show(&inputs), show(&outputs))?;
+            if !settings.is_empty() {
+                outln!("    settings: {}", settings.join(", "))?;
+            }
+        }
+        let json_ports = |ports: &[(String, String, &str)]| {
+            ports
+                .iter()
+                .map(|(role, product, kind)| serde_json::json!({ "role": role, "product": product, "kind": kind }))
+                .collect::<Vec<_>>()
+        };
+        out.push(serde_json::json!({
+            "stage": stage.name,
+            "line": stage.line,
+            "command": command,
+            "inputs": json_ports(&inputs),
+            "outputs": json_ports(&outputs),
+            "settings": settings,
+        }));
+    }
+    Ok(out)
 }
 
 const OBJECTS_INTRO: &str = "\

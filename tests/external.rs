@@ -698,3 +698,91 @@ fn the_shipped_example_runs() {
     assert_eq!(stdout(&o).lines().count(), 5);
     assert_has(&stdout(&o), " scaled=");
 }
+
+/// `filter.oidn` (python/examples/oidn.py, Intel Open Image Denoise through pyoidn,
+/// installed into the test environment on first use) in place of the axis-aligned
+/// filter: the mixed-reality chain runs through it, the program's own time is reported,
+/// and it denoises: on every layer, the filtered estimate differs less from pixel to
+/// pixel than the accumulated one it was given.
+#[test]
+fn the_oidn_stage_runs_in_the_mixed_reality_chain_and_smooths_the_layers() {
+    let bin = python_bin();
+    let has = |bin: &Path| {
+        Command::new(bin.join("python3"))
+            .args(["-c", "import pyoidn"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    if !has(bin) {
+        let o = Command::new(bin.join("python3"))
+            .args([
+                "-m",
+                "pip",
+                "install",
+                "--quiet",
+                "--disable-pip-version-check",
+                "pyoidn",
+            ])
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success() && has(bin),
+            "pip install pyoidn (PyPI) failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    let dir = folder();
+    let d = dir.path();
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("python/examples");
+    // The shipped pipeline, saving the layers before and after the filter as EXR.
+    let toml = std::fs::read_to_string(examples.join("mixed-reality-oidn.toml"))
+        .unwrap()
+        .replace(
+            "program = \"oidn.py\"",
+            &format!("program = {:?}", examples.join("oidn.py")),
+        )
+        + "\n[[stage]]\nname = \"layers\"\nkind = \"write\"\n\
+           params = { products = [\"e_r_dir\", \"filtered_e_r_dir\"], formats = [\"exr\"] }\n";
+    std::fs::write(d.join("oidn.toml"), toml).unwrap();
+    let o = ok(relume_py(
+        d,
+        &[
+            "replay",
+            "r.relume",
+            "-p",
+            "oidn.toml",
+            "--frames",
+            "0..2",
+            "--out",
+            "o",
+        ],
+    ));
+    assert_has(&stdout(&o), "filter.oidn: the program's own time median ");
+    // Mean absolute difference between horizontal neighbours over the image.
+    let roughness = |file: &str| -> f64 {
+        let image = exr::prelude::read_first_rgba_layer_from_file(
+            d.join("o").join(file),
+            |size, _| (size.width(), vec![[0f32; 3]; size.width() * size.height()]),
+            |(w, px), at, (r, g, b, _a): (f32, f32, f32, f32)| px[at.y() * *w + at.x()] = [r, g, b],
+        )
+        .unwrap();
+        let (w, px) = &image.layer_data.channel_data.pixels;
+        let mut sum = 0.0;
+        let mut n = 0;
+        for (i, p) in px.iter().enumerate() {
+            let finite = |p: &[f32; 3]| p.iter().all(|c| c.is_finite());
+            if (i + 1) % w != 0 && finite(p) && finite(&px[i + 1]) {
+                let q = px[i + 1];
+                sum += (0..3).map(|c| (p[c] - q[c]).abs() as f64).sum::<f64>();
+                n += 1;
+            }
+        }
+        sum / n as f64
+    };
+    let before = roughness("e_r_dir/000001.exr");
+    let after = roughness("filtered_e_r_dir/000001.exr");
+    assert!(
+        after < 0.7 * before,
+        "OIDN: {after} against {before} before"
+    );
+}

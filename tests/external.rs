@@ -786,3 +786,87 @@ fn the_oidn_stage_runs_in_the_mixed_reality_chain_and_smooths_the_layers() {
         "OIDN: {after} against {before} before"
     );
 }
+
+/// Poses travel too, in the meta: the camera pose arrives bit for bit, and a pose the
+/// program makes comes back as a product of the pose kind; a rotation that is not a
+/// unit quaternion is refused naming the output.
+#[test]
+fn poses_travel_both_ways_and_a_bad_rotation_is_refused() {
+    let dir = folder();
+    let d = dir.path();
+    setup(
+        d,
+        r#"
+import json, sys
+import relume_stage
+
+def process(frame, settings):
+    camera = frame.inputs["camera"]
+    t = [float(v) for v in camera["translation"]]
+    r = [float(v) for v in camera["rotation"]]
+    lifted = [t[0], t[1] + 1.0, t[2]]
+    if settings["bad"]:
+        r = [v * 0.5 for v in r]
+    with open(f"pose-{frame.index}.json", "w") as f:
+        json.dump({"camera": [t, [float(v) for v in camera["rotation"]]], "lifted": [lifted, r]}, f)
+    return {"scaled": frame.inputs["image"], "lifted": {"translation": lifted, "rotation": r}}
+
+sys.exit(relume_stage.run(process, settings={"bad": False}))
+"#,
+        "",
+    );
+    let toml = std::fs::read_to_string(d.join("p.toml")).unwrap().replace(
+        "input_kinds = [\"image=depth\"], output_kinds = [\"scaled=depth\"]",
+        "input_kinds = [\"image=depth\", \"camera=pose\"], \
+         output_kinds = [\"scaled=depth\", \"lifted=pose\"]",
+    );
+    let toml = toml.replace(
+        "inputs = { image = \"depth\" }",
+        "inputs = { image = \"depth\", camera = \"pose\" }",
+    );
+    std::fs::write(d.join("p.toml"), &toml).unwrap();
+    let o = ok(relume_py(
+        d,
+        &["replay", "r.relume", "-p", "p.toml", "--hash", "--out", "o"],
+    ));
+    let pose_digest = |p: &serde_json::Value| {
+        let f = |v: &serde_json::Value| -> Vec<f64> {
+            v.as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect()
+        };
+        let (t, r) = (f(&p[0]), f(&p[1]));
+        let pose = relume::recording::Pose {
+            translation: [t[0], t[1], t[2]],
+            rotation: [r[0], r[1], r[2], r[3]],
+        };
+        format!(
+            "{:016x}",
+            Product::new(relume::recording::POSE, pose).digest()
+        )
+    };
+    for (index, line) in stdout(&o).lines().enumerate() {
+        let dumped: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(d.join(format!("pose-{index}.json"))).unwrap(),
+        )
+        .unwrap();
+        assert_has(line, &format!(" pose={}", pose_digest(&dumped["camera"])));
+        assert_has(line, &format!(" lifted={}", pose_digest(&dumped["lifted"])));
+    }
+    // `relume stages` shows the pose ports with their kind.
+    let o = ok(relume_py(d, &["stages", "--pipeline", "p.toml"]));
+    assert_has(&stdout(&o), "camera = pose (pose)");
+    assert_has(&stdout(&o), "lifted (pose)");
+    std::fs::write(
+        d.join("p.toml"),
+        toml.replace(
+            "timeout_s = 20",
+            "timeout_s = 20, settings = [\"bad=true\"]",
+        ),
+    )
+    .unwrap();
+    assert_has(&fails(d), "`lifted`'s rotation");
+    assert_has(&fails(d), "not 1: not a unit quaternion");
+}

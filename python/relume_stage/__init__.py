@@ -12,8 +12,9 @@ A stage is a function ``process(frame, settings) -> dict`` and a call to :func:`
 relume starts the program once per run and sends it one frame at a time over its
 standard input; the replies go back over its standard output (protocol 1,
 ``docs/external-stages.md`` in relume's repository). :func:`run` speaks the protocol:
-the function sees numpy arrays of shape ``(height, width, channels)`` and returns
-arrays of the kinds its outputs are declared with in the pipeline file. Anything the
+the function sees numpy arrays of shape ``(height, width, channels)`` (and poses as
+dicts of ``translation`` and ``rotation``) and returns arrays (and poses) of the kinds
+its outputs are declared with in the pipeline file. Anything the
 program prints goes to standard error, which relume shows prefixed with the stage's
 name; standard output belongs to the protocol.
 """
@@ -65,7 +66,9 @@ class Frame:
     ``transport``: "shm" when the images came through shared memory, else "pipe";
     ``seed``: a number fixed by (run seed, frame, stage name), for random numbers that
     are the same on every run (``numpy.random.default_rng(frame.seed)``); ``inputs``:
-    role -> array of shape (height, width, channels).
+    role -> array of shape (height, width, channels) for images, and for a pose (the
+    camera-to-world transform) a dict with ``translation`` (metres) and ``rotation`` (a
+    unit quaternion x, y, z, w), each a float64 array.
     """
 
     def __init__(self, index, stamp_ns, seed, inputs, transport="pipe"):
@@ -141,6 +144,21 @@ def _settings(given, declared):
     for name, text in given.items():
         out[name] = _typed(name, text, declared[name])
     return out
+
+
+def _pose(role, value):
+    """A pose output: a dict (or pair) of translation [x, y, z] and rotation [x, y, z, w]."""
+    if isinstance(value, dict):
+        translation, rotation = value.get("translation"), value.get("rotation")
+    else:
+        translation, rotation = value
+    translation = [float(v) for v in np.asarray(translation, dtype=np.float64).ravel()]
+    rotation = [float(v) for v in np.asarray(rotation, dtype=np.float64).ravel()]
+    if len(translation) != 3 or len(rotation) != 4:
+        raise StageError(
+            f"output {role!r} is a pose: a translation of 3 numbers and a rotation of 4"
+        )
+    return {"role": role, "kind": "pose", "translation": translation, "rotation": rotation}
 
 
 def _output(role, kind, array, height, width):
@@ -247,6 +265,11 @@ def run(process, settings=None):
                 _read_into(stdin, array)
             inputs[meta["role"]] = array
         transport = "shm" if any(m.get("offset") is not None for m in request["inputs"]) else "pipe"
+        for value in request.get("values", []):
+            inputs[value["role"]] = {
+                "translation": np.array(value["translation"], dtype=np.float64),
+                "rotation": np.array(value["rotation"], dtype=np.float64),
+            }
         frame = Frame(request["index"], request["stamp_ns"], request["seed"], inputs, transport)
         start = time.perf_counter()
         try:
@@ -259,7 +282,12 @@ def run(process, settings=None):
             extra = [r for r in result if r not in outputs]
             if extra:
                 raise StageError(f"process returned {extra[0]!r}, which is not a declared output")
-            replies = [_output(r, outputs[r], result[r], height, width) for r in outputs]
+            replies = [
+                _output(r, outputs[r], result[r], height, width)
+                for r in outputs
+                if outputs[r] != "pose"
+            ]
+            poses = [_pose(r, result[r]) for r in outputs if outputs[r] == "pose"]
         except StageError as e:
             _write_message(stdout, {"type": "error", "message": str(e)})
             return 1
@@ -275,6 +303,7 @@ def run(process, settings=None):
                 "type": "frame",
                 "index": request["index"],
                 "outputs": [m for m, _ in replies],
+                "values": poses,
                 "compute_ms": compute_ms,
             },
             [b for _, b in replies],

@@ -17,19 +17,21 @@
 //!
 //! Images travel through shared memory (`shm`) when the program maps it, else over the
 //! pipe. The reply's `compute_ms` (the program's own time) is reported apart from the
-//! rest, the transport. Not yet: products other than images, and ports declared by the
-//! program.
+//! rest, the transport. Poses travel in the meta. Not yet: other products than images
+//! and poses, and ports declared by the program.
 
 mod images;
 mod program;
 pub mod protocol;
 mod shm;
 
+use crate::kind;
 use program::{Program, Stopped};
-use protocol::{ImageMeta, Layout, ReadError, Reply, Request, ShmOffer};
+use protocol::{ImageMeta, Layout, ReadError, Reply, Request, ShmOffer, Value};
 use relume_graph::{
     BuildContext, Frame, ParamDefault, ParamSpec, Params, Port, Ports, Stage, StageError, StageInfo,
 };
+use relume_recording::Pose;
 use shm::SharedMemory;
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -109,8 +111,9 @@ fn port_declaration(s: &str) -> Result<(), String> {
             "the role {role:?} must be letters, digits and underscores"
         ));
     }
-    if Layout::of(kind).is_none() {
-        let kinds: Vec<&str> = protocol::LAYOUTS.iter().map(|l| l.name).collect();
+    if Layout::of(kind).is_none() && kind != protocol::POSE {
+        let mut kinds: Vec<&str> = protocol::LAYOUTS.iter().map(|l| l.name).collect();
+        kinds.push(protocol::POSE);
         return Err(format!(
             "{kind:?} is not a kind an external stage exchanges: {}",
             kinds.join(", ")
@@ -138,18 +141,31 @@ fn declared(params: &Params, name: &str) -> Vec<(String, Layout)> {
         .collect()
 }
 
+/// The declared ports of kind `pose`.
+fn declared_poses(params: &Params, name: &str) -> Vec<String> {
+    params
+        .str_list(name)
+        .iter()
+        .filter_map(|d| d.split_once('='))
+        .filter(|(_, kind)| *kind == protocol::POSE)
+        .map(|(role, _)| role.to_string())
+        .collect()
+}
+
 fn ports(params: &Params) -> Ports {
     let port =
         |(role, layout): (String, Layout)| Port::new(&role, &role, images::product_kind(&layout));
+    let pose = |role: String| Port::new(&role, &role, &[kind::POSE]);
+    let side = |name: &str| -> Vec<Port> {
+        declared(params, name)
+            .into_iter()
+            .map(port)
+            .chain(declared_poses(params, name).into_iter().map(pose))
+            .collect()
+    };
     Ports {
-        inputs: declared(params, "input_kinds")
-            .into_iter()
-            .map(port)
-            .collect(),
-        outputs: declared(params, "output_kinds")
-            .into_iter()
-            .map(port)
-            .collect(),
+        inputs: side("input_kinds"),
+        outputs: side("output_kinds"),
     }
 }
 
@@ -205,10 +221,24 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
             layout,
         })
         .collect();
-    let kinds = |bound: &[Bound]| -> BTreeMap<String, String> {
+    // Role -> (product, ...) of the pose ports.
+    let pose_inputs: Vec<(String, String)> = declared_poses(params, "input_kinds")
+        .into_iter()
+        .map(|role| (ctx.input(&role), role))
+        .collect();
+    let pose_outputs: Vec<(String, String)> = declared_poses(params, "output_kinds")
+        .into_iter()
+        .map(|role| (ctx.output(&role), role))
+        .collect();
+    let kinds = |bound: &[Bound], poses: &[(String, String)]| -> BTreeMap<String, String> {
         bound
             .iter()
             .map(|b| (b.role.clone(), b.layout.name.to_string()))
+            .chain(
+                poses
+                    .iter()
+                    .map(|(_, role)| (role.clone(), protocol::POSE.to_string())),
+            )
             .collect()
     };
     let settings = params
@@ -253,8 +283,8 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
         protocol: protocol::VERSION,
         stage: ctx.stage_name.to_string(),
         settings,
-        inputs: kinds(&inputs),
-        outputs: kinds(&outputs),
+        inputs: kinds(&inputs, &pose_inputs),
+        outputs: kinds(&outputs, &pose_outputs),
         seed: ctx.seed,
         shm: offer,
     };
@@ -331,6 +361,8 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
         size: (width, height),
         shm,
         program_ns: None,
+        pose_inputs,
+        pose_outputs,
     }))
 }
 
@@ -355,6 +387,9 @@ struct External {
     shm: Option<SharedMemory>,
     /// The program's own time on the last frame, from its reply.
     program_ns: Option<u64>,
+    /// The pose ports: (product, role).
+    pose_inputs: Vec<(String, String)>,
+    pose_outputs: Vec<(String, String)>,
 }
 
 /// The per-frame seed a program is given: hash(run seed, frame, stage name).
@@ -394,17 +429,29 @@ impl Stage for External {
                 }
             }
         }
+        let mut values = Vec::with_capacity(self.pose_inputs.len());
+        for (product, role) in &self.pose_inputs {
+            let pose: &Pose = frame.get_as(product, kind::POSE)?;
+            values.push(Value {
+                role: role.clone(),
+                kind: protocol::POSE.into(),
+                translation: Some(pose.translation),
+                rotation: Some(pose.rotation),
+            });
+        }
         let index = frame.index as u64;
         let request = Request::Frame {
             index,
             stamp_ns: frame.stamp_ns,
             seed: frame_seed(self.seed, index, &self.stage),
             inputs: metas,
+            values,
         };
         let program = self.program.as_mut().ok_or_else(|| {
             StageError::Failed("the program was stopped by an earlier error".into())
         })?;
         let outputs = &self.outputs;
+        let pose_outputs = &self.pose_outputs;
         let size = self.size;
         let shm = &self.shm;
         let exchange = program.within(self.timeout, |p| -> Result<_, Fault> {
@@ -417,12 +464,13 @@ impl Stage for External {
             });
             sent.map_err(|e| Fault::Read(ReadError::Io(e)))?;
             let reply = protocol::read_meta::<Reply>(&mut p.stdout).map_err(Fault::Read)?;
-            let (metas, compute_ms) = match reply {
+            let (metas, values, compute_ms) = match reply {
                 Reply::Frame {
                     index: i,
                     outputs,
+                    values,
                     compute_ms,
-                } if i == index => (outputs, compute_ms),
+                } if i == index => (outputs, values, compute_ms),
                 Reply::Frame { index: i, .. } => {
                     return Err(Fault::Reply(format!(
                         "the reply is for frame {i}, not {index}"
@@ -438,6 +486,7 @@ impl Stage for External {
                 }
             };
             let ports = check_outputs(&metas, outputs, size).map_err(Fault::Reply)?;
+            let poses = check_poses(&values, pose_outputs).map_err(Fault::Reply)?;
             // The images follow in the reply's order.
             let mut products = Vec::with_capacity(metas.len());
             for (meta, port) in metas.iter().zip(ports) {
@@ -462,6 +511,12 @@ impl Stage for External {
                 }
                 .map_err(Fault::Read)?;
                 products.push((bound.product.clone(), product));
+            }
+            for (pose, (product, _)) in poses.into_iter().zip(pose_outputs) {
+                products.push((
+                    product.clone(),
+                    relume_graph::Product::new(kind::POSE, pose),
+                ));
             }
             Ok((products, compute_ms))
         });
@@ -535,6 +590,58 @@ impl Stage for External {
             ))),
         }
     }
+}
+
+/// The reply's poses in the order of the declared pose outputs: each once, finite, its
+/// rotation a unit quaternion; otherwise what is wrong.
+fn check_poses(values: &[Value], outputs: &[(String, String)]) -> Result<Vec<Pose>, String> {
+    for value in values {
+        if !outputs.iter().any(|(_, role)| *role == value.role) {
+            return Err(format!(
+                "the reply holds the value `{}`, which is not a declared pose output",
+                value.role
+            ));
+        }
+    }
+    let mut poses = Vec::with_capacity(outputs.len());
+    for (_, role) in outputs {
+        let mut given = values.iter().filter(|v| v.role == *role);
+        let value = given
+            .next()
+            .ok_or_else(|| format!("the reply lacks the output `{role}`"))?;
+        if given.next().is_some() {
+            return Err(format!("the reply holds `{role}` twice"));
+        }
+        let (Some(translation), Some(rotation), protocol::POSE) =
+            (value.translation, value.rotation, value.kind.as_str())
+        else {
+            return Err(format!(
+                "`{role}` is declared a pose: kind \"pose\" with a translation [x, y, z] and \
+                 a rotation [x, y, z, w]"
+            ));
+        };
+        if translation
+            .iter()
+            .chain(&rotation)
+            .any(|v| !v.is_finite() || v.abs() > 1e4)
+        {
+            return Err(format!(
+                "`{role}` holds {translation:?}, {rotation:?}: not finite or beyond 10 km"
+            ));
+        }
+        let norm = rotation.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if (norm - 1.0).abs() > 1e-3 {
+            return Err(format!(
+                "`{role}`'s rotation {rotation:?} has length {norm:.4}, not 1: not a unit \
+                 quaternion"
+            ));
+        }
+        poses.push(Pose {
+            translation,
+            rotation,
+        });
+    }
+    Ok(poses)
 }
 
 /// What went wrong in an exchange.

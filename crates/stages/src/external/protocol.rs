@@ -97,6 +97,22 @@ pub struct ImageMeta {
     pub offset: Option<u64>,
 }
 
+/// A value that is not an image, carried in the meta itself. Protocol 1 knows one kind,
+/// `pose`: the camera-to-world transform, `translation` in metres and `rotation` a unit
+/// quaternion (x, y, z, w), as the recording holds it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Value {
+    pub role: String,
+    pub kind: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub translation: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation: Option<[f64; 4]>,
+}
+
+/// The kind name of a pose value.
+pub const POSE: &str = "pose";
+
 /// The shared memory relume offers in `hello`: a file the program maps whole. Inputs
 /// lie before `output_offset`; the program writes its outputs from there on.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -160,6 +176,9 @@ pub enum Request {
         /// random numbers with it and gives the same bytes on every run.
         seed: u64,
         inputs: Vec<ImageMeta>,
+        /// The inputs that are not images (poses).
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        values: Vec<Value>,
     },
     /// No more frames: the program exits with status 0.
     End,
@@ -181,6 +200,9 @@ pub enum Reply {
     Frame {
         index: u64,
         outputs: Vec<ImageMeta>,
+        /// The outputs that are not images (poses).
+        #[serde(default)]
+        values: Vec<Value>,
         #[serde(default)]
         compute_ms: Option<f64>,
     },
@@ -266,6 +288,7 @@ mod tests {
                 dtype: Dtype::F32,
                 offset: None,
             }],
+            values: vec![],
         };
         let mut bytes = Vec::new();
         write_meta(&mut bytes, &request).unwrap();
@@ -294,6 +317,7 @@ mod tests {
             Reply::Frame {
                 index: 0,
                 outputs: vec![],
+                values: vec![],
                 compute_ms: None
             }
         );

@@ -6,7 +6,7 @@
 //! [`Program`] ends it (asked first, then killed).
 
 use std::collections::VecDeque;
-use std::io::{BufRead, BufReader, BufWriter};
+use std::io::{BufRead, BufReader, BufWriter, Write};
 use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
 use std::sync::mpsc;
 use std::sync::{Arc, Condvar, Mutex};
@@ -68,7 +68,9 @@ impl Program {
             .spawn(move || {
                 for line in BufReader::new(stderr).lines() {
                     let Ok(line) = line else { break };
-                    eprintln!("{prefix}{line}");
+                    // Not eprintln!: with relume's stderr closed it would panic this
+                    // thread, and the program would block on a full stderr pipe.
+                    let _ = writeln!(std::io::stderr(), "{prefix}{line}");
                     let mut tail = tail.lock().unwrap_or_else(|e| e.into_inner());
                     if tail.len() == STDERR_TAIL {
                         tail.pop_front();

@@ -417,6 +417,86 @@ sys.exit(relume_stage.run(process))
     );
 }
 
+/// A program started by a shell wrapper without `exec` (as conda run and many launch
+/// scripts do) that hangs: the timeout stops the wrapper and what it started, and the
+/// run ends.
+#[test]
+fn a_hanging_program_behind_a_wrapper_is_stopped_with_its_wrapper() {
+    let dir = folder();
+    let d = dir.path();
+    setup(
+        d,
+        r#"
+import os, sys, time
+import relume_stage
+
+def process(frame, settings):
+    with open("inner", "w") as f:
+        f.write(str(os.getpid()))
+    time.sleep(600)
+
+sys.exit(relume_stage.run(process))
+"#,
+        ", timeout_s = 1",
+    );
+    std::fs::write(
+        d.join("wrapper.sh"),
+        "#!/bin/sh
+python3 ./prog.py
+echo done
+",
+    )
+    .unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(d.join("wrapper.sh"), std::fs::Permissions::from_mode(0o755)).unwrap();
+    let toml = std::fs::read_to_string(d.join("p.toml"))
+        .unwrap()
+        .replace("timeout_s = 20, ", "")
+        .replace(
+            "interpreter = \"python3\", program = \"prog.py\"",
+            "program = \"wrapper.sh\"",
+        );
+    std::fs::write(d.join("p.toml"), toml).unwrap();
+    let start = Instant::now();
+    let err = fails(d);
+    assert!(
+        start.elapsed() < Duration::from_secs(30),
+        "{:?}",
+        start.elapsed()
+    );
+    assert_has(
+        &err,
+        "no reply within 1 s (timeout_s): the program was stopped",
+    );
+    let pid = std::fs::read_to_string(d.join("inner")).unwrap();
+    assert!(
+        ends_soon(pid.trim()),
+        "the wrapped program (pid {pid}) outlived the run"
+    );
+}
+
+/// Whether process `pid` is gone (or a zombie waiting to be reaped) within 5 s: a
+/// SIGKILL is delivered asynchronously.
+fn ends_soon(pid: &str) -> bool {
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(5) {
+        match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+            Err(_) => return true,
+            // The state follows the command name in parentheses.
+            Ok(stat)
+                if stat
+                    .rsplit(')')
+                    .next()
+                    .is_some_and(|r| r.trim_start().starts_with('Z')) =>
+            {
+                return true;
+            }
+            Ok(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+    false
+}
+
 /// A program speaking the protocol by hand (msgpack alone): `reply(request)` gives the
 /// bytes it writes for each frame request.
 fn raw(reply: &str) -> String {

@@ -171,6 +171,11 @@ def _output(role, kind, array, height, width):
             raise StageError(
                 f"output {role!r} is {array.dtype}: a {kind} image is 8-bit; convert it"
             )
+        if dtype == np.dtype("u1") and array.size and (array.min() < 0 or array.max() > 255):
+            raise StageError(
+                f"output {role!r} holds {array.min()} to {array.max()}: a {kind} image "
+                "is 8-bit (0 to 255)"
+            )
         array = array.astype(dtype)
     if array.ndim != 3 or array.shape[2] != channels:
         raise StageError(

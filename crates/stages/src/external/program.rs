@@ -7,6 +7,7 @@
 
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::os::unix::process::CommandExt;
 use std::process::{Child, ChildStdin, ChildStdout, Command, ExitStatus, Stdio};
 use std::sync::mpsc;
 use std::sync::{Arc, Condvar, Mutex};
@@ -40,6 +41,10 @@ impl Program {
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
+            // A group of its own, so that stopping it stops what it started too (a shell
+            // wrapper that runs python without `exec`). An interrupt reaches it through
+            // the watchdog and `Drop` instead of the terminal.
+            .process_group(0)
             .spawn()
             .map_err(|e| {
                 let hint = match e.kind() {
@@ -121,7 +126,7 @@ impl Program {
         let _ = self.stderr_done.recv_timeout(Duration::from_millis(500));
         let exit = match status {
             Some(status) => describe(status),
-            None => "is still running but closed its output".to_string(),
+            None => "is still running but stopped reading or writing the protocol".to_string(),
         };
         format!("the program {exit}{}", self.stderr_tail())
     }
@@ -170,9 +175,9 @@ impl Program {
 impl Drop for Program {
     fn drop(&mut self) {
         self.stdin = None;
-        if self.wait_for_exit(Duration::from_millis(200)).is_none() {
-            kill(&self.child);
-        }
+        let _ = self.wait_for_exit(Duration::from_millis(200));
+        // Whatever it started and left behind goes with it.
+        kill(&self.child);
     }
 }
 
@@ -186,8 +191,16 @@ pub fn describe(status: ExitStatus) -> String {
     }
 }
 
+/// Kills the program and every process of its group, then reaps it.
 fn kill(child: &Mutex<Child>) {
     let mut child = child.lock().unwrap_or_else(|e| e.into_inner());
+    if let Ok(pid) = i32::try_from(child.id()) {
+        // SAFETY: kill(2) with the program's own process group (its pid, as
+        // `process_group(0)` made it); a group already gone gives ESRCH, ignored.
+        unsafe {
+            libc::kill(-pid, libc::SIGKILL);
+        }
+    }
     let _ = child.kill();
     let _ = child.wait();
 }

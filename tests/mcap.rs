@@ -141,6 +141,22 @@ fn fill_raw_bag(mut bag: Bag, info: impl Fn(usize, i64, &str) -> Vec<u8>) {
     bag.finish();
 }
 
+/// Frame `i` of `replay` holds [`write_raw_bag`]'s frame `k`: its color and depth
+/// exactly, its camera pose within rounding.
+fn assert_frame_is_bag_frame(replay: &Replay, i: usize, k: usize) {
+    let rec = replay.read_frame(i).unwrap();
+    let rgb = codec::decode_color(&rec.color.image).unwrap();
+    let flat: Vec<u8> = rgb.data.iter().flatten().copied().collect();
+    assert_eq!(flat, color_pixels(k), "frame {k} color");
+    let units = codec::decode_depth_units(&rec.depth.unwrap().image).unwrap();
+    assert_eq!(units.data, depth_units(k), "frame {k} depth");
+    assert_pose_near(
+        &rec.pose.unwrap(),
+        &expected_camera_pose(k),
+        &format!("frame {k}"),
+    );
+}
+
 fn assert_pose_near(got: &Pose, want: &Pose, what: &str) {
     let dt = (got.translation() - want.translation()).length();
     let dq = got.rotation().angle_between(want.rotation());
@@ -184,17 +200,7 @@ fn ros2_raw_images_tf_and_camera_info_import_exactly() {
         for (i, f) in replay.frames.iter().enumerate() {
             let k = i + 1;
             assert_eq!(f.stamp_ns, T0 + k as i64 * DT);
-            let rec = replay.read_frame(i).unwrap();
-            let rgb = codec::decode_color(&rec.color.image).unwrap();
-            let flat: Vec<u8> = rgb.data.iter().flatten().copied().collect();
-            assert_eq!(flat, color_pixels(k), "frame {k} color");
-            let units = codec::decode_depth_units(&rec.depth.unwrap().image).unwrap();
-            assert_eq!(units.data, depth_units(k), "frame {k} depth");
-            assert_pose_near(
-                &rec.pose.unwrap(),
-                &expected_camera_pose(k),
-                &format!("frame {k}"),
-            );
+            assert_frame_is_bag_frame(&replay, i, k);
         }
     }
 }
@@ -1131,17 +1137,7 @@ fn skip_corrupt_passes_over_a_damaged_chunk_and_imports_the_rest_exactly() {
             "{compression:?}: frame 2's color was in the damaged chunk"
         );
         for (i, k) in [1usize, 3, 4].into_iter().enumerate() {
-            let rec = replay.read_frame(i).unwrap();
-            let rgb = codec::decode_color(&rec.color.image).unwrap();
-            let flat: Vec<u8> = rgb.data.iter().flatten().copied().collect();
-            assert_eq!(flat, color_pixels(k), "frame {k} color");
-            let units = codec::decode_depth_units(&rec.depth.unwrap().image).unwrap();
-            assert_eq!(units.data, depth_units(k), "frame {k} depth");
-            assert_pose_near(
-                &rec.pose.unwrap(),
-                &expected_camera_pose(k),
-                &format!("frame {k}"),
-            );
+            assert_frame_is_bag_frame(&replay, i, k);
         }
     }
 }

@@ -129,24 +129,24 @@ fn setting(s: &str) -> Result<(), String> {
     }
 }
 
-/// The declared ports: `role=kind` items, checked when the pipeline was loaded.
-fn declared(params: &Params, name: &str) -> Vec<(String, Layout)> {
+/// The `role=kind` items of the list `name`, checked when the pipeline was loaded.
+fn role_kinds<'p>(params: &'p Params, name: &str) -> impl Iterator<Item = (&'p str, &'p str)> {
     params
         .str_list(name)
         .iter()
-        .filter_map(|d| {
-            let (role, kind) = d.split_once('=')?;
-            Some((role.to_string(), Layout::of(kind)?))
-        })
+        .filter_map(|d| d.split_once('='))
+}
+
+/// The declared image ports.
+fn declared(params: &Params, name: &str) -> Vec<(String, Layout)> {
+    role_kinds(params, name)
+        .filter_map(|(role, kind)| Some((role.to_string(), Layout::of(kind)?)))
         .collect()
 }
 
 /// The declared ports of kind `pose`.
 fn declared_poses(params: &Params, name: &str) -> Vec<String> {
-    params
-        .str_list(name)
-        .iter()
-        .filter_map(|d| d.split_once('='))
+    role_kinds(params, name)
         .filter(|(_, kind)| *kind == protocol::POSE)
         .map(|(role, _)| role.to_string())
         .collect()
@@ -205,31 +205,24 @@ fn build(ctx: &BuildContext) -> Result<Box<dyn Stage>, StageError> {
                 .into(),
         ));
     }
-    let inputs: Vec<Bound> = declared(params, "input_kinds")
-        .into_iter()
-        .map(|(role, layout)| Bound {
-            product: ctx.input(&role),
-            role,
-            layout,
-        })
-        .collect();
-    let outputs: Vec<Bound> = declared(params, "output_kinds")
-        .into_iter()
-        .map(|(role, layout)| Bound {
-            product: ctx.output(&role),
-            role,
-            layout,
-        })
-        .collect();
-    // Role -> (product, ...) of the pose ports.
-    let pose_inputs: Vec<(String, String)> = declared_poses(params, "input_kinds")
-        .into_iter()
-        .map(|role| (ctx.input(&role), role))
-        .collect();
-    let pose_outputs: Vec<(String, String)> = declared_poses(params, "output_kinds")
-        .into_iter()
-        .map(|role| (ctx.output(&role), role))
-        .collect();
+    // The image ports and the pose ports (product, role) of one side, bound to products.
+    let bind = |name: &str, product: &dyn Fn(&str) -> String| {
+        let images: Vec<Bound> = declared(params, name)
+            .into_iter()
+            .map(|(role, layout)| Bound {
+                product: product(&role),
+                role,
+                layout,
+            })
+            .collect();
+        let poses: Vec<(String, String)> = declared_poses(params, name)
+            .into_iter()
+            .map(|role| (product(&role), role))
+            .collect();
+        (images, poses)
+    };
+    let (inputs, pose_inputs) = bind("input_kinds", &|role| ctx.input(role));
+    let (outputs, pose_outputs) = bind("output_kinds", &|role| ctx.output(role));
     let kinds = |bound: &[Bound], poses: &[(String, String)]| -> BTreeMap<String, String> {
         bound
             .iter()

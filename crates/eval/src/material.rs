@@ -18,10 +18,10 @@
 //! rho is estimated in the compensated camera space of the first frame and the truth is
 //! in scene RGB; the camera's color matrix is close to the identity (rows sum to 1, off
 //! the diagonal at most 0.1), so the two agree to a few percent on saturated colors and
-//! exactly on grays. The synthetic room is lit by its two area lights plus a constant
-//! ambient term standing in for interreflection (see `synth::render`), while the
-//! pipeline's E_R also gathers the light the walls really reflect in the captured
-//! environment: part of what the score measures is that difference.
+//! exactly on grays. The synthetic room is lit by its two area lights and by the light
+//! its surfaces pass between them (`synth::indirect`); the pipeline's E_R gathers that
+//! same interreflected light from the captured environment, so what the score measures
+//! is how well capture and the estimator reproduce it.
 
 use super::truth::FrameTruth;
 use glam::{DMat3, Vec3};

@@ -2,7 +2,9 @@
 //!
 //! An analytic room ([`scene`], built from [`geometry`] with [`texture`]s inside the
 //! extent and surfaces of [`room`]) is rendered along a smooth camera path ([`camera`])
-//! with soft shadows from a warm ceiling panel and a bright window ([`render`]), seen
+//! with soft shadows from a warm ceiling panel and a bright window and the light its
+//! diffuse surfaces pass between them (a precomputed interreflection solution,
+//! [`indirect`]) ([`render`]), seen
 //! through a camera with automatic exposure, white balance and optional contrast
 //! changes, and measured by a Kinect-like depth sensor ([`depth_noise`]).
 //!
@@ -31,6 +33,7 @@
 pub mod camera;
 pub mod depth_noise;
 pub mod geometry;
+pub mod indirect;
 pub mod render;
 pub mod room;
 pub mod scene;
@@ -54,7 +57,7 @@ use std::path::{Path, PathBuf};
 
 /// Version of the generator's output: bumped whenever the same config would give
 /// different content, so cached recordings can be told apart.
-pub const GENERATOR_VERSION: &str = "2";
+pub const GENERATOR_VERSION: &str = "3";
 /// Metres per stored depth unit (TUM's scale: 5000 units per metre).
 pub const DEPTH_UNIT_M: f64 = 0.0002;
 /// Width and height of the environment-map attachment, in texels.

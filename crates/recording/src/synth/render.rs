@@ -34,14 +34,29 @@ pub const SHADOW_GRID: (u32, u32) = (4, 2);
 pub const ENVIRONMENT_FRAME: u64 = u64::MAX;
 
 /// Radiance leaving `hit` back along the ray: an emitter's radiance, or for diffuse
-/// surfaces the direct light of both rectangles (`grid` stratified shadow rays each)
-/// plus the ambient term, times albedo.
+/// surfaces albedo / pi times the irradiance: the direct light of both rectangles
+/// (`grid` stratified shadow rays each, [`direct_irradiance`]) plus the light the room
+/// reflects onto the point ([`Scene::indirect_irradiance`]).
 pub fn shade(scene: &Scene, hit: &Hit, rng: &mut Counter, grid: (u32, u32)) -> Vec3 {
     let material = scene.material(hit);
     if material.emission != Vec3::ZERO {
         return material.emission;
     }
-    let origin = hit.position + hit.normal * 1e-4;
+    let direct = direct_irradiance(scene, hit.position, hit.normal, rng, grid);
+    material.albedo * ((direct + scene.indirect_irradiance(hit)) / PI)
+}
+
+/// The irradiance at `position` (unit `normal`) from both area lights: for each, `grid`
+/// stratified points on its area (one jittered sample per cell), each weighted by
+/// cos_here cos_light / d^2 when no box or the sphere blocks it.
+pub fn direct_irradiance(
+    scene: &Scene,
+    position: Vec3,
+    normal: Vec3,
+    rng: &mut Counter,
+    grid: (u32, u32),
+) -> Vec3 {
+    let origin = position + normal * 1e-4;
     let samples = (grid.0 * grid.1).max(1) as f32;
     let mut irradiance = Vec3::ZERO;
     for light in &scene.lights {
@@ -54,7 +69,7 @@ pub fn shade(scene: &Scene, hit: &Hit, rng: &mut Counter, grid: (u32, u32)) -> V
                 let q = light.point(u, v);
                 let w = q - origin;
                 // cos_here * cos_light / d^2 with unnormalized w: no square root.
-                let here = hit.normal.dot(w);
+                let here = normal.dot(w);
                 let there = -light.normal.dot(w);
                 if here <= 0.0 || there <= 0.0 || scene.occluded_by(occluders, origin, q) {
                     continue;
@@ -65,7 +80,7 @@ pub fn shade(scene: &Scene, hit: &Hit, rng: &mut Counter, grid: (u32, u32)) -> V
         }
         irradiance += light.radiance * (geometry_sum * light.area() / samples);
     }
-    material.albedo * (irradiance / PI + scene.ambient)
+    irradiance
 }
 
 /// A pinhole view: camera-to-world rotation (camera x right, y down, z forward) and

@@ -10,10 +10,12 @@
 //! recording shows the same room.
 
 pub use super::geometry::{AxisBox, Ray, Sphere, ray_box_entry, ray_sphere, segment_crosses_box};
+use super::indirect::IndirectLight;
 pub use super::room::{ROOM_MAX, ROOM_MIN, Surface};
 pub use super::texture::BlockTexture;
 use super::texture::{BALL_ALBEDO, block_albedo, room_albedo};
 use glam::Vec3;
+use std::sync::{Arc, OnceLock};
 
 /// Centre of the free spot left for a virtual object: 0.3 m above the middle of the
 /// floor, so a sphere of radius 0.3 m placed here rests on the floor.
@@ -93,13 +95,26 @@ pub struct Scene {
     pub ball: Sphere,
     /// The ceiling light and the window.
     pub lights: [RectLight; 2],
-    /// Constant incident radiance standing in for indirect light (reflected: albedo times it).
-    pub ambient: Vec3,
+    /// The light the surfaces reflect onto each other, solved once ([`IndirectLight`]);
+    /// `None` lights the room by the two lights' direct light alone.
+    pub indirect: Option<Arc<IndirectLight>>,
 }
 
 impl Scene {
-    /// The room every synthetic recording shows.
+    /// The room every synthetic recording shows, with its interreflection (solved on the
+    /// first call, in about a second on two cores, and kept for the process).
     pub fn room() -> Scene {
+        static ROOM: OnceLock<Scene> = OnceLock::new();
+        ROOM.get_or_init(|| {
+            let mut scene = Scene::room_without_interreflection();
+            scene.indirect = Some(Arc::new(IndirectLight::solve(&scene)));
+            scene
+        })
+        .clone()
+    }
+
+    /// The room's geometry, materials and lights, lit by direct light alone.
+    pub fn room_without_interreflection() -> Scene {
         let block = |min: [f32; 3], max: [f32; 3], texture| Block {
             bounds: AxisBox {
                 min: Vec3::from_array(min),
@@ -142,7 +157,7 @@ impl Scene {
                     surface: Surface::EastWall,
                 },
             ],
-            ambient: Vec3::new(0.055, 0.055, 0.06),
+            indirect: None,
         }
     }
 
@@ -225,6 +240,11 @@ impl Scene {
                 t_max,
             )
             .is_some()
+    }
+
+    /// The irradiance the room's surfaces reflect onto `hit` (zero without a solution).
+    pub fn indirect_irradiance(&self, hit: &Hit) -> Vec3 {
+        self.indirect.as_ref().map_or(Vec3::ZERO, |s| s.at(hit))
     }
 
     /// Albedo and emission at a hit.

@@ -34,6 +34,8 @@ pub mod camera;
 pub mod depth_noise;
 pub mod geometry;
 pub mod indirect;
+pub mod insert;
+pub mod mitsuba;
 pub mod render;
 pub mod room;
 pub mod scene;
@@ -58,6 +60,8 @@ use std::path::{Path, PathBuf};
 /// Version of the generator's output: bumped whenever the same config would give
 /// different content, so cached recordings can be told apart.
 pub const GENERATOR_VERSION: &str = "3";
+/// The provenance tool name of the recordings it writes.
+pub const SYNTH_TOOL: &str = "relume synth";
 /// Metres per stored depth unit (TUM's scale: 5000 units per metre).
 pub const DEPTH_UNIT_M: f64 = 0.0002;
 /// Width and height of the environment-map attachment, in texels.
@@ -221,7 +225,7 @@ pub fn provenance(config: &SynthConfig) -> Provenance {
     .map(|(k, v)| (k.to_string(), v))
     .collect();
     Provenance {
-        tool: "relume synth".into(),
+        tool: SYNTH_TOOL.into(),
         tool_version: env!("CARGO_PKG_VERSION").into(),
         source: "synthetic room".into(),
         settings,

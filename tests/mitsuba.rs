@@ -578,7 +578,7 @@ fn mitsuba_direct_light_matches_relume_direct_light() {
 fn mitsuba_path_tracing_matches_relume_global_illumination() {
     // The full light transport: Mitsuba without a depth limit against the renderer
     // `relume synth` uses, one ray per pixel centre.
-    let scene = Scene::room();
+    let scene = relume::recording::synth::interreflection::room();
     let views = views();
     let dir = tempfile::tempdir().unwrap();
     export_scene(dir.path(), &scene, &views, &[], TEXELS_PER_METRE).unwrap();
@@ -821,7 +821,7 @@ fn mitsuba_agrees_with_the_true_mixed_reality_frame() {
     // objects reflect). Each region of at least 50 pixels must agree within 2 % per
     // channel; the first three must each have one somewhere.
     let started = Instant::now();
-    let scene = Scene::room();
+    let scene = relume::recording::synth::interreflection::room();
     let views = views();
     let objects = inserted_objects();
     let inserted = Inserted::new(&objects);

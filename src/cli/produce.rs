@@ -143,7 +143,7 @@ pub fn ensure_default_recording(path: &Path) -> anyhow::Result<()> {
 fn generate(config: &SynthConfig, path: &Path) -> anyhow::Result<synth::SynthSummary> {
     // The room's interreflection is solved once, before the first frame (about a
     // second), so that the frame rate the progress reports is the frames'.
-    synth::scene::Scene::room();
+    synth::interreflection::room();
     let bar = progress::bar(config.frames as u64, "rendering", "frames");
     let summary =
         synth::generate_with_progress(config, path, &mut |done, _| bar.set_position(done as u64));

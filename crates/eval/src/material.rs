@@ -2,7 +2,7 @@
 //! albedo of the surface each pixel sees.
 //!
 //! The truth stream stores no albedo; a recording made by `relume synth` shows the
-//! analytic room of [`relume_recording::synth::scene::Scene::room`], so each pixel's
+//! analytic room of [`relume_recording::synth::interreflection::room`], so each pixel's
 //! true albedo is that of the surface its view ray meets there. A pixel counts only
 //! where that ray's depth agrees with the stored true depth (within 1 mm + 0.1 %), so
 //! a recording of another room, or from another tool, scores no pixel rather than a
@@ -61,7 +61,7 @@ impl MaterialScorer {
         let synthetic = header.provenance.tool == "relume synth";
         MaterialScorer {
             albedo,
-            scene: synthetic.then(Scene::room),
+            scene: synthetic.then(relume_recording::synth::interreflection::room),
             intrinsics: header.depth_intrinsics,
             histogram: vec![0; (MAX_BINNED / BIN) as usize + 1],
             squared_error_sum: 0.0,
@@ -170,7 +170,7 @@ mod tests {
         let scorer = MaterialScorer::new("real_albedo".into(), &header);
         let eye = DVec3::new(1.5, 1.4, 1.8);
         let pose = Pose::from_parts(eye, look_at(eye, DVec3::new(-0.5, 0.2, -0.8)));
-        let scene = Scene::room();
+        let scene = relume_recording::synth::interreflection::room();
         let rotation = DMat3::from_quat(pose.rotation()).as_mat3();
         let (mut depth, mut albedo) = (Vec::new(), Vec::new());
         for y in 0..36 {

@@ -1,6 +1,7 @@
 //! Ray primitives of the synthetic scene: rays, axis-aligned boxes and spheres, and
 //! their intersection tests. Directions need not be unit length.
 
+use super::room::Surface;
 use glam::Vec3;
 
 /// A ray `origin + t * direction`. The direction need not be unit length; distances
@@ -26,6 +27,17 @@ impl Ray {
     pub fn at(&self, t: f32) -> Vec3 {
         self.origin + self.direction * t
     }
+}
+
+/// The first surface along a ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit.
+    pub t: f32,
+    pub position: Vec3,
+    /// Unit world-space normal, on the side the ray came from.
+    pub normal: Vec3,
+    pub surface: Surface,
 }
 
 /// An axis-aligned box.

@@ -1,60 +1,27 @@
-//! Interreflection in the synthetic room: the diffuse surfaces light each other, solved
-//! once for the static room and looked up per shaded point.
+//! The room's interreflection as a texel atlas: the indirect irradiance on every surface
+//! of the synthetic room, and its lookup at a shaded point. [`super::interreflection`]
+//! solves it.
 //!
 //! Every surface of the room (floor, ceiling, the four walls, the visible faces of the
-//! boxes, the sphere) is covered by a grid of texels about [`TEXEL_M`] on a side. The
-//! solution holds, per texel centre, the irradiance that arrives from the room itself
-//! (everything but the lights' direct light), found by Jacobi iteration of the rendering
-//! equation for Lambertian surfaces:
+//! boxes, the sphere) is covered by a grid of texels about [`TEXEL_M`] on a side, each
+//! holding the irradiance that arrives at its centre from the room itself (everything but
+//! the lights' direct light).
 //!
-//! E_ind^(k)(x) = mean over cosine-distributed directions w of rho(y) (E_dir(y) + E_ind^(k-1)(y)),
-//!
-//! where y is the first surface along w from x, rho its albedo and E_dir its direct
-//! irradiance from the two area lights (cosine sampling makes the estimator of
-//! E = integral of L cos dw the mean of pi L = rho E). Rays that reach a light add
-//! nothing here: the lights' radiance is direct light, sampled on their area by the
-//! renderer. Iteration stops after [`MAX_BOUNCES`] or when a bounce adds less than
-//! [`CONVERGED`] of the total.
-//!
-//! A shaded point reads E_ind by bilinear interpolation of its surface's grid, over the
+//! A shaded point reads it by bilinear interpolation of its surface's grid, over the
 //! texels whose centres are open (not inside a box, the sphere or behind a wall), so that
 //! the dark inside of a box does not bleed into the floor around it.
-//!
-//! The solution is a fixed function of the scene: its random numbers are keyed by
-//! [`SOLUTION_SEED`], not by a recording's seed, so every recording of the room shows the
-//! same interreflection and the truth renderer reads the same solution.
 
-use super::render::direct_irradiance;
+use super::geometry::{AxisBox, Hit, Sphere};
 use super::room::Surface;
-use super::scene::{AxisBox, Hit, Ray, Scene};
 use glam::Vec3;
-use rayon::prelude::*;
-use relume_base::rng::Counter;
 use std::f32::consts::PI;
 
 /// Side of a texel of the solution, metres (rounded per surface to a whole count).
 pub const TEXEL_M: f32 = 0.05;
-/// The most light bounces solved.
-pub const MAX_BOUNCES: usize = 32;
-/// A bounce that adds less than this fraction of the irradiance so far ends the solution.
-pub const CONVERGED: f32 = 0.002;
-/// Cosine-distributed gather rays per texel of the first bounce (the direct light
-/// reflected once: sharp shadows and the lights' bright patches), a stratified grid.
-pub const FIRST_GATHER_GRID: (u32, u32) = (16, 16);
-/// Gather rays per texel of each later bounce, whose light is already smooth.
-pub const LATER_GATHER_GRID: (u32, u32) = (8, 8);
-/// Stratified shadow rays per light of a texel's direct irradiance.
-pub const DIRECT_GRID: (u32, u32) = (8, 8);
-/// The key of the solution's random numbers.
-pub const SOLUTION_SEED: u64 = 0x4749_524f_4f4d;
-/// Purpose keys of the solution's random numbers.
-const DIRECT_PURPOSE: u64 = 11;
-const GATHER_PURPOSE: u64 = 12;
-
 /// A grid of texels over one planar face: texel (i, j) is centred at
 /// `corner + (i + 0.5) / nu * edge_u + (j + 0.5) / nv * edge_v`.
 #[derive(Clone, Debug, PartialEq)]
-struct FaceGrid {
+pub(super) struct FaceGrid {
     surface: Surface,
     corner: Vec3,
     edge_u: Vec3,
@@ -69,91 +36,41 @@ struct FaceGrid {
 
 /// The sphere's grid: `n_theta` rings from +y down, `n_phi` columns from +x towards +z.
 #[derive(Clone, Debug, PartialEq)]
-struct SphereGrid {
-    n_theta: usize,
-    n_phi: usize,
+pub(super) struct SphereGrid {
+    pub(super) n_theta: usize,
+    pub(super) n_phi: usize,
     first: usize,
 }
 
 /// The room's interreflection: indirect irradiance per texel of every surface.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IndirectLight {
-    faces: Vec<FaceGrid>,
-    sphere: SphereGrid,
+    pub(super) faces: Vec<FaceGrid>,
+    pub(super) sphere: SphereGrid,
     /// Indirect irradiance per texel (linear RGB).
-    irradiance: Vec<Vec3>,
+    pub(super) irradiance: Vec<Vec3>,
     /// Whether each texel's centre is open (a surface point light can reach).
-    open: Vec<bool>,
+    pub(super) open: Vec<bool>,
     /// Bounces solved.
     pub bounces: usize,
 }
 
 /// A texel centre to solve at: position, unit normal and its surface.
-struct Texel {
-    position: Vec3,
-    normal: Vec3,
-    surface: Surface,
+pub(super) struct Texel {
+    pub(super) position: Vec3,
+    pub(super) normal: Vec3,
+    pub(super) surface: Surface,
 }
 
 impl IndirectLight {
-    /// Solves the interreflection of `scene` (its lights, boxes, sphere and room).
-    pub fn solve(scene: &Scene) -> IndirectLight {
-        let mut layout = IndirectLight::layout(scene);
-        let texels = layout.texels(scene);
-        layout.open = texels.iter().map(|t| is_open(scene, t)).collect();
-        let direct: Vec<Vec3> = texels
-            .par_iter()
-            .enumerate()
-            .map(|(i, t)| {
-                let mut rng = Counter::new(&[SOLUTION_SEED, DIRECT_PURPOSE, i as u64]);
-                direct_irradiance(scene, t.position, t.normal, &mut rng, DIRECT_GRID)
-            })
-            .collect();
-        // Bounce k's light is gathered from bounce k - 1's alone (the direct light for
-        // the first), and the bounces are summed.
-        let mut previous = IndirectLight {
-            irradiance: direct,
-            ..layout.clone()
-        };
-        let mut solution = IndirectLight {
-            irradiance: vec![Vec3::ZERO; texels.len()],
-            ..layout
-        };
-        let total = |v: &[Vec3]| v.iter().map(|e| e.element_sum() as f64).sum::<f64>();
-        let direct_total = total(&previous.irradiance);
-        for bounce in 0..MAX_BOUNCES {
-            let grid = if bounce == 0 {
-                FIRST_GATHER_GRID
-            } else {
-                LATER_GATHER_GRID
-            };
-            let next: Vec<Vec3> = texels
-                .par_iter()
-                .enumerate()
-                .map(|(i, t)| {
-                    if !solution.open[i] {
-                        return Vec3::ZERO;
-                    }
-                    let mut rng =
-                        Counter::new(&[SOLUTION_SEED, GATHER_PURPOSE, bounce as u64, i as u64]);
-                    gather(scene, t, &previous, &mut rng, grid)
-                })
-                .collect();
-            for (sum, added) in solution.irradiance.iter_mut().zip(&next) {
-                *sum += *added;
-            }
-            solution.bounces = bounce + 1;
-            let added = total(&next);
-            previous.irradiance = next;
-            if added < CONVERGED as f64 * (direct_total + total(&solution.irradiance)) {
-                break;
-            }
-        }
-        solution
-    }
-
-    /// The grids of `scene`'s surfaces, with no values yet.
-    fn layout(scene: &Scene) -> IndirectLight {
+    /// The grids over the inside of `room`, the faces of `blocks` (all but the bottom,
+    /// which stands on the floor) and the sphere `ball`, with no values yet: every texel
+    /// open, zero irradiance.
+    pub fn layout(
+        room: &AxisBox,
+        blocks: impl IntoIterator<Item = AxisBox>,
+        ball: &Sphere,
+    ) -> IndirectLight {
         let mut faces = Vec::new();
         let mut count = 0usize;
         let mut add = |surface, corner: Vec3, edge_u: Vec3, edge_v: Vec3, normal: Vec3| {
@@ -171,18 +88,18 @@ impl IndirectLight {
             });
             count += nu * nv;
         };
-        for (surface, b, normal) in box_faces(&scene.room, true) {
+        for (surface, b, normal) in box_faces(room, true) {
             add(surface, b.0, b.1, b.2, normal);
         }
-        for (i, block) in scene.blocks.iter().enumerate() {
-            for (_, b, normal) in box_faces(&block.bounds, false) {
+        for (i, bounds) in blocks.into_iter().enumerate() {
+            for (_, b, normal) in box_faces(&bounds, false) {
                 // The bottom face stands on the floor: nothing reaches it.
                 if normal != Vec3::NEG_Y {
                     add(Surface::Block(i), b.0, b.1, b.2, normal);
                 }
             }
         }
-        let r = scene.ball.radius;
+        let r = ball.radius;
         let n_theta = (PI * r / TEXEL_M).ceil().max(2.0) as usize;
         let n_phi = (2.0 * PI * r / TEXEL_M).ceil().max(3.0) as usize;
         let sphere = SphereGrid {
@@ -200,8 +117,9 @@ impl IndirectLight {
         }
     }
 
-    /// Every texel centre, in the order of the solution's arrays.
-    fn texels(&self, scene: &Scene) -> Vec<Texel> {
+    /// Every texel centre, in the order of the solution's arrays (`ball` the sphere the
+    /// layout was made for).
+    pub(super) fn texels(&self, ball: &Sphere) -> Vec<Texel> {
         let mut texels = Vec::with_capacity(self.irradiance.len());
         for f in &self.faces {
             for j in 0..f.nv {
@@ -216,7 +134,6 @@ impl IndirectLight {
                 }
             }
         }
-        let ball = &scene.ball;
         for j in 0..self.sphere.n_theta {
             for i in 0..self.sphere.n_phi {
                 let n = sphere_direction(
@@ -347,129 +264,4 @@ fn box_faces(b: &AxisBox, inside: bool) -> Vec<(Surface, (Vec3, Vec3, Vec3), Vec
             Vec3::Z * sign,
         ),
     ]
-}
-
-/// Whether light can reach texel `t`: a point just off it, on its normal's side, lies
-/// inside the room and outside every box and the sphere.
-fn is_open(scene: &Scene, t: &Texel) -> bool {
-    let p = t.position + t.normal * 1e-3;
-    let inside = |b: &AxisBox| p.cmpgt(b.min).all() && p.cmplt(b.max).all();
-    inside(&scene.room)
-        && !scene.blocks.iter().any(|b| inside(&b.bounds))
-        && (t.surface == Surface::Ball || p.distance(scene.ball.center) > scene.ball.radius)
-}
-
-/// One bounce at texel `t`: the mean over `grid` stratified cosine-distributed rays of
-/// rho(y) E(y), E being the previous bounce's irradiance `previous` at the first
-/// surface y each ray meets (lights add nothing: they are direct light).
-fn gather(
-    scene: &Scene,
-    t: &Texel,
-    previous: &IndirectLight,
-    rng: &mut Counter,
-    grid: (u32, u32),
-) -> Vec3 {
-    let origin = t.position + t.normal * 1e-4;
-    let (tangent, bitangent) = t.normal.any_orthonormal_pair();
-    let (gu, gv) = grid;
-    let mut sum = Vec3::ZERO;
-    for j in 0..gv {
-        for i in 0..gu {
-            let u1 = (j as f32 + rng.next_f32()) / gv as f32;
-            let u2 = (i as f32 + rng.next_f32()) / gu as f32;
-            let r = u1.sqrt();
-            let (s, c) = (2.0 * PI * u2).sin_cos();
-            let z = (1.0 - u1).max(0.0).sqrt();
-            let direction = tangent * (r * c) + bitangent * (r * s) + t.normal * z;
-            let Some(hit) = scene.intersect(&Ray { origin, direction }, 0.0) else {
-                continue;
-            };
-            let material = scene.material(&hit);
-            if material.emission != Vec3::ZERO {
-                continue;
-            }
-            sum += material.albedo * previous.at(&hit);
-        }
-    }
-    sum / (gu * gv) as f32
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn grids_cover_every_surface_and_lookups_land_on_their_texel() {
-        let scene = Scene::room_without_interreflection();
-        let layout = IndirectLight::layout(&scene);
-        // Floor and ceiling 100 x 100, four walls 100 x 52, the boxes' five faces each,
-        // the sphere 22 x 44.
-        assert_eq!(layout.faces.len(), 6 + 4 * 5);
-        assert_eq!((layout.sphere.n_theta, layout.sphere.n_phi), (22, 44));
-        let texels = layout.texels(&scene);
-        assert_eq!(texels.len(), layout.irradiance.len());
-        // Each texel's own lookup returns its own value.
-        let mut marked = layout.clone();
-        for (k, v) in marked.irradiance.iter_mut().enumerate() {
-            *v = Vec3::splat(k as f32);
-        }
-        for (k, t) in texels.iter().enumerate().step_by(97) {
-            let got = marked.lookup(t.surface, t.position, t.normal);
-            let error = (got - Vec3::splat(k as f32)).abs().max_element();
-            assert!(!marked.open[k] || error < 0.01, "texel {k}: {got}");
-        }
-    }
-
-    /// The share of the irradiance at `position` (normal `normal`) that comes from the
-    /// room itself rather than straight from the lights.
-    fn room_share(scene: &Scene, surface: Surface, position: Vec3, normal: Vec3) -> f32 {
-        let mut rng = Counter::new(&[7]);
-        let direct = direct_irradiance(scene, position, normal, &mut rng, (32, 32));
-        let indirect = scene
-            .indirect
-            .as_ref()
-            .unwrap()
-            .lookup(surface, position, normal);
-        indirect.element_sum() / (direct + indirect).element_sum()
-    }
-
-    #[test]
-    fn the_room_lights_itself() {
-        let started = std::time::Instant::now();
-        let scene = Scene::room();
-        let solution = scene.indirect.as_ref().unwrap();
-        eprintln!(
-            "solved in {:?}, {} bounces",
-            started.elapsed(),
-            solution.bounces
-        );
-        assert!(solution.bounces >= 3);
-        // On the floor beside a wall: 10 cm from the west wall's green paint and the
-        // south wall's red, away from the boxes.
-        for (name, p) in [
-            ("west", Vec3::new(-2.4, 0.0, -0.3)),
-            ("south", Vec3::new(0.3, 0.0, 2.4)),
-            ("middle", Vec3::new(0.0, 0.0, 0.0)),
-        ] {
-            let share = room_share(&scene, Surface::Floor, p, Vec3::Y);
-            eprintln!(
-                "floor beside the {name} wall at {p}: {:.1} % from the room",
-                100.0 * share
-            );
-            if name != "middle" {
-                assert!(share >= 0.10, "{name}: {share}");
-            }
-        }
-        // Colour bleeding: the floor beside the red south wall gets redder indirect light
-        // than the floor beside the green west wall.
-        let west = solution.lookup(Surface::Floor, Vec3::new(-2.4, 0.0, -0.3), Vec3::Y);
-        let south = solution.lookup(Surface::Floor, Vec3::new(0.3, 0.0, 2.4), Vec3::Y);
-        assert!(
-            south.x / south.y > west.x / west.y,
-            "south {south} west {west}"
-        );
-        // The ceiling, which no light reaches directly, is lit by the room alone.
-        let ceiling = solution.lookup(Surface::Ceiling, Vec3::new(2.0, 2.6, 2.0), Vec3::NEG_Y);
-        assert!(ceiling.min_element() > 0.0, "{ceiling}");
-    }
 }

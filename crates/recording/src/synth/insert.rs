@@ -27,8 +27,8 @@
 //! rho / pi for exponent 0, rho (n + 2) / (2 pi) cos^n(alpha) about the mirror direction
 //! otherwise.
 
-use super::render::{View, direct_irradiance, pixel_direction};
-use super::scene::{Ray, Scene};
+use super::render::{View, pixel_direction};
+use super::scene::{Ray, Scene, direct_irradiance};
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::rng::Counter;
@@ -163,7 +163,7 @@ struct RoomPoint {
     albedo: Vec3,
     /// The room's own radiance there is light (an emitter's).
     emitter: bool,
-    hit: super::scene::Hit,
+    hit: super::geometry::Hit,
 }
 
 /// What a ray from a point meets first: the room, an object in front of it, or nothing.
@@ -460,7 +460,7 @@ mod tests {
 
     #[test]
     fn with_no_objects_the_truth_is_the_recorded_frame() {
-        let scene = Scene::room();
+        let scene = crate::synth::interreflection::room();
         let (view, recorded) = small_frame(&scene);
         let settings = TrueFrameSettings {
             paths: 8,
@@ -483,7 +483,7 @@ mod tests {
 
     #[test]
     fn pixels_the_objects_do_not_reach_keep_their_recorded_radiance_and_the_shadow_darkens() {
-        let scene = Scene::room();
+        let scene = crate::synth::interreflection::room();
         let (view, recorded) = small_frame(&scene);
         let ball = Ball {
             sphere: Sphere {
@@ -558,7 +558,7 @@ mod tests {
 
     #[test]
     fn pixels_left_out_keep_the_recorded_radiance() {
-        let scene = Scene::room();
+        let scene = crate::synth::interreflection::room();
         let (view, recorded) = small_frame(&scene);
         let ball = Ball {
             sphere: Sphere {

@@ -631,7 +631,7 @@ mod tests {
 
     #[test]
     fn faces_face_the_viewer_and_textures_hold_the_material() {
-        let scene = Scene::room();
+        let scene = crate::synth::interreflection::room();
         let faces = faces(&scene);
         // 6 room surfaces; blocks 0, 1, 2: 5 faces each; block 3 also stands on the
         // north wall: 4.
@@ -702,7 +702,14 @@ mod tests {
             normals: None,
             albedo: Vec3::splat(0.5),
         };
-        export_scene(dir.path(), &Scene::room(), &[view], &[object], 4.0).unwrap();
+        export_scene(
+            dir.path(),
+            &crate::synth::interreflection::room(),
+            &[view],
+            &[object],
+            4.0,
+        )
+        .unwrap();
         let xml = std::fs::read_to_string(dir.path().join("scene.xml")).unwrap();
         assert!(xml.contains("<scene version=\"3.0.0\">"));
         assert_eq!(xml.matches("<sensor ").count(), 1);

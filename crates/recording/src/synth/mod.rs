@@ -35,6 +35,7 @@ pub mod depth_noise;
 pub mod geometry;
 pub mod indirect;
 pub mod insert;
+pub mod interreflection;
 pub mod mitsuba;
 pub mod render;
 pub mod room;
@@ -262,7 +263,8 @@ pub fn scene_truth() -> SceneTruth {
 /// The header of the recording of `config`, with the rendered environment map.
 pub fn header(config: &SynthConfig) -> Header {
     let (env_width, env_height) = ENVIRONMENT_SIZE;
-    let env = render::render_environment(&Scene::room(), config.seed, env_width, env_height);
+    let env =
+        render::render_environment(&interreflection::room(), config.seed, env_width, env_height);
     let intrinsics = config.intrinsics();
     Header {
         name: "synthetic-room".into(),
@@ -393,7 +395,7 @@ pub fn generate_with_progress(
     config
         .validate()
         .map_err(|reason| invalid(format!("invalid synthetic recording settings: {reason}")))?;
-    let scene = Scene::room();
+    let scene = interreflection::room();
     let mut writer = RecordingWriter::create(path, &header(config))?;
     for frame in 0..config.frames {
         for record in frame_records(config, &scene, frame).map_err(invalid)? {

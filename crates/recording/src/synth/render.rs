@@ -5,7 +5,7 @@
 //! Every random number is drawn from [`relume_base::rng::Counter`] keyed by (seed, frame,
 //! purpose, pixel), so the images are the same for any number of threads.
 
-use super::scene::{Hit, OBJECT_POSITION, Ray, Scene};
+use super::scene::{Hit, OBJECT_POSITION, Ray, Scene, direct_irradiance};
 use crate::types::Intrinsics;
 use glam::{Mat3, Vec3};
 use rayon::prelude::*;
@@ -36,7 +36,7 @@ pub const ENVIRONMENT_FRAME: u64 = u64::MAX;
 /// Radiance leaving `hit` back along the ray: an emitter's radiance, or for diffuse
 /// surfaces albedo / pi times the irradiance: the direct light of both rectangles
 /// (`grid` stratified shadow rays each, [`direct_irradiance`]) plus the light the room
-/// reflects onto the point ([`Scene::indirect_irradiance`]).
+/// reflects onto the point ([`Scene::indirect_irradiance`], solved by [`super::interreflection`]).
 pub fn shade(scene: &Scene, hit: &Hit, rng: &mut Counter, grid: (u32, u32)) -> Vec3 {
     let material = scene.material(hit);
     if material.emission != Vec3::ZERO {
@@ -44,43 +44,6 @@ pub fn shade(scene: &Scene, hit: &Hit, rng: &mut Counter, grid: (u32, u32)) -> V
     }
     let direct = direct_irradiance(scene, hit.position, hit.normal, rng, grid);
     material.albedo * ((direct + scene.indirect_irradiance(hit)) / PI)
-}
-
-/// The irradiance at `position` (unit `normal`) from both area lights: for each, `grid`
-/// stratified points on its area (one jittered sample per cell), each weighted by
-/// cos_here cos_light / d^2 when no box or the sphere blocks it.
-pub fn direct_irradiance(
-    scene: &Scene,
-    position: Vec3,
-    normal: Vec3,
-    rng: &mut Counter,
-    grid: (u32, u32),
-) -> Vec3 {
-    let origin = position + normal * 1e-4;
-    let samples = (grid.0 * grid.1).max(1) as f32;
-    let mut irradiance = Vec3::ZERO;
-    for light in &scene.lights {
-        let occluders = scene.occluders_towards(origin, light);
-        let mut geometry_sum = 0.0f32;
-        for j in 0..grid.0 {
-            for k in 0..grid.1 {
-                let u = (j as f32 + rng.next_f32()) / grid.0 as f32;
-                let v = (k as f32 + rng.next_f32()) / grid.1 as f32;
-                let q = light.point(u, v);
-                let w = q - origin;
-                // cos_here * cos_light / d^2 with unnormalized w: no square root.
-                let here = normal.dot(w);
-                let there = -light.normal.dot(w);
-                if here <= 0.0 || there <= 0.0 || scene.occluded_by(occluders, origin, q) {
-                    continue;
-                }
-                let d2 = w.length_squared();
-                geometry_sum += here * there / (d2 * d2);
-            }
-        }
-        irradiance += light.radiance * (geometry_sum * light.area() / samples);
-    }
-    irradiance
 }
 
 /// A pinhole view: camera-to-world rotation (camera x right, y down, z forward) and
@@ -222,7 +185,7 @@ mod tests {
 
     #[test]
     fn lit_floor_is_brighter_than_shadowed_floor_and_emitters_return_their_radiance() {
-        let scene = Scene::room();
+        let scene = crate::synth::interreflection::room();
         let down = |x: f32, z: f32| Ray {
             origin: Vec3::new(x, 2.0, z),
             direction: Vec3::NEG_Y,
@@ -252,7 +215,7 @@ mod tests {
 
     #[test]
     fn depth_is_camera_z_and_normals_face_the_camera() {
-        let scene = Scene::room();
+        let scene = crate::synth::interreflection::room();
         let intrinsics = Intrinsics::PRIMESENSE.scaled_to(32, 24);
         // Camera at the room centre looking down +x (world): camera z = world +x,
         // camera x = world +z, camera y = world -y.

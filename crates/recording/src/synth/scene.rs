@@ -9,30 +9,22 @@
 //! The scene is fixed: it does not depend on the seed or on any setting, so every
 //! recording shows the same room.
 
-pub use super::geometry::{AxisBox, Ray, Sphere, ray_box_entry, ray_sphere, segment_crosses_box};
+pub use super::geometry::{
+    AxisBox, Hit, Ray, Sphere, ray_box_entry, ray_sphere, segment_crosses_box,
+};
 use super::indirect::IndirectLight;
 pub use super::room::{ROOM_MAX, ROOM_MIN, Surface};
 pub use super::texture::BlockTexture;
 use super::texture::{BALL_ALBEDO, block_albedo, room_albedo};
 use glam::Vec3;
-use std::sync::{Arc, OnceLock};
+use relume_base::rng::Counter;
+use std::sync::Arc;
 
 /// Centre of the free spot left for a virtual object: 0.3 m above the middle of the
 /// floor, so a sphere of radius 0.3 m placed here rests on the floor.
 pub const OBJECT_POSITION: Vec3 = Vec3::new(0.0, 0.3, 0.0);
 /// [`OBJECT_POSITION`] in double precision, as stored in the header.
 pub const OBJECT_POSITION_F64: glam::DVec3 = glam::DVec3::new(0.0, 0.3, 0.0);
-
-/// The first surface along a ray.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Hit {
-    /// Ray parameter of the hit.
-    pub t: f32,
-    pub position: Vec3,
-    /// Unit world-space normal, on the side the ray came from.
-    pub normal: Vec3,
-    pub surface: Surface,
-}
 
 /// Reflectance and emission of a surface point (linear RGB).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,24 +87,12 @@ pub struct Scene {
     pub ball: Sphere,
     /// The ceiling light and the window.
     pub lights: [RectLight; 2],
-    /// The light the surfaces reflect onto each other, solved once ([`IndirectLight`]);
+    /// The light the surfaces reflect onto each other, solved once ([`super::interreflection::room`]);
     /// `None` lights the room by the two lights' direct light alone.
     pub indirect: Option<Arc<IndirectLight>>,
 }
 
 impl Scene {
-    /// The room every synthetic recording shows, with its interreflection (solved on the
-    /// first call, in about a second on two cores, and kept for the process).
-    pub fn room() -> Scene {
-        static ROOM: OnceLock<Scene> = OnceLock::new();
-        ROOM.get_or_init(|| {
-            let mut scene = Scene::room_without_interreflection();
-            scene.indirect = Some(Arc::new(IndirectLight::solve(&scene)));
-            scene
-        })
-        .clone()
-    }
-
     /// The room's geometry, materials and lights, lit by direct light alone.
     pub fn room_without_interreflection() -> Scene {
         let block = |min: [f32; 3], max: [f32; 3], texture| Block {
@@ -274,6 +254,43 @@ impl Scene {
     }
 }
 
+/// The irradiance at `position` (unit `normal`) from both area lights: for each, `grid`
+/// stratified points on its area (one jittered sample per cell), each weighted by
+/// cos_here cos_light / d^2 when no box or the sphere blocks it.
+pub fn direct_irradiance(
+    scene: &Scene,
+    position: Vec3,
+    normal: Vec3,
+    rng: &mut Counter,
+    grid: (u32, u32),
+) -> Vec3 {
+    let origin = position + normal * 1e-4;
+    let samples = (grid.0 * grid.1).max(1) as f32;
+    let mut irradiance = Vec3::ZERO;
+    for light in &scene.lights {
+        let occluders = scene.occluders_towards(origin, light);
+        let mut geometry_sum = 0.0f32;
+        for j in 0..grid.0 {
+            for k in 0..grid.1 {
+                let u = (j as f32 + rng.next_f32()) / grid.0 as f32;
+                let v = (k as f32 + rng.next_f32()) / grid.1 as f32;
+                let q = light.point(u, v);
+                let w = q - origin;
+                // cos_here * cos_light / d^2 with unnormalized w: no square root.
+                let here = normal.dot(w);
+                let there = -light.normal.dot(w);
+                if here <= 0.0 || there <= 0.0 || scene.occluded_by(occluders, origin, q) {
+                    continue;
+                }
+                let d2 = w.length_squared();
+                geometry_sum += here * there / (d2 * d2);
+            }
+        }
+        irradiance += light.radiance * (geometry_sum * light.area() / samples);
+    }
+    irradiance
+}
+
 /// Where a ray from inside `room` leaves it: parameter, inward unit normal and surface.
 pub fn ray_room_exit(ray: &Ray, room: &AxisBox) -> Option<(f32, Vec3, Surface)> {
     let mut best: Option<(f32, Vec3, Surface)> = None;
@@ -331,7 +348,7 @@ mod tests {
 
     #[test]
     fn rays_from_inside_leave_the_room_through_the_right_surface() {
-        let room = Scene::room().room;
+        let room = Scene::room_without_interreflection().room;
         let (t, n, s) = ray_room_exit(&Ray::new([0.0, 1.0, 0.0], [0.0, -1.0, 0.0]), &room).unwrap();
         assert_eq!((t, n, s), (1.0, Vec3::Y, Surface::Floor));
         let (t, n, s) = ray_room_exit(&Ray::new([0.0, 1.0, 0.0], [1.0, 0.1, 0.0]), &room).unwrap();
@@ -341,7 +358,7 @@ mod tests {
 
     #[test]
     fn scene_hits_objects_lights_and_shadows() {
-        let scene = Scene::room();
+        let scene = Scene::room_without_interreflection();
         // Straight up from the room centre: the ceiling light.
         let up = scene
             .intersect(&Ray::new([0.0, 1.0, 0.0], [0.0, 1.0, 0.0]), 0.0)
@@ -372,7 +389,7 @@ mod tests {
 
     #[test]
     fn culled_occluder_sets_give_the_same_shadows() {
-        let scene = Scene::room();
+        let scene = Scene::room_without_interreflection();
         let mut rng = relume_base::rng::Counter::new(&[3]);
         let mut blocked = 0;
         for _ in 0..20_000 {
@@ -413,7 +430,7 @@ mod tests {
 
     #[test]
     fn albedos_stay_in_a_plausible_range() {
-        let scene = Scene::room();
+        let scene = Scene::room_without_interreflection();
         for i in 0..2000 {
             let a = i as f32 * 0.37;
             let dir = Vec3::new(a.cos(), (a * 0.61).sin(), a.sin());

@@ -478,7 +478,7 @@ fn results_are_bit_identical_for_any_thread_count() {
 /// white balance +-20 %), so the true map is M_0 M_t^-1.
 #[test]
 fn synthetic_recording_with_a_perfect_reference_gives_the_true_maps() {
-    use relume_recording::synth::{SynthConfig, frame_records, scene::Scene};
+    use relume_recording::synth::{SynthConfig, frame_records};
     let config = SynthConfig {
         frames: 30,
         width: 160,
@@ -486,7 +486,7 @@ fn synthetic_recording_with_a_perfect_reference_gives_the_true_maps() {
         depth_noise: false,
         ..SynthConfig::default()
     };
-    let scene = Scene::room();
+    let scene = relume_recording::synth::interreflection::room();
     let row_major = |m: &[f32; 9]| Mat3::from_cols_array(m).transpose();
     let frames: Vec<(Rgb8Image, Vec<Vec3>, Mat3)> = (0..config.frames)
         .map(|i| {

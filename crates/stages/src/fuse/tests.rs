@@ -52,7 +52,7 @@ fn synthetic_depth(config: &SynthConfig, scene: &Scene, frame: usize) -> DepthFr
 }
 
 fn synthetic_frames(config: &SynthConfig) -> Vec<DepthFrame> {
-    let scene = Scene::room();
+    let scene = synth::interreflection::room();
     (0..config.frames)
         .map(|n| synthetic_depth(config, &scene, n))
         .collect()
@@ -71,7 +71,7 @@ fn the_depth_only_synthesis_matches_the_generator() {
     generate(&config, &path).unwrap();
     let replay = Replay::open(&path, ReplayOptions::default()).unwrap();
     let unit = replay.recording.header().depth_unit_m;
-    let scene = Scene::room();
+    let scene = synth::interreflection::room();
     for n in 0..config.frames {
         let f = replay.read_frame(n).unwrap();
         let (raw, clean, pose) = synthetic_depth(&config, &scene, n);

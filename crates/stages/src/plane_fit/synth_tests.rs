@@ -5,7 +5,7 @@ use super::*;
 use crate::normals::{CrossParams, cross_normals};
 use crate::points::depth_to_points;
 use relume_base::raster::{DepthImage, Vec3Image};
-use relume_recording::synth::{DEPTH_UNIT_M, SynthConfig, frame_records, scene::Scene};
+use relume_recording::synth::{DEPTH_UNIT_M, SynthConfig, frame_records};
 use relume_recording::{Record, codec};
 
 /// One frame of the synthetic room: camera, raw depth, truth normals (zero: no surface),
@@ -21,7 +21,12 @@ fn synth_frame(
         height,
         ..SynthConfig::default()
     };
-    let records = frame_records(&config, &Scene::room(), frame).unwrap();
+    let records = frame_records(
+        &config,
+        &relume_recording::synth::interreflection::room(),
+        frame,
+    )
+    .unwrap();
     let (mut depth, mut truth, mut truth_depth) = (None, None, None);
     for record in records {
         match record {

@@ -112,15 +112,20 @@ fn compare_runs_acquisition_once_and_scores_each_pipeline_as_eval_does() {
             "{id} is on the page"
         );
     }
-    // Four images per variant and frame: composite and difference; one reference.
+    // Per variant and frame its composite and its differences from the reference and
+    // from the truth (the recording is `relume synth`'s); one reference, one truth.
     let frame = out.join("frames/000014");
     assert!(frame.join("reference.png").is_file());
+    assert!(frame.join("truth.png").is_file());
     for v in variants {
         let label = v["label"].as_str().unwrap();
-        for kind in ["composite", "difference"] {
+        for kind in ["composite", "difference", "truth_difference"] {
             assert!(frame.join(format!("{label}.{kind}.png")).is_file());
         }
+        let truth = &v["scores"]["composite.differential"]["psnr_db_truth"];
+        assert!(truth.as_f64().is_some_and(|p| p > 10.0), "{label}: {truth}");
     }
+    assert!(page.contains("<th>psnr_db against the truth</th>"));
     check_page_in_browser(&out.join("index.html"));
 }
 

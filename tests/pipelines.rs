@@ -337,6 +337,28 @@ fn the_dit_pipeline_is_the_default_chain_with_the_impostor_traced() {
     assert!(path.params.bool("visibility"));
 }
 
+/// The light-probe pipeline is the default chain with the recording's probe in place of
+/// the cloud's impostor, nothing else changed: scored against the truth beside the
+/// default, the difference is what capture misses.
+#[test]
+fn the_probe_pipeline_is_the_default_chain_lit_by_the_recordings_probe() {
+    let swaps = [
+        (
+            "-> light.impostor -> light.importance ->",
+            "-> light.envmap -> light.importance ->",
+        ),
+        (
+            "# --- Light: from the reconstructed cloud, centred on the objects. ---",
+            "# --- Light: the recording's light probe, seen from the objects' spot. ---",
+        ),
+        ("kind = \"light.impostor\"\n", "kind = \"light.envmap\"\n"),
+    ];
+    let p = assert_twin("mixed-reality", "mixed-reality-probe", &swaps);
+    let probe = p.stages.iter().find(|s| s.kind == "light.envmap").unwrap();
+    assert_eq!(probe.params.str("source"), "attachment");
+    assert!(p.stages.iter().all(|s| s.kind != "light.impostor"));
+}
+
 /// The Voxel Cone Tracing pipeline with temporal reuse is the default chain with the
 /// voxel volume built and the query swapped, nothing else changed.
 #[test]

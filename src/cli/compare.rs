@@ -323,7 +323,9 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     for f in &mut comparison.images {
         for v in &mut f.variants {
             let b = labels.iter().position(|l| *l == v.label).unwrap_or(0);
-            v.psnr_db = scored_psnr(&comparison.variants[b], f.frame);
+            v.psnr_db = scored_psnr(&comparison.variants[b], f.frame, "psnr_db_by_frame");
+            v.psnr_db_truth =
+                scored_psnr(&comparison.variants[b], f.frame, "psnr_db_truth_by_frame");
         }
     }
     comparison.wall_s = started.elapsed().as_secs_f64();
@@ -401,14 +403,15 @@ fn composite_stage(pipeline: &Pipeline) -> Option<&relume::graph::ResolvedStage>
         .find(|s| s.kind == "composite.differential")
 }
 
-/// The composite PSNR that a variant's scores hold for `frame`.
-fn scored_psnr(variant: &Variant, frame: usize) -> Option<f64> {
+/// The composite PSNR that a variant's scores hold for `frame` under `key` (one value
+/// per scored frame).
+fn scored_psnr(variant: &Variant, frame: usize, key: &str) -> Option<f64> {
     let composite = &variant.scores[variant.composite_stage.as_deref()?];
     let frames = composite["scored_frames"].as_array()?;
     let at = frames
         .iter()
         .position(|f| f.as_u64() == Some(frame as u64))?;
-    composite["psnr_db_by_frame"][at].as_f64()
+    composite[key][at].as_f64()
 }
 
 /// On a frame the evaluator just scored against a reference composite: saves the
@@ -457,6 +460,7 @@ fn save_images(
             images.push(FrameImages {
                 frame: frame.index,
                 reference: save("reference", &reference)?,
+                truth: None,
                 variants: Vec::new(),
             });
             let path = images[images.len() - 1].reference.clone();
@@ -480,12 +484,31 @@ fn save_images(
         &format!("{label}.difference"),
         &report::images::difference(&own, &reference),
     )?;
+    // The true frame: saved once per frame (the pipelines' objects are the same where
+    // the truths are; the first is shown).
+    let truths = evaluator.true_composites();
+    let truth = truths.iter().find(|t| t.frame == frame.index);
+    let truth_difference = match truth {
+        Some(t) => {
+            let truth = report::images::on_lattice(&t.image, stride);
+            if images[entry].truth.is_none() {
+                images[entry].truth = Some(save("truth", &truth)?);
+            }
+            Some(save(
+                &format!("{label}.truth_difference"),
+                &report::images::difference(&own, &truth),
+            )?)
+        }
+        None => None,
+    };
     images[entry].variants.push(VariantImages {
         label: label.to_string(),
         reference: reference_path,
         composite,
         difference,
         psnr_db: None,
+        truth_difference,
+        psnr_db_truth: None,
     });
     Ok(())
 }

@@ -43,12 +43,18 @@ Scores (per stage, keyed by the stage's name):
   composite.differential
                     psnr_db of the final image against the composite of the references;
                     psnr_db_unfiltered (the composite of the unfiltered layers);
-                    psnr_db_by_frame (psnr_db of each scored frame)
+                    psnr_db_by_frame (psnr_db of each scored frame); on recordings of
+                    `relume synth`, against the true frame (the room with the objects
+                    really in it, path traced): psnr_db_truth, psnr_db_truth_differential
+                    (pixels off the objects the truth changes by more than one level:
+                    shadows, bleeding), psnr_db_truth_objects, shadow_ratio_bias (the
+                    composite's ratio to the camera frame minus the truth's, in its
+                    shadows), truth_noise_psnr_db (the truth's own error)
 
-The 1024-sample references cost most of an eval at 640x480: about 25 s per scored frame
-on 2 cores (the default pipeline's eval of the built-in recording takes 1 minute, its
-replay 12 s). --reference-stride 4 computes them on every 4th pixel in x and y, 16 times
-faster.
+The 1024-sample references and the true frame cost most of an eval at 640x480: about 30 s
+each per scored frame on 2 cores (the default pipeline's eval of the built-in recording
+takes 2.3 minutes, its replay 12 s). --reference-stride 4 computes them on every 4th
+pixel in x and y, 16 times faster.
 
 Examples:
   relume synth -o room.relume && relume eval room.relume -p pipelines/acquisition.toml
@@ -63,7 +69,9 @@ pub struct EvalArgs {
     #[command(flatten)]
     run: RunArgs,
     /// Print the scores as JSON: {recording, pipeline, frames, interrupted,
-    /// ground_truth, stages: {<stage name>: {kind, <score keys>}}}.
+    /// ground_truth, stages: {<stage name>: {kind, <score keys>}}, scoring_costs:
+    /// {reference_render_s, truth_render_s} (seconds per scored frame; only with a
+    /// scored composite)}.
     #[arg(long)]
     json: bool,
     /// Directory for files that `write` stages of the pipeline save (default: a temporary
@@ -166,6 +174,10 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
     doc.insert("recording".into(), path.clone().into());
     doc.insert("pipeline".into(), loaded.pipeline.name.clone().into());
     doc.insert("interrupted".into(), run.interrupted.into());
+    let costs = evaluator.scoring_costs();
+    if let Some(costs) = &costs {
+        doc.insert("scoring_costs".into(), costs.clone());
+    }
     if a.json {
         outln!("{}", serde_json::to_string_pretty(&report)?)?;
         return Ok(status);
@@ -196,6 +208,13 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
                 outln!("  (nothing to score without ground truth)")?;
             }
         }
+    }
+    if let Some(costs) = costs {
+        outln!(
+            "scoring cost per scored frame: references {} s, truth {} s",
+            score_text(&costs["reference_render_s"]),
+            score_text(&costs["truth_render_s"])
+        )?;
     }
     Ok(status)
 }

@@ -9,10 +9,28 @@
 //!   (what the filter buys; absent without a `sample.path`);
 //! - `psnr_db_by_frame`: `psnr_db` of each scored frame alone, in `scored_frames` order.
 //!
-//! There is no score against a ground-truth render with the objects really in the
-//! room: the synthetic generator renders the room without them.
+//! On recordings of the synthetic room, the same frames and pixels are scored against
+//! the true frame as well ([`super::true_frame`]: the room with the objects really in
+//! it), the model-consistent scores above separating noise from the model's own error:
+//! - `psnr_db_truth`: the whole frame against the truth;
+//! - `psnr_db_truth_differential`: over the differential region, the pixels off the
+//!   objects where the truth differs from the recorded frame by more than one level in
+//!   a channel (shadows, bleeding, reflections); `differential_pixels` counts them;
+//! - `psnr_db_truth_objects`: over the objects' own pixels (`object_pixels`);
+//! - `shadow_ratio_bias`: in the shadow region (the differential region where the truth
+//!   is darker than the recorded frame), the mean over pixels and channels of the
+//!   composite's ratio to the recorded frame minus the truth's, both in the camera's
+//!   linear values (negative: shadows too dark); channels below level 16 or clipped in
+//!   the recorded frame are left out;
+//! - `truth_noise_psnr_db`: the truth's own error (one standard error, in levels) as a
+//!   PSNR over the pixels it changed: a method scored far below it is scored on its
+//!   own error, not the truth's;
+//! - `psnr_db_truth_by_frame`.
+//!
+//! What the references and the truth cost is reported apart ([`CompositeScorer::costs`]).
 
 use super::sampling::ReferenceLayers;
+use super::true_frame::{TrueComposite, linear_of_level};
 use glam::Vec3;
 use relume_base::raster::Rgb8Image;
 use relume_graph::{Frame, ResolvedStage};
@@ -21,6 +39,7 @@ use relume_stages::composite::{
 };
 use relume_stages::kind::FrameProducts;
 use serde_json::{Value, json};
+use std::sync::Arc;
 
 /// Scores a `composite.differential` stage.
 pub struct CompositeScorer {
@@ -38,6 +57,26 @@ pub struct CompositeScorer {
     by_frame: Vec<f64>,
     /// The reference composite of each scored frame (for viewing beside the stage's).
     references: Vec<(usize, Rgb8Image)>,
+    /// Seconds each scored frame's reference layers took.
+    reference_render_s: Vec<f64>,
+    /// The scores against the true frames, when the recording has them.
+    truth: TruthScores,
+}
+
+/// Sums of the scores against the true frames.
+#[derive(Default)]
+struct TruthScores {
+    /// The true frames scored against, in `scored_frames` order.
+    frames: Vec<Arc<TrueComposite>>,
+    /// Squared 8-bit errors and their channel counts: whole frame, differential
+    /// region, objects, and the truth's own noise over the pixels it changed.
+    whole: (f64, u64),
+    differential: (f64, u64),
+    objects: (f64, u64),
+    noise: (f64, u64),
+    /// Sum and count of the ratio errors in the shadow region.
+    shadow_bias: (f64, u64),
+    by_frame: Vec<f64>,
 }
 
 impl CompositeScorer {
@@ -56,6 +95,8 @@ impl CompositeScorer {
             values: 0,
             by_frame: Vec::new(),
             references: Vec::new(),
+            reference_render_s: Vec::new(),
+            truth: TruthScores::default(),
         }
     }
 
@@ -86,11 +127,13 @@ impl CompositeScorer {
         Ok(out.final_color)
     }
 
-    /// Scores `frame` when `reference` holds its reference layers.
+    /// Scores `frame` when `reference` holds its reference layers, and against
+    /// `truth` when the recording has a true frame for it.
     pub fn observe(
         &mut self,
         frame: &Frame,
         reference: Option<&ReferenceLayers>,
+        truth_frame: Option<&Arc<TrueComposite>>,
     ) -> Result<(), String> {
         let Some(reference) = reference.filter(|r| r.frame == frame.index) else {
             return Ok(());
@@ -124,7 +167,27 @@ impl CompositeScorer {
         self.by_frame.push(psnr_db(squared / values.max(1) as f64));
         self.scored_frames.push(frame.index);
         self.references.push((frame.index, truth));
+        self.reference_render_s.push(reference.render_s);
+        if let Some(t) = truth_frame {
+            self.truth.observe(own, t);
+        }
         Ok(())
+    }
+
+    /// The true frames scored against, as (frame, true frame).
+    pub fn truths(&self) -> &[Arc<TrueComposite>] {
+        &self.truth.frames
+    }
+
+    /// What scoring cost, per scored frame: `reference_render_s` (the reference layers;
+    /// shared references: what the evaluator that computed them took) and
+    /// `truth_render_s` (the true frame). Timings, so not among the scores, which are
+    /// the same on every run.
+    pub fn costs(&self) -> Value {
+        json!({
+            "reference_render_s": self.reference_render_s,
+            "truth_render_s": self.truth.frames.iter().map(|t| t.render_s).collect::<Vec<_>>(),
+        })
     }
 
     /// The reference composite of each scored frame, as (frame, image). Off the
@@ -150,8 +213,84 @@ impl CompositeScorer {
         if self.unfiltered.is_some() {
             report["psnr_db_unfiltered"] = json!(psnr(self.squared_unfiltered));
         }
+        if let Value::Object(truth) = self.truth.report() {
+            report
+                .as_object_mut()
+                .into_iter()
+                .for_each(|r| r.extend(truth.clone()));
+        }
         report
     }
+}
+
+impl TruthScores {
+    /// Scores the composite `own` against the true frame `t` on its lattice.
+    fn observe(&mut self, own: &Rgb8Image, t: &Arc<TrueComposite>) {
+        let mut frame = (0.0f64, 0u64);
+        for i in (0..own.data.len()).filter(|&i| t.has_pixel(i)) {
+            let (mine, truth, camera) = (own.data[i], t.image.data[i], t.camera.data[i]);
+            let error = level_distance(mine, truth);
+            frame.0 += error;
+            frame.1 += 3;
+            let changed = t.object[i] || t.noise_levels[i] > 0.0;
+            if changed {
+                let sigma = t.noise_levels[i] as f64;
+                self.noise.0 += 3.0 * sigma * sigma;
+                self.noise.1 += 3;
+            }
+            if t.object[i] {
+                self.objects.0 += error;
+                self.objects.1 += 3;
+                continue;
+            }
+            let differs = (0..3).any(|c| truth[c].abs_diff(camera[c]) > 1);
+            if !differs {
+                continue;
+            }
+            self.differential.0 += error;
+            self.differential.1 += 3;
+            let darker = (0..3)
+                .map(|c| truth[c] as i32 - camera[c] as i32)
+                .sum::<i32>()
+                < 0;
+            if darker {
+                for c in (0..3).filter(|&c| (16..255).contains(&camera[c])) {
+                    let base = linear_of_level(camera[c], t.contrast);
+                    let ratio = |level: u8| linear_of_level(level, t.contrast) / base;
+                    self.shadow_bias.0 += (ratio(mine[c]) - ratio(truth[c])) as f64;
+                    self.shadow_bias.1 += 1;
+                }
+            }
+        }
+        self.whole.0 += frame.0;
+        self.whole.1 += frame.1;
+        self.by_frame.push(psnr_db(frame.0 / frame.1.max(1) as f64));
+        self.frames.push(t.clone());
+    }
+
+    fn report(&self) -> Value {
+        if self.frames.is_empty() {
+            return Value::Null;
+        }
+        let psnr =
+            |(squared, values): (f64, u64)| (values > 0).then(|| psnr_db(squared / values as f64));
+        json!({
+            "psnr_db_truth": psnr(self.whole),
+            "psnr_db_truth_differential": psnr(self.differential),
+            "psnr_db_truth_objects": psnr(self.objects),
+            "differential_pixels": self.differential.1 / 3,
+            "object_pixels": self.objects.1 / 3,
+            "shadow_ratio_bias": (self.shadow_bias.1 > 0)
+                .then(|| self.shadow_bias.0 / self.shadow_bias.1 as f64),
+            "truth_noise_psnr_db": psnr(self.noise),
+            "psnr_db_truth_by_frame": self.by_frame,
+        })
+    }
+}
+
+/// The squared distance of two 8-bit colors, summed over the channels.
+fn level_distance(a: [u8; 3], b: [u8; 3]) -> f64 {
+    (0..3).map(|c| (a[c] as f64 - b[c] as f64).powi(2)).sum()
 }
 
 /// The sum of squared 8-bit differences over the pixels `scored` keeps, all channels.

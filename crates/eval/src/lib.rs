@@ -16,6 +16,7 @@
 //! | `sample.dir`, `sample.val` | `ratio_rmse`, `ratio_rmse_all`, `frames_scored`, `scored_frames`, `region_pixels` (against the default `sample.path`'s 1024-sample references on the renderer's inputs; see [`renderer`]) | no |
 //! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `mse_unfiltered_by_layer`, `mse_filtered_by_layer` (per layer: E_R^dir, E_R^ind, E_RV^dir, E_RV^ind), `temporal_flicker`, `temporal_flicker_spatial_only`, `flicker_as_configured`, `frames_scored`, `scored_frames` (against the same references; see [`filter`]) | no |
 //! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `psnr_db_by_frame`, `frames_scored`, `scored_frames` (against a composite of the references; see [`composite`]) | no |
+//! | `composite.differential` | `psnr_db_truth`, `psnr_db_truth_differential`, `psnr_db_truth_objects`, `shadow_ratio_bias`, `differential_pixels`, `object_pixels`, `truth_noise_psnr_db`, `psnr_db_truth_by_frame` (against the true frame with the objects in the room, on recordings of `relume synth`; `truth_unavailable` says why a recording of another generator version has none; see [`composite`] and [`true_frame`]) | yes |
 //!
 //! Ground truth comes from the recording's truth stream (synthetic recordings).
 
@@ -31,6 +32,7 @@ mod ports;
 pub mod renderer;
 pub mod report;
 pub mod sampling;
+pub mod true_frame;
 mod truth;
 
 pub use depth::forward_warp;
@@ -41,6 +43,7 @@ use relume_graph::{Frame, Pipeline, ResolvedStage};
 use relume_recording::{Header, StreamKind};
 use relume_stages::sample::{RENDERERS, renderer_kind};
 use serde_json::{Map, Value, json};
+use std::sync::Arc;
 
 enum Scorer {
     Depth(depth::DepthScorer),
@@ -87,6 +90,12 @@ pub struct Evaluator {
     scorers: Vec<(String, &'static str, Scorer)>,
     /// The many-sample references, when a scorer needs them.
     references: Option<sampling::ReferenceSchedule>,
+    /// The true frames with the objects in the room, when the recording is the
+    /// synthetic room and a composite is scored.
+    truths: Option<true_frame::TruthRenderer>,
+    /// Why a recording of `relume synth` has no true frame (another generator version).
+    truth_unavailable: Option<String>,
+    reference_stride: u32,
     frames: usize,
     frames_with_truth: usize,
 }
@@ -304,9 +313,21 @@ impl Evaluator {
         let references = runner.filter(|_| needs_references).map(|r| {
             sampling::ReferenceSchedule::new(r, options.reference_stride, options.frames.clone())
         });
+        let scores_composite = scorers
+            .iter()
+            .any(|(_, _, s)| matches!(s, Scorer::Composite(_)));
+        let truths = scores_composite
+            .then(|| true_frame::TruthRenderer::new(header, objects.clone(), seed))
+            .flatten();
+        let synthetic = header.provenance.tool == relume_recording::synth::SYNTH_TOOL;
+        let truth_unavailable =
+            true_frame::unavailable(header).filter(|_| scores_composite && synthetic);
         Ok(Evaluator {
             scorers,
             references,
+            truths,
+            truth_unavailable,
+            reference_stride: options.reference_stride.max(1),
             frames: 0,
             frames_with_truth: 0,
         })
@@ -315,9 +336,23 @@ impl Evaluator {
     /// Shares the many-sample references with the other evaluators given `cache`
     /// (see [`sampling::ReferenceCache`]): the scores do not change.
     pub fn share_references(&mut self, cache: sampling::ReferenceCache) {
+        if let Some(truths) = &mut self.truths {
+            truths.share(cache.1.clone());
+        }
         if let Some(schedule) = &mut self.references {
             schedule.share(cache);
         }
+    }
+
+    /// The true frames the first `composite.differential` stage was scored against.
+    pub fn true_composites(&self) -> Vec<Arc<true_frame::TrueComposite>> {
+        self.scorers
+            .iter()
+            .find_map(|(_, _, s)| match s {
+                Scorer::Composite(c) => Some(c.truths().to_vec()),
+                _ => None,
+            })
+            .unwrap_or_default()
     }
 
     /// The reference composites of the scored frames of the first
@@ -348,6 +383,11 @@ impl Evaluator {
             Some(schedule) => schedule.reference(frame)?,
             None => None,
         };
+        // The true frame on the frames and lattice of the references.
+        let true_composite = match (&self.truths, &reference) {
+            (Some(truths), Some(_)) => truths.render(frame, self.reference_stride)?,
+            _ => None,
+        };
         for (_, _, scorer) in &mut self.scorers {
             match scorer {
                 Scorer::Depth(s) => s.observe(frame, truth.as_ref()),
@@ -360,10 +400,22 @@ impl Evaluator {
                 Scorer::Path(s) => s.observe(frame, reference.as_deref())?,
                 Scorer::Renderer(s) => s.observe(frame, reference.as_deref()),
                 Scorer::Filter(s) => s.observe(frame, reference.as_deref())?,
-                Scorer::Composite(s) => s.observe(frame, reference.as_deref())?,
+                Scorer::Composite(s) => {
+                    s.observe(frame, reference.as_deref(), true_composite.as_ref())?
+                }
             }
         }
         Ok(())
+    }
+
+    /// What the first composite's references and true frames cost per scored frame
+    /// (seconds: `reference_render_s`, `truth_render_s`), `None` without a scored
+    /// composite.
+    pub fn scoring_costs(&self) -> Option<Value> {
+        self.scorers.iter().find_map(|(_, _, s)| match s {
+            Scorer::Composite(c) => Some(c.costs()),
+            _ => None,
+        })
     }
 
     /// True when every observed frame carried ground truth.
@@ -392,6 +444,9 @@ impl Evaluator {
             entry.insert("kind".into(), json!(kind));
             if let Value::Object(scores) = scores {
                 entry.extend(scores);
+            }
+            if let (Scorer::Composite(_), Some(why)) = (scorer, &self.truth_unavailable) {
+                entry.insert("truth_unavailable".into(), json!(why));
             }
             stages.insert(name.clone(), Value::Object(entry));
         }

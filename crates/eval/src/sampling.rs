@@ -211,6 +211,8 @@ pub struct ReferenceLayers {
     pub e_rv_ind: Vec3Image,
     /// Where some reference path met an object.
     pub touched: Vec<bool>,
+    /// Seconds its runs took.
+    pub render_s: f64,
 }
 
 impl ReferenceLayers {
@@ -222,6 +224,7 @@ impl ReferenceLayers {
         frame: &Frame,
         stride: u32,
     ) -> Option<Result<ReferenceLayers, String>> {
+        let started = std::time::Instant::now();
         let mut sums: Option<ReferenceLayers> = None;
         for k in 0..REFERENCE_RUNS {
             let params = runner.reference_params(k, stride);
@@ -239,6 +242,7 @@ impl ReferenceLayers {
                     e_rv_dir: zero.clone(),
                     e_rv_ind: zero,
                     touched: vec![false; out.touched.data.len()],
+                    render_s: 0.0,
                 }
             });
             let layers = [
@@ -256,7 +260,10 @@ impl ReferenceLayers {
                 *t |= o != 0;
             }
         }
-        sums.map(Ok)
+        sums.map(|mut layers| {
+            layers.render_s = started.elapsed().as_secs_f64();
+            Ok(layers)
+        })
     }
 
     /// Whether pixel `i` of the image has reference values (lies on the lattice).
@@ -297,16 +304,21 @@ pub struct ReferenceSchedule {
 /// as the shared stages of one run hand them out) with the same settings. The owner
 /// clears it once every evaluator has seen the frame, so that an allocation's address
 /// is never taken for a later product's.
+/// The true frames ([`super::true_frame`]) are shared the same way.
 #[derive(Clone, Default)]
-pub struct ReferenceCache(Arc<std::sync::Mutex<Vec<KeyedReference>>>);
+pub struct ReferenceCache(
+    Arc<std::sync::Mutex<Vec<KeyedReference>>>,
+    pub(crate) super::true_frame::TruthCache,
+);
 
 /// A reference and what it depends on ([`PathRunner::reference_key`]).
 type KeyedReference = (String, Arc<ReferenceLayers>);
 
 impl ReferenceCache {
-    /// Forgets every reference (call after each frame).
+    /// Forgets every reference and true frame (call after each frame).
     pub fn clear(&self) {
         self.0.lock().unwrap_or_else(|p| p.into_inner()).clear();
+        self.1.clear();
     }
 
     /// How many references it holds.

@@ -70,27 +70,40 @@ fn td(value: Option<f64>, best: bool) -> String {
     }
 }
 
-/// Per variant: its pipeline, composite PSNR and cost.
+/// Per variant: its pipeline, composite PSNR (against the references, and against the
+/// true frame where the recording has one) and cost.
 fn summary(h: &mut String, c: &Comparison) {
     let psnr: Vec<Option<f64>> = (0..c.variants.len()).map(|v| c.composite_psnr(v)).collect();
+    let truth: Vec<Option<f64>> = (0..c.variants.len())
+        .map(|v| c.composite_score(v, "psnr_db_truth"))
+        .collect();
     let cost: Vec<Option<f64>> = c.variants.iter().map(|v| Some(v.cost_ms)).collect();
-    let (bp, bc) = (
+    let (bp, bt, bc) = (
         Comparison::best("psnr_db", &psnr),
+        Comparison::best("psnr_db", &truth),
         Comparison::best("median_ms", &cost),
     );
+    let with_truth = truth.iter().any(Option::is_some);
     h.push_str(
         "<table id=\"summary\"><tr><th>variant</th><th>pipeline</th><th>composite \
-         psnr_db</th><th>cost ms/frame</th></tr>",
+         psnr_db</th>",
     );
+    if with_truth {
+        h.push_str("<th>psnr_db against the truth</th>");
+    }
+    h.push_str("<th>cost ms/frame</th></tr>");
     for (v, variant) in c.variants.iter().enumerate() {
         let _ = write!(
             h,
-            "<tr><td>{}</td><td>{}</td>{}{}</tr>",
+            "<tr><td>{}</td><td>{}</td>{}",
             escape(&variant.label),
             escape(&variant.file),
             td(psnr[v], bp.contains(&v)),
-            td(cost[v], bc.contains(&v))
         );
+        if with_truth {
+            h.push_str(&td(truth[v], bt.contains(&v)));
+        }
+        let _ = write!(h, "{}</tr>", td(cost[v], bc.contains(&v)));
     }
     h.push_str("</table>");
 }
@@ -202,6 +215,15 @@ fn frames(h: &mut String, c: &Comparison) {
             escape(&f.reference),
             f.frame
         );
+        if let Some(truth) = &f.truth {
+            let _ = write!(
+                h,
+                "<figure><img src=\"{}\" alt=\"true frame, frame {}\">\
+                 <figcaption>truth (the objects really in the room)</figcaption></figure>",
+                escape(truth),
+                f.frame
+            );
+        }
         h.push_str("</div>");
         for v in &f.variants {
             let psnr = v
@@ -217,11 +239,25 @@ fn frames(h: &mut String, c: &Comparison) {
                 ),
                 false => String::new(),
             };
+            let against_truth = match &v.truth_difference {
+                Some(path) => format!(
+                    "<figure><img src=\"{}\" alt=\"{} difference from the truth\">\
+                     <figcaption>{} − truth{}</figcaption></figure>",
+                    escape(path),
+                    escape(&v.label),
+                    escape(&v.label),
+                    v.psnr_db_truth
+                        .map(|p| format!(", {p:.2} dB"))
+                        .unwrap_or_default()
+                ),
+                None => String::new(),
+            };
             let _ = write!(
                 h,
                 "<div class=\"variant\">{own_reference}<figure><img src=\"{}\" alt=\"{} composite\">\
                  <figcaption>{}{}</figcaption></figure><figure><img src=\"{}\" \
-                 alt=\"{} difference\"><figcaption>{} − reference</figcaption></figure></div>",
+                 alt=\"{} difference\"><figcaption>{} − reference</figcaption></figure>\
+                 {against_truth}</div>",
                 escape(&v.composite),
                 escape(&v.label),
                 escape(&v.label),

@@ -4,7 +4,8 @@
 //! - `report.md`: a table per scored stage and one of stage times, the best of each
 //!   column in bold ([`markdown`]);
 //! - `index.html`: a static page that opens from the file system with no network: the
-//!   composites of the scored frames beside the reference, false-colour differences,
+//!   composites of the scored frames beside the reference and the true frame (synthetic
+//!   recordings), false-colour differences from both,
 //!   per-frame curves and a quality-versus-cost scatter, in inline SVG ([`html`]).
 
 pub mod html;
@@ -73,6 +74,8 @@ pub struct FrameImages {
     pub frame: usize,
     /// The composite of the 1024-sample references.
     pub reference: String,
+    /// The true frame with the objects in the room (synthetic recordings).
+    pub truth: Option<String>,
     /// Per variant (label): its composite and its false-colour difference from the
     /// reference, and the PSNR of that frame.
     pub variants: Vec<VariantImages>,
@@ -87,6 +90,9 @@ pub struct VariantImages {
     pub composite: String,
     pub difference: String,
     pub psnr_db: Option<f64>,
+    /// Its false-colour difference from the true frame, and its PSNR against it.
+    pub truth_difference: Option<String>,
+    pub psnr_db_truth: Option<f64>,
 }
 
 /// One score across the variants, as the report tables show it.
@@ -130,8 +136,13 @@ impl Comparison {
     /// The composite's PSNR of variant `v`: that of its
     /// [`Variant::composite_stage`].
     pub fn composite_psnr(&self, v: usize) -> Option<f64> {
+        self.composite_score(v, "psnr_db")
+    }
+
+    /// The finite score `key` of variant `v`'s [`Variant::composite_stage`].
+    pub fn composite_score(&self, v: usize, key: &str) -> Option<f64> {
         let stage = self.variants[v].composite_stage.as_deref()?;
-        self.score(v, stage, "psnr_db").filter(|p| p.is_finite())
+        self.score(v, stage, key).filter(|p| p.is_finite())
     }
 
     /// The scores of variant `v`'s composite stage.

@@ -3,6 +3,7 @@
 //!
 //! | stage kind | keys | needs ground truth |
 //! |---|---|---|
+//! | `pose.track` | `ate_rmse_m`, `rpe_translation_m_per_frame`, `rpe_rotation_deg_per_frame`, `rpe_translation_m_per_s`, `rpe_rotation_deg_per_s`, `lost_frames`, `frames_scored` (against the recording's poses, TUM RGB-D's definitions; see [`trajectory`]) | no (the recording's poses) |
 //! | `depth.fuse` | `rmse_raw_m`, `rmse_fused_m`, `holes_raw`, `holes_fused` | yes |
 //! | `depth.fuse` | `warp_rmse_raw_m`, `warp_rmse_fused_m`, `warp_overlap_raw`, `warp_overlap_fused` (frame t-1 forward-warped into frame t against raw depth t; null where no two consecutive frames were compared) | no |
 //! | `normals.*` | `mean_angle_deg`, `median_angle_deg`, `valid_fraction` | yes |
@@ -32,6 +33,7 @@ mod ports;
 pub mod renderer;
 pub mod report;
 pub mod sampling;
+pub mod trajectory;
 pub mod true_frame;
 mod truth;
 
@@ -57,6 +59,7 @@ enum Scorer {
     Renderer(Box<renderer::RatioScorer>),
     Filter(Box<filter::FilterScorer>),
     Composite(Box<composite::CompositeScorer>),
+    Trajectory(trajectory::TrajectoryScorer),
 }
 
 impl Scorer {
@@ -186,6 +189,9 @@ impl Evaluator {
                     ))),
                     k if renderer_kind(k).is_some() => {
                         Scorer::Renderer(Box::new(renderer::RatioScorer::new(s)))
+                    }
+                    "pose.track" => {
+                        Scorer::Trajectory(trajectory::TrajectoryScorer::new(output(s, "pose")))
                     }
                     "depth.fuse" => Scorer::Depth(depth::DepthScorer::new(
                         input(s, "depth"),
@@ -403,6 +409,7 @@ impl Evaluator {
                 Scorer::Composite(s) => {
                     s.observe(frame, reference.as_deref(), true_composite.as_ref())?
                 }
+                Scorer::Trajectory(s) => s.observe(frame),
             }
         }
         Ok(())
@@ -439,6 +446,7 @@ impl Evaluator {
                 Scorer::Renderer(s) => s.report(),
                 Scorer::Filter(s) => s.report(),
                 Scorer::Composite(s) => s.report(),
+                Scorer::Trajectory(s) => s.report(),
             };
             let mut entry = Map::new();
             entry.insert("kind".into(), json!(kind));

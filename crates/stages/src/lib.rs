@@ -5,6 +5,7 @@
 //! | kind | module | what it does |
 //! |---|---|---|
 //! | `decode` | [`decode`] | decodes color, depth and pose from the recording's records |
+//! | `pose.track` | [`track`] | camera pose from color and depth: frame-to-model ICP with a photometric term (KinectFusion, ElasticFusion) |
 //! | `color.compensate` | [`compensate`] | color compensation c_t to the reference space, A_t / C_t of eq. (2) (paper 000 Sec. 4) |
 //! | `depth.fuse` | [`fuse`] | warps the previous fused depth into the view and merges it with the new depth |
 //! | `depth.to_points` | [`points`] | back-projects depth to a camera-space position map |
@@ -131,6 +132,7 @@ pub mod plane_fit;
 pub mod points;
 pub mod sample;
 pub mod temporal;
+pub mod track;
 pub mod world;
 pub mod write;
 
@@ -152,6 +154,7 @@ pub fn registry() -> Registry {
 pub fn builtin() -> Vec<StageInfo> {
     let mut all = vec![
         decode::INFO,
+        track::INFO,
         compensate::INFO,
         fuse::INFO,
         points::INFO,

@@ -12,7 +12,7 @@
 //! Frames the tracker lost, or that the recording has no pose for, are left out of both;
 //! lost frames are counted.
 
-use glam::{DMat3, DMat4, DQuat, DVec3};
+use glam::{DMat4, DQuat, DVec3};
 use relume_graph::Frame;
 use relume_graph::pipeline::SOURCE_PRODUCT;
 use relume_recording::Pose;
@@ -118,14 +118,9 @@ pub fn relative_error(qa: &Pose, qb: &Pose, pa: &Pose, pb: &Pose) -> (f64, f64) 
     let q = qa.matrix().inverse() * qb.matrix();
     let p = pa.matrix().inverse() * pb.matrix();
     let e = q.inverse() * p;
-    let rotation = DMat3::from_cols(
-        e.x_axis.truncate(),
-        e.y_axis.truncate(),
-        e.z_axis.truncate(),
-    );
     (
         e.w_axis.truncate().length(),
-        DQuat::from_mat3(&rotation)
+        DQuat::from_mat4(&e)
             .normalize()
             .angle_between(DQuat::IDENTITY)
             .to_degrees(),

@@ -336,7 +336,7 @@ fn pixel(
     }
     sum.valid += 1;
     let q = rotation * p + translation;
-    let cam = model.pinhole();
+    let cam = &model.camera;
     let Some(uv) = cam.project(q) else {
         return;
     };

@@ -27,7 +27,7 @@ pub use pyramid::{Level, Pyramid};
 
 use crate::fuse::{DepthFusion, FuseParams};
 use crate::{OpError, kind};
-use glam::{DMat3, DMat4, DQuat};
+use glam::{DMat4, DQuat};
 use relume_base::pinhole::Intrinsics;
 use relume_base::raster::{DepthImage, Rgb8Image};
 use relume_graph::{
@@ -211,12 +211,7 @@ impl Tracker {
         }
         let m = &a.model_from_frame;
         let translation_m = m.w_axis.truncate().length();
-        let rotation = DMat3::from_cols(
-            m.x_axis.truncate(),
-            m.y_axis.truncate(),
-            m.z_axis.truncate(),
-        );
-        let rotation_deg = DQuat::from_mat3(&rotation)
+        let rotation_deg = DQuat::from_mat4(m)
             .angle_between(DQuat::IDENTITY)
             .to_degrees();
         if translation_m > p.max_translation_m || rotation_deg > p.max_rotation_deg {
@@ -254,12 +249,7 @@ impl Tracker {
 
 /// The pose of a camera-to-world matrix (its rotation made a unit quaternion).
 fn pose_of(m: &DMat4) -> Pose {
-    let rotation = DMat3::from_cols(
-        m.x_axis.truncate(),
-        m.y_axis.truncate(),
-        m.z_axis.truncate(),
-    );
-    Pose::from_parts(m.w_axis.truncate(), DQuat::from_mat3(&rotation).normalize())
+    Pose::from_parts(m.w_axis.truncate(), DQuat::from_mat4(m).normalize())
 }
 
 const PARAMS: &[ParamSpec] = &[

@@ -23,9 +23,9 @@ pub const EDGE_JUMP: f32 = 0.05;
 
 /// One level of the pyramid. Pixel `i` is at (i % width, i / width); a missing point is
 /// [`Vec3::ZERO`] (z = 0), a missing normal likewise.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct Level {
-    pub camera: Option<Pinhole>,
+    pub camera: Pinhole,
     pub width: usize,
     pub height: usize,
     pub points: Vec<Vec3>,
@@ -33,13 +33,6 @@ pub struct Level {
     pub intensity: Vec<f32>,
     /// Intensity gradient per pixel (d/du, d/dv), central differences; zero on the border.
     pub gradient: Vec<[f32; 2]>,
-}
-
-impl Level {
-    /// The pinhole of this level.
-    pub fn pinhole(&self) -> &Pinhole {
-        self.camera.as_ref().expect("a built level has a camera")
-    }
 }
 
 /// A pyramid of [`Level`]s, finest first.
@@ -168,7 +161,7 @@ fn level_of(raw: &Raw, camera: Pinhole) -> Level {
             }
         });
     Level {
-        camera: Some(camera),
+        camera,
         width: w,
         height: h,
         points,

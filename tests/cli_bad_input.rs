@@ -218,7 +218,7 @@ fn import_warns_of_what_pipelines_will_miss() {
     assert_eq!(
         stderr(&o),
         "warning: r.relume: no camera poses: pipelines that read `pose` (the default one \
-         does) will not run\n"
+         does) run only with the tracker giving it (pipelines/*-tracked.toml)\n"
     );
     // Depth images of another size than the color images.
     for i in 0..2 {

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{ok, run_in, stdout};
+use common::{ok, pipeline, run_in, stderr, stdout};
 use serde_json::Value;
 use std::path::Path;
 
@@ -42,4 +42,93 @@ fn eval_scores_the_tracked_trajectory_against_the_true_one() {
         track["rpe_rotation_deg_per_frame"].as_f64().unwrap() < 0.1,
         "{track}"
     );
+}
+
+/// A recording without poses (livingroom1's first frames, its trajectory left out):
+/// the acquisition pipeline is refused before it runs, with the tracker named; its
+/// tracked twin runs, and since livingroom1's world is its first camera's (where the
+/// tracker starts without poses), its products are bit for bit the ones it gives with
+/// the trajectory in the folder.
+#[test]
+fn a_recording_without_poses_runs_acquisition_with_the_tracker() {
+    const FRAMES: usize = 6;
+    let tmp = tempfile::tempdir().unwrap();
+    let data = common::data_dir().join("livingroom1");
+    for (name, with_poses) in [("bare", false), ("posed", true)] {
+        let dir = tmp.path().join(name);
+        for (sub, ext) in [("color", "jpg"), ("depth", "png")] {
+            std::fs::create_dir_all(dir.join(sub)).unwrap();
+            for i in 0..FRAMES {
+                let file = format!("{i:05}.{ext}");
+                std::os::unix::fs::symlink(data.join(sub).join(&file), dir.join(sub).join(&file))
+                    .unwrap();
+            }
+        }
+        if with_poses {
+            // The trajectory's first records: five lines each.
+            let log = std::fs::read_to_string(data.join("trajectory.log")).unwrap();
+            let head: Vec<&str> = log.lines().take(5 * FRAMES).collect();
+            std::fs::write(dir.join("trajectory.log"), head.join("\n") + "\n").unwrap();
+        }
+        ok(run_in(
+            tmp.path(),
+            &["import", "redwood", name, "-o", &format!("{name}.relume")],
+        ));
+    }
+
+    let untracked = run_in(
+        tmp.path(),
+        &[
+            "replay",
+            "bare.relume",
+            "-p",
+            &pipeline("acquisition.toml"),
+            "--out",
+            "o",
+        ],
+    );
+    assert!(!untracked.status.success());
+    let err = stderr(&untracked);
+    assert!(
+        err.contains("bare.relume: the recording has no camera poses, and stage `gbuffer.splat`")
+            && err.contains("its input `pose` reads `pose`")
+            && err.contains("pose.track")
+            && err.contains("pipelines/acquisition-tracked.toml"),
+        "{err}"
+    );
+
+    let tracked = pipeline("acquisition-tracked.toml");
+    let hashes = |rec: &str| {
+        let o = ok(run_in(
+            tmp.path(),
+            &["replay", rec, "-p", &tracked, "--hash", "--out", "o"],
+        ));
+        assert!(!stderr(&o).contains("lost"), "{}", stderr(&o));
+        // The recording's own poses (and the record that holds them) are what the
+        // two runs differ in. And the sign of zero: livingroom1's first pose is the
+        // identity written with `-0.00000000`s, so frame 0's pose and the cloud (world
+        // positions, some of them 0 + -0) differ in those bits, and nothing else.
+        stdout(&o)
+            .lines()
+            .map(|l| {
+                let frame0 = l.starts_with("000000 ");
+                l.split(' ')
+                    .filter(|t| {
+                        let dropped = ["record=", "recorded_pose=", "cloud="];
+                        let differs = dropped.iter().any(|d| t.starts_with(d))
+                            || (frame0 && t.starts_with("pose="));
+                        !differs
+                    })
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            })
+            .collect::<Vec<_>>()
+    };
+    let bare = hashes("bare.relume");
+    assert_eq!(
+        bare.iter().filter(|l| l.contains(" pose=")).count(),
+        FRAMES - 1,
+        "{bare:?}"
+    );
+    assert_eq!(bare, hashes("posed.relume"));
 }

@@ -510,3 +510,71 @@ fn set_overrides_change_parameters_and_report_their_own_line() {
         "{stage}"
     );
 }
+
+/// The tracked pipelines are their twins with `pose.track` in place of the recording's
+/// poses: decode's pose renamed `recorded_pose`, the tracker after it, nothing else
+/// changed; every stage that read `pose` now reads the tracker's.
+#[test]
+fn the_tracked_pipelines_are_their_twins_with_the_tracker_giving_poses() {
+    let tracker = "kind = \"decode\"\noutputs = { pose = \"recorded_pose\" }\n\n\
+# The camera's pose from color and depth, aligned to the depth fused so far (see\n\
+# pipelines/tracking.toml and `relume stages pose.track`); started from the recording's\n\
+# first pose where it has one, else from the identity.\n\
+[[stage]]\nkind = \"pose.track\"\n";
+    for (twin, name, description) in [
+        (
+            "acquisition",
+            "acquisition-tracked",
+            (
+                "decode -> gbuffer.splat",
+                "decode -> pose.track -> gbuffer.splat",
+            ),
+        ),
+        (
+            "mixed-reality",
+            "mixed-reality-tracked",
+            (
+                "acquisition -> light.impostor",
+                "acquisition (poses from pose.track) -> light.impostor",
+            ),
+        ),
+        (
+            "mixed-reality-livingroom1",
+            "mixed-reality-livingroom1-tracked",
+            (
+                "acquisition -> light.impostor",
+                "acquisition (poses from pose.track) -> light.impostor",
+            ),
+        ),
+    ] {
+        let swaps = [description, ("kind = \"decode\"\n", tracker)];
+        let p = assert_twin(twin, name, &swaps);
+        assert_eq!(p.stages[1].kind, "pose.track", "{name}");
+        let registry = relume::stages::registry();
+        assert_eq!(
+            relume::stages::track::reads_recorded_pose(&p.stages, &registry),
+            None,
+            "{name}"
+        );
+        // Its twin reads the recording's: the first stage after decode that needs one.
+        let twin = Pipeline::load(
+            std::path::Path::new(&format!(
+                "{}/pipelines/{twin}.toml",
+                env!("CARGO_MANIFEST_DIR")
+            )),
+            &registry,
+        )
+        .unwrap();
+        let reader = relume::stages::track::reads_recorded_pose(&twin.stages, &registry)
+            .expect("the twin reads the recording's poses");
+        assert_eq!(
+            (
+                reader.stage.as_str(),
+                reader.role.as_str(),
+                reader.product.as_str()
+            ),
+            ("gbuffer.splat", "pose", "pose"),
+            "{name}"
+        );
+    }
+}

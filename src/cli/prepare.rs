@@ -1,20 +1,54 @@
-//! A loaded pipeline made ready for a recording: its anchored objects placed (saying
-//! where), the programs it will start named, and a warning before scores of stages
-//! that run at their own rate.
+//! A loaded pipeline made ready for a recording: refused when it needs poses the
+//! recording lacks, its anchored objects placed (saying where), the programs it will
+//! start named, and a warning before scores of stages that run at their own rate.
 
 use relume::stages::world::PipelineObjects;
 
-/// Places `pipeline`'s objects anchored to the scene on `replay`, saying where (each
-/// line after `prefix`, which names the pipeline where several run).
+/// Makes `pipeline` ready for `replay`: refuses it when a stage needs the recording's
+/// poses and the recording has none ([`check_poses`]), then places its objects
+/// anchored to the scene, saying where (each line after `prefix`, which names the
+/// pipeline where several run).
 pub(crate) fn place_objects(
     pipeline: &mut relume::graph::Pipeline,
     replay: &relume::recording::Replay,
     prefix: &str,
 ) -> anyhow::Result<()> {
+    check_poses(pipeline, replay)?;
     for placed in pipeline.place_objects(replay)? {
         eprintln!("{prefix}{placed}");
     }
     Ok(())
+}
+
+/// Refuses `pipeline` on `replay` when none of the recording's frames has a pose and a
+/// stage reads `decode`'s: every frame would stop at that stage. The hint names the
+/// tracker, which gives poses from color and depth.
+pub(crate) fn check_poses(
+    pipeline: &relume::graph::Pipeline,
+    replay: &relume::recording::Replay,
+) -> anyhow::Result<()> {
+    if replay.stats.frames_with_pose > 0 {
+        return Ok(());
+    }
+    let registry = relume::stages::registry();
+    let Some(reader) = relume::stages::track::reads_recorded_pose(&pipeline.stages, &registry)
+    else {
+        return Ok(());
+    };
+    anyhow::bail!(
+        "{}: the recording has no camera poses, and stage `{}` ({}:{}) needs them: its input \
+         `{}` reads `{}`, which `decode` takes from the recording\n\
+         hint: track the poses from color and depth with a `pose.track` stage after decode \
+         (decode's `outputs = {{ pose = \"recorded_pose\" }}`, then `[[stage]] kind = \
+         \"pose.track\"`), as pipelines/acquisition-tracked.toml and \
+         pipelines/mixed-reality-tracked.toml do",
+        replay.recording.path().display(),
+        reader.stage,
+        pipeline.file,
+        reader.line,
+        reader.role,
+        reader.product,
+    )
 }
 
 /// Names the programs `pipeline`'s external stages start, before anything runs: a

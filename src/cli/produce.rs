@@ -482,7 +482,8 @@ fn missing_streams(stats: &AssociationStats) -> Vec<String> {
     }
     if stats.frames_with_pose == 0 {
         warnings.push(
-            "no camera poses: pipelines that read `pose` (the default one does) will not run"
+            "no camera poses: pipelines that read `pose` (the default one does) run only with \
+             the tracker giving it (pipelines/*-tracked.toml)"
                 .to_string(),
         );
     } else if stats.frames_with_pose < stats.frames {

@@ -84,8 +84,10 @@ pub struct ReplayArgs {
     #[arg(long)]
     hash: bool,
     /// Save these products of every frame into OUT/<product>/ (comma-separated names, or
-    /// `all` for every image, compensation and cloud in the frame), without editing the
-    /// pipeline. `relume stages` says what each stage produces.
+    /// `all` for every image, compensation, cloud and pose in the frame), without editing
+    /// the pipeline. A pose is saved as one line of a TUM trajectory file: `cat
+    /// OUT/pose/*.txt` is the run's trajectory. `relume stages` says what each stage
+    /// produces.
     #[arg(long, value_delimiter = ',', value_name = "PRODUCTS")]
     save: Vec<String>,
     /// File formats for --save: png, exr (f32 values), or both (png,exr). PNGs of
@@ -549,7 +551,7 @@ pub(super) fn save_products(
     }
     jobs.par_iter()
         .map(|(product, path, format)| match format {
-            None => write_record(product, path),
+            None => write_record(product, path, frame.stamp_ns),
             Some("exr") => write_exr(product, path),
             Some(_) => write_png(product, path),
         })

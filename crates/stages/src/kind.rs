@@ -22,7 +22,8 @@ pub const IMAGES: &[relume_graph::ProductKind] =
     &[COLOR, DEPTH, POINTS, NORMALS, RADIANCE, SCALAR, LABELS];
 
 /// The kinds the `write` stage can save: the images first, then compensation (JSON),
-/// the cloud (PLY) and the light model (`relume_scene::light::record`).
+/// the cloud (PLY), the light model (`relume_scene::light::record`) and the camera pose
+/// (a line of a TUM trajectory file).
 pub const WRITABLE: &[relume_graph::ProductKind] = &[
     COLOR,
     DEPTH,
@@ -34,6 +35,7 @@ pub const WRITABLE: &[relume_graph::ProductKind] = &[
     COMPENSATION,
     CLOUD,
     AREA_LIGHTS,
+    POSE,
 ];
 
 /// True for the kinds in [`IMAGES`].

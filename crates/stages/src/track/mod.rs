@@ -18,12 +18,14 @@
 
 pub mod align;
 pub mod pyramid;
+pub mod source;
 
 #[cfg(test)]
 mod tests;
 
 pub use align::{AlignParams, Alignment, align};
 pub use pyramid::{Level, Pyramid};
+pub use source::{PoseReader, reads_recorded_pose};
 
 use crate::fuse::{DepthFusion, FuseParams};
 use crate::{OpError, kind};

@@ -31,6 +31,7 @@ use relume_base::raster::{
 use relume_graph::{
     Frame, ParamDefault, ParamSpec, Params, Port, Ports, Product, Stage, StageError, StageInfo,
 };
+use relume_recording::Pose;
 use relume_recording::writer::write_file_atomic;
 use relume_scene::light::AreaLights;
 use relume_scene::light::EnvCloud;
@@ -141,6 +142,7 @@ impl Stage for Write {
         if !frame.index.is_multiple_of(self.every) {
             return Ok(());
         }
+        let stamp_ns = frame.stamp_ns;
         let mut jobs = Vec::new();
         for (name, dir) in &self.products {
             let product = frame
@@ -168,7 +170,7 @@ impl Stage for Write {
         jobs.par_iter()
             .map(|(product, path, exr)| {
                 if !kind::is_image(product.kind()) {
-                    write_record(product, path)
+                    write_record(product, path, stamp_ns)
                 } else if *exr {
                     write_exr(product, path)
                 } else {
@@ -192,6 +194,7 @@ enum W<'a> {
     Compensation(&'a Compensation),
     Cloud(&'a Arc<EnvCloud>),
     AreaLights(&'a Arc<AreaLights>),
+    Pose(&'a Pose),
 }
 
 /// `product` as the writer sees it; `None` for kinds it cannot save.
@@ -217,6 +220,8 @@ fn view(product: &Product) -> Option<W<'_>> {
         W::Cloud(product.value()?)
     } else if k == kind::AREA_LIGHTS {
         W::AreaLights(product.value()?)
+    } else if k == kind::POSE {
+        W::Pose(product.value()?)
     } else {
         return None;
     })
@@ -308,10 +313,16 @@ pub fn write_png(product: &Product, path: &Path) -> Result<(), OpError> {
     })
 }
 
-/// Writes a non-image product next to `stem`: a compensation as `.json`, a cloud as
-/// `.ply`.
-pub fn write_record(product: &Product, stem: &Path) -> Result<(), OpError> {
+/// Writes a non-image product of the frame stamped `stamp_ns` next to `stem`: a
+/// compensation as `.json`, a cloud as `.ply`, a light model as `.val`, a pose as
+/// `.txt` (one line of a TUM trajectory, see [`tum_pose_line`]: the files of a run,
+/// concatenated in order, are the trajectory).
+pub fn write_record(product: &Product, stem: &Path, stamp_ns: i64) -> Result<(), OpError> {
     let (path, bytes) = match view(product) {
+        Some(W::Pose(pose)) => (
+            stem.with_extension("txt"),
+            tum_pose_line(stamp_ns, pose).into_bytes(),
+        ),
         Some(W::Compensation(c)) => (
             stem.with_extension("json"),
             serde_json::to_vec_pretty(&c.to_json()).expect("JSON of plain values"),
@@ -330,6 +341,19 @@ pub fn write_record(product: &Product, stem: &Path) -> Result<(), OpError> {
         }
     };
     write_file_atomic(&path, &bytes).map_err(|source| OpError::Io { path, source })
+}
+
+/// A pose as a line of a TUM RGB-D trajectory file: `timestamp tx ty tz qx qy qz qw`,
+/// seconds and metres, the camera's position and orientation in the world (the format
+/// the TUM benchmark's tools, evo and Open3D read).
+pub fn tum_pose_line(stamp_ns: i64, pose: &Pose) -> String {
+    let (t, q) = (pose.translation(), pose.rotation());
+    let (sign, ns) = (if stamp_ns < 0 { "-" } else { "" }, stamp_ns.unsigned_abs());
+    let seconds = format!("{sign}{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000);
+    format!(
+        "{seconds} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}\n",
+        t.x, t.y, t.z, q.x, q.y, q.z, q.w
+    )
 }
 
 /// Writes a product as EXR with f32 channels (see the module table).
@@ -433,6 +457,18 @@ mod tests {
     use relume_recording::{Header, Intrinsics};
     use relume_scene::light::{AreaLight, AreaLights, record};
     use std::collections::BTreeMap;
+
+    #[test]
+    fn a_pose_is_a_tum_trajectory_line() {
+        let half_turn_about_y = glam::DQuat::from_rotation_y(std::f64::consts::PI);
+        let pose = Pose::from_parts(glam::DVec3::new(1.0, -0.25, 3.5), half_turn_about_y);
+        assert_eq!(
+            tum_pose_line(1_305_031_102_175_304_000, &pose),
+            "1305031102.175304000 1.000000000 -0.250000000 3.500000000 0.000000000 \
+             1.000000000 0.000000000 0.000000000\n"
+        );
+        assert!(tum_pose_line(-5, &Pose::IDENTITY).starts_with("-0.000000005 "));
+    }
 
     fn model(intensity: f32) -> Arc<AreaLights> {
         Arc::new(AreaLights {

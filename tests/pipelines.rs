@@ -517,10 +517,10 @@ fn set_overrides_change_parameters_and_report_their_own_line() {
 #[test]
 fn the_tracked_pipelines_are_their_twins_with_the_tracker_giving_poses() {
     let tracker = "kind = \"decode\"\noutputs = { pose = \"recorded_pose\" }\n\n\
-# The camera's pose from color and depth, aligned to the depth fused so far (see\n\
-# pipelines/tracking.toml and `relume stages pose.track`); started from the recording's\n\
-# first pose where it has one, else from the identity.\n\
-[[stage]]\nkind = \"pose.track\"\n";
+# The camera's pose from color and depth, aligned to the depth fused so far (depth.fuse's\n\
+# below, a frame back; see pipelines/tracking.toml and `relume stages pose.track`);\n\
+# started from the recording's first pose where it has one, else from the identity.\n\
+[[stage]]\nkind = \"pose.track\"\nparams = { model = \"depth.fuse\" }\n";
     for (twin, name, description) in [
         (
             "acquisition",
@@ -550,6 +550,15 @@ fn the_tracked_pipelines_are_their_twins_with_the_tracker_giving_poses() {
         let swaps = [description, ("kind = \"decode\"\n", tracker)];
         let p = assert_twin(twin, name, &swaps);
         assert_eq!(p.stages[1].kind, "pose.track", "{name}");
+        // Its model is depth.fuse's map, a frame back.
+        assert_eq!(p.stages[1].inputs["fused"], "fused_depth@prev", "{name}");
+        assert!(
+            p.feedback
+                .iter()
+                .any(|f| p.stages[f.producer].kind == "depth.fuse" && f.consumer == 1),
+            "{name}: {:?}",
+            p.feedback
+        );
         let registry = relume::stages::registry();
         assert_eq!(
             relume::stages::track::reads_recorded_pose(&p.stages, &registry),

@@ -41,48 +41,81 @@ pub struct Pyramid {
     pub levels: Vec<Level>,
 }
 
-/// Depth and intensity of one level before points and normals are derived.
-struct Raw {
-    width: usize,
-    height: usize,
-    depth: Vec<f32>,
-    intensity: Vec<f32>,
-}
-
 impl Pyramid {
     /// Builds `levels` levels (at least 1) from a frame's `color` and `depth` (same size)
     /// seen through `intrinsics`; each level at most half as wide as the one below and
-    /// at least 8 x 8 pixels (fewer levels when the image is small).
+    /// at least 8 x 8 pixels (fewer levels when the image is small). The finest level's
+    /// normals are made only at every `fine_stride`-th pixel in x and y (1: all), the
+    /// pixels a frame is aligned by (its normals cost the pyramid a third of its time).
     pub fn build(
         intrinsics: &Intrinsics,
         color: &Rgb8Image,
         depth: &DepthImage,
         levels: usize,
+        fine_stride: usize,
     ) -> Pyramid {
-        let (w, h) = (depth.width as usize, depth.height as usize);
-        let mut raw = Raw {
-            width: w,
-            height: h,
-            depth: depth
-                .data
-                .iter()
-                .map(|&z| if depth_is_valid(z) { z } else { 0.0 })
-                .collect(),
-            intensity: color.data.par_iter().map(|c| luma(*c)).collect(),
-        };
+        let (w, h) = (color.width as usize, color.height as usize);
         let mut out = Pyramid::default();
-        for l in 0..levels.max(1) {
-            if l > 0 {
-                if raw.width / 2 < 8 || raw.height / 2 < 8 {
-                    break;
-                }
-                raw = halve(&raw);
-            }
-            let camera = Pinhole::new(intrinsics, raw.width as u32, raw.height as u32);
-            out.levels.push(level_of(&raw, camera));
+        for (lw, lh) in level_sizes(w, h, levels) {
+            let intensity: Vec<f32> = match out.levels.last() {
+                None => color.data.par_iter().map(|c| luma(*c)).collect(),
+                Some(below) => halve_intensity(&below.intensity, below.width, below.height),
+            };
+            let gradient = gradient_of(&intensity, lw, lh);
+            out.levels.push(Level {
+                camera: Pinhole::new(intrinsics, lw as u32, lh as u32),
+                width: lw,
+                height: lh,
+                points: Vec::new(),
+                normals: Vec::new(),
+                intensity,
+                gradient,
+            });
         }
-        out
+        out.with_depth_every(depth, fine_stride)
     }
+
+    /// This pyramid's intensity and gradient with the points and normals of another
+    /// `depth` of the same view and size (the tracker's model: the fused depth seen
+    /// from the frame whose color it keeps).
+    pub fn with_depth(self, depth: &DepthImage) -> Pyramid {
+        self.with_depth_every(depth, 1)
+    }
+
+    /// [`Pyramid::with_depth`] with the finest level's normals at every `fine_stride`-th
+    /// pixel in x and y only (zero elsewhere).
+    fn with_depth_every(mut self, depth: &DepthImage, fine_stride: usize) -> Pyramid {
+        let mut z: Vec<f32> = depth
+            .data
+            .iter()
+            .map(|&z| if depth_is_valid(z) { z } else { 0.0 })
+            .collect();
+        for l in 0..self.levels.len() {
+            if l > 0 {
+                let below = &self.levels[l - 1];
+                z = halve_depth(&z, below.width, below.height);
+            }
+            let level = &mut self.levels[l];
+            let every = if l == 0 { fine_stride.max(1) } else { 1 };
+            (level.points, level.normals) =
+                geometry_of(&z, level.width, level.height, &level.camera, every);
+        }
+        self
+    }
+}
+
+/// The sizes of up to `levels` levels (at least 1) of a `w` x `h` image: each half the
+/// one below (a last odd row or column dropped), none under 8 x 8.
+fn level_sizes(w: usize, h: usize, levels: usize) -> Vec<(usize, usize)> {
+    let mut sizes = vec![(w, h)];
+    while sizes.len() < levels.max(1) {
+        let (w, h) = *sizes.last().expect("one level");
+        if w / 2 < 8 || h / 2 < 8 {
+            break;
+        }
+        sizes.push((w / 2, h / 2));
+    }
+    sizes
 }
 
 /// Rec. 601 luma of an 8-bit sRGB color, in [0, 1].
@@ -90,23 +123,39 @@ pub fn luma(c: [u8; 3]) -> f32 {
     (0.299 * c[0] as f32 + 0.587 * c[1] as f32 + 0.114 * c[2] as f32) / 255.0
 }
 
-/// The next level: 2 x 2 blocks (a last odd row or column is dropped).
-fn halve(raw: &Raw) -> Raw {
-    let (w, h) = (raw.width / 2, raw.height / 2);
-    let mut depth = vec![0.0f32; w * h];
-    let mut intensity = vec![0.0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
+/// The next level's intensity: the mean of each 2 x 2 block (a last odd row or column
+/// is dropped).
+fn halve_intensity(intensity: &[f32], width: usize, height: usize) -> Vec<f32> {
+    let (w, h) = (width / 2, height / 2);
+    let mut out = vec![0.0f32; w * h];
+    for (y, row) in out.chunks_mut(w.max(1)).enumerate().take(h) {
+        let (a, b) = (
+            &intensity[2 * y * width..],
+            &intensity[(2 * y + 1) * width..],
+        );
+        for (x, o) in row.iter_mut().enumerate() {
+            *o = (a[2 * x] + a[2 * x + 1] + b[2 * x] + b[2 * x + 1]) * 0.25;
+        }
+    }
+    out
+}
+
+/// The next level's depth: the mean of each 2 x 2 block's valid depths when they lie
+/// within [`BLOCK_SPREAD`] of it, else missing (0).
+fn halve_depth(depth: &[f32], width: usize, height: usize) -> Vec<f32> {
+    let (w, h) = (width / 2, height / 2);
+    let mut out = vec![0.0f32; w * h];
+    for (y, row) in out.chunks_mut(w.max(1)).enumerate().take(h) {
+        for (x, o) in row.iter_mut().enumerate() {
             let idx = [
-                2 * y * raw.width + 2 * x,
-                2 * y * raw.width + 2 * x + 1,
-                (2 * y + 1) * raw.width + 2 * x,
-                (2 * y + 1) * raw.width + 2 * x + 1,
+                2 * y * width + 2 * x,
+                2 * y * width + 2 * x + 1,
+                (2 * y + 1) * width + 2 * x,
+                (2 * y + 1) * width + 2 * x + 1,
             ];
-            intensity[y * w + x] = idx.iter().map(|&i| raw.intensity[i]).sum::<f32>() * 0.25;
             let (mut sum, mut n, mut lo, mut hi) = (0.0f32, 0u32, f32::INFINITY, 0.0f32);
             for &i in &idx {
-                let z = raw.depth[i];
+                let z = depth[i];
                 if z > 0.0 {
                     sum += z;
                     n += 1;
@@ -117,26 +166,44 @@ fn halve(raw: &Raw) -> Raw {
             if n > 0 {
                 let mean = sum / n as f32;
                 if hi - lo <= BLOCK_SPREAD * mean {
-                    depth[y * w + x] = mean;
+                    *o = mean;
                 }
             }
         }
     }
-    Raw {
-        width: w,
-        height: h,
-        depth,
-        intensity,
-    }
+    out
 }
 
-/// Points, normals and the intensity gradient of one level (rows in parallel).
-fn level_of(raw: &Raw, camera: Pinhole) -> Level {
-    let (w, h) = (raw.width, raw.height);
+/// The intensity gradient of a `w` x `h` level: central differences, zero on the border.
+fn gradient_of(g: &[f32], w: usize, h: usize) -> Vec<[f32; 2]> {
+    let mut gradient = vec![[0.0f32; 2]; w * h];
+    gradient
+        .par_chunks_mut(w.max(1))
+        .enumerate()
+        .filter(|(y, _)| *y >= 1 && *y + 1 < h)
+        .for_each(|(y, row)| {
+            let inner = 1..w.saturating_sub(1).max(1);
+            for (x, d) in inner.clone().zip(&mut row[inner]) {
+                let i = y * w + x;
+                *d = [(g[i + 1] - g[i - 1]) * 0.5, (g[i + w] - g[i - w]) * 0.5];
+            }
+        });
+    gradient
+}
+
+/// Points and normals of a `w` x `h` level's depth (rows in parallel), normals at every
+/// `every`-th pixel in x and y.
+fn geometry_of(
+    depth: &[f32],
+    w: usize,
+    h: usize,
+    camera: &Pinhole,
+    every: usize,
+) -> (Vec<Vec3>, Vec<Vec3>) {
     let mut points = vec![Vec3::ZERO; w * h];
     points
         .par_chunks_mut(w.max(1))
-        .zip(raw.depth.par_chunks(w.max(1)))
+        .zip(depth.par_chunks(w.max(1)))
         .enumerate()
         .for_each(|(y, (row, depth))| {
             for (x, (p, &z)) in row.iter_mut().zip(depth).enumerate() {
@@ -146,29 +213,16 @@ fn level_of(raw: &Raw, camera: Pinhole) -> Level {
             }
         });
     let mut normals = vec![Vec3::ZERO; w * h];
-    let mut gradient = vec![[0.0f32; 2]; w * h];
     normals
         .par_chunks_mut(w.max(1))
-        .zip(gradient.par_chunks_mut(w.max(1)))
         .enumerate()
-        .filter(|(y, _)| *y >= 1 && *y + 1 < h)
-        .for_each(|(y, (normal_row, gradient_row))| {
-            let g = &raw.intensity;
-            for x in 1..w.saturating_sub(1) {
-                let i = y * w + x;
-                gradient_row[x] = [(g[i + 1] - g[i - 1]) * 0.5, (g[i + w] - g[i - w]) * 0.5];
-                normal_row[x] = normal_at(&points, w, i);
+        .filter(|(y, _)| *y >= 1 && *y + 1 < h && y % every == 0)
+        .for_each(|(y, row)| {
+            for x in (every..w.saturating_sub(1)).step_by(every) {
+                row[x] = normal_at(&points, w, y * w + x);
             }
         });
-    Level {
-        camera,
-        width: w,
-        height: h,
-        points,
-        normals,
-        intensity: raw.intensity.clone(),
-        gradient,
-    }
+    (points, normals)
 }
 
 /// The normal at inner pixel `i` of a `w`-wide point map: the cross product of central
@@ -213,7 +267,7 @@ mod tests {
             }
         }
         let color = Image::filled(64, 48, [128u8, 128, 128]);
-        let p = Pyramid::build(&k, &color, &depth, 3);
+        let p = Pyramid::build(&k, &color, &depth, 3, 1);
         assert_eq!(p.levels.len(), 3);
         assert_eq!((p.levels[2].width, p.levels[2].height), (16, 12));
         let want = Vec3::new(0.5, 0.0, -1.0).normalize();
@@ -241,7 +295,7 @@ mod tests {
             }
         }
         let color = Image::filled(16, 16, [0u8, 0, 0]);
-        let p = Pyramid::build(&k, &color, &depth, 2);
+        let p = Pyramid::build(&k, &color, &depth, 2, 1);
         let l1 = &p.levels[1];
         // Block x = 4 covers columns 8 and 9: 1 m and 3 m.
         assert_eq!(l1.points[4 * 8 + 4], Vec3::ZERO);

@@ -74,10 +74,10 @@ fn a_known_motion_is_recovered_within_a_millimetre_and_a_twentieth_of_a_degree()
     let (c0, d0) = render(&first);
     let (c1, d1) = render(&second);
     assert_eq!(
-        tracker.track(&c0, &d0, Some(&first), None).unwrap(),
+        tracker.track(&c0, &d0, Some(&first), None, None).unwrap(),
         Tracked::Started(first)
     );
-    let Tracked::Pose(got, alignment) = tracker.track(&c1, &d1, None, None).unwrap() else {
+    let Tracked::Pose(got, alignment) = tracker.track(&c1, &d1, None, None, None).unwrap() else {
         panic!("lost");
     };
     let (t, r) = error(&got, &second);
@@ -106,9 +106,9 @@ fn a_frame_that_sees_none_of_the_model_is_lost_and_tracking_resumes() {
     );
     let mut tracker = Tracker::new(intrinsics(), TrackParams::default());
     let (c0, d0) = render(&first);
-    tracker.track(&c0, &d0, Some(&first), None).unwrap();
+    tracker.track(&c0, &d0, Some(&first), None, None).unwrap();
     let (c1, d1) = render(&behind);
-    match tracker.track(&c1, &d1, None, None).unwrap() {
+    match tracker.track(&c1, &d1, None, None, None).unwrap() {
         Tracked::Lost(Lost::TooFewInliers { inliers, valid }, _) => {
             assert!(valid > 1000 && inliers * 10 < valid, "{inliers} of {valid}");
         }
@@ -116,7 +116,7 @@ fn a_frame_that_sees_none_of_the_model_is_lost_and_tracking_resumes() {
     }
     // The next frame near the last good one is tracked against the unchanged model.
     let (c2, d2) = render(&near);
-    let Tracked::Pose(got, _) = tracker.track(&c2, &d2, None, None).unwrap() else {
+    let Tracked::Pose(got, _) = tracker.track(&c2, &d2, None, None, None).unwrap() else {
         panic!("not resumed");
     };
     let (t, r) = error(&got, &near);
@@ -138,7 +138,7 @@ fn poses_are_the_same_bits_on_one_and_two_threads() {
             frames
                 .iter()
                 .map(
-                    |(c, d)| match tracker.track(c, d, Some(&poses[0]), None).unwrap() {
+                    |(c, d)| match tracker.track(c, d, Some(&poses[0]), None, None).unwrap() {
                         Tracked::Started(p) | Tracked::Pose(p, _) => p,
                         Tracked::Lost(l, _) => panic!("{l}"),
                     },
@@ -159,10 +159,57 @@ fn color_and_depth_of_different_sizes_are_refused() {
     let mut tracker = Tracker::new(intrinsics(), TrackParams::default());
     let color = Image::filled(320, 240, [0u8; 3]);
     let depth = Image::filled(160, 120, 1.0f32);
-    let e = tracker.track(&color, &depth, None, None).unwrap_err();
+    let e = tracker.track(&color, &depth, None, None, None).unwrap_err();
     assert_eq!(
         e.to_string(),
         "pose.track: color 320x240 and depth 160x120 differ (depth must be registered to \
          color)"
     );
+}
+
+/// The model made from the pipeline's fused depth (`depth.fuse` a frame back, fusing
+/// with the tracked poses) is the one the tracker's own fusion makes: the same poses,
+/// bit for bit.
+#[test]
+fn the_pipelines_fused_depth_gives_the_poses_of_the_trackers_own_fusion() {
+    let poses: Vec<Pose> = (0..4).map(|i| camera_pose(1.0 + i as f64 / 30.0)).collect();
+    let frames: Vec<_> = poses.iter().map(render).collect();
+    let pose_of_outcome = |t: Tracked| match t {
+        Tracked::Started(p) | Tracked::Pose(p, _) => p,
+        Tracked::Lost(l, _) => panic!("{l}"),
+    };
+    let mut own = Tracker::new(intrinsics(), TrackParams::default());
+    let alone: Vec<Pose> = frames
+        .iter()
+        .map(|(c, d)| pose_of_outcome(own.track(c, d, Some(&poses[0]), None, None).unwrap()))
+        .collect();
+    let mut tracker = Tracker::new(intrinsics(), TrackParams::default());
+    let mut fusion = DepthFusion::new(intrinsics(), FuseParams::default());
+    let mut fused_before: Option<DepthImage> = None;
+    let mut shared = Vec::new();
+    for (c, d) in &frames {
+        let outcome = tracker.track(c, d, Some(&poses[0]), None, fused_before.as_ref());
+        let pose = pose_of_outcome(outcome.unwrap());
+        let (fused, _) = fusion.push(d, &pose).unwrap();
+        fused_before = fused.get::<DepthImage>(kind::DEPTH).cloned();
+        shared.push(pose);
+    }
+    assert_eq!(shared, alone);
+    // And frame to frame differs: the fused model is in use.
+    let frame_params = TrackParams {
+        fused_model: false,
+        ..TrackParams::default()
+    };
+    let mut frame_to_frame = Tracker::new(intrinsics(), frame_params);
+    let last = frames
+        .iter()
+        .map(|(c, d)| {
+            pose_of_outcome(
+                frame_to_frame
+                    .track(c, d, Some(&poses[0]), None, None)
+                    .unwrap(),
+            )
+        })
+        .last();
+    assert_ne!(last.as_ref(), alone.last());
 }

@@ -160,7 +160,11 @@ pub enum ImportCommand {
         #[command(flatten)]
         common: CommonImportArgs,
     },
-    /// Redwood / Open3D layout: color/ or image/, depth/ (PNG16, mm), a .log trajectory.
+    /// Redwood / Open3D layout: color/ or image/, depth/ (PNG16, mm), a .log trajectory
+    /// (optional: without one the recording has no poses; track them with
+    /// pipelines/*-tracked.toml), and Open3D's camera_intrinsic.json or intrinsic.json
+    /// (its RealSense recorder's and bag reader's; used unless --intrinsics is given,
+    /// with intrinsic.json's depth_scale).
     Redwood {
         /// The dataset directory.
         dir: PathBuf,
@@ -348,6 +352,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
                 common: common.options(),
                 fps: *fps,
                 trajectory: trajectory.clone(),
+                override_intrinsics: common.intrinsics.is_some(),
             };
             redwood::import(dir, &common.out, &options, &mut tick)?
         }
@@ -372,8 +377,12 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         let _ = std::fs::remove_file(out);
         bail!("{}", no_association(&replay.stats, &offsets));
     }
-    let intrinsics = command.intrinsics();
     let header = replay.recording.header();
+    // Intrinsics from the folder's own file need no note on presets.
+    let intrinsics = match header.provenance.settings.contains_key("intrinsics_file") {
+        true => None,
+        false => command.intrinsics(),
+    };
     let sizes = [
         ("color", &header.color_intrinsics),
         ("depth", &header.depth_intrinsics),

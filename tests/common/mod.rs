@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod open3d;
 pub mod sample;
 
 use std::path::PathBuf;

@@ -2,7 +2,7 @@
 //!
 //! - [`tum`]: the TUM RGB-D benchmark layout (`rgb.txt`, `depth.txt`, `groundtruth.txt`).
 //! - [`redwood`]: the Redwood / Open3D layout (`color/` or `image/`, `depth/`, a `.log`
-//!   trajectory).
+//!   trajectory, Open3D's intrinsics file: [`open3d_intrinsics`]).
 //! - [`scannet`]: ScanNet's `.sens` files (one binary file: a header, then per frame a
 //!   pose, stamps and the color and depth images).
 //!
@@ -10,6 +10,7 @@
 //! decoded on replay) unless asked to store raw, check every image's header (format,
 //! size, bit depth) at import, and write atomically.
 
+pub mod open3d_intrinsics;
 pub mod redwood;
 pub mod scannet;
 pub mod tum;

@@ -5,7 +5,12 @@
 //! DIR/depth/*.png                          16-bit depth in millimetres, 0 = missing
 //! DIR/*.log                                trajectory: per frame a line of three integers,
 //!                                          then four rows of a 4x4 camera-to-world matrix
+//!                                          (optional: without it, no poses)
+//! DIR/camera_intrinsic.json                Open3D's intrinsics (optional, or
+//!   or DIR/intrinsic.json                  intrinsic.json with a depth scale: see
+//!                                          [`super::open3d_intrinsics`])
 //! ```
+//! The intrinsics file is used unless the options give intrinsics.
 //! The layout has no timestamps: frame k is stamped k / fps. Files are ordered by the
 //! numbers in their names (`2.png` before `10.png`), and where every name ends in a
 //! number, color and depth pair by that number (`color/000012.jpg` with
@@ -13,8 +18,8 @@
 //! without numbers pair by position.
 
 use super::{
-    ImportOptions, ImportSummary, check_dataset_dir, check_size, file_error, import_header,
-    line_error, read_color, read_depth,
+    CameraIntrinsics, ImportOptions, ImportSummary, check_dataset_dir, check_size, file_error,
+    import_header, line_error, open3d_intrinsics, read_color, read_depth,
 };
 use crate::error::ImportError;
 use crate::types::{ColorRecord, DepthRecord, Pose, PoseRecord, Record, StreamKind};
@@ -33,6 +38,8 @@ pub struct RedwoodOptions {
     pub fps: f64,
     /// The trajectory file; by default the directory's only `.log` file (or `trajectory.log`).
     pub trajectory: Option<PathBuf>,
+    /// `common.intrinsics` was given: the folder's Open3D intrinsics file is not read.
+    pub override_intrinsics: bool,
 }
 
 impl Default for RedwoodOptions {
@@ -41,6 +48,7 @@ impl Default for RedwoodOptions {
             common: ImportOptions::default(),
             fps: 30.0,
             trajectory: None,
+            override_intrinsics: false,
         }
     }
 }
@@ -449,16 +457,48 @@ pub fn import(
         .as_ref()
         .map(|p| p.display().to_string())
         .unwrap_or_default();
+    let mut common = options.common.clone();
+    let mut settings = vec![
+        ("fps", options.fps.to_string()),
+        ("trajectory", trajectory_setting),
+    ];
+    let mut depth_unit_m = REDWOOD_DEPTH_UNIT_M;
+    let file = match options.override_intrinsics {
+        true => None,
+        false => open3d_intrinsics::find(dir)?,
+    };
+    if let Some(file) = file {
+        let k = &file.intrinsics;
+        if (first_color.width, first_color.height) != (k.width, k.height) {
+            return Err(file_error(
+                &file.path,
+                format!(
+                    "is for {}x{} images, but {} is {}x{} (give --intrinsics fx,fy,cx,cy for \
+                     the images' own size)",
+                    k.width,
+                    k.height,
+                    frames[0].0.display(),
+                    first_color.width,
+                    first_color.height
+                ),
+            ));
+        }
+        common.intrinsics = CameraIntrinsics::Given {
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+        };
+        depth_unit_m = file.depth_unit_m.unwrap_or(REDWOOD_DEPTH_UNIT_M);
+        settings.push(("intrinsics_file", file.path.display().to_string()));
+    }
     let header = import_header(
         "redwood",
         dir,
-        &options.common,
-        &[
-            ("fps", options.fps.to_string()),
-            ("trajectory", trajectory_setting),
-        ],
+        &common,
+        &settings,
         (color_size, depth_size),
-        REDWOOD_DEPTH_UNIT_M,
+        depth_unit_m,
         streams,
     );
     let mut writer = RecordingWriter::create(out, &header)?;

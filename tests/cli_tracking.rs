@@ -53,23 +53,8 @@ fn eval_scores_the_tracked_trajectory_against_the_true_one() {
 fn a_recording_without_poses_runs_acquisition_with_the_tracker() {
     const FRAMES: usize = 6;
     let tmp = tempfile::tempdir().unwrap();
-    let data = common::data_dir().join("livingroom1");
     for (name, with_poses) in [("bare", false), ("posed", true)] {
-        let dir = tmp.path().join(name);
-        for (sub, ext) in [("color", "jpg"), ("depth", "png")] {
-            std::fs::create_dir_all(dir.join(sub)).unwrap();
-            for i in 0..FRAMES {
-                let file = format!("{i:05}.{ext}");
-                std::os::unix::fs::symlink(data.join(sub).join(&file), dir.join(sub).join(&file))
-                    .unwrap();
-            }
-        }
-        if with_poses {
-            // The trajectory's first records: five lines each.
-            let log = std::fs::read_to_string(data.join("trajectory.log")).unwrap();
-            let head: Vec<&str> = log.lines().take(5 * FRAMES).collect();
-            std::fs::write(dir.join("trajectory.log"), head.join("\n") + "\n").unwrap();
-        }
+        livingroom1_folder(&tmp.path().join(name), FRAMES, with_poses);
         ok(run_in(
             tmp.path(),
             &["import", "redwood", name, "-o", &format!("{name}.relume")],
@@ -131,4 +116,115 @@ fn a_recording_without_poses_runs_acquisition_with_the_tracker() {
         "{bare:?}"
     );
     assert_eq!(bare, hashes("posed.relume"));
+}
+
+/// Links livingroom1's first `frames` frames into `dir` (a Redwood folder), with the
+/// trajectory's first records when `with_poses`.
+fn livingroom1_folder(dir: &Path, frames: usize, with_poses: bool) {
+    let data = common::data_dir().join("livingroom1");
+    for (sub, ext) in [("color", "jpg"), ("depth", "png")] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+        for i in 0..frames {
+            let file = format!("{i:05}.{ext}");
+            std::os::unix::fs::symlink(data.join(sub).join(&file), dir.join(sub).join(&file))
+                .unwrap();
+        }
+    }
+    if with_poses {
+        let log = std::fs::read_to_string(data.join("trajectory.log")).unwrap();
+        let head: Vec<&str> = log.lines().take(5 * frames).collect();
+        std::fs::write(dir.join("trajectory.log"), head.join("\n") + "\n").unwrap();
+    }
+}
+
+/// Objects anchored to the floor on a recording without poses: the tracked world is the
+/// first frame's camera, and the floor found there is livingroom1's (the same anchor as
+/// with the recorded poses, whose first is the identity); a run that starts elsewhere
+/// is refused at the anchor, and the run from frame 0 finishes its frames.
+#[test]
+fn anchors_on_a_recording_without_poses_are_found_in_the_tracked_world() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (name, with_poses) in [("bare", false), ("posed", true)] {
+        livingroom1_folder(&tmp.path().join(name), 4, with_poses);
+        ok(run_in(
+            tmp.path(),
+            &["import", "redwood", name, "-o", &format!("{name}.relume")],
+        ));
+    }
+    let text = std::fs::read_to_string(pipeline("mixed-reality-tracked.toml"))
+        .unwrap()
+        .replacen(
+            "translation = [0.0, 0.09, 0.0]",
+            "anchor = \"floor\"\nat_pixel = [320, 440]\ntranslation = [0.0, 0.09, 0.0]",
+            1,
+        )
+        .replacen(
+            "translation = [0.3, 0.12, -0.42]",
+            "anchor = \"floor\"\nat_pixel = [320, 440]\ntranslation = [0.3, 0.12, -0.42]",
+            1,
+        );
+    std::fs::write(tmp.path().join("p.toml"), text).unwrap();
+    // The torus's line: "... its frame's origin is [x, y, z] m, its up [x, y, z]; ...".
+    let anchor = |rec: &str| {
+        let o = ok(run_in(
+            tmp.path(),
+            &["validate", "p.toml", "--recording", rec],
+        ));
+        let out = stdout(&o) + &stderr(&o);
+        let line = out
+            .lines()
+            .find(|l| l.starts_with("object `torus`: anchored on the floor"))
+            .unwrap_or_else(|| panic!("{out}"))
+            .to_string();
+        let numbers = |after: &str| -> Vec<f32> {
+            let rest = &line[line.find(after).unwrap() + after.len()..];
+            rest[..rest.find(']').unwrap()]
+                .split(", ")
+                .map(|v| v.parse().unwrap())
+                .collect()
+        };
+        (numbers("origin is ["), numbers("its up ["), line.clone())
+    };
+    let (origin, up, line) = anchor("bare.relume");
+    assert!(line.contains("depth samples of frames 0..1"), "{line}");
+    let (posed_origin, posed_up, _) = anchor("posed.relume");
+    // livingroom1's floor, in its first camera's frame: y = 0.405 m below the camera
+    // (y down), seen 1.1 m ahead at that pixel.
+    assert!((origin[1] - 0.41).abs() < 0.015, "{line}");
+    for k in 0..3 {
+        assert!(
+            (origin[k] - posed_origin[k]).abs() < 0.005,
+            "{origin:?} {posed_origin:?}"
+        );
+        assert!((up[k] - posed_up[k]).abs() < 0.02, "{up:?} {posed_up:?}");
+    }
+
+    let late = run_in(
+        tmp.path(),
+        &[
+            "replay",
+            "bare.relume",
+            "-p",
+            "p.toml",
+            "--frames",
+            "2..4",
+            "--out",
+            "o",
+        ],
+    );
+    assert!(!late.status.success());
+    let err = stderr(&late);
+    assert!(
+        err.contains(
+            "object `torus`: `bare.relume` has no camera poses, and the tracked world is the \
+             camera of frame 2, where the run starts: anchors are found on that frame alone, \
+             not on frame 0"
+        ) && err.contains("anchor it on frame 2 (`frame = 2`), or start the run at frame 0"),
+        "{err}"
+    );
+    ok(run_in(
+        tmp.path(),
+        &["replay", "bare.relume", "-p", "p.toml", "--out", "o"],
+    ));
+    assert_eq!(common::file_names(&tmp.path().join("o/final")).len(), 4);
 }

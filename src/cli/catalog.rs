@@ -293,7 +293,7 @@ pub fn validate(a: ValidateArgs) -> anyhow::Result<i32> {
             ..Default::default()
         };
         let replay = relume::recording::Replay::open(rec, options)?;
-        super::prepare::place_objects(&mut pipeline, &replay, "")?;
+        super::prepare::place_objects(&mut pipeline, &replay, 0, "")?;
     }
     // A light probe file is read when its stage is set up: read it now, so that a
     // missing or corrupt one does not pass here and stop the run.

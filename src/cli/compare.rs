@@ -142,7 +142,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     let (replay, frames) = open_recording(&run_args)?;
     for pipeline in &mut pipelines {
         let prefix = format!("{}: ", pipeline.file);
-        place_objects(pipeline, &replay, &prefix)?;
+        place_objects(pipeline, &replay, frames.start, &prefix)?;
         if !a.no_scores {
             prepare::warn_every(pipeline);
         }

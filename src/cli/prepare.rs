@@ -6,15 +6,16 @@ use relume::stages::world::PipelineObjects;
 
 /// Makes `pipeline` ready for `replay`: refuses it when a stage needs the recording's
 /// poses and the recording has none ([`check_poses`]), then places its objects
-/// anchored to the scene, saying where (each line after `prefix`, which names the
-/// pipeline where several run).
+/// anchored to the scene for a run from `first_frame`, saying where (each line after
+/// `prefix`, which names the pipeline where several run).
 pub(crate) fn place_objects(
     pipeline: &mut relume::graph::Pipeline,
     replay: &relume::recording::Replay,
+    first_frame: usize,
     prefix: &str,
 ) -> anyhow::Result<()> {
     check_poses(pipeline, replay)?;
-    for placed in pipeline.place_objects(replay)? {
+    for placed in pipeline.place_objects_from(replay, first_frame)? {
         eprintln!("{prefix}{placed}");
     }
     Ok(())

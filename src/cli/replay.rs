@@ -121,7 +121,7 @@ pub(super) fn load(args: &RunArgs) -> anyhow::Result<Loaded> {
     let (replay, frames) = open_recording(args)?;
     let mut pipeline = pipeline;
     prepare::announce_programs(&pipeline);
-    prepare::place_objects(&mut pipeline, &replay, "")?;
+    prepare::place_objects(&mut pipeline, &replay, frames.start, "")?;
     Ok(Loaded {
         replay,
         pipeline,

@@ -96,16 +96,26 @@ pub fn objects<'a>(ctx: &BuildContext<'a>) -> &'a Arc<VirtualScene> {
 /// `at_pixel`) on `replay`'s surfaces and rebuilds its world with every object; says
 /// where each was placed. Nothing to do (and an empty list) when none is anchored.
 /// Errors stand at the anchor's keys in the config.
+///
+/// `first_frame` is where the run starts. On a recording without poses, a pipeline that
+/// tracks them (`pose.track`) has the camera of that frame as its world (the tracker
+/// starts there at the identity): anchors are found on that frame.
 pub fn place_objects(
     pipeline: &mut Pipeline,
     replay: &Replay,
+    first_frame: usize,
 ) -> Result<Vec<Placement>, ConfigError> {
     let world = object_world(&pipeline.world);
     if world.declared.iter().all(|d| d.sites.is_none()) {
         return Ok(Vec::new());
     }
+    let tracks = pipeline
+        .stages
+        .iter()
+        .any(|s| s.kind == crate::track::INFO.kind);
+    let tracked_from = (replay.stats.frames_with_pose == 0 && tracks).then_some(first_frame);
     let mut declared = world.declared.clone();
-    let mut placements = place::place_objects(&mut declared, replay)?;
+    let mut placements = place::place_objects(&mut declared, replay, tracked_from)?;
     let scene = place::scene_of(&declared, &pipeline.file)?;
     for placed in &mut placements {
         // Object k has material k (VirtualScene::from_specs).
@@ -145,8 +155,16 @@ pub trait PipelineObjects {
     fn declared_objects(&self) -> &[DeclaredObject];
     /// The names of the objects anchored to the scene that have not been placed yet.
     fn unplaced_objects(&self) -> Vec<String>;
-    /// [`place_objects`] on this pipeline.
-    fn place_objects(&mut self, replay: &Replay) -> Result<Vec<Placement>, ConfigError>;
+    /// [`place_objects`] on this pipeline, for a run from frame 0.
+    fn place_objects(&mut self, replay: &Replay) -> Result<Vec<Placement>, ConfigError> {
+        self.place_objects_from(replay, 0)
+    }
+    /// [`place_objects`] on this pipeline, for a run from `first_frame`.
+    fn place_objects_from(
+        &mut self,
+        replay: &Replay,
+        first_frame: usize,
+    ) -> Result<Vec<Placement>, ConfigError>;
 }
 
 impl PipelineObjects for Pipeline {
@@ -162,7 +180,11 @@ impl PipelineObjects for Pipeline {
         object_world(&self.world).unplaced()
     }
 
-    fn place_objects(&mut self, replay: &Replay) -> Result<Vec<Placement>, ConfigError> {
-        place_objects(self, replay)
+    fn place_objects_from(
+        &mut self,
+        replay: &Replay,
+        first_frame: usize,
+    ) -> Result<Vec<Placement>, ConfigError> {
+        place_objects(self, replay, first_frame)
     }
 }

@@ -61,14 +61,20 @@ impl std::fmt::Display for Placement {
 /// [`Anchor`]), setting its `anchor_frame`. Errors stand at the key that asked
 /// for what the recording cannot give: a frame past its end, a pixel outside its
 /// images, a frame without depth or pose, no floor, no surface at the pixel.
+///
+/// `tracked_from`: on a recording without poses whose pipeline tracks them, the frame
+/// the tracker starts from at the identity, whose camera is the world: the one frame
+/// anchors can be found on (the floor then fitted to it alone).
 pub fn place_objects(
     declared: &mut [DeclaredObject],
     replay: &Replay,
+    tracked_from: Option<usize>,
 ) -> Result<Vec<Placement>, ConfigError> {
     let path = replay.recording.path().display().to_string();
     let color = replay.recording.header().color_intrinsics;
     let mut scene = SceneViews {
         replay,
+        identity_at: tracked_from,
         views: BTreeMap::new(),
         floors: BTreeMap::new(),
     };
@@ -83,15 +89,27 @@ pub fn place_objects(
             Anchor::Floor { at_pixel, frame } => (frame, at_pixel),
             Anchor::Surface { at_pixel, frame } => (frame, Some(at_pixel)),
         };
-        if replay.stats.frames_with_pose == 0 {
-            return Err(sites.anchor.retold(
-                format!(
-                    "object `{name}`: `{path}` has no camera poses, so no surface it shows has a place in the world"
-                ),
-                Some("anchored objects need a recording with poses (a TUM folder's groundtruth.txt, a Redwood trajectory.log)".into()),
-            ));
-        }
         let frame_site = sites.frame.as_ref().unwrap_or(&sites.anchor);
+        match tracked_from {
+            _ if replay.stats.frames_with_pose > 0 => {}
+            Some(start) if start == frame => {}
+            Some(start) => {
+                return Err(frame_site.retold(
+                    format!(
+                        "object `{name}`: `{path}` has no camera poses, and the tracked world is the camera of frame {start}, where the run starts: anchors are found on that frame alone, not on frame {frame}"
+                    ),
+                    Some(format!("anchor it on frame {start} (`frame = {start}`), or start the run at frame {frame}")),
+                ));
+            }
+            None => {
+                return Err(sites.anchor.retold(
+                    format!(
+                        "object `{name}`: `{path}` has no camera poses, so no surface it shows has a place in the world"
+                    ),
+                    Some("anchored objects need poses: a recording with them (a TUM folder's groundtruth.txt, a Redwood trajectory.log), or a pipeline that tracks them (pipelines/*-tracked.toml)".into()),
+                ));
+            }
+        }
         let pixel_site = sites.at_pixel.as_ref().unwrap_or(&sites.anchor);
         if frame >= replay.len() {
             return Err(frame_site.retold(
@@ -230,27 +248,34 @@ type FloorFound = Result<(Floor, Range<usize>), (Range<usize>, String)>;
 /// Frames and floors read once for all the objects that use them.
 struct SceneViews<'a> {
     replay: &'a Replay,
+    /// The frame whose missing pose is the identity (the tracked world's first camera).
+    identity_at: Option<usize>,
     views: BTreeMap<usize, Result<CameraView, String>>,
     floors: BTreeMap<usize, FloorFound>,
 }
 
 impl SceneViews<'_> {
     fn view(&mut self, n: usize) -> Result<&CameraView, String> {
-        let replay = self.replay;
+        let (replay, identity) = (self.replay, self.identity_at == Some(n));
         self.views
             .entry(n)
-            .or_insert_with(|| CameraView::read(replay, n))
+            .or_insert_with(|| CameraView::read(replay, n, identity))
             .as_ref()
             .map_err(Clone::clone)
     }
 
     /// The floor of frames `first .. first + FLOOR_FRAMES` (those of them with depth and
-    /// a pose), and those frames.
+    /// a pose; frame `first` alone in a tracked world), and those frames.
     fn floor(&mut self, first: usize) -> FloorFound {
         if let Some(known) = self.floors.get(&first) {
             return known.clone();
         }
-        let frames = first..(first + FLOOR_FRAMES).min(self.replay.len());
+        // A tracked world knows one camera before the run: its first.
+        let count = match self.identity_at {
+            Some(_) => 1,
+            None => FLOOR_FRAMES,
+        };
+        let frames = first..(first + count).min(self.replay.len());
         let (mut points, mut cameras, mut up) = (Vec::new(), Vec::new(), Vec3::ZERO);
         for n in frames.clone() {
             if let Ok(view) = self.view(n) {

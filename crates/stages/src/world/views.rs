@@ -24,17 +24,26 @@ pub struct CameraView {
 
 impl CameraView {
     /// Frame `n` of `replay`; an error saying why when it has no depth image or no
-    /// pose, or its records cannot be read.
-    pub fn read(replay: &Replay, n: usize) -> Result<CameraView, String> {
+    /// pose (a missing pose is the identity where `identity_if_missing`: the first
+    /// camera of a tracked world), or its records cannot be read.
+    pub fn read(
+        replay: &Replay,
+        n: usize,
+        identity_if_missing: bool,
+    ) -> Result<CameraView, String> {
         let records = replay.read_frame(n).map_err(|e| e.to_string())?;
         let header = replay.recording.header();
         let Some(depth) = records.depth else {
             return Err(format!("frame {n} has no depth image"));
         };
-        let Some(pose) = records.pose else {
-            return Err(format!(
-                "frame {n} has no camera pose (it lies in a gap of the pose stream)"
-            ));
+        let pose = match records.pose {
+            Some(pose) => pose,
+            None if identity_if_missing => relume_recording::Pose::IDENTITY,
+            None => {
+                return Err(format!(
+                    "frame {n} has no camera pose (it lies in a gap of the pose stream)"
+                ));
+            }
         };
         let depth = codec::decode_depth(&depth.image, header.depth_unit_m)
             .map_err(|e| format!("frame {n}'s depth image does not decode: {e}"))?;

@@ -177,9 +177,10 @@ impl Tracker {
     /// Tracks the next frame. `start` is the pose of the first frame (the identity when
     /// `None`); `guess`, when given, is the frame's pose to start the alignment from
     /// (refinement of a recorded pose), else the last tracked pose. `fused`, when given,
-    /// is the last tracked frame's depth fused as [`DepthFusion`] with default settings
-    /// fuses it (the pipeline's `depth.fuse`, a frame back): the fused model is then
-    /// made from it instead of by the tracker's own fusion, which gives the same map.
+    /// is the depth fused up to the last tracked frame, in its view (the pipeline's
+    /// `depth.fuse`, a frame back): the fused model is made from it instead of by the
+    /// tracker's own fusion, which gives the same map where depth.fuse has its default
+    /// settings.
     pub fn track(
         &mut self,
         color: &Rgb8Image,

@@ -2,8 +2,14 @@
 
 mod cli;
 
+/// Counts allocations, for `relume bench --isolated`'s per-stage allocation peaks.
+#[global_allocator]
+static ALLOCATOR: relume::graph::memory::CountingAllocator =
+    relume::graph::memory::CountingAllocator;
+
 fn main() {
     relume::graph::memory::keep_freed_memory();
+    relume::graph::memory::CountingAllocator::installed();
     relume::graph::panics::quiet_in_stages();
     match cli::main() {
         Ok(code) => std::process::exit(code),

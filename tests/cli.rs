@@ -289,6 +289,51 @@ fn bench_isolated_runs_one_frame_at_a_time() {
     );
 }
 
+/// `--isolated` measures each stage's allocation high-water mark: decode's holds at
+/// least the 64 x 48 color (3 bytes a pixel) and depth (4) images it makes, and a
+/// sleeping stage allocates nothing; a pipelined bench, where stages allocate at once,
+/// gives none. Both say the process's peak resident memory.
+#[test]
+fn bench_isolated_reports_each_stages_allocation_peak() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 3);
+    let pipeline = "[[stage]]\nkind = \"decode\"\n\
+                    [[stage]]\nkind = \"debug.sleep\"\nparams = { ms = 1.0 }\n";
+    std::fs::write(d.join("p.toml"), pipeline).unwrap();
+    let bench = |isolated: bool| {
+        let mut args = vec![
+            "bench",
+            "small.relume",
+            "-p",
+            "p.toml",
+            "--repeat",
+            "1",
+            "--json",
+        ];
+        if isolated {
+            args.push("--isolated");
+        }
+        let doc: serde_json::Value = serde_json::from_str(&stdout(&ok(run_in(d, &args)))).unwrap();
+        doc
+    };
+    let doc = bench(true);
+    let decode = doc["stages"]["decode"]["alloc_peak_mb"].as_f64().unwrap();
+    assert!(
+        decode >= (64 * 48 * 7) as f64 / 1e6 && decode < 1.0,
+        "decode: {decode} MB"
+    );
+    assert_eq!(doc["stages"]["debug.sleep"]["alloc_peak_mb"], 0.0, "{doc}");
+    let resident = doc["peak_resident_mb"].as_f64().unwrap();
+    assert!(resident > 1.0 && resident < 4000.0, "{resident} MB");
+    let doc = bench(false);
+    assert_eq!(
+        doc["stages"]["decode"]["alloc_peak_mb"],
+        serde_json::Value::Null
+    );
+    assert!(doc["peak_resident_mb"].as_f64().unwrap() > 1.0);
+}
+
 /// Decodes, sleeps 40 ms and writes the color image of each frame: a run slow enough to
 /// interrupt in the middle, whose progress shows in the files it writes.
 const SLOW_COLOR_WRITER: &str = "[[stage]]\nkind = \"decode\"\n[[stage]]\nkind = \"debug.sleep\"\nparams = { ms = 40.0 }\n[[stage]]\nkind = \"write\"\nparams = { products = [\"color\"] }\n";

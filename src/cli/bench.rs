@@ -13,14 +13,17 @@ pub struct BenchArgs {
     /// Measured runs (after one warm-up run).
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..))]
     repeat: u32,
-    /// Run one frame at a time, so that each stage's time is its own work. By default
-    /// the stages run at once on different frames, as in `replay`: the end-to-end rate is
-    /// the real one, but a stage's time also holds the time it waited for cores that
-    /// other stages (sample.path's threads, say) were using.
+    /// Run one frame at a time, so that each stage's time is its own work, and its
+    /// allocation high-water mark its own (the most bytes it held allocated at once
+    /// while processing a frame, its threads included: the "peak alloc MB" column). By
+    /// default the stages run at once on different frames, as in `replay`: the
+    /// end-to-end rate is the real one, but a stage's time also holds the time it
+    /// waited for cores that other stages (sample.path's threads, say) were using.
     #[arg(long)]
     isolated: bool,
-    /// Print JSON: stages.<name>.{median_ms, p95_ms, max_ms}, fps, isolated, repeat (the
-    /// runs measured), interrupted.
+    /// Print JSON: stages.<name>.{median_ms, p95_ms, max_ms, alloc_peak_mb (with
+    /// --isolated)}, fps, peak_resident_mb (the process's, over the load and every run),
+    /// isolated, repeat (the runs measured), interrupted.
     #[arg(long)]
     json: bool,
 }
@@ -89,6 +92,18 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
             )
         })
         .collect();
+    // Each stage's allocation high-water mark over every measured frame (lockstep
+    // runs only), MB.
+    let alloc_peak_mb: Vec<Option<f64>> = (0..names.len())
+        .map(|i| {
+            reports
+                .iter()
+                .flat_map(|r| r.stages[i].frames.iter().filter_map(|f| f.alloc_peak_bytes))
+                .max()
+                .map(|b| b as f64 / 1e6)
+        })
+        .collect();
+    let peak_resident_mb = relume::graph::memory::peak_resident_bytes().map(|b| b as f64 / 1e6);
     let mut fps: Vec<f64> = reports.iter().map(|r| r.fps()).collect();
     fps.sort_by(f64::total_cmp);
     let median_fps = fps[fps.len() / 2];
@@ -106,8 +121,8 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
     if a.json {
         let stages: serde_json::Map<String, serde_json::Value> = names
             .iter()
-            .zip(&per_stage)
-            .map(|((n, k), s)| {
+            .zip(per_stage.iter().zip(&alloc_peak_mb))
+            .map(|((n, k), (s, alloc))| {
                 let timing = serde_json::json!({
                     "kind": k,
                     "median_ms": s.median_ms,
@@ -116,6 +131,7 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
                     "mean_ms": s.mean_ms,
                     "every": every_of(n),
                     "lag": lag_of(n),
+                    "alloc_peak_mb": alloc,
                 });
                 (n.clone(), timing)
             })
@@ -129,6 +145,7 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
             "interrupted": interrupted,
             "stages": stages,
             "fps": median_fps,
+            "peak_resident_mb": peak_resident_mb,
         });
         outln!("{}", serde_json::to_string_pretty(&doc)?)?;
         return Ok(status);
@@ -151,8 +168,12 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
             ""
         }
     )?;
+    let alloc_column = match a.isolated {
+        true => format!("  {:>14}", "peak alloc MB"),
+        false => String::new(),
+    };
     outln!(
-        "{:<width$}  {:<width$}  {:>9}  {:>9}  {:>9}  {:>10}",
+        "{:<width$}  {:<width$}  {:>9}  {:>9}  {:>9}  {:>10}{alloc_column}",
         "stage",
         "kind",
         "median ms",
@@ -161,7 +182,7 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
         "frames/s"
     )?;
     let (mut amortized, mut behind) = (Vec::new(), Vec::new());
-    for ((n, k), s) in names.iter().zip(&per_stage) {
+    for ((n, k), (s, alloc)) in names.iter().zip(per_stage.iter().zip(&alloc_peak_mb)) {
         let lag = lag_of(n);
         if lag > 0 {
             behind.push(format!("`{n}` (lag {lag})"));
@@ -178,8 +199,13 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
         } else {
             f64::INFINITY
         };
+        let alloc = match (a.isolated, alloc) {
+            (true, Some(mb)) => format!("  {mb:>14.1}"),
+            (true, None) => format!("  {:>14}", "-"),
+            (false, _) => String::new(),
+        };
         outln!(
-            "{n:<width$}  {k:<width$}  {:>9.3}  {:>9.3}  {:>9.3}  {:>10.1}",
+            "{n:<width$}  {k:<width$}  {:>9.3}  {:>9.3}  {:>9.3}  {:>10.1}{alloc}",
             typical,
             s.p95_ms,
             s.max_ms,
@@ -197,6 +223,9 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
             "{}: the frame's wait for its own thread's result, not the time that thread computes (it overlaps the other stages, even with --isolated)",
             behind.join(", ")
         )?;
+    }
+    if let Some(mb) = peak_resident_mb {
+        outln!("peak resident memory: {mb:.0} MB (the process, over loading and every run)")?;
     }
     if a.isolated {
         outln!(

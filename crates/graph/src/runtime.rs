@@ -348,6 +348,7 @@ pub fn run_graph(
                 name: &graph.nodes[n].stage.name,
                 kind: graph.nodes[n].stage.kind,
                 branch: graph.branch_label(n),
+                measure_allocations: options.lockstep,
             };
             let what = format!("stage `{}`", node.name);
             let spawned = std::thread::Builder::new()
@@ -424,6 +425,9 @@ struct StageNode<'a> {
     kind: &'static str,
     /// The branches that run it, when not all of them do.
     branch: Option<String>,
+    /// Measure the stage's allocation high-water mark per frame: in a lockstep run, where
+    /// no other stage allocates meanwhile.
+    measure_allocations: bool,
 }
 
 /// Reads frames and sends them on; returns its timings and whether it was interrupted.
@@ -502,6 +506,7 @@ fn source_loop(
             process_ns: (processed - start).as_nanos() as u64,
             wait_out_ns: (sent - processed).as_nanos() as u64,
             program_ns: None,
+            alloc_peak_bytes: None,
         });
     }
     (timings, false)
@@ -535,12 +540,17 @@ fn stage_loop(
             }
         }
         first = false;
+        let mark = match node.measure_allocations {
+            true => super::memory::allocation_mark(),
+            false => None,
+        };
         let start = Instant::now();
         let index = frame.index;
         let result = catch_unwind(AssertUnwindSafe(|| {
             super::panics::in_stage(|| stage.process(&mut frame))
         }));
         let processed = Instant::now();
+        let alloc_peak_bytes = mark.map(|m| super::memory::allocation_peak(m) as u64);
         let program_ns = stage.program_ns();
         let error = match result {
             Ok(Ok(())) => None,
@@ -582,6 +592,7 @@ fn stage_loop(
             process_ns: (processed - start).as_nanos() as u64,
             wait_out_ns: (sent - processed).as_nanos() as u64,
             program_ns,
+            alloc_peak_bytes,
         });
     }
     // Close our channels before finishing, so neighbours are never held up by `finish`.

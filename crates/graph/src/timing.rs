@@ -20,6 +20,11 @@ pub struct FrameTiming {
     /// stage's reply); the rest of it is transport. `None` for relume's own stages.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub program_ns: Option<u64>,
+    /// The most bytes the stage held allocated at once while processing the frame,
+    /// beyond what was allocated before (lockstep runs with the counting allocator
+    /// only: see [`super::memory::CountingAllocator`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub alloc_peak_bytes: Option<u64>,
 }
 
 /// All frames of one stage.

@@ -291,8 +291,9 @@ fn bench_isolated_runs_one_frame_at_a_time() {
 
 /// `--isolated` measures each stage's allocation high-water mark: decode's holds at
 /// least the 64 x 48 color (3 bytes a pixel) and depth (4) images it makes, and a
-/// sleeping stage allocates nothing; a pipelined bench, where stages allocate at once,
-/// gives none. Both say the process's peak resident memory.
+/// sleeping stage's only what other threads allocate meanwhile (the progress display:
+/// a few hundred bytes); a pipelined bench, where stages allocate at once, gives none.
+/// Both say the process's peak resident memory.
 #[test]
 fn bench_isolated_reports_each_stages_allocation_peak() {
     let tmp = tempfile::tempdir().unwrap();
@@ -323,7 +324,10 @@ fn bench_isolated_reports_each_stages_allocation_peak() {
         decode >= (64 * 48 * 7) as f64 / 1e6 && decode < 1.0,
         "decode: {decode} MB"
     );
-    assert_eq!(doc["stages"]["debug.sleep"]["alloc_peak_mb"], 0.0, "{doc}");
+    let sleep = doc["stages"]["debug.sleep"]["alloc_peak_mb"]
+        .as_f64()
+        .unwrap();
+    assert!(sleep < 0.005, "{doc}");
     let resident = doc["peak_resident_mb"].as_f64().unwrap();
     assert!(resident > 1.0 && resident < 4000.0, "{resident} MB");
     let doc = bench(false);

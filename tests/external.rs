@@ -24,41 +24,13 @@ const H: u32 = 24;
 fn python_bin() -> &'static Path {
     static BIN: OnceLock<Result<PathBuf, String>> = OnceLock::new();
     let made = BIN.get_or_init(|| {
-        let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("python-venv");
-        let bin = venv.join("bin");
-        let works = |bin: &Path| {
-            Command::new(bin.join("python3"))
-                .args(["-c", "import numpy, msgpack, relume_stage"])
-                .output()
-                .is_ok_and(|o| o.status.success())
-        };
-        if works(&bin) {
-            return Ok(bin);
-        }
-        let fresh = venv.with_extension(format!("making-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&fresh);
-        let run = |cmd: &mut Command| -> Result<(), String> {
-            let o = cmd.output().map_err(|e| format!("{cmd:?}: {e}"))?;
-            if !o.status.success() {
-                return Err(format!("{cmd:?}: {}", String::from_utf8_lossy(&o.stderr)));
-            }
-            Ok(())
-        };
-        run(Command::new("python3").args(["-m", "venv"]).arg(&fresh))?;
-        run(Command::new(fresh.join("bin/pip"))
-            .args(["install", "--quiet", "--disable-pip-version-check"])
-            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("python")))?;
-        let _ = std::fs::remove_dir_all(&venv);
-        std::fs::rename(&fresh, &venv).map_err(|e| e.to_string())?;
-        // A venv's scripts name its folder: the moved one runs its python by path.
-        if works(&bin) {
-            Ok(bin)
-        } else {
-            Err(format!(
-                "{} does not import relume_stage after installing it",
-                venv.display()
-            ))
-        }
+        let package = Path::new(env!("CARGO_MANIFEST_DIR")).join("python");
+        common::venv::make(
+            "python-venv",
+            &[package.to_str().expect("a UTF-8 checkout path")],
+            "import numpy, msgpack, relume_stage",
+        )
+        .map(|venv| venv.join("bin"))
     });
     match made {
         Ok(bin) => bin,

@@ -22,6 +22,8 @@
 //! The Python side runs in a virtual environment made once under the target folder by
 //! `pip install mitsuba==3.9.1`.
 
+mod common;
+
 use glam::{DMat3, Vec3};
 use relume::objects::{Bvh, Triangle, shapes, tri_normal};
 use relume::recording::Intrinsics;
@@ -64,52 +66,12 @@ const TOLERANCE: f64 = 0.02;
 fn python() -> &'static Path {
     static PYTHON: OnceLock<Result<PathBuf, String>> = OnceLock::new();
     let made = PYTHON.get_or_init(|| {
-        let venv = Path::new(env!("CARGO_TARGET_TMPDIR")).join("mitsuba-venv");
-        let python = |venv: &Path| venv.join("bin/python3");
-        let works = |python: &Path| {
-            Command::new(python)
-                .args(["-c", "import mitsuba; mitsuba.set_variant('scalar_rgb')"])
-                .output()
-                .is_ok_and(|o| o.status.success())
-        };
-        if works(&python(&venv)) {
-            return Ok(python(&venv));
-        }
-        let fresh = venv.with_extension(format!("making-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&fresh);
-        let run = |cmd: &mut Command| -> Result<(), String> {
-            let o = cmd.output().map_err(|e| format!("{cmd:?}: {e}"))?;
-            if !o.status.success() {
-                return Err(format!("{cmd:?}: {}", String::from_utf8_lossy(&o.stderr)));
-            }
-            Ok(())
-        };
-        let started = Instant::now();
-        run(Command::new("python3").args(["-m", "venv"]).arg(&fresh))?;
-        run(Command::new(python(&fresh)).args([
-            "-m",
-            "pip",
-            "install",
-            "--quiet",
-            "--disable-pip-version-check",
-            "mitsuba==3.9.1",
-        ]))?;
-        let _ = std::fs::remove_dir_all(&venv);
-        std::fs::rename(&fresh, &venv).map_err(|e| e.to_string())?;
-        eprintln!(
-            "made {} in {:.1} s",
-            venv.display(),
-            started.elapsed().as_secs_f64()
-        );
-        // A venv's scripts name its folder: the moved one runs its python by path.
-        if works(&python(&venv)) {
-            Ok(python(&venv))
-        } else {
-            Err(format!(
-                "{} does not import mitsuba after installing it",
-                venv.display()
-            ))
-        }
+        common::venv::make(
+            "mitsuba-venv",
+            &["mitsuba==3.9.1"],
+            "import mitsuba; mitsuba.set_variant('scalar_rgb')",
+        )
+        .map(|venv| venv.join("bin/python3"))
     });
     match made {
         Ok(python) => python,

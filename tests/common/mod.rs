@@ -3,6 +3,7 @@
 
 pub mod open3d;
 pub mod sample;
+pub mod venv;
 
 use std::path::PathBuf;
 use std::process::{Command, Output};

@@ -135,7 +135,9 @@ struct Model {
 /// fusion (or the frame's depth alone, frame to frame).
 struct LastFrame {
     pyramid: Pyramid,
-    depth: DepthImage,
+    /// Its depth, for the tracker's own fusion (`None` frame to frame, which fuses
+    /// nothing).
+    depth: Option<DepthImage>,
     pose: Pose,
 }
 
@@ -238,7 +240,7 @@ impl Tracker {
         self.tracked += 1;
         self.state = State::Tracked(LastFrame {
             pyramid,
-            depth: depth.clone(),
+            depth: self.params.fused_model.then(|| depth.clone()),
             pose,
         });
     }
@@ -248,16 +250,17 @@ impl Tracker {
     /// tracker's own fusion's (with the frame's intensity, which fusion does not change).
     fn model_of(&mut self, last: LastFrame, fused: Option<&DepthImage>) -> Result<Model, OpError> {
         let pose = last.pose.matrix();
-        if !self.params.fused_model {
+        // Frame to frame keeps no depth: the frame's own pyramid is the model.
+        let Some(depth) = &last.depth else {
             return Ok(Model {
                 pyramid: last.pyramid,
                 pose,
             });
-        }
+        };
         let pyramid = match fused {
-            Some(fused) if fused.same_size(&last.depth) => last.pyramid.with_depth(fused),
+            Some(fused) if fused.same_size(depth) => last.pyramid.with_depth(fused),
             _ => {
-                let (own, _) = self.fusion.push(&last.depth, &last.pose)?;
+                let (own, _) = self.fusion.push(depth, &last.pose)?;
                 let own = own
                     .get::<DepthImage>(kind::DEPTH)
                     .expect("the fusion returns depth");

@@ -3,6 +3,7 @@
 //! [`pose.track`](super::INFO); [`reads_recorded_pose`] finds the stage that would stop
 //! such a run, so that it is refused before it starts, with the swap that fixes it.
 
+use relume_graph::pipeline::PREVIOUS_SUFFIX;
 use relume_graph::{Registry, ResolvedStage};
 
 /// A stage that cannot run without the recording's poses.
@@ -28,7 +29,7 @@ pub fn reads_recorded_pose(stages: &[ResolvedStage], registry: &Registry) -> Opt
     stages.iter().find_map(|s| {
         let ports = (registry.get(s.kind)?.ports)(&s.params);
         s.inputs.iter().find_map(|(role, product)| {
-            let current = product.strip_suffix("@prev").unwrap_or(product);
+            let current = product.strip_suffix(PREVIOUS_SUFFIX).unwrap_or(product);
             let required = ports.inputs.iter().any(|p| &p.role == role && !p.optional);
             (required && recorded.iter().any(|r| r.as_str() == current)).then(|| PoseReader {
                 stage: s.name.clone(),

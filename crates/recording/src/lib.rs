@@ -9,6 +9,7 @@ pub mod importers;
 pub mod mcap;
 pub mod products;
 pub mod reader;
+pub mod register;
 pub mod replay;
 pub mod synth;
 pub mod types;

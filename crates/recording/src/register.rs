@@ -1,0 +1,396 @@
+//! Depth registered to the color camera, for recordings whose depth comes from a camera of
+//! its own (RealSense and Azure Kinect recordings: other intrinsics, another size, an
+//! extrinsic between the two). Every stage of relume assumes depth in the color view, so
+//! importers register once, here, and the recording stores registered depth.
+//!
+//! The depth map is taken as a surface: each depth pixel is back-projected with the depth
+//! intrinsics and moved by the extrinsic into the color camera; each pair of triangles
+//! between four neighbouring depth pixels is projected into the color image and
+//! rasterized there, keeping the nearest surface at each color pixel (a z-buffer). Depth is
+//! interpolated as 1/z, affine in image coordinates over a planar triangle, so a planar
+//! surface registers exactly, at any ratio of the two resolutions and with no cracks
+//! between triangles. A triangle whose corners step in depth more than a surface seen at
+//! [`Registration::max_obliquity_deg`] would is an edge between two surfaces: it is
+//! dropped, so depth is never smeared across edges. Inside such an edge triangle lies the
+//! near surface's silhouette, unsampled: the near surface may reach anywhere across it.
+//! Seen from the color camera's other viewpoint, that reach may hide the far surface
+//! behind it, so the triangle is also drawn as an occluder at the depths the near surface
+//! can have there, and a farther surface it covers is left a hole. Holes stay holes, and a color pixel the
+//! depth camera did not see gets no depth.
+//!
+//! librealsense's `rs2::align` and the Azure Kinect SDK's
+//! `k4a_transformation_depth_image_to_color_camera` do the same job by splatting each depth
+//! pixel's footprint with its own depth, which is exact only on surfaces facing the
+//! camera; the triangles here are exact on every plane.
+
+use glam::{DMat3, DQuat, DVec3};
+use relume_base::pinhole::Intrinsics;
+
+/// The rigid transform from the depth camera's frame to the color camera's (both in
+/// optical convention: x right, y down, z forward): `X_color = rotation * X_depth +
+/// translation`, metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Extrinsic {
+    pub rotation: DQuat,
+    pub translation: DVec3,
+}
+
+impl Extrinsic {
+    pub const IDENTITY: Extrinsic = Extrinsic {
+        rotation: DQuat::IDENTITY,
+        translation: DVec3::ZERO,
+    };
+
+    /// Whether points stay where they are (within a micrometre and a microradian).
+    pub fn is_identity(&self) -> bool {
+        self.translation.length() < 1e-6 && self.rotation.angle_between(DQuat::IDENTITY) < 1e-6
+    }
+
+    /// The transform that undoes this one.
+    pub fn inverse(&self) -> Extrinsic {
+        let rotation = self.rotation.inverse();
+        Extrinsic {
+            rotation,
+            translation: -(rotation * self.translation),
+        }
+    }
+
+    /// This transform after `first`: `self * first`.
+    pub fn after(&self, first: &Extrinsic) -> Extrinsic {
+        Extrinsic {
+            rotation: self.rotation * first.rotation,
+            translation: self.rotation * first.translation + self.translation,
+        }
+    }
+}
+
+/// How one recording's depth camera relates to its color camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Registration {
+    pub depth: Intrinsics,
+    pub color: Intrinsics,
+    pub depth_to_color: Extrinsic,
+    /// Surfaces seen more obliquely than this (degrees between the surface normal and the
+    /// depth camera's ray) count as edges: 80, as a structured-light or time-of-flight
+    /// camera measures little beyond it.
+    pub max_obliquity_deg: f64,
+}
+
+/// Why a registration cannot run.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RegisterError {
+    #[error("the depth image is {got}, the depth camera's intrinsics say {want}")]
+    DepthSize { got: String, want: String },
+}
+
+impl Registration {
+    pub const DEFAULT_MAX_OBLIQUITY_DEG: f64 = 80.0;
+
+    pub fn new(depth: Intrinsics, color: Intrinsics, depth_to_color: Extrinsic) -> Self {
+        Registration {
+            depth,
+            color,
+            depth_to_color,
+            max_obliquity_deg: Self::DEFAULT_MAX_OBLIQUITY_DEG,
+        }
+    }
+
+    /// Whether the depth is already in the color view: the same intrinsics and size, and
+    /// no extrinsic. Registering it would copy it.
+    pub fn is_identity(&self) -> bool {
+        self.depth == self.color && self.depth_to_color.is_identity()
+    }
+}
+
+/// Per-depth-pixel and per-color-pixel buffers, kept between frames.
+#[derive(Default)]
+pub struct Scratch {
+    /// Each depth pixel in the color image: x, y, and 1/z in the color camera (0: none).
+    projected: Vec<[f32; 3]>,
+    /// Each depth pixel's own depth in metres (0: none).
+    depth_m: Vec<f32>,
+    /// The largest 1/z so far at each color pixel (the nearest surface).
+    nearest: Vec<f32>,
+    /// The largest 1/z of the edge triangles' corners covering each color pixel.
+    edge_nearest: Vec<f32>,
+}
+
+/// Registers `depth` (units of `unit_m`, 0 = no measurement, the depth camera's size)
+/// into `out` (the color camera's size), in the same units; 0 where the depth camera saw
+/// nothing.
+pub fn register_depth(
+    depth: &[u16],
+    unit_m: f64,
+    registration: &Registration,
+    out: &mut Vec<u16>,
+    scratch: &mut Scratch,
+) -> Result<(), RegisterError> {
+    let (dk, ck) = (&registration.depth, &registration.color);
+    let (dw, dh) = (dk.width as usize, dk.height as usize);
+    if depth.len() != dw * dh {
+        return Err(RegisterError::DepthSize {
+            got: format!("{} pixels", depth.len()),
+            want: format!("{}x{}", dk.width, dk.height),
+        });
+    }
+    let (cw, ch) = (ck.width as usize, ck.height as usize);
+    out.clear();
+    if registration.is_identity() {
+        out.extend_from_slice(depth);
+        return Ok(());
+    }
+    project(depth, unit_m, registration, scratch);
+    for buffer in [&mut scratch.nearest, &mut scratch.edge_nearest] {
+        buffer.clear();
+        buffer.resize(cw * ch, 0.0);
+    }
+    // Corners of one depth step: a surface at the obliquity limit changes depth by
+    // z * tan(limit) / f per pixel; a triangle's corners are at most 1.5 pixels apart.
+    let step = (registration.max_obliquity_deg.to_radians().tan() * 1.5 / dk.fx.min(dk.fy)) as f32;
+    let Scratch {
+        projected,
+        depth_m,
+        nearest,
+        edge_nearest,
+    } = scratch;
+    let camera = Projector::new(registration);
+    for y in 0..dh.saturating_sub(1) {
+        for x in 0..dw.saturating_sub(1) {
+            let i = y * dw + x;
+            let quad = [i, i + 1, i + dw, i + dw + 1];
+            for tri in [[quad[0], quad[1], quad[2]], [quad[1], quad[3], quad[2]]] {
+                let z = tri.map(|i| depth_m[i]);
+                let (lo, hi) = (z[0].min(z[1]).min(z[2]), z[0].max(z[1]).max(z[2]));
+                let p = tri.map(|i| projected[i]);
+                if lo <= 0.0 || p.iter().any(|p| p[2] <= 0.0) {
+                    continue;
+                }
+                if hi - lo <= lo * step {
+                    rasterize(p, cw, ch, nearest);
+                    continue;
+                }
+                // An edge: the near surface may reach across the whole triangle, at any
+                // depth it can have there (its nearest corner's, up to a surface step
+                // beyond). Swept in three slices, each flat at its nearest 1/z.
+                for z in [lo, lo * (1.0 + step / 2.0), lo * (1.0 + step)] {
+                    let reach = tri.map(|i| camera.project((i % dw) as f32, (i / dw) as f32, z));
+                    if reach.iter().all(|p| p[2] > 0.0) {
+                        let w = reach[0][2].max(reach[1][2]).max(reach[2][2]);
+                        rasterize(reach.map(|[x, y, _]| [x, y, w]), cw, ch, edge_nearest);
+                    }
+                }
+            }
+        }
+    }
+    // Behind an edge's nearest corner by more than a surface's own step: hidden.
+    let hidden = 1.0 / (1.0 + step);
+    out.extend(nearest.iter().zip(edge_nearest.iter()).map(|(&w, &edge)| {
+        if w > 0.0 && w >= edge * hidden {
+            let units = (1.0 / (w as f64 * unit_m)).round();
+            if (1.0..=65535.0).contains(&units) {
+                units as u16
+            } else {
+                0
+            }
+        } else {
+            0
+        }
+    }));
+    Ok(())
+}
+
+/// Depth pixels to the color image: back-projection with the depth intrinsics, the
+/// extrinsic, projection with the color intrinsics.
+struct Projector {
+    depth: [f32; 4],
+    color: [f32; 4],
+    rotation: glam::Mat3,
+    translation: glam::Vec3,
+}
+
+impl Projector {
+    fn new(registration: &Registration) -> Self {
+        let k = |k: &Intrinsics| [k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32];
+        Projector {
+            depth: k(&registration.depth),
+            color: k(&registration.color),
+            rotation: DMat3::from_quat(registration.depth_to_color.rotation).as_mat3(),
+            translation: registration.depth_to_color.translation.as_vec3(),
+        }
+    }
+
+    /// Depth pixel (x, y) at depth `z` metres in the color image: x, y and 1/z there
+    /// (all 0 when it lies behind the color camera).
+    fn project(&self, x: f32, y: f32, z: f32) -> [f32; 3] {
+        let [dfx, dfy, dcx, dcy] = self.depth;
+        let [cfx, cfy, ccx, ccy] = self.color;
+        let point = glam::Vec3::new((x - dcx) / dfx * z, (y - dcy) / dfy * z, z);
+        let c = self.rotation * point + self.translation;
+        if c.z <= 0.0 {
+            return [0.0; 3];
+        }
+        let w = 1.0 / c.z;
+        [c.x * w * cfx + ccx, c.y * w * cfy + ccy, w]
+    }
+}
+
+/// Each depth pixel's depth in metres and its place in the color image.
+fn project(depth: &[u16], unit_m: f64, registration: &Registration, scratch: &mut Scratch) {
+    let camera = Projector::new(registration);
+    let unit = unit_m as f32;
+    let width = registration.depth.width as usize;
+    scratch.projected.clear();
+    scratch.depth_m.clear();
+    for (i, &d) in depth.iter().enumerate() {
+        let z = d as f32 * unit;
+        scratch.depth_m.push(z);
+        scratch.projected.push(match d {
+            0 => [0.0; 3],
+            _ => camera.project((i % width) as f32, (i / width) as f32, z),
+        });
+    }
+}
+
+/// Draws one triangle (color-image x, y and 1/z at each corner) into `nearest`, keeping
+/// the larger 1/z at each pixel whose centre (integer coordinates) lies inside or on it.
+fn rasterize(p: [[f32; 3]; 3], width: usize, height: usize, nearest: &mut [f32]) {
+    let area =
+        (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[2][0] - p[0][0]) * (p[1][1] - p[0][1]);
+    if area.abs() < 1e-12 {
+        return;
+    }
+    let min_x = p[0][0].min(p[1][0]).min(p[2][0]).ceil().max(0.0);
+    let max_x = p[0][0]
+        .max(p[1][0])
+        .max(p[2][0])
+        .floor()
+        .min(width as f32 - 1.0);
+    let min_y = p[0][1].min(p[1][1]).min(p[2][1]).ceil().max(0.0);
+    let max_y = p[0][1]
+        .max(p[1][1])
+        .max(p[2][1])
+        .floor()
+        .min(height as f32 - 1.0);
+    if min_x > max_x || min_y > max_y {
+        return;
+    }
+    let inv_area = 1.0 / area;
+    // Edge function of the edge from a to b at q, over the triangle's signed area: the
+    // barycentric weight of the corner opposite the edge.
+    let edge = |a: [f32; 3], b: [f32; 3], qx: f32, qy: f32| {
+        ((b[0] - a[0]) * (qy - a[1]) - (qx - a[0]) * (b[1] - a[1])) * inv_area
+    };
+    for y in min_y as usize..=max_y as usize {
+        let qy = y as f32;
+        for x in min_x as usize..=max_x as usize {
+            let qx = x as f32;
+            let l0 = edge(p[1], p[2], qx, qy);
+            let l1 = edge(p[2], p[0], qx, qy);
+            let l2 = 1.0 - l0 - l1;
+            // A hair of tolerance keeps pixels on a shared edge from falling between
+            // its two triangles by rounding.
+            const EPS: f32 = -1e-5;
+            if l0 < EPS || l1 < EPS || l2 < EPS {
+                continue;
+            }
+            let w = l0 * p[0][2] + l1 * p[1][2] + l2 * p[2][2];
+            let slot = &mut nearest[y * width + x];
+            if w > *slot {
+                *slot = w;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn k(width: u32, height: u32, f: f64) -> Intrinsics {
+        Intrinsics {
+            width,
+            height,
+            fx: f,
+            fy: f,
+            cx: (width as f64 - 1.0) / 2.0,
+            cy: (height as f64 - 1.0) / 2.0,
+        }
+    }
+
+    #[test]
+    fn depth_already_in_the_color_view_is_copied() {
+        let kk = k(4, 3, 5.0);
+        let depth: Vec<u16> = (0..12).collect();
+        let mut out = Vec::new();
+        let r = Registration::new(kk, kk, Extrinsic::IDENTITY);
+        register_depth(&depth, 0.001, &r, &mut out, &mut Scratch::default()).unwrap();
+        assert_eq!(out, depth);
+    }
+
+    #[test]
+    fn a_wall_facing_the_cameras_registers_to_its_depth_and_nothing_beyond_its_view() {
+        // A wall at 2 m seen by a narrow depth camera 4 cm to the color camera's right:
+        // every color pixel the depth camera sees gets 2000 mm, the others none.
+        let (dk, ck) = (k(40, 30, 30.0), k(64, 48, 40.0));
+        let depth = vec![2000u16; 40 * 30];
+        let shift = Extrinsic {
+            rotation: DQuat::IDENTITY,
+            translation: DVec3::new(0.04, 0.0, 0.0),
+        };
+        let r = Registration::new(dk, ck, shift);
+        let mut out = Vec::new();
+        register_depth(&depth, 0.001, &r, &mut out, &mut Scratch::default()).unwrap();
+        for y in 0..48 {
+            for x in 0..64 {
+                // The color pixel's point on the wall, in the depth camera.
+                let (cx, cy) = (
+                    (x as f64 - ck.cx) / ck.fx * 2.0,
+                    (y as f64 - ck.cy) / ck.fy * 2.0,
+                );
+                let (u, v) = ((cx - 0.04) / 2.0 * dk.fx + dk.cx, cy / 2.0 * dk.fy + dk.cy);
+                let inside = (0.0..=39.0).contains(&u) && (0.0..=29.0).contains(&v);
+                let got = out[y * 64 + x];
+                assert_eq!(got, if inside { 2000 } else { 0 }, "pixel {x},{y}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_step_between_two_surfaces_is_not_smeared() {
+        // Left half at 1 m, right half at 3 m, same camera: no depth between them.
+        let kk = k(20, 10, 20.0);
+        let depth: Vec<u16> = (0..200)
+            .map(|i| if i % 20 < 10 { 1000 } else { 3000 })
+            .collect();
+        let mut shifted = kk;
+        shifted.cx += 0.25;
+        let r = Registration::new(kk, shifted, Extrinsic::IDENTITY);
+        let mut out = Vec::new();
+        register_depth(&depth, 0.001, &r, &mut out, &mut Scratch::default()).unwrap();
+        for (i, &d) in out.iter().enumerate() {
+            assert!(d == 0 || d == 1000 || d == 3000, "pixel {i}: {d}");
+        }
+        assert!(out.contains(&1000) && out.contains(&3000));
+    }
+
+    #[test]
+    fn a_wrong_depth_size_is_refused() {
+        let kk = k(4, 3, 5.0);
+        let r = Registration::new(kk, kk, Extrinsic::IDENTITY);
+        let e = register_depth(&[0; 5], 0.001, &r, &mut Vec::new(), &mut Scratch::default());
+        assert_eq!(
+            e.unwrap_err().to_string(),
+            "the depth image is 5 pixels, the depth camera's intrinsics say 4x3"
+        );
+    }
+
+    #[test]
+    fn extrinsics_compose_and_invert() {
+        let a = Extrinsic {
+            rotation: DQuat::from_rotation_y(0.3),
+            translation: DVec3::new(0.1, -0.2, 0.05),
+        };
+        let round = a.inverse().after(&a);
+        assert!(round.is_identity(), "{round:?}");
+    }
+}

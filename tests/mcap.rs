@@ -542,7 +542,7 @@ fn damaged_and_unreadable_files_name_what_is_wrong_and_write_nothing() {
         &["import", "mcap", "sizes.mcap", "-o", "r.relume"],
         "sizes.mcap: message 1 on /color: the image is 4x6, but the topic's first is 8x6",
     );
-    // ROS 1 messages: said so, with the way out.
+    // A ROS 1 message too short for its header: named in the listing, and no colour.
     let mut bag = Bag::create(&d.join("ros1.mcap"), None);
     bag.put_encoded("/img", "sensor_msgs/Image", "ros1", 0, b"\0");
     bag.finish();
@@ -552,10 +552,73 @@ fn damaged_and_unreadable_files_name_what_is_wrong_and_write_nothing() {
     );
     let list = ok(run_in(d, &["import", "mcap", "ros1.mcap", "--list"]));
     assert!(
-        stdout(&list).contains("in ROS 1 encoding"),
+        stdout(&list).contains(
+            "its first message cannot be read: byte 0: message ends before its header.seq"
+        ),
         "{}",
         stdout(&list)
     );
+}
+
+/// A ROS 1 `sensor_msgs/Image` (uint32 seq, time, string frame_id, then the fields, packed
+/// little-endian), as DepthAI and `mcap convert` of a ROS 1 bag write them into MCAP.
+fn ros1_image(
+    stamp_ns: i64,
+    frame: &str,
+    encoding: &str,
+    w: u32,
+    h: u32,
+    step: u32,
+    data: &[u8],
+) -> Vec<u8> {
+    let mut m = 7u32.to_le_bytes().to_vec();
+    m.extend(((stamp_ns / 1_000_000_000) as u32).to_le_bytes());
+    m.extend(((stamp_ns % 1_000_000_000) as u32).to_le_bytes());
+    m.extend((frame.len() as u32).to_le_bytes());
+    m.extend(frame.as_bytes());
+    m.extend(h.to_le_bytes());
+    m.extend(w.to_le_bytes());
+    m.extend((encoding.len() as u32).to_le_bytes());
+    m.extend(encoding.as_bytes());
+    m.push(0);
+    m.extend(step.to_le_bytes());
+    m.extend((data.len() as u32).to_le_bytes());
+    m.extend(data);
+    m
+}
+
+#[test]
+fn ros1_encoded_channels_in_mcap_import_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut bag = Bag::create(&d.join("ros1.mcap"), None);
+    for k in 0..3 {
+        let t = T0 + k as i64 * DT;
+        let color = ros1_image(t, "cam", "rgb8", W, H, W * 3, &color_pixels(k));
+        let depth: Vec<u8> = depth_units(k)
+            .iter()
+            .flat_map(|u| u.to_le_bytes())
+            .collect();
+        let depth = ros1_image(t, "cam", "16UC1", W, H, W * 2, &depth);
+        bag.put_encoded("/color", "sensor_msgs/Image", "ros1", t as u64, &color);
+        bag.put_encoded("/depth", "sensor_msgs/Image", "ros1", t as u64, &depth);
+    }
+    bag.finish();
+    ok(run_in(
+        d,
+        &["import", "mcap", "ros1.mcap", "-o", "r.relume"],
+    ));
+    let replay = Replay::open(&d.join("r.relume"), ReplayOptions::default()).unwrap();
+    assert_eq!(replay.stats.frames, 3);
+    for k in 0..3 {
+        let rec = replay.read_frame(k).unwrap();
+        assert_eq!(rec.color.stamp_ns, T0 + k as i64 * DT);
+        let rgb = codec::decode_color(&rec.color.image).unwrap();
+        let flat: Vec<u8> = rgb.data.iter().flatten().copied().collect();
+        assert_eq!(flat, color_pixels(k), "frame {k} color");
+        let units = codec::decode_depth_units(&rec.depth.unwrap().image).unwrap();
+        assert_eq!(units.data, depth_units(k), "frame {k} depth");
+    }
 }
 
 /// A pipeline of the decode stage alone: its hash lines are the frames' color, depth

@@ -188,16 +188,22 @@ pub enum ImportCommand {
         #[command(flatten)]
         common: CommonImportArgs,
     },
-    /// ROS 2 or Foxglove MCAP log: color and depth images (sensor_msgs/Image,
+    /// ROS 2, ROS 1 or Foxglove MCAP log: color and depth images (sensor_msgs/Image,
     /// CompressedImage incl. compressedDepth, foxglove.RawImage/CompressedImage),
     /// intrinsics from CameraInfo, poses from /tf + /tf_static or a pose topic. Topics
     /// and frames are detected when unambiguous; `--list` shows what the file holds.
     Mcap(McapArgs),
+    /// ROS 1 bag (rosbag record, RealSense Viewer / librealsense recordings, TUM RGB-D's
+    /// bags): the same messages, options and detection as `import mcap`. A RealSense
+    /// recording's depth unit comes from its "Depth Units" option.
+    #[command(visible_alias = "rosbag")]
+    Bag(McapArgs),
 }
 
 #[derive(Args, Debug)]
 pub struct McapArgs {
-    /// The MCAP file (chunks uncompressed, zstd or lz4).
+    /// The MCAP file (chunks uncompressed, zstd or lz4) or ROS 1 bag (chunks
+    /// uncompressed, bz2 or lz4); either command reads either.
     file: PathBuf,
     /// List the topics, what each holds, and the transform tree; write nothing.
     #[arg(long)]
@@ -270,7 +276,7 @@ impl ImportCommand {
             ImportCommand::Tum { common, .. }
             | ImportCommand::Redwood { common, .. }
             | ImportCommand::Scannet { common, .. } => Some(&common.out),
-            ImportCommand::Mcap(a) => a.out.as_ref(),
+            ImportCommand::Mcap(a) | ImportCommand::Bag(a) => a.out.as_ref(),
         }
     }
 
@@ -282,7 +288,7 @@ impl ImportCommand {
             }
             // ScanNet: the file's own unless given, needing neither note nor warning.
             ImportCommand::Scannet { common, .. } => common.intrinsics,
-            ImportCommand::Mcap(a) => a.intrinsics,
+            ImportCommand::Mcap(a) | ImportCommand::Bag(a) => a.intrinsics,
         }
     }
 }
@@ -313,7 +319,7 @@ impl CommonImportArgs {
 
 pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     let start = std::time::Instant::now();
-    if let ImportCommand::Mcap(a) = &command
+    if let ImportCommand::Mcap(a) | ImportCommand::Bag(a) = &command
         && a.list
     {
         let read = mcap::read::ReadOptions {
@@ -326,7 +332,7 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     let out = command.out().expect("clap requires -o unless --list");
     output::check_output_file("-o", out)?;
     match &command {
-        ImportCommand::Mcap(a) => output::check_not_input(out, &a.file)?,
+        ImportCommand::Mcap(a) | ImportCommand::Bag(a) => output::check_not_input(out, &a.file)?,
         ImportCommand::Scannet { file, .. } => output::check_not_input(out, file)?,
         _ => {}
     }
@@ -341,7 +347,9 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         ImportCommand::Tum { dir, common } => {
             tum::import(dir, &common.out, &common.options(), &mut tick)?
         }
-        ImportCommand::Mcap(a) => mcap::import(&a.file, out, &a.options(), &mut tick)?,
+        ImportCommand::Mcap(a) | ImportCommand::Bag(a) => {
+            mcap::import(&a.file, out, &a.options(), &mut tick)?
+        }
         ImportCommand::Redwood {
             dir,
             fps,

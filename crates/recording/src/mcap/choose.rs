@@ -103,7 +103,8 @@ fn namespace(topic: &str) -> &str {
 }
 
 /// The intrinsics of an image topic: `--intrinsics`, else its camera info (the named
-/// one, else one in its namespace, else one in its frame, else the only one), taken
+/// one, else a RealSense stream's own, else one in its namespace, else one in its frame,
+/// else the only one), taken
 /// for the size it describes. `Ok(None)`: no camera info at all. The camera matrix must
 /// be a pinhole's without skew, `[fx 0 cx; 0 fy cy; 0 0 1]`, within the bounds of
 /// [`Intrinsics::check`]; a camera info that changes later in the stream is named in
@@ -132,7 +133,12 @@ pub(super) fn intrinsics_for(
         })?),
         None => infos
             .iter()
-            .find(|(c, _)| namespace(&c.topic) == namespace(&images.topic))
+            .find(|(c, _)| Some(&c.topic) == super::realsense::info_topic(&images.topic).as_ref())
+            .or_else(|| {
+                infos
+                    .iter()
+                    .find(|(c, _)| namespace(&c.topic) == namespace(&images.topic))
+            })
             .or_else(|| {
                 infos.iter().find(|(_, i)| {
                     !topic.frame_id.is_empty() && frame_name(&i.frame_id) == topic.frame_id

@@ -4,15 +4,19 @@
 //! and stamps each color image with the camera's pose at its header stamp.
 
 use super::choose::{PoseSource, choose_images, fail, intrinsics_for, pose_source};
+use super::container;
 use super::messages::{self, Message};
 use super::pixels::{self, ImageRole};
-use super::read::{self, Channel, Event, ReadOptions};
+use super::read::{Channel, Event, ReadOptions};
+use super::realsense;
 use super::scan::Scan;
 use crate::error::ImportError;
-use crate::importers::{CameraIntrinsics, ImportSummary, import_header};
+use crate::importers::{CameraIntrinsics, ImportSummary, StoreMode, import_header};
+use crate::register::{Extrinsic, Registration, Scratch, register_depth};
 use crate::types::{ColorRecord, DepthRecord, EncodedImage, Pose, PoseRecord, Record, StreamKind};
 use crate::writer::RecordingWriter;
 use rayon::prelude::*;
+use relume_base::pinhole::Intrinsics;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -131,13 +135,17 @@ pub fn import(
         }
     };
     let poses = pose_source(file, &scan, options, &color_topic.frame_id, &mut warnings)?;
-    if let Some(d) = depth {
-        let (depth_frame, color_frame) = (&scan.images[&d.id].frame_id, &color_topic.frame_id);
-        if !depth_frame.is_empty() && !color_frame.is_empty() && depth_frame != color_frame {
-            summary_warning_depth_frame(&mut warnings, &d.topic, depth_frame, color_frame);
-        }
-    }
-    let depth_unit_m = scan.depth_unit_m.unwrap_or(ROS_DEPTH_UNIT_M);
+    let registration = match depth {
+        Some(d) => registration(file, &scan, d, color, (depth_k, color_k), &mut warnings)?,
+        None => None,
+    };
+    let realsense_unit = match depth {
+        Some(d) => realsense::depth_unit_m(&scan, &d.topic).map_err(|e| fail(file, e))?,
+        None => None,
+    };
+    let depth_unit_m = realsense_unit
+        .or(scan.depth_unit_m)
+        .unwrap_or(ROS_DEPTH_UNIT_M);
     let mut streams = vec![StreamKind::Color];
     if depth.is_some() {
         streams.push(StreamKind::Depth);
@@ -157,7 +165,7 @@ pub fn import(
         settings.push(("pose-topic", t.clone()));
     }
     let mut header = import_header(
-        "mcap",
+        scan.end.container.importer(),
         file,
         &options.common,
         &settings,
@@ -170,6 +178,27 @@ pub fn import(
     );
     header.color_intrinsics = color_k;
     header.depth_intrinsics = depth_k;
+    if let Some(r) = &registration {
+        // The recording stores the depth registered into the color view.
+        header.depth_intrinsics = color_k;
+        let t = r.depth_to_color.translation;
+        header.provenance.settings.insert(
+            "registered".into(),
+            format!(
+                "depth {}x{} to color, depth camera at ({:.4}, {:.4}, {:.4}) m in the color \
+                 camera, turned {:.3} degrees",
+                depth_k.width,
+                depth_k.height,
+                t.x,
+                t.y,
+                t.z,
+                r.depth_to_color
+                    .rotation
+                    .angle_between(glam::DQuat::IDENTITY)
+                    .to_degrees()
+            ),
+        );
+    }
     if options.intrinsics.is_none() {
         header
             .provenance
@@ -195,7 +224,7 @@ pub fn import(
      -> Result<(), ImportError> {
         let converted: Vec<Result<(i64, EncodedImage), String>> = batch
             .par_iter()
-            .map(|p| convert(p, depth_unit_m, options))
+            .map(|p| convert(p, depth_unit_m, registration.as_ref(), options))
             .collect();
         for (p, result) in batch.drain(..).zip(converted) {
             let what = format!("message {} on {}", p.index, p.topic);
@@ -255,7 +284,7 @@ pub fn import(
         Ok(())
     };
     let mut seen = 0usize;
-    let end = read::stream(file, read_options, &mut |event| {
+    let end = container::stream(file, read_options, &mut |event| {
         let Event::Message {
             channel,
             index,
@@ -341,7 +370,7 @@ const BATCH: usize = 16;
 
 struct Pending {
     role: ImageRole,
-    ty: messages::MessageType,
+    ty: (messages::MessageType, messages::Encoding),
     topic: String,
     index: u64,
     log_time_ns: u64,
@@ -351,25 +380,90 @@ struct Pending {
 fn convert(
     p: &Pending,
     depth_unit_m: f64,
+    registration: Option<&Registration>,
     options: &McapOptions,
 ) -> Result<(i64, EncodedImage), String> {
-    let Message::Image(img) = messages::decode(p.ty, &p.bytes)? else {
+    let Message::Image(img) = messages::decode(p.ty.0, p.ty.1, &p.bytes)? else {
         unreachable!("image types decode to images");
     };
     let store = options.common.store;
-    let image = match p.role {
-        ImageRole::Color => pixels::color_image(&img.data, store)?,
-        ImageRole::Depth => pixels::depth_image(&img.data, depth_unit_m, store)?,
+    let image = match (p.role, registration) {
+        (ImageRole::Color, _) => pixels::color_image(&img.data, store)?,
+        (ImageRole::Depth, None) => pixels::depth_image(&img.data, depth_unit_m, store)?,
+        (ImageRole::Depth, Some(r)) => {
+            let image = pixels::depth_image(&img.data, depth_unit_m, StoreMode::Raw)?;
+            let (w, h) = (r.depth.width, r.depth.height);
+            if (image.width, image.height) != (w, h) {
+                return Err(format!(
+                    "the depth image is {}x{}, its camera info says {w}x{h}",
+                    image.width, image.height
+                ));
+            }
+            let units: Vec<u16> = image
+                .bytes
+                .chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .collect();
+            let mut registered = Vec::new();
+            SCRATCH
+                .with_borrow_mut(|scratch| {
+                    register_depth(&units, depth_unit_m, r, &mut registered, scratch)
+                })
+                .map_err(|e| e.to_string())?;
+            pixels::raw_u16(r.color.width, r.color.height, registered)
+        }
     };
     Ok((img.stamp_ns, image))
 }
 
-fn summary_warning_depth_frame(warnings: &mut Vec<String>, topic: &str, depth: &str, color: &str) {
-    warnings.push(format!(
-        "the depth images ({topic}) are in frame {depth:?} and the color images in {color:?}: \
-         relume takes them as one registered camera; if they are not, record depth aligned \
-         to color (e.g. a camera driver's aligned_depth_to_color topic)"
-    ));
+thread_local! {
+    /// Each import thread's registration buffers, kept from image to image.
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::default();
+}
+
+/// How the depth camera relates to the color camera, when the depth needs registering:
+/// a RealSense recording's extrinsics, else a static transform between the two images'
+/// frames, else the same optical centre (the intrinsics alone differ). `None` when the
+/// depth is already in the color view.
+fn registration(
+    file: &Path,
+    scan: &Scan,
+    depth: &Arc<Channel>,
+    color: &Arc<Channel>,
+    (depth_k, color_k): (Intrinsics, Intrinsics),
+    warnings: &mut Vec<String>,
+) -> Result<Option<Registration>, ImportError> {
+    let (depth_frame, color_frame) = (
+        &scan.images[&depth.id].frame_id,
+        &scan.images[&color.id].frame_id,
+    );
+    let extrinsic = match realsense::depth_to_color(scan, &depth.topic, &color.topic)
+        .map_err(|e| fail(file, e))?
+    {
+        Some(e) => Some(e),
+        None if !depth_frame.is_empty()
+            && !color_frame.is_empty()
+            && depth_frame != color_frame =>
+        {
+            let linked = scan.tf.static_between(depth_frame, color_frame);
+            if linked.is_none() {
+                warnings.push(format!(
+                    "the depth images ({}) are in frame {depth_frame:?} and the color images in \
+                     {color_frame:?}, and no static transform links the two: relume takes \
+                     them as one camera centre; if they are not, record depth aligned to \
+                     color (e.g. a camera driver's aligned_depth_to_color topic)",
+                    depth.topic
+                ));
+            }
+            linked.map(|p| Extrinsic {
+                rotation: p.rotation(),
+                translation: p.translation(),
+            })
+        }
+        None => None,
+    };
+    let r = Registration::new(depth_k, color_k, extrinsic.unwrap_or(Extrinsic::IDENTITY));
+    Ok((!r.is_identity()).then_some(r))
 }
 
 /// A topic's images keep the size of its first: an error naming the file and message

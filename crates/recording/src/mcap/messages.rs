@@ -1,18 +1,23 @@
-//! The messages relume reads from MCAP files, decoded from either of two families:
+//! The messages relume reads from MCAP files and ROS 1 bags, decoded from either of two
+//! families:
 //!
-//! | what | ROS 2 (`ros2msg` schema, `cdr` messages) | Foxglove (`jsonschema`, `json`) |
+//! | what | ROS (`cdr` for ROS 2, `ros1` for ROS 1) | Foxglove (`jsonschema`, `json`) |
 //! |---|---|---|
 //! | raw image | `sensor_msgs/msg/Image` | `foxglove.RawImage` |
 //! | compressed image | `sensor_msgs/msg/CompressedImage` | `foxglove.CompressedImage` |
 //! | intrinsics | `sensor_msgs/msg/CameraInfo` | `foxglove.CameraCalibration` |
-//! | transforms | `tf2_msgs/msg/TFMessage` | `foxglove.FrameTransform(s)` |
+//! | transforms | `tf2_msgs/msg/TFMessage` (ROS 1 `tf/tfMessage` too) | `foxglove.FrameTransform(s)` |
 //! | a pose | `geometry_msgs/msg/PoseStamped`, `nav_msgs/msg/Odometry` | `foxglove.PoseInFrame` |
+//! | an extrinsic | `geometry_msgs/msg/Transform` (RealSense bags' `.../tf/N`) | |
+//! | a value | `std_msgs/msg/Float32` (RealSense bags' `.../option/NAME/value`) | |
 //!
-//! The CDR layouts follow the ROS 2 message definitions (`std_msgs/Header` = `int32 sec,
-//! uint32 nanosec, string frame_id`, and so on); the JSON ones Foxglove's schemas, whose
+//! The ROS layouts follow the message definitions; ROS 1 and ROS 2 order the fields the
+//! same way and differ in the header (ROS 1's `std_msgs/Header` = `uint32 seq, time
+//! stamp, string frame_id`, ROS 2's = `int32 sec, uint32 nanosec, string frame_id`) and in
+//! the wire format ([`super::wire`]). The JSON ones follow Foxglove's schemas, whose
 //! `bytes` fields are base64 strings.
 
-use super::cdr::CdrReader;
+use super::wire::{WireError, WireReader};
 use base64::Engine;
 use serde::Deserialize;
 use std::borrow::Cow;
@@ -26,6 +31,8 @@ pub enum MessageType {
     RosTf,
     RosPoseStamped,
     RosOdometry,
+    RosTransform,
+    RosFloat32,
     FoxRawImage,
     FoxCompressedImage,
     FoxCameraCalibration,
@@ -35,17 +42,22 @@ pub enum MessageType {
 }
 
 impl MessageType {
-    /// The type of a channel from its schema name and message encoding, or why it is not
-    /// read (`None`: a type relume has no use for).
-    pub fn of(schema: &str, message_encoding: &str) -> Result<Option<MessageType>, String> {
+    /// The type of a channel and the wire format of its messages, from its schema name
+    /// and message encoding, or why it is not read (`None`: a type relume has no use for).
+    pub fn of(
+        schema: &str,
+        message_encoding: &str,
+    ) -> Result<Option<(MessageType, Encoding)>, String> {
         use MessageType::*;
         let ros = match schema.replace("/msg/", "/").as_str() {
             "sensor_msgs/Image" => Some(RosImage),
             "sensor_msgs/CompressedImage" => Some(RosCompressedImage),
             "sensor_msgs/CameraInfo" => Some(RosCameraInfo),
-            "tf2_msgs/TFMessage" => Some(RosTf),
+            "tf2_msgs/TFMessage" | "tf/tfMessage" => Some(RosTf),
             "geometry_msgs/PoseStamped" => Some(RosPoseStamped),
             "nav_msgs/Odometry" => Some(RosOdometry),
+            "geometry_msgs/Transform" => Some(RosTransform),
+            "std_msgs/Float32" => Some(RosFloat32),
             _ => None,
         };
         let foxglove = match schema {
@@ -58,14 +70,12 @@ impl MessageType {
             _ => None,
         };
         match (ros, foxglove, message_encoding) {
-            (Some(t), _, "cdr") | (_, Some(t), "json") => Ok(Some(t)),
-            (Some(_), _, "ros1") => Err(format!(
-                "{schema} in ROS 1 encoding: relume reads ROS 2 (cdr) messages; convert the \
-                 bag with `mcap convert` from a ROS 2 installation or rosbags-convert"
-            )),
+            (Some(t), _, "cdr") => Ok(Some((t, Encoding::Cdr))),
+            (Some(t), _, "ros1") => Ok(Some((t, Encoding::Ros1))),
+            (_, Some(t), "json") => Ok(Some((t, Encoding::Json))),
             (Some(_), _, other) | (_, Some(_), other) => Err(format!(
-                "{schema} in `{other}` encoding: relume reads ROS 2 messages as cdr and \
-                 Foxglove's schemas as json"
+                "{schema} in `{other}` encoding: relume reads ROS messages as cdr (ROS 2) or \
+                 ros1 and Foxglove's schemas as json"
             )),
             _ => Ok(None),
         }
@@ -137,6 +147,22 @@ pub enum Message<'a> {
     /// TF transforms, or a pose message as a transform (`child` empty for a
     /// PoseStamped / PoseInFrame, which does not name the frame it places).
     Transforms(Vec<TransformMsg>),
+    /// A bare `geometry_msgs/Transform` (no stamp, no frames: the topic says what it
+    /// relates), as translation and quaternion x, y, z, w.
+    Extrinsic {
+        translation: [f64; 3],
+        rotation: [f64; 4],
+    },
+    /// A `std_msgs/Float32`.
+    Value(f32),
+}
+
+/// The wire format of a channel's messages, from its message encoding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Encoding {
+    Cdr,
+    Ros1,
+    Json,
 }
 
 /// Nanoseconds of a ROS or Foxglove time (seconds, nanoseconds).
@@ -149,15 +175,14 @@ fn stamp_ns(sec: i64, nsec: i64) -> Result<i64, String> {
         .ok_or_else(|| format!("stamp of {sec} s is out of range"))
 }
 
-/// Decodes one message of type `ty`.
-pub fn decode(ty: MessageType, bytes: &[u8]) -> Result<Message<'_>, String> {
-    use MessageType::*;
-    match ty {
-        RosImage | RosCompressedImage | RosCameraInfo | RosTf | RosPoseStamped | RosOdometry => {
-            decode_cdr(ty, bytes).map_err(|e| e.to_string())
-        }
-        _ => decode_json(ty, bytes),
-    }
+/// Decodes one message of type `ty` sent in `encoding`.
+pub fn decode(ty: MessageType, encoding: Encoding, bytes: &[u8]) -> Result<Message<'_>, String> {
+    let reader = match encoding {
+        Encoding::Json => return decode_json(ty, bytes),
+        Encoding::Cdr => WireReader::cdr(bytes).map_err(|e| e.to_string())?,
+        Encoding::Ros1 => WireReader::ros1(bytes),
+    };
+    decode_ros(ty, reader).map_err(|e| e.to_string())
 }
 
 struct Header {
@@ -165,27 +190,34 @@ struct Header {
     frame_id: String,
 }
 
-fn cdr_header(r: &mut CdrReader) -> Result<Header, super::cdr::CdrError> {
-    let sec = r.i32("header.stamp.sec")?;
+/// `std_msgs/Header`: ROS 2's (`int32 sec, uint32 nanosec, string frame_id`) in CDR,
+/// ROS 1's (`uint32 seq, uint32 secs, uint32 nsecs, string frame_id`) otherwise.
+fn ros_header(r: &mut WireReader) -> Result<Header, WireError> {
+    let sec = if r.is_cdr() {
+        r.i32("header.stamp.sec")? as i64
+    } else {
+        r.u32("header.seq")?;
+        r.u32("header.stamp.secs")? as i64
+    };
     let nsec = r.u32("header.stamp.nanosec")?;
     let frame_id = r.string("header.frame_id")?;
-    let stamp_ns = stamp_ns(sec as i64, nsec as i64)
-        .map_err(|reason| super::cdr::CdrError { offset: 4, reason })?;
+    // Both stamps start at byte 4: after CDR's encapsulation, after ROS 1's seq.
+    let stamp_ns = stamp_ns(sec, nsec as i64).map_err(|reason| WireError { offset: 4, reason })?;
     Ok(Header { stamp_ns, frame_id })
 }
 
-fn cdr_pose(r: &mut CdrReader, what: &str) -> Result<([f64; 3], [f64; 4]), super::cdr::CdrError> {
+fn ros_pose(r: &mut WireReader, what: &str) -> Result<([f64; 3], [f64; 4]), WireError> {
     let t = r.f64_array::<3>(what)?;
     let q = r.f64_array::<4>(what)?;
     Ok((t, q))
 }
 
-fn decode_cdr(ty: MessageType, bytes: &[u8]) -> Result<Message<'_>, super::cdr::CdrError> {
+fn decode_ros<'a>(ty: MessageType, mut r: WireReader<'a>) -> Result<Message<'a>, WireError> {
     use MessageType::*;
-    let mut r = CdrReader::new(bytes)?;
+    let r = &mut r;
     Ok(match ty {
         RosImage => {
-            let h = cdr_header(&mut r)?;
+            let h = ros_header(r)?;
             let height = r.u32("height")?;
             let width = r.u32("width")?;
             let encoding = r.string("encoding")?;
@@ -206,7 +238,7 @@ fn decode_cdr(ty: MessageType, bytes: &[u8]) -> Result<Message<'_>, super::cdr::
             })
         }
         RosCompressedImage => {
-            let h = cdr_header(&mut r)?;
+            let h = ros_header(r)?;
             let format = r.string("format")?;
             let data = r.bytes("data")?;
             Message::Image(ImageMsg {
@@ -219,7 +251,7 @@ fn decode_cdr(ty: MessageType, bytes: &[u8]) -> Result<Message<'_>, super::cdr::
             })
         }
         RosCameraInfo => {
-            let h = cdr_header(&mut r)?;
+            let h = ros_header(r)?;
             let height = r.u32("height")?;
             let width = r.u32("width")?;
             let distortion_model = r.string("distortion_model")?;
@@ -239,9 +271,9 @@ fn decode_cdr(ty: MessageType, bytes: &[u8]) -> Result<Message<'_>, super::cdr::
             let n = r.seq_len("transforms", 72)?;
             let mut out = Vec::with_capacity(n);
             for _ in 0..n {
-                let h = cdr_header(&mut r)?;
+                let h = ros_header(r)?;
                 let child = r.string("child_frame_id")?;
-                let (translation, rotation) = cdr_pose(&mut r, "transform")?;
+                let (translation, rotation) = ros_pose(r, "transform")?;
                 out.push(TransformMsg {
                     stamp_ns: h.stamp_ns,
                     parent: h.frame_id,
@@ -253,13 +285,13 @@ fn decode_cdr(ty: MessageType, bytes: &[u8]) -> Result<Message<'_>, super::cdr::
             Message::Transforms(out)
         }
         RosPoseStamped | RosOdometry => {
-            let h = cdr_header(&mut r)?;
+            let h = ros_header(r)?;
             let child = if ty == RosOdometry {
                 r.string("child_frame_id")?
             } else {
                 String::new()
             };
-            let (translation, rotation) = cdr_pose(&mut r, "pose")?;
+            let (translation, rotation) = ros_pose(r, "pose")?;
             Message::Transforms(vec![TransformMsg {
                 stamp_ns: h.stamp_ns,
                 parent: h.frame_id,
@@ -268,7 +300,20 @@ fn decode_cdr(ty: MessageType, bytes: &[u8]) -> Result<Message<'_>, super::cdr::
                 rotation,
             }])
         }
-        _ => unreachable!("JSON types are decoded by decode_json"),
+        RosTransform => {
+            let (translation, rotation) = ros_pose(r, "transform")?;
+            Message::Extrinsic {
+                translation,
+                rotation,
+            }
+        }
+        RosFloat32 => Message::Value(r.f32("data")?),
+        _ => {
+            return Err(WireError {
+                offset: 0,
+                reason: format!("{ty:?} is a Foxglove schema, sent as json"),
+            });
+        }
     })
 }
 
@@ -439,6 +484,6 @@ fn decode_json(ty: MessageType, bytes: &[u8]) -> Result<Message<'static>, String
                 rotation: [q.x, q.y, q.z, q.w],
             }])
         }
-        _ => unreachable!("CDR types are decoded by decode_cdr"),
+        _ => return Err(format!("{ty:?} is a ROS message, sent as cdr or ros1")),
     })
 }

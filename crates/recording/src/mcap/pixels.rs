@@ -229,7 +229,8 @@ fn quantize(metres: f32, unit_m: f64) -> u16 {
     }
 }
 
-fn raw_u16(width: u32, height: u32, units: impl IntoIterator<Item = u16>) -> EncodedImage {
+/// Depth units as a raw 16-bit image.
+pub fn raw_u16(width: u32, height: u32, units: impl IntoIterator<Item = u16>) -> EncodedImage {
     EncodedImage {
         encoding: ImageEncoding::RawU16,
         width,

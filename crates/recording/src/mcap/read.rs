@@ -15,7 +15,7 @@
 //! [`StreamEnd::skipped_chunks`]; damage outside the chunks still stops the import.
 
 use super::chunk;
-use super::messages::MessageType;
+use super::messages::{Encoding, MessageType};
 use crate::error::ImportError;
 use mcap::records::{Record, op};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -31,9 +31,10 @@ pub struct Channel {
     pub topic: String,
     pub schema: String,
     pub message_encoding: String,
-    /// The type relume reads it as; `Ok(None)` for types it has no use for; `Err` with
-    /// why for a type it knows in an encoding it does not read (ROS 1, protobuf).
-    pub ty: Result<Option<MessageType>, String>,
+    /// The type relume reads it as and the messages' wire format; `Ok(None)` for types
+    /// it has no use for; `Err` with why for a type it knows in an encoding it does not
+    /// read (protobuf).
+    pub ty: Result<Option<(MessageType, Encoding)>, String>,
 }
 
 /// What the stream hands to its visitor.
@@ -60,9 +61,30 @@ pub struct ReadOptions {
     pub skip_corrupt: bool,
 }
 
+/// The two containers [`stream`] reads.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Container {
+    #[default]
+    Mcap,
+    /// A ROS 1 bag, format 2.0.
+    RosBag,
+}
+
+impl Container {
+    /// The importer's name in a recording's provenance.
+    pub fn importer(self) -> &'static str {
+        match self {
+            Container::Mcap => "mcap",
+            Container::RosBag => "rosbag",
+        }
+    }
+}
+
 /// How a stream ended.
 #[derive(Debug, Default, Clone, PartialEq, Eq)]
 pub struct StreamEnd {
+    /// What the file was.
+    pub container: Container,
     pub messages: u64,
     /// Set when the file ends inside a record (a recorder stopped before closing the
     /// file): what preceded it was read.
@@ -112,7 +134,7 @@ impl StreamEnd {
 
 /// The largest record (or decompressed chunk) read: a damaged length field must not
 /// allocate gigabytes. 64 times the file (chunks compress), from 16 MiB to 1 GiB.
-fn record_limit(file_len: u64) -> usize {
+pub(super) fn record_limit(file_len: u64) -> usize {
     file_len
         .saturating_mul(64)
         .clamp(16 << 20, 1 << 30)
@@ -120,10 +142,13 @@ fn record_limit(file_len: u64) -> usize {
         .unwrap_or(1 << 30)
 }
 
-/// Calls `visit` for every channel, message and metadata record of `path`, in file
-/// order. Errors name the file and the message index or byte offset.
-pub fn stream(
+/// Calls `visit` for every channel, message and metadata record of the MCAP file `path`
+/// (opened as `file`, at its start), in file order. Errors name the file and the message
+/// index or byte offset.
+pub(super) fn stream_mcap(
     path: &Path,
+    mut file: std::fs::File,
+    file_len: u64,
     options: ReadOptions,
     visit: &mut dyn FnMut(Event<'_>) -> Result<(), ImportError>,
 ) -> Result<StreamEnd, ImportError> {
@@ -131,8 +156,6 @@ pub fn stream(
         path: path.to_path_buf(),
         source,
     };
-    let mut file = relume_base::files::open_regular(path).map_err(io)?;
-    let file_len = file.metadata().map_err(io)?.len();
     let limit = record_limit(file_len);
     let skip = options.skip_corrupt;
     // Skipping needs each chunk whole before its records are read: the reader hands it

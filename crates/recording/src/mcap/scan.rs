@@ -2,9 +2,10 @@
 //! its first message), the camera infos, the transform tree and the pose topics. The
 //! import chooses its topics from this; `relume import mcap --list` prints it.
 
-use super::messages::{self, CameraInfoMsg, Message, MessageType, TransformMsg};
+use super::container;
+use super::messages::{self, CameraInfoMsg, Encoding, Message, MessageType, TransformMsg};
 use super::pixels::{self, ImageRole};
-use super::read::{self, Channel, Event, ReadOptions, StreamEnd};
+use super::read::{Channel, Event, ReadOptions, StreamEnd};
 use super::tf::TfTree;
 use crate::error::ImportError;
 use std::collections::BTreeMap;
@@ -43,6 +44,11 @@ pub struct Scan {
     pub tf: TfTree,
     /// Messages of the pose topics (PoseStamped, Odometry, PoseInFrame) as transforms.
     pub poses: BTreeMap<u16, Vec<TransformMsg>>,
+    /// The first bare `geometry_msgs/Transform` of each channel (translation, quaternion
+    /// x, y, z, w): RealSense bags' extrinsics.
+    pub extrinsics: BTreeMap<u16, ([f64; 3], [f64; 4])>,
+    /// The first `std_msgs/Float32` of each channel: RealSense bags' option values.
+    pub values: BTreeMap<u16, f32>,
     /// From relume's own metadata record.
     pub depth_unit_m: Option<f64>,
     pub end: StreamEnd,
@@ -61,7 +67,7 @@ impl Scan {
             path: path.to_path_buf(),
             reason,
         };
-        let end = read::stream(path, options, &mut |event| {
+        let end = container::stream(path, options, &mut |event| {
             match event {
                 Event::Channel(c) => {
                     scan.channels.insert(c.id, c.clone());
@@ -90,16 +96,17 @@ impl Scan {
                     let count = scan.counts.entry(channel.id).or_default();
                     *count += 1;
                     let first = *count == 1;
-                    let Ok(Some(ty)) = channel.ty else {
+                    let Ok(Some((ty, encoding))) = channel.ty else {
                         return Ok(());
                     };
                     if ty.is_image() {
                         if first {
-                            scan.images.insert(channel.id, image_topic(ty, data));
+                            let topic = image_topic(ty, encoding, data);
+                            scan.images.insert(channel.id, topic);
                         }
                         return Ok(());
                     }
-                    let message = messages::decode(ty, data).map_err(|e| {
+                    let message = messages::decode(ty, encoding, data).map_err(|e| {
                         bad(format!(
                             "message {index} on {} ({}): {e}",
                             channel.topic, channel.schema
@@ -132,6 +139,17 @@ impl Scan {
                         }
                         Message::Transforms(t) => {
                             scan.poses.entry(channel.id).or_default().extend(t);
+                        }
+                        Message::Extrinsic {
+                            translation,
+                            rotation,
+                        } => {
+                            scan.extrinsics
+                                .entry(channel.id)
+                                .or_insert((translation, rotation));
+                        }
+                        Message::Value(v) => {
+                            scan.values.entry(channel.id).or_insert(v);
                         }
                         Message::Image(_) => {}
                     }
@@ -167,6 +185,14 @@ impl Scan {
             self.end.messages,
             self.channels.len()
         );
+        // RealSense topics run to 50 characters; a driver's to 40.
+        let topic_width = self
+            .channels
+            .values()
+            .map(|c| c.topic.chars().count())
+            .max()
+            .unwrap_or(0)
+            .max(40);
         for (id, c) in &self.channels {
             let n = self.counts.get(id).copied().unwrap_or(0);
             let what = match (&c.ty, self.images.get(id), self.infos.get(id)) {
@@ -194,18 +220,32 @@ impl Scan {
                     info.k[5],
                     info.frame_id
                 ),
-                (Ok(Some(MessageType::RosTf)), _, _)
-                | (Ok(Some(MessageType::FoxFrameTransform)), _, _)
-                | (Ok(Some(MessageType::FoxFrameTransforms)), _, _) => "transforms".into(),
+                (Ok(Some((MessageType::RosTf, _))), _, _)
+                | (Ok(Some((MessageType::FoxFrameTransform, _))), _, _)
+                | (Ok(Some((MessageType::FoxFrameTransforms, _))), _, _) => "transforms".into(),
                 (Ok(Some(_)), _, _) if self.poses.contains_key(id) => {
                     let p = &self.poses[id];
                     let frame = p.first().map_or("", |t| t.parent.as_str());
                     format!("poses in frame {frame:?}")
                 }
+                (Ok(Some(_)), _, _) if self.extrinsics.contains_key(id) => {
+                    let (t, q) = self.extrinsics[id];
+                    format!(
+                        "extrinsic: translation {:?} m, rotation (x y z w) {:?}",
+                        t, q
+                    )
+                }
+                (Ok(Some(_)), _, _) if self.values.contains_key(id) => {
+                    format!("value {}", self.values[id])
+                }
                 (Ok(_), _, _) => "not used".into(),
                 (Err(e), _, _) => format!("not read: {e}"),
             };
-            let _ = writeln!(out, "  {:<40} {:>7}  {:<32} {what}", c.topic, n, c.schema);
+            let _ = writeln!(
+                out,
+                "  {:<topic_width$} {:>7}  {:<32} {what}",
+                c.topic, n, c.schema
+            );
         }
         let edges = self.tf.describe();
         if !edges.is_empty() {
@@ -233,8 +273,8 @@ impl Scan {
     }
 }
 
-fn image_topic(ty: MessageType, data: &[u8]) -> ImageTopic {
-    match messages::decode(ty, data) {
+fn image_topic(ty: MessageType, encoding: Encoding, data: &[u8]) -> ImageTopic {
+    match messages::decode(ty, encoding, data) {
         Ok(Message::Image(img)) => {
             let size = match &img.data {
                 messages::ImageData::Raw { width, height, .. } => Some((*width, *height)),

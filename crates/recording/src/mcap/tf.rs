@@ -204,6 +204,29 @@ impl TfTree {
             .collect()
     }
 
+    /// The pose of `frame` in `target` when the two hang from a common frame through
+    /// static transforms only (a camera's depth and color optical frames under its
+    /// mount); `None` otherwise.
+    pub fn static_between(&self, frame: &str, target: &str) -> Option<Pose> {
+        let (up, target_up) = (self.path_to_root(frame), self.path_to_root(target));
+        let common = up.iter().find(|f| target_up.contains(f))?;
+        let all_static = |path: &[String]| {
+            path.iter()
+                .take_while(|f| *f != common)
+                .all(|f| self.edges.get(f).is_some_and(|e| e.is_static))
+        };
+        if !all_static(&up) || !all_static(&target_up) {
+            return None;
+        }
+        let in_common = self.lookup(common, frame, 0).ok()??;
+        let target_in_common = self.lookup(common, target, 0).ok()??;
+        let inverse = target_in_common.rotation().inverse();
+        Some(Pose::from_parts(
+            inverse * (in_common.translation() - target_in_common.translation()),
+            inverse * in_common.rotation(),
+        ))
+    }
+
     /// The pose of `frame` in `world` at `t`, or `None` when a dynamic edge on the path
     /// has no samples around `t`. `Err` when `world` is not above `frame`.
     pub fn lookup(&self, world: &str, frame: &str, t: i64) -> Result<Option<Pose>, String> {

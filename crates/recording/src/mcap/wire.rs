@@ -1,36 +1,43 @@
-//! A reader of OMG CDR as ROS 2 writes it (XCDR1, "plain CDR"): a 4-byte encapsulation
-//! header (`00 01` little-endian or `00 00` big-endian, then two option bytes), then the
-//! fields in order, each primitive aligned to its own size counted from the end of the
-//! header; strings and sequences are a `u32` count followed by the elements (a string's
-//! count includes its terminating NUL).
+//! The two wire formats ROS messages travel in, read by one cursor:
 //!
-//! Only what the ROS 2 messages of [`super::messages`] need. Every read is bounds-checked:
-//! a count larger than the bytes left is an error, never an allocation.
+//! - **CDR** as ROS 2 writes it (XCDR1, "plain CDR"): a 4-byte encapsulation header
+//!   (`00 01` little-endian or `00 00` big-endian, then two option bytes), then the fields
+//!   in order, each primitive aligned to its own size counted from the end of the header.
+//! - **ROS 1 serialization** (wiki.ros.org/msg, "Serialization"): little-endian fields in
+//!   order with no header and no alignment.
+//!
+//! In both, strings and sequences are a `u32` count followed by the elements (CDR counts
+//! a string's terminating NUL, ROS 1 has none) and fixed arrays have no count.
+//!
+//! Only what the messages of [`super::messages`] need. Every read is bounds-checked: a
+//! count larger than the bytes left is an error, never an allocation.
 
-/// A CDR decoding error: what was being read and at which byte of the message.
+/// A decoding error: what was being read and at which byte of the message.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("byte {offset}: {reason}")]
-pub struct CdrError {
+pub struct WireError {
     pub offset: usize,
     pub reason: String,
 }
 
-/// A cursor over one CDR-encoded message.
-pub struct CdrReader<'a> {
+/// A cursor over one message in either wire format.
+pub struct WireReader<'a> {
     bytes: &'a [u8],
-    /// Position in `bytes`; alignment counts from byte 4 (after the header).
     pos: usize,
+    /// CDR: alignment counts from byte 4 (after the header). ROS 1: no alignment.
+    aligned: bool,
     little_endian: bool,
 }
 
-impl<'a> CdrReader<'a> {
-    /// Reads the encapsulation header. Only plain CDR (`00 00` or `00 01`) is accepted:
-    /// XCDR2 and parameter lists are used by other DDS types, not ROS 2 messages.
-    pub fn new(bytes: &'a [u8]) -> Result<Self, CdrError> {
+impl<'a> WireReader<'a> {
+    /// A CDR message: reads the encapsulation header. Only plain CDR (`00 00` or `00 01`)
+    /// is accepted: XCDR2 and parameter lists are used by other DDS types, not ROS 2
+    /// messages.
+    pub fn cdr(bytes: &'a [u8]) -> Result<Self, WireError> {
         let header: [u8; 4] = bytes
             .get(..4)
             .and_then(|h| h.try_into().ok())
-            .ok_or_else(|| CdrError {
+            .ok_or_else(|| WireError {
                 offset: 0,
                 reason: format!(
                     "{} bytes are too short for a CDR encapsulation header",
@@ -41,7 +48,7 @@ impl<'a> CdrReader<'a> {
             [0, 1] => true,
             [0, 0] => false,
             _ => {
-                return Err(CdrError {
+                return Err(WireError {
                     offset: 0,
                     reason: format!(
                         "encapsulation {:02x} {:02x} is not plain CDR (00 00 or 00 01)",
@@ -50,21 +57,45 @@ impl<'a> CdrReader<'a> {
                 });
             }
         };
-        Ok(CdrReader {
+        Ok(WireReader {
             bytes,
             pos: 4,
+            aligned: true,
             little_endian,
         })
     }
 
-    fn err<T>(&self, reason: impl Into<String>) -> Result<T, CdrError> {
-        Err(CdrError {
+    /// A ROS 1 message.
+    pub fn ros1(bytes: &'a [u8]) -> Self {
+        WireReader {
+            bytes,
+            pos: 0,
+            aligned: false,
+            little_endian: true,
+        }
+    }
+
+    /// Whether the message is CDR (ROS 2) rather than ROS 1.
+    pub fn is_cdr(&self) -> bool {
+        self.aligned
+    }
+
+    /// Whether every byte of the message has been read.
+    pub fn at_end(&self) -> bool {
+        self.pos == self.bytes.len()
+    }
+
+    fn err<T>(&self, reason: impl Into<String>) -> Result<T, WireError> {
+        Err(WireError {
             offset: self.pos,
             reason: reason.into(),
         })
     }
 
-    fn align(&mut self, size: usize) -> Result<(), CdrError> {
+    fn align(&mut self, size: usize) -> Result<(), WireError> {
+        if !self.aligned {
+            return Ok(());
+        }
         let rel = self.pos - 4;
         let pad = (size - rel % size) % size;
         if self.pos + pad > self.bytes.len() {
@@ -74,7 +105,7 @@ impl<'a> CdrReader<'a> {
         Ok(())
     }
 
-    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], CdrError> {
+    fn take<const N: usize>(&mut self, what: &str) -> Result<[u8; N], WireError> {
         self.align(N)?;
         let Some(slice) = self.bytes.get(self.pos..self.pos + N) else {
             return self.err(format!("message ends before its {what}"));
@@ -87,25 +118,29 @@ impl<'a> CdrReader<'a> {
         Ok(raw)
     }
 
-    pub fn u8(&mut self, what: &str) -> Result<u8, CdrError> {
+    pub fn u8(&mut self, what: &str) -> Result<u8, WireError> {
         Ok(self.take::<1>(what)?[0])
     }
 
-    pub fn u32(&mut self, what: &str) -> Result<u32, CdrError> {
+    pub fn u32(&mut self, what: &str) -> Result<u32, WireError> {
         Ok(u32::from_le_bytes(self.take::<4>(what)?))
     }
 
-    pub fn i32(&mut self, what: &str) -> Result<i32, CdrError> {
+    pub fn i32(&mut self, what: &str) -> Result<i32, WireError> {
         Ok(i32::from_le_bytes(self.take::<4>(what)?))
     }
 
-    pub fn f64(&mut self, what: &str) -> Result<f64, CdrError> {
+    pub fn f32(&mut self, what: &str) -> Result<f32, WireError> {
+        Ok(f32::from_le_bytes(self.take::<4>(what)?))
+    }
+
+    pub fn f64(&mut self, what: &str) -> Result<f64, WireError> {
         Ok(f64::from_le_bytes(self.take::<8>(what)?))
     }
 
     /// A sequence or array count, checked against the bytes left (each element at least
     /// `min_element_size` bytes).
-    fn count(&mut self, what: &str, min_element_size: usize) -> Result<usize, CdrError> {
+    fn count(&mut self, what: &str, min_element_size: usize) -> Result<usize, WireError> {
         let n = self.u32(what)? as usize;
         let left = self.bytes.len() - self.pos;
         if n.saturating_mul(min_element_size) > left {
@@ -116,8 +151,9 @@ impl<'a> CdrReader<'a> {
         Ok(n)
     }
 
-    /// A string (u32 length including the NUL, the bytes, the NUL); UTF-8 checked.
-    pub fn string(&mut self, what: &str) -> Result<String, CdrError> {
+    /// A string (u32 length, the bytes; in CDR the length counts a closing NUL, which is
+    /// dropped); UTF-8 checked.
+    pub fn string(&mut self, what: &str) -> Result<String, WireError> {
         let n = self.count(what, 1)?;
         let start = self.pos;
         let raw = &self.bytes[start..start + n];
@@ -130,7 +166,7 @@ impl<'a> CdrReader<'a> {
         self.pos += n;
         match std::str::from_utf8(text) {
             Ok(s) => Ok(s.to_string()),
-            Err(_) => Err(CdrError {
+            Err(_) => Err(WireError {
                 offset: start,
                 reason: format!("{what} is not UTF-8"),
             }),
@@ -138,7 +174,7 @@ impl<'a> CdrReader<'a> {
     }
 
     /// A `uint8[]` sequence, borrowed.
-    pub fn bytes(&mut self, what: &str) -> Result<&'a [u8], CdrError> {
+    pub fn bytes(&mut self, what: &str) -> Result<&'a [u8], WireError> {
         let n = self.count(what, 1)?;
         let out = &self.bytes[self.pos..self.pos + n];
         self.pos += n;
@@ -146,13 +182,13 @@ impl<'a> CdrReader<'a> {
     }
 
     /// A `float64[]` sequence.
-    pub fn f64_seq(&mut self, what: &str) -> Result<Vec<f64>, CdrError> {
+    pub fn f64_seq(&mut self, what: &str) -> Result<Vec<f64>, WireError> {
         let n = self.count(what, 8)?;
         (0..n).map(|_| self.f64(what)).collect()
     }
 
     /// A fixed `float64[N]` array (no count on the wire).
-    pub fn f64_array<const N: usize>(&mut self, what: &str) -> Result<[f64; N], CdrError> {
+    pub fn f64_array<const N: usize>(&mut self, what: &str) -> Result<[f64; N], WireError> {
         let mut out = [0.0; N];
         for v in &mut out {
             *v = self.f64(what)?;
@@ -161,7 +197,7 @@ impl<'a> CdrReader<'a> {
     }
 
     /// A sequence count of structs (each at least `min_element_size` bytes).
-    pub fn seq_len(&mut self, what: &str, min_element_size: usize) -> Result<usize, CdrError> {
+    pub fn seq_len(&mut self, what: &str, min_element_size: usize) -> Result<usize, WireError> {
         self.count(what, min_element_size)
     }
 }
@@ -176,7 +212,7 @@ mod tests {
         let mut msg = vec![0, 1, 0, 0, 7, 0, 0, 0];
         msg.extend(5u32.to_le_bytes());
         msg.extend(2.5f64.to_le_bytes());
-        let mut r = CdrReader::new(&msg).unwrap();
+        let mut r = WireReader::cdr(&msg).unwrap();
         assert_eq!(r.u8("a").unwrap(), 7);
         assert_eq!(r.u32("b").unwrap(), 5);
         assert_eq!(r.f64("c").unwrap(), 2.5);
@@ -188,7 +224,7 @@ mod tests {
         msg.extend(4u32.to_be_bytes());
         msg.extend(b"abc\0");
         msg.extend(9i32.to_be_bytes());
-        let mut r = CdrReader::new(&msg).unwrap();
+        let mut r = WireReader::cdr(&msg).unwrap();
         assert_eq!(r.string("s").unwrap(), "abc");
         assert_eq!(r.i32("i").unwrap(), 9);
     }
@@ -197,24 +233,42 @@ mod tests {
     fn counts_beyond_the_message_are_errors_not_allocations() {
         let mut msg = vec![0, 1, 0, 0];
         msg.extend(u32::MAX.to_le_bytes());
-        let e = CdrReader::new(&msg).unwrap().bytes("data").unwrap_err();
+        let e = WireReader::cdr(&msg).unwrap().bytes("data").unwrap_err();
         assert_eq!(
             e.to_string(),
             "byte 8: data claims 4294967295 elements but only 0 bytes are left"
         );
-        let mut r = CdrReader::new(&[0, 1, 0, 0, 1]).unwrap();
+        let mut r = WireReader::cdr(&[0, 1, 0, 0, 1]).unwrap();
         r.u8("is_bigendian").unwrap();
         let e = r.u32("step");
         assert_eq!(
             e.unwrap_err().to_string(),
             "byte 5: message ends inside alignment padding"
         );
-        let e = CdrReader::new(&[0, 1, 0, 0]).unwrap().u32("width");
+        let e = WireReader::cdr(&[0, 1, 0, 0]).unwrap().u32("width");
         assert_eq!(
             e.unwrap_err().to_string(),
             "byte 4: message ends before its width"
         );
-        assert!(CdrReader::new(&[0, 2, 0, 0]).is_err());
-        assert!(CdrReader::new(&[0, 1]).is_err());
+        assert!(WireReader::cdr(&[0, 2, 0, 0]).is_err());
+        assert!(WireReader::cdr(&[0, 1]).is_err());
+    }
+
+    #[test]
+    fn ros1_fields_are_packed_little_endian_without_a_header() {
+        // u8 1, u32 5 right after it, a string without NUL, a f32.
+        let mut msg = vec![1];
+        msg.extend(5u32.to_le_bytes());
+        msg.extend(3u32.to_le_bytes());
+        msg.extend(b"abc");
+        msg.extend(0.5f32.to_le_bytes());
+        let mut r = WireReader::ros1(&msg);
+        assert_eq!(r.u8("a").unwrap(), 1);
+        assert_eq!(r.u32("b").unwrap(), 5);
+        assert_eq!(r.string("s").unwrap(), "abc");
+        assert_eq!(r.f32("f").unwrap(), 0.5);
+        assert!(r.at_end());
+        let e = WireReader::ros1(&[1, 0]).u32("seq").unwrap_err();
+        assert_eq!(e.to_string(), "byte 0: message ends before its seq");
     }
 }

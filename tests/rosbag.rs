@@ -166,7 +166,7 @@ fn a_realsense_recording_gives_its_depth_unit_and_registers_its_depth_camera() {
         assert_eq!(units.data, depth(i), "frame {i}");
     }
 
-    // The color camera 1.5 cm beside the depth camera and turned by a degree: the depth
+    // The depth camera 1.5 cm beside the color camera and turned by a degree: the depth
     // is registered into the color view, the header says so.
     let bag = dir.path().join("rs-extrinsic.bag");
     let out = dir.path().join("rs-extrinsic.relume");
@@ -178,7 +178,7 @@ fn a_realsense_recording_gives_its_depth_unit_and_registers_its_depth_camera() {
     let registered = &header.provenance.settings["registered"];
     assert!(
         registered.starts_with(
-            "depth 16x12 to color, depth camera at (-0.0150, 0.0000, -0.0003) m in the color \
+            "depth 16x12 to color, depth camera at (0.0150, 0.0000, 0.0000) m in the color \
              camera, turned 1.000 degrees"
         ),
         "{registered}"
@@ -305,4 +305,23 @@ fn chunk_offsets(bytes: &[u8]) -> Vec<usize> {
         at += 8 + header_len + data_len;
     }
     chunks
+}
+
+/// Writes the `rosbag` fuzz target's seeds (small, uncompressed: a driver's layout and a
+/// RealSense one with an extrinsic):
+/// `cargo test --test rosbag write_fuzz_seeds -- --ignored`.
+#[test]
+#[ignore = "writes files into fuzz/seeds/rosbag"]
+fn write_fuzz_seeds() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/rosbag");
+    std::fs::create_dir_all(&dir).unwrap();
+    write_bag(&dir.join("driver-tf"), "ros", "none", 2, &[]);
+    write_bag(
+        &dir.join("realsense-extrinsic"),
+        "realsense",
+        "none",
+        2,
+        &["0.015,0,0,1"],
+    );
+    write_bag(&dir.join("driver-lz4"), "ros", "lz4", 2, &[]);
 }

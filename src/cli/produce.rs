@@ -193,9 +193,10 @@ pub enum ImportCommand {
     /// intrinsics from CameraInfo, poses from /tf + /tf_static or a pose topic. Topics
     /// and frames are detected when unambiguous; `--list` shows what the file holds.
     Mcap(McapArgs),
-    /// ROS 1 bag (rosbag record, RealSense Viewer / librealsense recordings, TUM RGB-D's
+    /// ROS 1 bag (rosbag record, RealSense Viewer / librealsense up to 2.55, TUM RGB-D's
     /// bags): the same messages, options and detection as `import mcap`. A RealSense
-    /// recording's depth unit comes from its "Depth Units" option.
+    /// recording's depth unit comes from its "Depth Units" option and its depth is
+    /// registered to the color camera with the recorded extrinsics.
     #[command(visible_alias = "rosbag")]
     Bag(McapArgs),
 }
@@ -214,8 +215,10 @@ pub struct McapArgs {
     /// The color image topic (default: the only one).
     #[arg(long)]
     color_topic: Option<String>,
-    /// The depth image topic (default: the only one). Depth must be registered to the
-    /// color camera (a driver's aligned_depth_to_color topic).
+    /// The depth image topic (default: the only one). Depth from a camera of its own
+    /// (other intrinsics, or another frame) is registered into the color view: with a
+    /// RealSense recording's extrinsics, a static transform between the two frames, or
+    /// else as one camera centre.
     #[arg(long)]
     depth_topic: Option<String>,
     /// The CameraInfo / CameraCalibration topic of the color images (default: the one

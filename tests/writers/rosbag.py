@@ -6,8 +6,9 @@ LAYOUT is `ros` (a camera driver's topics: /camera/rgb/image_color, /camera/dept
 /camera/rgb/camera_info, /tf) or `realsense` (librealsense's recording layout:
 /device_0/sensor_{0,1}/{Depth,Color}_0/image/data, .../info/camera_info, the "Depth Units"
 option, each stream's extrinsic to the reference stream under .../tf/0). COMPRESSION is
-none, bz2 or lz4. EXTRINSIC (realsense only) is `tx,ty,tz,yaw_deg`: the color stream's
-transform to the depth (reference) stream; without it the two coincide.
+none, bz2 or lz4. EXTRINSIC (realsense only) is `tx,ty,tz,yaw_deg`: the extrinsic from
+the depth (reference) stream to the color stream, as librealsense stores it under
+Color_0/tf/0 (p_color = R p_depth + t); without it the two coincide.
 
 Pixels, stamps and poses follow the formulas below; tests/rosbag.rs computes the same
 ones and compares them with what relume imported.

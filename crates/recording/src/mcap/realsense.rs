@@ -5,12 +5,14 @@
 //! |---|---|
 //! | `/device_D/sensor_S/STREAM_I/image/data` | `sensor_msgs/Image` (`mono16` depth, `rgb8` color) |
 //! | `/device_D/sensor_S/STREAM_I/info/camera_info` | the stream's `sensor_msgs/CameraInfo` |
-//! | `/device_D/sensor_S/STREAM_I/tf/G` | `geometry_msgs/Transform`: the stream to the reference stream of extrinsics group `G` |
-//! | `/device_D/sensor_S/option/Depth Units/value` | `std_msgs/Float32`: metres per depth unit |
+//! | `/device_D/sensor_S/STREAM_I/tf/G` | `geometry_msgs/Transform`: the extrinsic from the reference stream of group `G` to this stream |
+//! | `/device_D/sensor_S/option/Depth Units/value` | `std_msgs/Float32`: metres per depth unit (`Depth_Units` in librealsense 2.5x) |
 //!
-//! A stream's extrinsic maps its points into the group's reference stream (librealsense's
-//! `rs2_extrinsics` from the stream to the reference: `p_ref = R p + t`), so the depth
-//! camera's points reach the color camera as `color_to_ref⁻¹ ∘ depth_to_ref`.
+//! A stream's extrinsic maps the reference stream's points into its own camera
+//! (librealsense's `rs2_extrinsics` from the reference to the stream, `p = R p_ref + t`;
+//! checked against bags that librealsense 2.55's recorder wrote from a software device with
+//! a known depth-to-color extrinsic), so the depth camera's points reach the color camera
+//! as `ref_to_color ∘ ref_to_depth⁻¹`.
 
 use super::read::Channel;
 use super::scan::Scan;
@@ -46,8 +48,12 @@ pub fn depth_unit_m(scan: &Scan, depth_topic: &str) -> Result<Option<f64>, Strin
         return Ok(None);
     };
     let sensor = stream.rsplit_once('/').map_or("", |(s, _)| s);
-    let topic = format!("{sensor}/option/Depth Units/value");
-    let Some(value) = channel(scan, &topic).and_then(|c| scan.values.get(&c.id)) else {
+    let found = ["Depth Units", "Depth_Units"].iter().find_map(|name| {
+        let topic = format!("{sensor}/option/{name}/value");
+        let value = channel(scan, &topic).and_then(|c| scan.values.get(&c.id))?;
+        Some((topic, value))
+    });
+    let Some((topic, value)) = found else {
         return Ok(None);
     };
     // The f32's shortest decimal (0.001, not 0.0010000000474974513).
@@ -87,7 +93,7 @@ pub fn depth_to_color(
             .collect()
     };
     let (depth_groups, color_groups) = (groups(depth), groups(color));
-    let Some((depth_to_ref, color_to_ref, topics)) = depth_groups.iter().find_map(|(g, d, dt)| {
+    let Some((ref_to_depth, ref_to_color, topics)) = depth_groups.iter().find_map(|(g, d, dt)| {
         color_groups
             .iter()
             .find(|(cg, _, _)| cg == g)
@@ -95,7 +101,7 @@ pub fn depth_to_color(
     }) else {
         return Ok(None);
     };
-    for (e, topic) in [(depth_to_ref, topics.0), (color_to_ref, topics.1)] {
+    for (e, topic) in [(ref_to_depth, topics.0), (ref_to_color, topics.1)] {
         let norm = e.rotation.length();
         let rigid =
             e.translation.is_finite() && e.translation.length() < 10.0 && (norm - 1.0).abs() < 1e-3;
@@ -113,9 +119,7 @@ pub fn depth_to_color(
         translation: e.translation,
     };
     Ok(Some(
-        normalized(color_to_ref)
-            .inverse()
-            .after(&normalized(depth_to_ref)),
+        normalized(ref_to_color).after(&normalized(ref_to_depth).inverse()),
     ))
 }
 

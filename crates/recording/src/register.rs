@@ -184,14 +184,12 @@ pub fn register_depth(
     }
     // Behind an edge's nearest corner by more than a surface's own step: hidden.
     let hidden = 1.0 / (1.0 + step);
+    let unit = unit_m as f32;
     out.extend(nearest.iter().zip(edge_nearest.iter()).map(|(&w, &edge)| {
-        if w > 0.0 && w >= edge * hidden {
-            let units = (1.0 / (w as f64 * unit_m)).round();
-            if (1.0..=65535.0).contains(&units) {
-                units as u16
-            } else {
-                0
-            }
+        // Units rounded to nearest (no libm call); f32 keeps 65535 units to 0.004 of one.
+        let units = 1.0 / (w * unit) + 0.5;
+        if w > 0.0 && w >= edge * hidden && (1.0..65536.0).contains(&units) {
+            units as u16
         } else {
             0
         }
@@ -251,27 +249,32 @@ fn project(depth: &[u16], unit_m: f64, registration: &Registration, scratch: &mu
     }
 }
 
+/// The smallest integer at or above `x` (saturating; NaN gives 0), without the libm call
+/// `f32::ceil` is on a baseline x86-64 target.
+fn ceil(x: f32) -> i32 {
+    let i = x as i32;
+    i + ((i as f32) < x) as i32
+}
+
+/// The largest integer at or below `x` (saturating; NaN gives 0).
+fn floor(x: f32) -> i32 {
+    let i = x as i32;
+    i - ((i as f32) > x) as i32
+}
+
 /// Draws one triangle (color-image x, y and 1/z at each corner) into `nearest`, keeping
 /// the larger 1/z at each pixel whose centre (integer coordinates) lies inside or on it.
 fn rasterize(p: [[f32; 3]; 3], width: usize, height: usize, nearest: &mut [f32]) {
+    let min_x = ceil(p[0][0].min(p[1][0]).min(p[2][0])).max(0);
+    let max_x = floor(p[0][0].max(p[1][0]).max(p[2][0])).min(width as i32 - 1);
+    let min_y = ceil(p[0][1].min(p[1][1]).min(p[2][1])).max(0);
+    let max_y = floor(p[0][1].max(p[1][1]).max(p[2][1])).min(height as i32 - 1);
+    if min_x > max_x || min_y > max_y {
+        return;
+    }
     let area =
         (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[2][0] - p[0][0]) * (p[1][1] - p[0][1]);
     if area.abs() < 1e-12 {
-        return;
-    }
-    let min_x = p[0][0].min(p[1][0]).min(p[2][0]).ceil().max(0.0);
-    let max_x = p[0][0]
-        .max(p[1][0])
-        .max(p[2][0])
-        .floor()
-        .min(width as f32 - 1.0);
-    let min_y = p[0][1].min(p[1][1]).min(p[2][1]).ceil().max(0.0);
-    let max_y = p[0][1]
-        .max(p[1][1])
-        .max(p[2][1])
-        .floor()
-        .min(height as f32 - 1.0);
-    if min_x > max_x || min_y > max_y {
         return;
     }
     let inv_area = 1.0 / area;
@@ -371,6 +374,20 @@ mod tests {
             assert!(d == 0 || d == 1000 || d == 3000, "pixel {i}: {d}");
         }
         assert!(out.contains(&1000) && out.contains(&3000));
+    }
+
+    #[test]
+    fn integer_bounds_round_towards_the_pixels_inside() {
+        let cases = [
+            (1.5f32, 2, 1),
+            (-1.5, -1, -2),
+            (3.0, 3, 3),
+            (-0.0, 0, 0),
+            (-0.25, 0, -1),
+        ];
+        for (x, c, f) in cases {
+            assert_eq!((ceil(x), floor(x)), (c, f), "{x}");
+        }
     }
 
     #[test]

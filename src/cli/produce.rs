@@ -6,7 +6,9 @@ use super::progress;
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use relume::recording::association::{self, AssociationStats};
-use relume::recording::importers::{self, ImportOptions, StoreMode, redwood, scannet, tum};
+use relume::recording::importers::{
+    self, ImportOptions, StoreMode, record3d, redwood, scannet, tum,
+};
 use relume::recording::mcap;
 use relume::recording::synth::{self, SynthConfig};
 use relume::recording::{Recording, Replay, ReplayOptions};
@@ -188,6 +190,18 @@ pub enum ImportCommand {
         #[command(flatten)]
         common: CommonImportArgs,
     },
+    /// Record3D .r3d export (iPhone / iPad LiDAR): JPEG color, LZFSE depth registered to
+    /// the color size, intrinsics and ARKit poses from its metadata; frame k at k / fps.
+    Record3d {
+        /// The .r3d file.
+        file: PathBuf,
+        /// Output recording (.relume).
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Keep color compressed as found (decoded on replay) or store raw pixels.
+        #[arg(long, value_enum, default_value_t = StoreMode::Compressed)]
+        store: StoreMode,
+    },
     /// ROS 2, ROS 1 or Foxglove MCAP log: color and depth images (sensor_msgs/Image,
     /// CompressedImage incl. compressedDepth, foxglove.RawImage/CompressedImage),
     /// intrinsics from CameraInfo, poses from /tf + /tf_static or a pose topic. Topics
@@ -279,6 +293,7 @@ impl ImportCommand {
             ImportCommand::Tum { common, .. }
             | ImportCommand::Redwood { common, .. }
             | ImportCommand::Scannet { common, .. } => Some(&common.out),
+            ImportCommand::Record3d { out, .. } => Some(out),
             ImportCommand::Mcap(a) | ImportCommand::Bag(a) => a.out.as_ref(),
         }
     }
@@ -291,6 +306,7 @@ impl ImportCommand {
             }
             // ScanNet: the file's own unless given, needing neither note nor warning.
             ImportCommand::Scannet { common, .. } => common.intrinsics,
+            ImportCommand::Record3d { .. } => None,
             ImportCommand::Mcap(a) | ImportCommand::Bag(a) => a.intrinsics,
         }
     }
@@ -336,7 +352,9 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
     output::check_output_file("-o", out)?;
     match &command {
         ImportCommand::Mcap(a) | ImportCommand::Bag(a) => output::check_not_input(out, &a.file)?,
-        ImportCommand::Scannet { file, .. } => output::check_not_input(out, file)?,
+        ImportCommand::Scannet { file, .. } | ImportCommand::Record3d { file, .. } => {
+            output::check_not_input(out, file)?
+        }
         _ => {}
     }
     remove_stale_partials_beside(out);
@@ -366,6 +384,13 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
                 override_intrinsics: common.intrinsics.is_some(),
             };
             redwood::import(dir, &common.out, &options, &mut tick)?
+        }
+        ImportCommand::Record3d { file, out, store } => {
+            let options = ImportOptions {
+                store: *store,
+                ..ImportOptions::default()
+            };
+            record3d::import(file, out, &options, &mut tick)?
         }
         ImportCommand::Scannet { file, fps, common } => {
             let options = scannet::ScannetOptions {

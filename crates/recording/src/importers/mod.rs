@@ -11,6 +11,7 @@
 //! size, bit depth) at import, and write atomically.
 
 pub mod open3d_intrinsics;
+pub mod record3d;
 pub mod redwood;
 pub mod scannet;
 pub mod tum;

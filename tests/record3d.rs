@@ -210,3 +210,14 @@ fn rewrite_entry(from: &Path, to: &Path, name: &str, data: &[u8]) {
     child.stdin.take().unwrap().write_all(data).unwrap();
     assert!(child.wait().unwrap().success());
 }
+
+/// Writes the `record3d` fuzz target's seeds (12x9 color, 4x3 depth, entries stored
+/// without deflate): `cargo test --test record3d write_fuzz_seeds -- --ignored`.
+#[test]
+#[ignore = "writes files into fuzz/seeds/record3d"]
+fn write_fuzz_seeds() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/record3d");
+    std::fs::create_dir_all(&dir).unwrap();
+    write_r3d(&dir.join("two-frames"), 2, &["stored", "--small"]);
+    write_r3d(&dir.join("no-poses"), 1, &["noposes", "--small"]);
+}

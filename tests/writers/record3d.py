@@ -2,9 +2,9 @@
 JSON, rgbd/N.jpg and LZFSE-compressed float32 rgbd/N.depth), with Python's zipfile,
 Pillow's JPEG encoder and pyliblzfse: writers independent of relume. For its tests.
 
-    python record3d.py OUT.r3d FRAMES [noposes]
+    python record3d.py OUT.r3d FRAMES [noposes|stored]
 
-Color 96x72, depth 32x24 (the same field of view): frame k's depth is a wall at
+Color 96x72, depth 32x24 (the same field of view; `--small`: 12x9 and 4x3): frame k's depth is a wall at
 1.5 + 0.01 k m (0 in its top-left pixel: no measurement), its color a gradient. Poses:
 ARKit camera-to-world [qx, qy, qz, qw, px, py, pz], a turn of 0.1 k rad about y and a
 step of 0.2 k m along x. K is column-major: fx 80, fy 81, cx 47.5, cy 35.5. fps 30.
@@ -21,6 +21,9 @@ import numpy as np
 from PIL import Image
 
 W, H, DW, DH = 96, 72, 32, 24
+if "--small" in sys.argv:
+    sys.argv.remove("--small")
+    W, H, DW, DH = 12, 9, 4, 3
 
 
 def pose(k):
@@ -30,14 +33,17 @@ def pose(k):
 
 def main():
     out, frames = sys.argv[1], int(sys.argv[2])
-    with_poses = not (len(sys.argv) > 3 and sys.argv[3] == "noposes")
+    flag = sys.argv[3] if len(sys.argv) > 3 else ""
+    with_poses = flag != "noposes"
+    # `stored`: no deflate, for fuzzing seeds whose mutations should reach the entries.
+    method = zipfile.ZIP_STORED if flag == "stored" else zipfile.ZIP_DEFLATED
     meta = {
         "w": W, "h": H, "dw": DW, "dh": DH, "fps": 30,
-        "K": [80.0, 0.0, 0.0, 0.0, 81.0, 0.0, 47.5, 35.5, 1.0],
+        "K": [W * 80 / 96, 0.0, 0.0, 0.0, H * 81 / 72, 0.0, (W - 1) / 2, (H - 1) / 2, 1.0],
         "cameraType": 1,
         "poses": [pose(k) for k in range(frames)] if with_poses else [],
     }
-    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+    with zipfile.ZipFile(out, "w", method) as z:
         z.writestr("metadata", json.dumps(meta))
         for k in range(frames):
             y, x = np.mgrid[0:H, 0:W]

@@ -1,5 +1,5 @@
 //! The two containers relume reads robotics logs from, told apart by their first bytes:
-//! MCAP files ([`super::read`]) and ROS 1 bags ([`super::bag`]). Both are streamed as the
+//! MCAP files ([`super::read`]) and ROS 1 bags (`bag.rs`). Both are streamed as the
 //! same [`Event`]s, so the scan, the topic choice and the import serve either.
 
 use super::read::{Event, ReadOptions, StreamEnd, stream_mcap};

@@ -53,7 +53,7 @@ pub enum Event<'a> {
     },
 }
 
-/// How [`stream`] meets damage it can place.
+/// How [`stream`](super::container::stream) meets damage it can place.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ReadOptions {
     /// Pass over a chunk that fails its CRC, its size or its decompression, and say so
@@ -61,7 +61,7 @@ pub struct ReadOptions {
     pub skip_corrupt: bool,
 }
 
-/// The two containers [`stream`] reads.
+/// The two containers [`stream`](super::container::stream) reads.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Container {
     #[default]

@@ -228,6 +228,41 @@ fn damaged_bags_name_the_chunk_or_byte_and_write_nothing() {
     );
     std::fs::remove_file(&out).unwrap();
 
+    // Cut inside the first chunk of an uncompressed bag (a short recording stopped
+    // early; the RealSense layout's first chunk holds the file version, options and
+    // extrinsics): the chunk's complete messages are read, with a warning.
+    let plain = dir.path().join("plain.bag");
+    write_bag(&plain, "realsense", "none", 6, &[]);
+    let plain_bytes = std::fs::read(&plain).unwrap();
+    let plain_chunks = chunk_offsets(&plain_bytes);
+    let u32_at = |at: usize| u32::from_le_bytes(plain_bytes[at..at + 4].try_into().unwrap());
+    let header_len = u32_at(plain_chunks[0]) as usize;
+    let data_len = u32_at(plain_chunks[0] + 4 + header_len) as usize;
+    let first_end = plain_chunks[0] + 8 + header_len + data_len;
+    let cut_first = write("cut-first.bag", &plain_bytes[..first_end - 10]);
+    let o = ok(relume()
+        .args(["import", "bag", "--list"])
+        .arg(&cut_first)
+        .output()
+        .unwrap());
+    let listing = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        listing.contains("warning: the file ends inside chunk 1")
+            && listing
+                .lines()
+                .any(|l| l.contains("/file_version ") && l.contains(" 1 ")),
+        "{listing}"
+    );
+    // Cut inside a record's header: a cut too, not damage.
+    let in_header = write("in-header.bag", &plain_bytes[..plain_chunks[2] + 10]);
+    let o = ok(import(&in_header, &out, &[]));
+    assert!(
+        stderr(&o).contains("the file ends inside a record's header"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::remove_file(&out).unwrap();
+
     // Cut before any message: an error, no file.
     let early = write("early.bag", &bytes[..4200]);
     let o = import(&early, &out, &[]);

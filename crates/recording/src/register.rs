@@ -31,11 +31,14 @@ use relume_base::pinhole::Intrinsics;
 /// translation`, metres.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Extrinsic {
+    /// The rotation from depth camera axes to color camera axes.
     pub rotation: DQuat,
+    /// The depth camera's origin in the color camera's frame, metres.
     pub translation: DVec3,
 }
 
 impl Extrinsic {
+    /// The two cameras coincide.
     pub const IDENTITY: Extrinsic = Extrinsic {
         rotation: DQuat::IDENTITY,
         translation: DVec3::ZERO,
@@ -67,25 +70,30 @@ impl Extrinsic {
 /// How one recording's depth camera relates to its color camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Registration {
+    /// The depth camera, at the depth images' size.
     pub depth: Intrinsics,
+    /// The color camera, at the color images' size: the registered depth's.
     pub color: Intrinsics,
     pub depth_to_color: Extrinsic,
     /// Surfaces seen more obliquely than this (degrees between the surface normal and the
     /// depth camera's ray) count as edges: 80, as a structured-light or time-of-flight
-    /// camera measures little beyond it.
+    /// camera measures little beyond it. Taken within 0 to 89 degrees.
     pub max_obliquity_deg: f64,
 }
 
 /// Why a registration cannot run.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum RegisterError {
+    /// The depth image does not have the depth camera's size.
     #[error("the depth image is {got}, the depth camera's intrinsics say {want}")]
     DepthSize { got: String, want: String },
 }
 
 impl Registration {
+    /// See [`Registration::max_obliquity_deg`].
     pub const DEFAULT_MAX_OBLIQUITY_DEG: f64 = 80.0;
 
+    /// A registration with the default obliquity limit.
     pub fn new(depth: Intrinsics, color: Intrinsics, depth_to_color: Extrinsic) -> Self {
         Registration {
             depth,
@@ -146,7 +154,13 @@ pub fn register_depth(
     }
     // Corners of one depth step: a surface at the obliquity limit changes depth by
     // z * tan(limit) / f per pixel; a triangle's corners are at most 1.5 pixels apart.
-    let step = (registration.max_obliquity_deg.to_radians().tan() * 1.5 / dk.fx.min(dk.fy)) as f32;
+    let obliquity = registration.max_obliquity_deg.clamp(0.0, 89.0);
+    let step = (obliquity.to_radians().tan() * 1.5 / dk.fx.min(dk.fy)) as f32;
+    // A triangle of neighbouring depth pixels covers about (color f / depth f)^2 color
+    // pixels; one far larger lies at the color camera's own centre (a damaged extrinsic)
+    // and is not drawn, so that no input makes registration quadratic.
+    let scale = (ck.fx / dk.fx).max(ck.fy / dk.fy).max(1.0);
+    let max_pixels = (64.0 * scale * scale) as i64 + 64;
     let Scratch {
         projected,
         depth_m,
@@ -166,7 +180,7 @@ pub fn register_depth(
                     continue;
                 }
                 if hi - lo <= lo * step {
-                    rasterize(p, cw, ch, nearest);
+                    rasterize(p, (cw, ch), max_pixels, nearest);
                     continue;
                 }
                 // An edge: the near surface may reach across the whole triangle, at any
@@ -176,7 +190,12 @@ pub fn register_depth(
                     let reach = tri.map(|i| camera.project((i % dw) as f32, (i / dw) as f32, z));
                     if reach.iter().all(|p| p[2] > 0.0) {
                         let w = reach[0][2].max(reach[1][2]).max(reach[2][2]);
-                        rasterize(reach.map(|[x, y, _]| [x, y, w]), cw, ch, edge_nearest);
+                        rasterize(
+                            reach.map(|[x, y, _]| [x, y, w]),
+                            (cw, ch),
+                            max_pixels,
+                            edge_nearest,
+                        );
                     }
                 }
             }
@@ -264,12 +283,21 @@ fn floor(x: f32) -> i32 {
 
 /// Draws one triangle (color-image x, y and 1/z at each corner) into `nearest`, keeping
 /// the larger 1/z at each pixel whose centre (integer coordinates) lies inside or on it.
-fn rasterize(p: [[f32; 3]; 3], width: usize, height: usize, nearest: &mut [f32]) {
+/// A triangle whose bounding box holds more than `max_pixels` pixels is not drawn.
+fn rasterize(
+    p: [[f32; 3]; 3],
+    (width, height): (usize, usize),
+    max_pixels: i64,
+    nearest: &mut [f32],
+) {
     let min_x = ceil(p[0][0].min(p[1][0]).min(p[2][0])).max(0);
     let max_x = floor(p[0][0].max(p[1][0]).max(p[2][0])).min(width as i32 - 1);
     let min_y = ceil(p[0][1].min(p[1][1]).min(p[2][1])).max(0);
     let max_y = floor(p[0][1].max(p[1][1]).max(p[2][1])).min(height as i32 - 1);
-    if min_x > max_x || min_y > max_y {
+    if min_x > max_x
+        || min_y > max_y
+        || (max_x - min_x + 1) as i64 * (max_y - min_y + 1) as i64 > max_pixels
+    {
         return;
     }
     let area =
@@ -388,6 +416,23 @@ mod tests {
         for (x, c, f) in cases {
             assert_eq!((ceil(x), floor(x)), (c, f), "{x}");
         }
+    }
+
+    #[test]
+    fn a_surface_at_the_color_cameras_centre_is_not_drawn_across_the_image() {
+        // A damaged extrinsic puts the wall 1 mm in front of the color camera: each
+        // triangle would cover the whole image (quadratic work); none is drawn.
+        let kk = k(64, 48, 50.0);
+        let depth = vec![1000u16; 64 * 48];
+        let near = Extrinsic {
+            rotation: DQuat::IDENTITY,
+            translation: DVec3::new(0.0, 0.0, -0.999),
+        };
+        let r = Registration::new(kk, kk, near);
+        let mut out = Vec::new();
+        register_depth(&depth, 0.001, &r, &mut out, &mut Scratch::default()).unwrap();
+        let drawn = out.iter().filter(|&&d| d != 0).count();
+        assert!(drawn < 64 * 48 / 4, "{drawn} pixels");
     }
 
     #[test]

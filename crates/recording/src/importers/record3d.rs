@@ -168,13 +168,17 @@ pub fn import(
         meta.dw as f64 / meta.w as f64,
         meta.dh as f64 / meta.h as f64,
     );
-    let depth_k = Intrinsics {
-        width: meta.dw,
-        height: meta.dh,
-        fx: color_k.fx * sx,
-        fy: color_k.fy * sy,
-        cx: (color_k.cx + 0.5) * sx - 0.5,
-        cy: (color_k.cy + 0.5) * sy - 0.5,
+    let depth_k = if (meta.dw, meta.dh) == (meta.w, meta.h) {
+        color_k
+    } else {
+        Intrinsics {
+            width: meta.dw,
+            height: meta.dh,
+            fx: color_k.fx * sx,
+            fy: color_k.fy * sy,
+            cx: (color_k.cx + 0.5) * sx - 0.5,
+            cy: (color_k.cy + 0.5) * sy - 0.5,
+        }
     };
     let registration = Registration::new(depth_k, color_k, Extrinsic::IDENTITY);
     let frames = (0..)

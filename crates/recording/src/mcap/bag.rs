@@ -168,7 +168,8 @@ fn decompress(compression: &str, data: &[u8], size: usize) -> (Vec<u8>, Option<S
     let mut out = Vec::with_capacity(size);
     let result = match compression {
         "none" => {
-            out.extend_from_slice(&data[..data.len().min(size)]);
+            // More data than declared is reported below (as "more than"), not dropped.
+            out.extend_from_slice(&data[..data.len().min(size + 1)]);
             Ok(())
         }
         // `take` keeps a chunk that decompresses to more than it declares from growing
@@ -362,7 +363,8 @@ pub(super) fn stream(
         let messages = bag.end.messages;
         // The file ends inside this record: a recorder stopped before closing the bag.
         let cut = |bag: &mut Bag, what: &str| -> Result<(), ImportError> {
-            if messages == 0 {
+            // Counted now: a cut chunk may have given messages before its cut.
+            if bag.end.messages == 0 {
                 return Err(bag.bad(format!(
                     "the file ends inside {what} at byte {at}, before any message"
                 )));
@@ -384,23 +386,27 @@ pub(super) fn stream(
             }
         }
         let header_len = u32::from_le_bytes(len);
-        if header_len > MAX_HEADER_BYTES || header_len as u64 + 8 > file_len - offset {
+        if header_len > MAX_HEADER_BYTES {
             return Err(bag.bad(format!(
                 "the record at byte {at} after {messages} messages is damaged: its header \
-                 claims {header_len} bytes{}",
-                if header_len > MAX_HEADER_BYTES {
-                    format!(", more than a bag record's {MAX_HEADER_BYTES}")
-                } else {
-                    format!(" but the file has {} left", file_len - offset - 4)
-                }
+                 claims {header_len} bytes, more than a bag record's {MAX_HEADER_BYTES}"
             )));
         }
-        let mut header = vec![0u8; header_len as usize];
-        if read_up_to(&mut r, &mut header).map_err(io)? != header.len()
-            || read_up_to(&mut r, &mut len).map_err(io)? != 4
-        {
+        // A header (and the data length after it) running past the end of the file is a
+        // cut, as a killed recorder leaves it.
+        let left_after_length = file_len.saturating_sub(offset + 4);
+        if header_len as u64 + 4 > left_after_length {
             cut(&mut bag, "a record's header")?;
             break;
+        }
+        let mut header = vec![0u8; header_len as usize];
+        let mut data_len_bytes = [0u8; 4];
+        if read_up_to(&mut r, &mut header).map_err(io)? != header.len()
+            || read_up_to(&mut r, &mut data_len_bytes).map_err(io)? != 4
+        {
+            return Err(bag.bad(format!(
+                "the file changed while it was read (record at byte {at})"
+            )));
         }
         let damaged = |bag: &Bag, e: String| {
             bag.bad(format!(
@@ -409,9 +415,9 @@ pub(super) fn stream(
         };
         let fields = Fields::parse(&header).map_err(|e| damaged(&bag, e))?;
         let op = fields.op().map_err(|e| damaged(&bag, e))?;
-        let data_len = u32::from_le_bytes(len) as u64;
+        let data_len = u32::from_le_bytes(data_len_bytes) as u64;
         offset += 8 + header_len as u64;
-        let left = file_len - offset;
+        let left = file_len.saturating_sub(offset);
         // Data cut by the file's end is read as far as it goes, for a chunk's sake.
         let whole = data_len <= left;
         if !whole && op != op::CHUNK {
@@ -461,9 +467,14 @@ pub(super) fn stream(
             cut(&mut bag, &format!("chunk {chunks}"))?;
             break;
         }
-        let result = match why {
-            Some(why) => Err(Failure::Damaged(why)),
-            None => bag.chunk(&unpacked, false, visit),
+        let result = match (why, bag.skip) {
+            (None, _) => bag.chunk(&unpacked, false, visit),
+            // Passing over a damaged chunk keeps the complete records that came out of
+            // it before the damage.
+            (Some(why), true) => bag
+                .chunk(&unpacked, true, visit)
+                .and(Err(Failure::Damaged(why))),
+            (Some(why), false) => Err(Failure::Damaged(why)),
         };
         if let Err(failure) = result {
             let why = match failure {

@@ -395,7 +395,7 @@ fn convert(
             let (w, h) = (r.depth.width, r.depth.height);
             if (image.width, image.height) != (w, h) {
                 return Err(format!(
-                    "the depth image is {}x{}, its camera info says {w}x{h}",
+                    "the depth image is {}x{}, the depth intrinsics say {w}x{h}",
                     image.width, image.height
                 ));
             }

@@ -160,8 +160,11 @@ pub enum Message<'a> {
 /// The wire format of a channel's messages, from its message encoding.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Encoding {
+    /// ROS 2's CDR (`cdr`).
     Cdr,
+    /// ROS 1 serialization (`ros1`: ROS 1 bags, and MCAP files converted from them).
     Ros1,
+    /// Foxglove's JSON schemas (`json`).
     Json,
 }
 
@@ -193,16 +196,24 @@ struct Header {
 /// `std_msgs/Header`: ROS 2's (`int32 sec, uint32 nanosec, string frame_id`) in CDR,
 /// ROS 1's (`uint32 seq, uint32 secs, uint32 nsecs, string frame_id`) otherwise.
 fn ros_header(r: &mut WireReader) -> Result<Header, WireError> {
-    let sec = if r.is_cdr() {
-        r.i32("header.stamp.sec")? as i64
+    let (sec, at, nsec) = if r.is_cdr() {
+        let at = r.position();
+        (
+            r.i32("header.stamp.sec")? as i64,
+            at,
+            r.u32("header.stamp.nanosec")?,
+        )
     } else {
         r.u32("header.seq")?;
-        r.u32("header.stamp.secs")? as i64
+        let at = r.position();
+        (
+            r.u32("header.stamp.secs")? as i64,
+            at,
+            r.u32("header.stamp.nsecs")?,
+        )
     };
-    let nsec = r.u32("header.stamp.nanosec")?;
     let frame_id = r.string("header.frame_id")?;
-    // Both stamps start at byte 4: after CDR's encapsulation, after ROS 1's seq.
-    let stamp_ns = stamp_ns(sec, nsec as i64).map_err(|reason| WireError { offset: 4, reason })?;
+    let stamp_ns = stamp_ns(sec, nsec as i64).map_err(|reason| WireError { offset: at, reason })?;
     Ok(Header { stamp_ns, frame_id })
 }
 

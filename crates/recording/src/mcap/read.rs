@@ -64,6 +64,7 @@ pub struct ReadOptions {
 /// The two containers [`stream`](super::container::stream) reads.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Container {
+    /// An MCAP file.
     #[default]
     Mcap,
     /// A ROS 1 bag, format 2.0.

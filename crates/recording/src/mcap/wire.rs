@@ -80,9 +80,9 @@ impl<'a> WireReader<'a> {
         self.aligned
     }
 
-    /// Whether every byte of the message has been read.
-    pub fn at_end(&self) -> bool {
-        self.pos == self.bytes.len()
+    /// The byte the next field starts at.
+    pub fn position(&self) -> usize {
+        self.pos
     }
 
     fn err<T>(&self, reason: impl Into<String>) -> Result<T, WireError> {
@@ -118,22 +118,27 @@ impl<'a> WireReader<'a> {
         Ok(raw)
     }
 
+    /// A `u8` field; `what` names it in errors.
     pub fn u8(&mut self, what: &str) -> Result<u8, WireError> {
         Ok(self.take::<1>(what)?[0])
     }
 
+    /// A `u32` field; `what` names it in errors.
     pub fn u32(&mut self, what: &str) -> Result<u32, WireError> {
         Ok(u32::from_le_bytes(self.take::<4>(what)?))
     }
 
+    /// A `i32` field; `what` names it in errors.
     pub fn i32(&mut self, what: &str) -> Result<i32, WireError> {
         Ok(i32::from_le_bytes(self.take::<4>(what)?))
     }
 
+    /// A `f32` field; `what` names it in errors.
     pub fn f32(&mut self, what: &str) -> Result<f32, WireError> {
         Ok(f32::from_le_bytes(self.take::<4>(what)?))
     }
 
+    /// A `f64` field; `what` names it in errors.
     pub fn f64(&mut self, what: &str) -> Result<f64, WireError> {
         Ok(f64::from_le_bytes(self.take::<8>(what)?))
     }
@@ -151,8 +156,8 @@ impl<'a> WireReader<'a> {
         Ok(n)
     }
 
-    /// A string (u32 length, the bytes; in CDR the length counts a closing NUL, which is
-    /// dropped); UTF-8 checked.
+    /// A string (u32 length, the bytes); a closing NUL, which CDR counts in the length, is
+    /// dropped in either format; UTF-8 checked.
     pub fn string(&mut self, what: &str) -> Result<String, WireError> {
         let n = self.count(what, 1)?;
         let start = self.pos;
@@ -267,7 +272,7 @@ mod tests {
         assert_eq!(r.u32("b").unwrap(), 5);
         assert_eq!(r.string("s").unwrap(), "abc");
         assert_eq!(r.f32("f").unwrap(), 0.5);
-        assert!(r.at_end());
+        assert_eq!(r.position(), msg.len());
         let e = WireReader::ros1(&[1, 0]).u32("seq").unwrap_err();
         assert_eq!(e.to_string(), "byte 0: message ends before its seq");
     }

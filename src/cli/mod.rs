@@ -60,7 +60,8 @@ enum Command {
     /// Render a synthetic recording of an analytic room with ground truth.
     Synth(produce::SynthArgs),
     /// Import a recording from a dataset layout (TUM RGB-D, Redwood / Open3D), a ScanNet
-    /// .sens file, a ROS 2 / Foxglove MCAP log or a ROS 1 bag (RealSense recordings too).
+    /// .sens file, a ROS 2 / Foxglove MCAP log, a ROS 1 bag (RealSense recordings too) or
+    /// a Record3D .r3d export (iPhone / iPad LiDAR).
     #[command(subcommand)]
     Import(produce::ImportCommand),
     /// Export a recording, and the products a replay saved, as MCAP for Foxglove.

@@ -247,6 +247,17 @@ fn bench_reports_stage_medians_as_json() {
     );
 }
 
+/// `relume bench` of small.relume through p.toml, one run, as JSON.
+const BENCH_ONCE_JSON: [&str; 7] = [
+    "bench",
+    "small.relume",
+    "-p",
+    "p.toml",
+    "--repeat",
+    "1",
+    "--json",
+];
+
 /// `--isolated` runs one frame at a time: two stages of 20 ms each then take at least
 /// 40 ms a frame together (pipelined they would overlap).
 #[test]
@@ -257,15 +268,7 @@ fn bench_isolated_runs_one_frame_at_a_time() {
     let pipeline = "[[stage]]\nname = \"a\"\nkind = \"debug.sleep\"\nparams = { ms = 20.0 }\n\
                     [[stage]]\nname = \"b\"\nkind = \"debug.sleep\"\nparams = { ms = 20.0 }\n";
     std::fs::write(d.join("p.toml"), pipeline).unwrap();
-    let args = [
-        "bench",
-        "small.relume",
-        "-p",
-        "p.toml",
-        "--repeat",
-        "1",
-        "--json",
-    ];
+    let args = BENCH_ONCE_JSON;
     let o = ok(run_in(d, &[&args[..], &["--isolated"]].concat()));
     let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     assert_eq!(doc["isolated"], true);
@@ -303,15 +306,7 @@ fn bench_isolated_reports_each_stages_allocation_peak() {
                     [[stage]]\nkind = \"debug.sleep\"\nparams = { ms = 1.0 }\n";
     std::fs::write(d.join("p.toml"), pipeline).unwrap();
     let bench = |isolated: bool| {
-        let mut args = vec![
-            "bench",
-            "small.relume",
-            "-p",
-            "p.toml",
-            "--repeat",
-            "1",
-            "--json",
-        ];
+        let mut args = BENCH_ONCE_JSON.to_vec();
         if isolated {
             args.push("--isolated");
         }

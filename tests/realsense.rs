@@ -17,17 +17,12 @@ const H: usize = 48;
 
 fn python() -> &'static Path {
     static PYTHON: OnceLock<Result<PathBuf, String>> = OnceLock::new();
-    match PYTHON.get_or_init(|| {
-        common::venv::make(
-            "pyrealsense2-venv",
-            &["pyrealsense2==2.55.1.6486", "numpy"],
-            "import pyrealsense2",
-        )
-        .map(|venv| venv.join("bin/python3"))
-    }) {
-        Ok(python) => python,
-        Err(e) => panic!("cannot make the pyrealsense2 environment: {e}"),
-    }
+    common::venv::python(
+        &PYTHON,
+        "pyrealsense2-venv",
+        &["pyrealsense2==2.55.1.6486", "numpy"],
+        "import pyrealsense2",
+    )
 }
 
 fn record(dir: &Path, name: &str, frames: usize, separate: bool) -> PathBuf {

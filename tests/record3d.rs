@@ -17,17 +17,12 @@ const H: usize = 72;
 
 fn python() -> &'static Path {
     static PYTHON: OnceLock<Result<PathBuf, String>> = OnceLock::new();
-    match PYTHON.get_or_init(|| {
-        common::venv::make(
-            "record3d-venv",
-            &["pyliblzfse==0.4.1", "pillow", "numpy"],
-            "import liblzfse, PIL, numpy",
-        )
-        .map(|venv| venv.join("bin/python3"))
-    }) {
-        Ok(python) => python,
-        Err(e) => panic!("cannot make the Record3D writer's environment: {e}"),
-    }
+    common::venv::python(
+        &PYTHON,
+        "record3d-venv",
+        &["pyliblzfse==0.4.1", "pillow", "numpy"],
+        "import liblzfse, PIL, numpy",
+    )
 }
 
 fn write_r3d(path: &Path, frames: usize, extra: &[&str]) {

@@ -48,17 +48,12 @@ fn pose(k: usize) -> Pose {
 
 fn python() -> &'static Path {
     static PYTHON: OnceLock<Result<PathBuf, String>> = OnceLock::new();
-    match PYTHON.get_or_init(|| {
-        common::venv::make(
-            "rosbags-venv",
-            &["rosbags==0.11.9"],
-            "import rosbags.rosbag1",
-        )
-        .map(|venv| venv.join("bin/python3"))
-    }) {
-        Ok(python) => python,
-        Err(e) => panic!("cannot make the rosbags environment: {e}"),
-    }
+    common::venv::python(
+        &PYTHON,
+        "rosbags-venv",
+        &["rosbags==0.11.9"],
+        "import rosbags.rosbag1",
+    )
 }
 
 /// Writes a bag with tests/writers/rosbag.py.

@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::OnceLock;
 use std::time::Instant;
 
 /// The folder of the virtual environment `name` under the target folder, where
@@ -57,5 +58,24 @@ pub fn make(name: &str, packages: &[&str], check: &str) -> Result<PathBuf, Strin
             venv.display(),
             packages.join(" ")
         ))
+    }
+}
+
+/// The `python3` of the virtual environment `name` ([`make`] with `packages` and `check`),
+/// made once per test binary through `cell` (tests run in parallel threads); a panic
+/// saying what could not be installed otherwise.
+pub fn python(
+    cell: &'static OnceLock<Result<PathBuf, String>>,
+    name: &str,
+    packages: &[&str],
+    check: &str,
+) -> &'static Path {
+    let made = cell.get_or_init(|| make(name, packages, check).map(|v| v.join("bin/python3")));
+    match made {
+        Ok(python) => python,
+        Err(e) => panic!(
+            "cannot make the {name} environment ({}): {e}",
+            packages.join(" ")
+        ),
     }
 }

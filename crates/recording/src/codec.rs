@@ -123,13 +123,29 @@ pub fn to_raw_color(img: &EncodedImage) -> Result<EncodedImage, CodecError> {
 /// Decodes an encoded depth image and stores it raw (little-endian u16 units).
 pub fn to_raw_depth(img: &EncodedImage) -> Result<EncodedImage, CodecError> {
     let units = decode_depth_units(img)?;
-    Ok(EncodedImage {
+    Ok(raw_depth(units.width, units.height, units.data))
+}
+
+/// Depth units stored raw: a `width` x `height` little-endian u16 image.
+pub fn raw_depth(width: u32, height: u32, units: impl IntoIterator<Item = u16>) -> EncodedImage {
+    EncodedImage {
         encoding: ImageEncoding::RawU16,
-        width: units.width,
-        height: units.height,
+        width,
+        height,
         channels: 1,
-        bytes: units.data.iter().flat_map(|u| u.to_le_bytes()).collect(),
-    })
+        bytes: units.into_iter().flat_map(u16::to_le_bytes).collect(),
+    }
+}
+
+/// A metric depth in units of `unit_m`, rounded; 0 (no measurement) for a depth that is
+/// not finite, not positive or beyond the 16-bit range.
+pub fn depth_units_of(metres: f32, unit_m: f64) -> u16 {
+    let units = (metres as f64 / unit_m).round();
+    if metres.is_finite() && metres > 0.0 && (1.0..=65535.0).contains(&units) {
+        units as u16
+    } else {
+        0
+    }
 }
 
 fn decode_file(img: &EncodedImage) -> Result<DynamicImage, CodecError> {

@@ -26,9 +26,7 @@ use super::{ImportOptions, ImportSummary, StoreMode, file_error, import_header};
 use crate::codec::{self, wrap_image_file};
 use crate::error::ImportError;
 use crate::register::{Extrinsic, Registration, Scratch, register_depth};
-use crate::types::{
-    ColorRecord, DepthRecord, EncodedImage, ImageEncoding, Pose, PoseRecord, Record, StreamKind,
-};
+use crate::types::{ColorRecord, DepthRecord, EncodedImage, Pose, PoseRecord, Record, StreamKind};
 use crate::writer::RecordingWriter;
 use glam::{DQuat, DVec3};
 use relume_base::pinhole::Intrinsics;
@@ -264,13 +262,7 @@ pub fn import(
         let units: Vec<u16> = raw
             .chunks_exact(4)
             .map(|b| {
-                let m = f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64;
-                let u = (m / DEPTH_UNIT_M).round();
-                if m.is_finite() && (1.0..=65535.0).contains(&u) {
-                    u as u16
-                } else {
-                    0
-                }
+                codec::depth_units_of(f32::from_le_bytes([b[0], b[1], b[2], b[3]]), DEPTH_UNIT_M)
             })
             .collect();
         let mut registered = Vec::new();
@@ -282,13 +274,7 @@ pub fn import(
             &mut scratch,
         )
         .map_err(|e| fail(e.to_string()))?;
-        let depth = EncodedImage {
-            encoding: ImageEncoding::RawU16,
-            width: meta.w,
-            height: meta.h,
-            channels: 1,
-            bytes: registered.iter().flat_map(|u| u.to_le_bytes()).collect(),
-        };
+        let depth = codec::raw_depth(meta.w, meta.h, registered);
         writer.write(&Record::Color(ColorRecord {
             stamp_ns,
             image: color,

@@ -324,7 +324,7 @@ impl Bag<'_> {
 }
 
 /// Calls `visit` for every connection and message of the bag `path` (opened as `file`,
-/// its magic not yet read), in file order.
+/// just past its magic, which the caller has checked), in file order.
 pub(super) fn stream(
     path: &Path,
     file: File,
@@ -347,14 +347,6 @@ pub(super) fn stream(
         },
     };
     let mut r = BufReader::with_capacity(1 << 20, file);
-    let mut magic = [0u8; MAGIC.len()];
-    if read_up_to(&mut r, &mut magic).map_err(io)? != MAGIC.len() || magic != MAGIC {
-        return Err(bag.bad(
-            "not a ROS 1 bag (format 2.0): it does not start with \
-             `#ROSBAG V2.0`"
-                .into(),
-        ));
-    }
     let mut offset = MAGIC.len() as u64;
     let mut chunks = 0u64;
     let mut buf = Vec::new();

@@ -23,10 +23,10 @@ pub fn stream(
     let file_len = file.metadata().map_err(io)?.len();
     let mut magic = [0u8; super::bag::MAGIC.len()];
     let got = file.read(&mut magic).map_err(io)?;
-    file.rewind().map_err(io)?;
     if got == magic.len() && magic == super::bag::MAGIC {
         super::bag::stream(path, file, file_len, options, visit)
     } else {
+        file.rewind().map_err(io)?;
         stream_mcap(path, file, file_len, options, visit)
     }
 }

@@ -10,6 +10,7 @@ use super::pixels::{self, ImageRole};
 use super::read::{Channel, Event, ReadOptions};
 use super::realsense;
 use super::scan::Scan;
+use crate::codec;
 use crate::error::ImportError;
 use crate::importers::{CameraIntrinsics, ImportSummary, StoreMode, import_header};
 use crate::register::{Extrinsic, Registration, Scratch, register_depth};
@@ -410,7 +411,7 @@ fn convert(
                     register_depth(&units, depth_unit_m, r, &mut registered, scratch)
                 })
                 .map_err(|e| e.to_string())?;
-            pixels::raw_u16(r.color.width, r.color.height, registered)
+            codec::raw_depth(r.color.width, r.color.height, registered)
         }
     };
     Ok((img.stamp_ns, image))

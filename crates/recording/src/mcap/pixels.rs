@@ -219,27 +219,6 @@ pub fn color_image(data: &ImageData, store: StoreMode) -> Result<EncodedImage, S
     .map_err(|e| e.to_string())
 }
 
-/// Depth units of a metric depth: rounded to `unit_m`, 0 for no measurement.
-fn quantize(metres: f32, unit_m: f64) -> u16 {
-    let units = (metres as f64 / unit_m).round();
-    if metres.is_finite() && metres > 0.0 && (1.0..=65535.0).contains(&units) {
-        units as u16
-    } else {
-        0
-    }
-}
-
-/// Depth units as a raw 16-bit image.
-pub fn raw_u16(width: u32, height: u32, units: impl IntoIterator<Item = u16>) -> EncodedImage {
-    EncodedImage {
-        encoding: ImageEncoding::RawU16,
-        width,
-        height,
-        channels: 1,
-        bytes: units.into_iter().flat_map(u16::to_le_bytes).collect(),
-    }
-}
-
 /// A depth message as stored, in units of `unit_m` metres.
 pub fn depth_image(
     data: &ImageData,
@@ -275,12 +254,12 @@ pub fn depth_image(
                             } else {
                                 f32::from_le_bytes(raw)
                             };
-                            quantize(m, unit_m)
+                            codec::depth_units_of(m, unit_m)
                         }
                     });
                 }
             }
-            raw_u16(*width, *height, units)
+            codec::raw_depth(*width, *height, units)
         }
         ImageData::Compressed { format, data } => {
             let (header, png) = compressed_file(format, data)?;
@@ -303,10 +282,10 @@ pub fn depth_image(
                         if v == 0 {
                             0
                         } else {
-                            quantize(a / (v as f32 - b), unit_m)
+                            codec::depth_units_of(a / (v as f32 - b), unit_m)
                         }
                     });
-                    raw_u16(img.width, img.height, units)
+                    codec::raw_depth(img.width, img.height, units)
                 }
                 _ => img,
             }

@@ -60,8 +60,8 @@ enum Command {
     /// Render a synthetic recording of an analytic room with ground truth.
     Synth(produce::SynthArgs),
     /// Import a recording from a dataset layout (TUM RGB-D, Redwood / Open3D), a ScanNet
-    /// .sens file, a ROS 2 / Foxglove MCAP log, a ROS 1 bag (RealSense recordings too) or
-    /// a Record3D .r3d export (iPhone / iPad LiDAR).
+    /// .sens file, a ROS 2 / Foxglove MCAP log, a ROS 1 bag (RealSense recordings too), a
+    /// Record3D .r3d export (iPhone / iPad LiDAR) or an Azure Kinect .mkv recording.
     #[command(subcommand)]
     Import(produce::ImportCommand),
     /// Export a recording, and the products a replay saved, as MCAP for Foxglove.

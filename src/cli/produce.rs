@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 use relume::recording::association::{self, AssociationStats};
 use relume::recording::importers::{
-    self, ImportOptions, StoreMode, record3d, redwood, scannet, tum,
+    self, ImportOptions, StoreMode, k4a, record3d, redwood, scannet, tum,
 };
 use relume::recording::mcap;
 use relume::recording::synth::{self, SynthConfig};
@@ -202,6 +202,30 @@ pub enum ImportCommand {
         #[arg(long, value_enum, default_value_t = StoreMode::Compressed)]
         store: StoreMode,
     },
+    /// Azure Kinect recording (.mkv from k4arecorder, the SDK, Open3D or pyk4a; Orbbec's
+    /// Kinect-compatible cameras too): MJPG or BGRA color, 16-bit depth registered to the
+    /// color camera with the calibration.json it carries (both lenses' distortion and the
+    /// extrinsic), the device's stamps. No poses: track them with pipelines/*-tracked.toml.
+    /// `--list` shows the tracks, attachments and tags.
+    K4a {
+        /// The .mkv file.
+        file: PathBuf,
+        /// List the tracks, attachments and tags, and what an import takes; write nothing.
+        #[arg(long)]
+        list: bool,
+        /// Output recording (.relume).
+        #[arg(short, long, required_unless_present = "list")]
+        out: Option<PathBuf>,
+        /// The color track by name or number (default: the one named COLOR).
+        #[arg(long)]
+        color_track: Option<String>,
+        /// The depth track by name or number (default: the one named DEPTH).
+        #[arg(long)]
+        depth_track: Option<String>,
+        /// Keep color compressed as found (decoded on replay) or store raw pixels.
+        #[arg(long, value_enum, default_value_t = StoreMode::Compressed)]
+        store: StoreMode,
+    },
     /// ROS 2, ROS 1 or Foxglove MCAP log: color and depth images (sensor_msgs/Image,
     /// CompressedImage incl. compressedDepth, foxglove.RawImage/CompressedImage),
     /// intrinsics from CameraInfo, poses from /tf + /tf_static or a pose topic. Topics
@@ -294,6 +318,7 @@ impl ImportCommand {
             | ImportCommand::Redwood { common, .. }
             | ImportCommand::Scannet { common, .. } => Some(&common.out),
             ImportCommand::Record3d { out, .. } => Some(out),
+            ImportCommand::K4a { out, .. } => out.as_ref(),
             ImportCommand::Mcap(a) | ImportCommand::Bag(a) => a.out.as_ref(),
         }
     }
@@ -306,7 +331,7 @@ impl ImportCommand {
             }
             // ScanNet: the file's own unless given, needing neither note nor warning.
             ImportCommand::Scannet { common, .. } => common.intrinsics,
-            ImportCommand::Record3d { .. } => None,
+            ImportCommand::Record3d { .. } | ImportCommand::K4a { .. } => None,
             ImportCommand::Mcap(a) | ImportCommand::Bag(a) => a.intrinsics,
         }
     }
@@ -348,13 +373,20 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
         outln!("{}", scan.listing().trim_end())?;
         return Ok(0);
     }
+    if let ImportCommand::K4a {
+        file, list: true, ..
+    } = &command
+    {
+        outln!("{}", k4a::listing(file)?.trim_end())?;
+        return Ok(0);
+    }
     let out = command.out().expect("clap requires -o unless --list");
     output::check_output_file("-o", out)?;
     match &command {
         ImportCommand::Mcap(a) | ImportCommand::Bag(a) => output::check_not_input(out, &a.file)?,
-        ImportCommand::Scannet { file, .. } | ImportCommand::Record3d { file, .. } => {
-            output::check_not_input(out, file)?
-        }
+        ImportCommand::Scannet { file, .. }
+        | ImportCommand::Record3d { file, .. }
+        | ImportCommand::K4a { file, .. } => output::check_not_input(out, file)?,
         _ => {}
     }
     remove_stale_partials_beside(out);
@@ -391,6 +423,23 @@ pub fn import(command: ImportCommand) -> anyhow::Result<i32> {
                 ..ImportOptions::default()
             };
             record3d::import(file, out, &options, &mut tick)?
+        }
+        ImportCommand::K4a {
+            file,
+            color_track,
+            depth_track,
+            store,
+            ..
+        } => {
+            let options = k4a::K4aOptions {
+                common: ImportOptions {
+                    store: *store,
+                    ..ImportOptions::default()
+                },
+                color_track: color_track.clone(),
+                depth_track: depth_track.clone(),
+            };
+            k4a::import(file, out, &options, &mut tick)?
         }
         ImportCommand::Scannet { file, fps, common } => {
             let options = scannet::ScannetOptions {

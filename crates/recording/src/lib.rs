@@ -6,6 +6,8 @@ pub mod codec;
 pub mod error;
 pub mod format;
 pub mod importers;
+pub mod lens;
+pub mod matroska;
 pub mod mcap;
 pub mod products;
 pub mod reader;

@@ -23,6 +23,7 @@
 //! pixel's footprint with its own depth, which is exact only on surfaces facing the
 //! camera; the triangles here are exact on every plane.
 
+use crate::lens::Distortion;
 use glam::{DMat3, DQuat, DVec3};
 use relume_base::pinhole::Intrinsics;
 
@@ -74,6 +75,11 @@ pub struct Registration {
     pub depth: Intrinsics,
     /// The color camera, at the color images' size: the registered depth's.
     pub color: Intrinsics,
+    /// The depth camera's lens distortion (`None`: a pinhole camera).
+    pub depth_lens: Option<Distortion>,
+    /// The color camera's lens distortion: registered depth lands on the color image's
+    /// own (distorted) pixels.
+    pub color_lens: Option<Distortion>,
     pub depth_to_color: Extrinsic,
     /// Surfaces seen more obliquely than this (degrees between the surface normal and the
     /// depth camera's ray) count as edges: 80, as a structured-light or time-of-flight
@@ -98,15 +104,19 @@ impl Registration {
         Registration {
             depth,
             color,
+            depth_lens: None,
+            color_lens: None,
             depth_to_color,
             max_obliquity_deg: Self::DEFAULT_MAX_OBLIQUITY_DEG,
         }
     }
 
-    /// Whether the depth is already in the color view: the same intrinsics and size, and
-    /// no extrinsic. Registering it would copy it.
+    /// Whether the depth is already in the color view: the same intrinsics, lens and
+    /// size, and no extrinsic. Registering it would copy it.
     pub fn is_identity(&self) -> bool {
-        self.depth == self.color && self.depth_to_color.is_identity()
+        self.depth == self.color
+            && self.depth_lens == self.color_lens
+            && self.depth_to_color.is_identity()
     }
 }
 
@@ -121,6 +131,10 @@ pub struct Scratch {
     nearest: Vec<f32>,
     /// The largest 1/z of the edge triangles' corners covering each color pixel.
     edge_nearest: Vec<f32>,
+    /// Each depth pixel's ray on the z = 1 plane (NaN: outside the lens's field), and the
+    /// camera it was computed for.
+    rays: Vec<[f32; 2]>,
+    rays_for: Option<(Intrinsics, Option<Distortion>)>,
 }
 
 /// Registers `depth` (units of `unit_m`, 0 = no measurement, the depth camera's size)
@@ -166,8 +180,10 @@ pub fn register_depth(
         depth_m,
         nearest,
         edge_nearest,
+        rays,
+        ..
     } = scratch;
-    let camera = Projector::new(registration);
+    let camera = Projector::new(registration, rays);
     for y in 0..dh.saturating_sub(1) {
         for x in 0..dw.saturating_sub(1) {
             let i = y * dw + x;
@@ -187,7 +203,7 @@ pub fn register_depth(
                 // depth it can have there (its nearest corner's, up to a surface step
                 // beyond). Swept in three slices, each flat at its nearest 1/z.
                 for z in [lo, lo * (1.0 + step / 2.0), lo * (1.0 + step)] {
-                    let reach = tri.map(|i| camera.project((i % dw) as f32, (i / dw) as f32, z));
+                    let reach = tri.map(|i| camera.project(i, z));
                     if reach.iter().all(|p| p[2] > 0.0) {
                         let w = reach[0][2].max(reach[1][2]).max(reach[2][2]);
                         rasterize(
@@ -216,46 +232,86 @@ pub fn register_depth(
     Ok(())
 }
 
-/// Depth pixels to the color image: back-projection with the depth intrinsics, the
-/// extrinsic, projection with the color intrinsics.
-struct Projector {
-    depth: [f32; 4],
+/// Depth pixels to the color image: back-projection along each depth pixel's ray, the
+/// extrinsic, projection with the color intrinsics (and the color lens's distortion).
+struct Projector<'a> {
+    rays: &'a [[f32; 2]],
     color: [f32; 4],
+    color_lens: Option<Distortion>,
     rotation: glam::Mat3,
     translation: glam::Vec3,
 }
 
-impl Projector {
-    fn new(registration: &Registration) -> Self {
-        let k = |k: &Intrinsics| [k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32];
+impl<'a> Projector<'a> {
+    fn new(registration: &Registration, rays: &'a [[f32; 2]]) -> Self {
+        let k = &registration.color;
         Projector {
-            depth: k(&registration.depth),
-            color: k(&registration.color),
+            rays,
+            color: [k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32],
+            color_lens: registration.color_lens.filter(|lens| !lens.is_none()),
             rotation: DMat3::from_quat(registration.depth_to_color.rotation).as_mat3(),
             translation: registration.depth_to_color.translation.as_vec3(),
         }
     }
 
-    /// Depth pixel (x, y) at depth `z` metres in the color image: x, y and 1/z there
-    /// (all 0 when it lies behind the color camera).
-    fn project(&self, x: f32, y: f32, z: f32) -> [f32; 3] {
-        let [dfx, dfy, dcx, dcy] = self.depth;
+    /// Depth pixel `i` at depth `z` metres in the color image: x, y and 1/z there (all 0
+    /// when it lies behind the color camera or outside either lens's field).
+    fn project(&self, i: usize, z: f32) -> [f32; 3] {
+        let [rx, ry] = self.rays[i];
         let [cfx, cfy, ccx, ccy] = self.color;
-        let point = glam::Vec3::new((x - dcx) / dfx * z, (y - dcy) / dfy * z, z);
+        let point = glam::Vec3::new(rx * z, ry * z, z);
         let c = self.rotation * point + self.translation;
-        if c.z <= 0.0 {
+        // Also rejects NaN, which fails every comparison.
+        if c.z.is_nan() || c.z <= 0.0 {
             return [0.0; 3];
         }
         let w = 1.0 / c.z;
-        [c.x * w * cfx + ccx, c.y * w * cfy + ccy, w]
+        let (mut x, mut y) = (c.x * w, c.y * w);
+        if let Some(lens) = &self.color_lens {
+            match lens.distort(x as f64, y as f64) {
+                Some((dx, dy)) => (x, y) = (dx as f32, dy as f32),
+                None => return [0.0; 3],
+            }
+        }
+        [x * cfx + ccx, y * cfy + ccy, w]
     }
+}
+
+/// Each depth pixel's ray on the z = 1 plane: `((x - cx) / fx, (y - cy) / fy)` through a
+/// pinhole, undistorted through a lens (NaN where it cannot be: outside its field).
+/// Kept in `scratch` while the depth camera stays the same.
+fn depth_rays(registration: &Registration, scratch: &mut Scratch) {
+    let key = (registration.depth, registration.depth_lens);
+    if scratch.rays_for == Some(key) {
+        return;
+    }
+    let k = &registration.depth;
+    let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+    let lens = registration.depth_lens.filter(|lens| !lens.is_none());
+    scratch.rays.clear();
+    for y in 0..k.height {
+        for x in 0..k.width {
+            scratch.rays.push(match &lens {
+                None => [(x as f32 - cx) / fx, (y as f32 - cy) / fy],
+                Some(lens) => {
+                    let xd = (x as f64 - k.cx) / k.fx;
+                    let yd = (y as f64 - k.cy) / k.fy;
+                    match lens.undistort(xd, yd) {
+                        Some((ux, uy)) => [ux as f32, uy as f32],
+                        None => [f32::NAN; 2],
+                    }
+                }
+            });
+        }
+    }
+    scratch.rays_for = Some(key);
 }
 
 /// Each depth pixel's depth in metres and its place in the color image.
 fn project(depth: &[u16], unit_m: f64, registration: &Registration, scratch: &mut Scratch) {
-    let camera = Projector::new(registration);
+    depth_rays(registration, scratch);
+    let camera = Projector::new(registration, &scratch.rays);
     let unit = unit_m as f32;
-    let width = registration.depth.width as usize;
     scratch.projected.clear();
     scratch.depth_m.clear();
     for (i, &d) in depth.iter().enumerate() {
@@ -263,7 +319,7 @@ fn project(depth: &[u16], unit_m: f64, registration: &Registration, scratch: &mu
         scratch.depth_m.push(z);
         scratch.projected.push(match d {
             0 => [0.0; 3],
-            _ => camera.project((i % width) as f32, (i / width) as f32, z),
+            _ => camera.project(i, z),
         });
     }
 }

@@ -10,6 +10,7 @@
 //! decoded on replay) unless asked to store raw, check every image's header (format,
 //! size, bit depth) at import, and write atomically.
 
+pub mod k4a;
 pub mod open3d_intrinsics;
 pub mod record3d;
 pub mod redwood;

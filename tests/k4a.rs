@@ -293,3 +293,21 @@ fn the_listing_names_tracks_attachments_and_what_is_read() {
         assert!(text.contains(line), "{line:?} not in\n{text}");
     }
 }
+
+/// Writes the fuzz seeds for `fuzz/fuzz_targets/k4a.rs`: a one-frame recording, and its
+/// first 16 KiB (header, tracks, calibration, tags and a cut cluster), so that most
+/// mutations land on the element structure rather than in the depth payload:
+/// `cargo test --test k4a write_fuzz_seeds -- --ignored`.
+#[test]
+#[ignore = "writes files into fuzz/seeds/k4a"]
+fn write_fuzz_seeds() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/k4a");
+    std::fs::create_dir_all(&dir).unwrap();
+    let one = dir.join("one-frame");
+    write_mkv(&one, 1, &[]);
+    let bytes = std::fs::read(&one).unwrap();
+    std::fs::write(dir.join("header"), &bytes[..bytes.len().min(16 << 10)]).unwrap();
+    for k in ["truth", "color0.jpg", "color0.npy"] {
+        let _ = std::fs::remove_file(dir.join(format!("one-frame.{k}")));
+    }
+}

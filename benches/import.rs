@@ -142,5 +142,46 @@ fn write_realsense_bag(recording: &Path, bag: &Path) {
     w.finish();
 }
 
-criterion_group!(benches, bench_import);
+/// One livingroom1 frame registered as the RealSense bag above registers it (depth camera
+/// fx = fy = 500, 1.5 cm to the side): the part of that import that registration costs,
+/// on one core.
+fn bench_register(c: &mut Criterion) {
+    use relume::recording::register::{Extrinsic, Registration, Scratch, register_depth};
+    use relume::recording::{Replay, ReplayOptions, codec};
+    let tmp = tempfile::tempdir().unwrap();
+    let recording = tmp.path().join("lr.relume");
+    let folder = data_dir().join("livingroom1");
+    redwood::import(&folder, &recording, &Default::default(), &mut |_, _| {}).unwrap();
+    let replay = Replay::open(&recording, ReplayOptions::default()).unwrap();
+    let color = replay.recording.header().color_intrinsics;
+    let mut depth_k = color;
+    (depth_k.fx, depth_k.fy, depth_k.cx, depth_k.cy) = (500.0, 500.0, 320.0, 240.0);
+    let beside = Extrinsic {
+        rotation: glam::DQuat::IDENTITY,
+        translation: glam::DVec3::new(0.015, 0.0, 0.0),
+    };
+    let registration = Registration::new(depth_k, color, beside);
+    let frame = replay.read_frame(0).unwrap();
+    let depth = codec::decode_depth_units(&frame.depth.unwrap().image).unwrap();
+    let (mut out, mut scratch) = (Vec::new(), Scratch::default());
+    // RELUME_DUMP_REGISTERED=FILE: every frame registered, written to FILE (u16 LE), to
+    // compare two versions of the registration byte for byte.
+    if let Some(dump) = std::env::var_os("RELUME_DUMP_REGISTERED") {
+        let mut all = Vec::new();
+        for i in 0..replay.stats.frames {
+            let f = replay.read_frame(i).unwrap();
+            let d = codec::decode_depth_units(&f.depth.unwrap().image).unwrap();
+            register_depth(&d.data, 0.001, &registration, &mut out, &mut scratch).unwrap();
+            all.extend(out.iter().flat_map(|u| u.to_le_bytes()));
+        }
+        std::fs::write(dump, all).unwrap();
+    }
+    c.bench_function("register_livingroom1_frame0", |b| {
+        b.iter(|| {
+            register_depth(&depth.data, 0.001, &registration, &mut out, &mut scratch).unwrap()
+        })
+    });
+}
+
+criterion_group!(benches, bench_import, bench_register);
 criterion_main!(benches);

@@ -1,6 +1,7 @@
 //! `relume import mcap`: a ROS 2 or Foxglove MCAP log to a recording, in two passes:
 //! [`Scan`] learns the topics, intrinsics and transforms; the second pass converts the
-//! chosen color and depth topics' images (in parallel batches, written in file order)
+//! chosen color and depth topics' images (in parallel batches, written in file order
+//! on a thread of its own)
 //! and stamps each color image with the camera's pose at its header stamp.
 
 use super::choose::{PoseSource, choose_images, fail, intrinsics_for, pose_source};
@@ -206,123 +207,114 @@ pub fn import(
             .settings
             .insert("intrinsics".into(), "camera info".into());
     }
-    let mut writer = RecordingWriter::create(out, &header)?;
-    let mut summary = ImportSummary {
+    let writer = RecordingWriter::create(out, &header)?;
+    let summary = ImportSummary {
         color: 0,
         depth: 0,
         poses: 0,
         skipped_frames: 0,
         warnings,
     };
+    let mut written = Written {
+        writer,
+        summary,
+        color_size: None,
+        depth_size: None,
+        zero_stamps: 0,
+        skipped_span: None,
+    };
     let mut batch: Vec<Pending> = Vec::new();
     let total = scan.end.messages as usize;
-    let mut sizes = (None, None);
-    let mut zero_stamps = 0usize;
-    let mut skipped_span: Option<(i64, i64)> = None;
-    let mut flush = |batch: &mut Vec<Pending>,
-                     writer: &mut RecordingWriter,
-                     summary: &mut ImportSummary|
-     -> Result<(), ImportError> {
-        let converted: Vec<Result<(i64, EncodedImage), String>> = batch
+    let convert_batch = |batch: &mut Vec<Pending>| -> Vec<Converted> {
+        let results: Vec<_> = batch
             .par_iter()
             .map(|p| convert(p, depth_unit_m, registration.as_ref(), options))
             .collect();
-        for (p, result) in batch.drain(..).zip(converted) {
-            let what = format!("message {} on {}", p.index, p.topic);
-            let (stamp_ns, image) = result.map_err(|e| fail(file, format!("{what}: {e}")))?;
-            let stamp_ns = if stamp_ns == 0 && p.log_time_ns != 0 {
-                zero_stamps += 1;
-                i64::try_from(p.log_time_ns).map_err(|_| {
-                    fail(
-                        file,
-                        format!("{what}: log time {} ns is out of range", p.log_time_ns),
-                    )
-                })?
-            } else {
-                stamp_ns
-            };
-            match p.role {
-                ImageRole::Color => {
-                    check_size(file, &what, &image, &mut sizes.0)?;
-                    let pose = match &poses {
-                        PoseSource::None => None,
-                        PoseSource::Tree {
-                            tree,
-                            world,
-                            camera,
-                        } => {
-                            match tree
-                                .lookup(world, camera, stamp_ns)
-                                .map_err(|e| fail(file, e))?
-                            {
-                                Some(pose) => Some(pose),
-                                None => {
-                                    summary.skipped_frames += 1;
-                                    skipped_span = Some(match skipped_span {
-                                        None => (stamp_ns, stamp_ns),
-                                        Some((a, b)) => (a.min(stamp_ns), b.max(stamp_ns)),
-                                    });
-                                    continue;
-                                }
-                            }
-                        }
-                    };
-                    writer.write(&Record::Color(ColorRecord { stamp_ns, image }))?;
-                    summary.color += 1;
-                    if let Some(pose) = pose {
-                        check_pose(file, &what, &pose)?;
-                        writer.write(&Record::Pose(PoseRecord { stamp_ns, pose }))?;
-                        summary.poses += 1;
-                    }
-                }
-                ImageRole::Depth => {
-                    check_size(file, &what, &image, &mut sizes.1)?;
-                    writer.write(&Record::Depth(DepthRecord { stamp_ns, image }))?;
-                    summary.depth += 1;
-                }
-            }
-        }
-        Ok(())
+        batch
+            .drain(..)
+            .zip(results)
+            .map(|(p, result)| Converted {
+                role: p.role,
+                what: format!("message {} on {}", p.index, p.topic),
+                log_time_ns: p.log_time_ns,
+                result,
+            })
+            .collect()
     };
-    let mut seen = 0usize;
-    let end = container::stream(file, read_options, &mut |event| {
-        let Event::Message {
-            channel,
-            index,
-            log_time_ns,
-            data,
-        } = event
-        else {
-            return Ok(());
-        };
-        seen += 1;
-        let role = if channel.id == color.id {
-            ImageRole::Color
-        } else if depth.is_some_and(|d| d.id == channel.id) {
-            ImageRole::Depth
-        } else {
-            return Ok(());
-        };
-        batch.push(Pending {
-            role,
-            ty: channel
-                .ty
-                .clone()
-                .ok()
-                .flatten()
-                .expect("image topics have a type"),
-            topic: channel.topic.clone(),
-            index,
-            log_time_ns,
-            bytes: data.to_vec(),
+    // Batches are converted on this thread (in parallel) while the one before is written
+    // on a thread of its own, so that writing, which is most of the time a raw image
+    // costs, overlaps the next batch's reading and registration. At most one batch
+    // waits between them.
+    let (to_writer, batches) = std::sync::mpsc::sync_channel::<Vec<Converted>>(1);
+    let (streamed, writing) = std::thread::scope(|scope| {
+        let writing = scope.spawn(|| -> Result<Written, ImportError> {
+            for batch in batches {
+                written.write(file, batch, &poses)?;
+            }
+            Ok(written)
         });
-        if batch.len() >= BATCH {
-            flush(&mut batch, &mut writer, &mut summary)?;
-            progress(seen, total);
-        }
-        Ok(())
-    })?;
-    flush(&mut batch, &mut writer, &mut summary)?;
+        let mut seen = 0usize;
+        let streamed = container::stream(file, read_options, &mut |event| {
+            let Event::Message {
+                channel,
+                index,
+                log_time_ns,
+                data,
+            } = event
+            else {
+                return Ok(());
+            };
+            seen += 1;
+            let role = if channel.id == color.id {
+                ImageRole::Color
+            } else if depth.is_some_and(|d| d.id == channel.id) {
+                ImageRole::Depth
+            } else {
+                return Ok(());
+            };
+            batch.push(Pending {
+                role,
+                ty: channel
+                    .ty
+                    .clone()
+                    .ok()
+                    .flatten()
+                    .expect("image topics have a type"),
+                topic: channel.topic.clone(),
+                index,
+                log_time_ns,
+                bytes: data.to_vec(),
+            });
+            if batch.len() >= BATCH {
+                if to_writer.send(convert_batch(&mut batch)).is_err() {
+                    // The writer stopped on an error, the one reported.
+                    return Err(fail(file, "the writer stopped".into()));
+                }
+                progress(seen, total);
+            }
+            Ok(())
+        });
+        let streamed = streamed.and_then(|end| {
+            to_writer
+                .send(convert_batch(&mut batch))
+                .map_err(|_| fail(file, "the writer stopped".into()))?;
+            Ok(end)
+        });
+        drop(to_writer);
+        let writing = writing
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        (streamed, writing)
+    });
+    // A writer's error comes first: the reading stopped because of it.
+    let Written {
+        writer,
+        mut summary,
+        zero_stamps,
+        skipped_span,
+        ..
+    } = writing?;
+    let end = streamed?;
     progress(total, total);
     if let (0, Some((first, last)), PoseSource::Tree { tree, camera, .. }) =
         (summary.color, skipped_span, &poses)
@@ -368,6 +360,98 @@ pub fn import(
 
 /// Images converted together (in parallel), then written in file order.
 const BATCH: usize = 16;
+
+/// An image converted for the recording, or why it cannot be.
+struct Converted {
+    role: ImageRole,
+    /// "message N on TOPIC", for errors.
+    what: String,
+    log_time_ns: u64,
+    result: Result<(i64, EncodedImage), String>,
+}
+
+/// The writing side of an import: the recording, and what it has counted.
+struct Written {
+    writer: RecordingWriter,
+    summary: ImportSummary,
+    /// The color images' size (all of a topic's images keep its first's).
+    color_size: Option<(u32, u32)>,
+    /// The depth images' size.
+    depth_size: Option<(u32, u32)>,
+    zero_stamps: usize,
+    /// The stamps of the color images skipped for want of a pose.
+    skipped_span: Option<(i64, i64)>,
+}
+
+impl Written {
+    /// Writes a batch of converted images in file order, each color image with its pose.
+    fn write(
+        &mut self,
+        file: &Path,
+        batch: Vec<Converted>,
+        poses: &PoseSource,
+    ) -> Result<(), ImportError> {
+        for c in batch {
+            let what = c.what;
+            let (stamp_ns, image) = c.result.map_err(|e| fail(file, format!("{what}: {e}")))?;
+            let stamp_ns = if stamp_ns == 0 && c.log_time_ns != 0 {
+                self.zero_stamps += 1;
+                i64::try_from(c.log_time_ns).map_err(|_| {
+                    fail(
+                        file,
+                        format!("{what}: log time {} ns is out of range", c.log_time_ns),
+                    )
+                })?
+            } else {
+                stamp_ns
+            };
+            match c.role {
+                ImageRole::Color => {
+                    check_size(file, &what, &image, &mut self.color_size)?;
+                    let pose = match poses {
+                        PoseSource::None => None,
+                        PoseSource::Tree {
+                            tree,
+                            world,
+                            camera,
+                        } => {
+                            match tree
+                                .lookup(world, camera, stamp_ns)
+                                .map_err(|e| fail(file, e))?
+                            {
+                                Some(pose) => Some(pose),
+                                None => {
+                                    self.summary.skipped_frames += 1;
+                                    self.skipped_span = Some(match self.skipped_span {
+                                        None => (stamp_ns, stamp_ns),
+                                        Some((a, b)) => (a.min(stamp_ns), b.max(stamp_ns)),
+                                    });
+                                    continue;
+                                }
+                            }
+                        }
+                    };
+                    self.writer
+                        .write(&Record::Color(ColorRecord { stamp_ns, image }))?;
+                    self.summary.color += 1;
+                    if let Some(pose) = pose {
+                        check_pose(file, &what, &pose)?;
+                        self.writer
+                            .write(&Record::Pose(PoseRecord { stamp_ns, pose }))?;
+                        self.summary.poses += 1;
+                    }
+                }
+                ImageRole::Depth => {
+                    check_size(file, &what, &image, &mut self.depth_size)?;
+                    self.writer
+                        .write(&Record::Depth(DepthRecord { stamp_ns, image }))?;
+                    self.summary.depth += 1;
+                }
+            }
+        }
+        Ok(())
+    }
+}
 
 struct Pending {
     role: ImageRole,

@@ -165,6 +165,8 @@ pub fn listing(path: &Path) -> Result<String, ImportError> {
     let _ = writeln!(out, "tracks:");
     for t in &mkv.tracks {
         let what = match t.kind {
+            // k4arecorder's infrared track is b16g too: brightness, not depth.
+            1 if t.name == "IR" => format!("{}x{} infrared (not read)", t.width, t.height),
             1 => format!("{}x{} {}", t.width, t.height, Format::of(t).name()),
             _ => format!("type {} {} (not read)", t.kind, t.codec_id),
         };

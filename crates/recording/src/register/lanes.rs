@@ -8,7 +8,7 @@
 //! bits; a lane whose quad is anything else (an edge, a hole, a NaN, a wider quad, the
 //! image's border) is handed to the scalar code.
 
-use super::{EDGE_TOLERANCE, Projected, Quads};
+use super::quads::{EDGE_TOLERANCE, Projected, Quads};
 use relume_base::simd::{Kernel, LANES, Lanes, Portable};
 
 /// Draws the quads of the depth row starting at pixel `row` (of a `width`-pixel depth

@@ -10,7 +10,6 @@ mod common;
 use common::{ok, relume, stderr};
 use relume::recording::{Replay, ReplayOptions, codec};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 const W: usize = 1280;
@@ -27,19 +26,11 @@ fn python() -> &'static Path {
 }
 
 fn write_mkv(path: &Path, frames: usize, extra: &[&str]) {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/writers/k4a.py");
-    let o = Command::new(python())
-        .arg(script)
-        .arg(path)
-        .arg(frames.to_string())
-        .args(extra)
-        .output()
-        .expect("run python");
-    assert!(
-        o.status.success(),
-        "k4a.py failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let frames = frames.to_string();
+    let args = [path.as_os_str(), frames.as_ref()]
+        .into_iter()
+        .chain(extra.iter().map(|a| a.as_ref()));
+    common::venv::run_writer(python(), "k4a.py", &args.collect::<Vec<_>>());
 }
 
 fn import(mkv: &Path, out: &Path) -> std::process::Output {

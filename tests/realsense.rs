@@ -9,7 +9,6 @@ mod common;
 use common::{ok, relume};
 use relume::recording::{Replay, ReplayOptions, codec};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 const W: usize = 64;
@@ -27,18 +26,12 @@ fn python() -> &'static Path {
 
 fn record(dir: &Path, name: &str, frames: usize, separate: bool) -> PathBuf {
     let bag = dir.join(format!("{name}.bag"));
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/writers/realsense.py");
-    let mut cmd = Command::new(python());
-    cmd.arg(script).arg(&bag).arg(frames.to_string());
+    let frames = frames.to_string();
+    let mut args = vec![bag.as_os_str(), frames.as_ref()];
     if separate {
-        cmd.arg("separate");
+        args.push("separate".as_ref());
     }
-    let o = cmd.output().expect("run python");
-    assert!(
-        o.status.success(),
-        "realsense.py failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    common::venv::run_writer(python(), "realsense.py", &args);
     bag
 }
 

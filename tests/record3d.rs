@@ -26,19 +26,11 @@ fn python() -> &'static Path {
 }
 
 fn write_r3d(path: &Path, frames: usize, extra: &[&str]) {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/writers/record3d.py");
-    let o = Command::new(python())
-        .arg(script)
-        .arg(path)
-        .arg(frames.to_string())
-        .args(extra)
-        .output()
-        .expect("run python");
-    assert!(
-        o.status.success(),
-        "record3d.py failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let frames = frames.to_string();
+    let args = [path.as_os_str(), frames.as_ref()]
+        .into_iter()
+        .chain(extra.iter().map(|a| a.as_ref()));
+    common::venv::run_writer(python(), "record3d.py", &args.collect::<Vec<_>>());
 }
 
 fn import(r3d: &Path, out: &Path) -> std::process::Output {

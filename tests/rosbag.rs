@@ -9,7 +9,6 @@ use common::{ok, relume, stderr};
 use glam::{DQuat, DVec3};
 use relume::recording::{Pose, Replay, ReplayOptions, codec};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 /// tests/writers/rosbag.py's formulas.
@@ -58,19 +57,16 @@ fn python() -> &'static Path {
 
 /// Writes a bag with tests/writers/rosbag.py.
 fn write_bag(path: &Path, layout: &str, compression: &str, frames: usize, extra: &[&str]) {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/writers/rosbag.py");
-    let o = Command::new(python())
-        .arg(script)
-        .arg(path)
-        .args([layout, compression, &frames.to_string()])
-        .args(extra)
-        .output()
-        .expect("run python");
-    assert!(
-        o.status.success(),
-        "rosbag.py failed: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let frames = frames.to_string();
+    let args = [
+        path.as_os_str(),
+        layout.as_ref(),
+        compression.as_ref(),
+        frames.as_ref(),
+    ]
+    .into_iter()
+    .chain(extra.iter().map(|a| a.as_ref()));
+    common::venv::run_writer(python(), "rosbag.py", &args.collect::<Vec<_>>());
 }
 
 fn import(bag: &Path, out: &Path, extra: &[&str]) -> std::process::Output {

@@ -79,3 +79,21 @@ pub fn python(
         ),
     }
 }
+
+/// Runs `tests/writers/<script>` with `python` and `args`; a panic with its error output
+/// when it fails.
+pub fn run_writer<S: AsRef<std::ffi::OsStr>>(python: &Path, script: &str, args: &[S]) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/writers")
+        .join(script);
+    let o = std::process::Command::new(python)
+        .arg(path)
+        .args(args)
+        .output()
+        .expect("run python");
+    assert!(
+        o.status.success(),
+        "{script} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}

@@ -215,13 +215,20 @@ pub(crate) fn read_color(path: &Path, store: StoreMode) -> Result<EncodedImage, 
             format!("a color image must have 8-bit samples, found {bits}-bit"),
         ));
     }
-    // Decoded either way: a damaged file (a truncated PNG) is refused here, naming it,
-    // rather than stored to fail the replay at its frame.
+    stored_color(img, store).map_err(|e| file_error(path, e.to_string()))
+}
+
+/// A color image as `store` keeps it: compressed as found, or as raw pixels. Decoded
+/// either way, so that a damaged file (a truncated JPEG or PNG) is refused at import,
+/// naming it, rather than stored to fail the replay at its frame.
+pub(crate) fn stored_color(
+    img: EncodedImage,
+    store: StoreMode,
+) -> Result<EncodedImage, codec::CodecError> {
     match store {
         StoreMode::Compressed => codec::decode_color(&img).map(|_| img),
         StoreMode::Raw => codec::to_raw_color(&img),
     }
-    .map_err(|e| file_error(path, e.to_string()))
 }
 
 /// Reads an image file and checks it is a 16-bit single-channel depth image.

@@ -22,7 +22,7 @@
 //! - Every entry's size is read from the ZIP's directory and bounded before anything is
 //!   read; a depth entry must decompress to exactly dw x dh x 4 bytes.
 
-use super::{ImportOptions, ImportSummary, StoreMode, file_error, import_header};
+use super::{ImportOptions, ImportSummary, StoreMode, file_error, import_header, stored_color};
 use crate::codec::{self, wrap_image_file};
 use crate::error::ImportError;
 use crate::register::{Extrinsic, Registration, Scratch, register_depth};
@@ -308,13 +308,7 @@ fn color_image(bytes: Vec<u8>, k: &Intrinsics, store: StoreMode) -> Result<Encod
             image.width, image.height, k.width, k.height
         ));
     }
-    match store {
-        StoreMode::Compressed => {
-            codec::decode_color(&image).map_err(|e| format!("color: {e}"))?;
-            Ok(image)
-        }
-        StoreMode::Raw => codec::to_raw_color(&image).map_err(|e| format!("color: {e}")),
-    }
+    stored_color(image, store).map_err(|e| format!("color: {e}"))
 }
 
 #[cfg(test)]

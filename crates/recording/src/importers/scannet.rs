@@ -146,11 +146,7 @@ fn decode_color(bytes: Vec<u8>, h: &SensHeader, store: StoreMode) -> Result<Enco
             img.width, img.height
         ));
     }
-    match store {
-        StoreMode::Compressed => codec::decode_color(&img).map(|_| img),
-        StoreMode::Raw => codec::to_raw_color(&img),
-    }
-    .map_err(|e| e.to_string())
+    super::stored_color(img, store).map_err(|e| e.to_string())
 }
 
 fn decode_depth(bytes: Vec<u8>, h: &SensHeader, store: StoreMode) -> Result<EncodedImage, String> {

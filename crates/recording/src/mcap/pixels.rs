@@ -212,11 +212,7 @@ pub fn color_image(data: &ImageData, store: StoreMode) -> Result<EncodedImage, S
             img
         }
     };
-    match store {
-        StoreMode::Compressed => codec::decode_color(&img).map(|_| img),
-        StoreMode::Raw => codec::to_raw_color(&img),
-    }
-    .map_err(|e| e.to_string())
+    crate::importers::stored_color(img, store).map_err(|e| e.to_string())
 }
 
 /// A depth message as stored, in units of `unit_m` metres.

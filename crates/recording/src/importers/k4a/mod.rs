@@ -28,7 +28,7 @@
 
 pub mod calibration;
 
-use super::{ImportOptions, ImportSummary, StoreMode, import_header};
+use super::{ImportOptions, ImportSummary, StoreMode, import_header, stored_color};
 use crate::codec::{self, wrap_image_file};
 use crate::error::ImportError;
 use crate::matroska::{Block, Matroska, Track};
@@ -517,11 +517,5 @@ fn color_image(
             image.width, image.height, k.width, k.height
         ));
     }
-    match store {
-        StoreMode::Compressed => {
-            codec::decode_color(&image).map_err(|e| format!("color: {e}"))?;
-            Ok(image)
-        }
-        StoreMode::Raw => codec::to_raw_color(&image).map_err(|e| format!("color: {e}")),
-    }
+    stored_color(image, store).map_err(|e| format!("color: {e}"))
 }

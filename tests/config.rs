@@ -455,7 +455,7 @@ fn object_errors_are_located_and_explained() {
     assert_eq!(
         e.hint.as_deref(),
         Some(
-            "did you mean `radius`? keys of a sphere: radius, segments; of every object: name, shape, translation, rotation_deg, scale, albedo, exponent, anchor, at_pixel, frame"
+            "did you mean `radius`? keys of a sphere: radius, segments; of every object: name, shape, translation, rotation_deg, scale, albedo, exponent, anchor, at_pixel, frame, keyframes, keyframe_translation, keyframe_rotation_deg, velocity"
         )
     );
     // A key of another shape is unknown too.
@@ -549,5 +549,101 @@ fn object_errors_are_located_and_explained() {
     assert_eq!(
         e.message,
         "`object` must be an array of tables, written [[object]]"
+    );
+}
+
+#[test]
+fn object_paths_are_read_and_checked() {
+    use relume::stages::world::object_world;
+    let torus = "[[object]]\nname = \"torus\"\nshape = \"torus\"\nminor_radius = 0.09\n";
+    let pipeline = load(&format!(
+        "{DECODE}{torus}keyframes = [0, 30]\nkeyframe_translation = [[-0.5, 0.09, 0.0], [0.5, 0.09, 0.0]]\n"
+    ))
+    .unwrap();
+    let world = object_world(&pipeline.world);
+    assert!(world.moves());
+    let center_x = |frame: u64| world.scene_at(frame).unwrap().bounds().center().x;
+    // Frame 0's scene is the pipeline's scene; halfway the torus is at the origin,
+    // and after the last keyframe it stays there.
+    assert!((center_x(0) + 0.5).abs() < 1e-5 && pipeline.objects().bounds().center().x < -0.49);
+    assert!(center_x(15).abs() < 1e-5, "{}", center_x(15));
+    assert!((center_x(99) - 0.5).abs() < 1e-5);
+    assert!(world.same_at(30, 99) && !world.same_at(14, 15));
+
+    // A velocity: metres per frame from `translation`.
+    let pipeline = load(&format!(
+        "{DECODE}{torus}translation = [0.0, 0.09, 0.0]\nvelocity = [0.0, 0.0, 0.01]\n"
+    ))
+    .unwrap();
+    let world = object_world(&pipeline.world);
+    let z = world.scene_at(10).unwrap().bounds().center().z;
+    assert!((z - 0.1).abs() < 1e-5, "{z}");
+
+    // A still pipeline has no motion, and its scene is the same allocation each frame.
+    let still = load(&format!("{DECODE}{torus}")).unwrap();
+    let world = object_world(&still.world);
+    assert!(!world.moves());
+    assert!(std::sync::Arc::ptr_eq(
+        &world.scene_at(7).unwrap(),
+        &world.scene
+    ));
+
+    let e = error(&format!("{DECODE}{torus}keyframes = [0, 30]\n"));
+    assert_eq!(
+        (e.line, e.message.as_str()),
+        (7, "object `torus` has `keyframes` but no poses for them")
+    );
+    let e = error(&format!(
+        "{DECODE}{torus}keyframes = [0, 30]\nkeyframe_translation = [[0, 0, 0]]\n"
+    ));
+    assert_eq!(
+        (e.line, e.column, e.message.as_str()),
+        (
+            8,
+            24,
+            "`keyframe_translation` of object `torus` has 1 pose for 2 keyframes"
+        )
+    );
+    let e = error(&format!(
+        "{DECODE}{torus}keyframes = [30, 0]\nkeyframe_rotation_deg = [[0, 0, 0], [0, 90, 0]]\n"
+    ));
+    assert_eq!(
+        e.message,
+        "object `torus`: keyframes must be in ascending frame order: frame 0 follows frame 30"
+    );
+    let e = error(&format!(
+        "{DECODE}{torus}keyframes = [0, 3]\nkeyframe_translation = [[0, 0, 0], [0, 0]]\n"
+    ));
+    assert_eq!(
+        (e.line, e.column, e.message.as_str()),
+        (
+            8,
+            36,
+            "each item of `keyframe_translation` of object `torus` must be [x, y, z], found an array"
+        )
+    );
+    let e = error(&format!(
+        "{DECODE}{torus}translation = [0, 0, 0]\nkeyframes = [0, 3]\nkeyframe_translation = [[0, 0, 0], [1, 0, 0]]\n"
+    ));
+    assert_eq!(
+        (e.line, e.message.as_str()),
+        (
+            7,
+            "object `torus` has both `translation` and `keyframe_translation`"
+        )
+    );
+    let e = error(&format!(
+        "{DECODE}{torus}velocity = [0, 0, 1]\nkeyframes = [0, 3]\nkeyframe_translation = [[0, 0, 0], [1, 0, 0]]\n"
+    ));
+    assert_eq!(
+        e.message,
+        "object `torus` has both `velocity` and `keyframes`"
+    );
+    let e = error(&format!(
+        "{DECODE}{torus}keyframe_translation = [[0, 0, 0]]\n"
+    ));
+    assert_eq!(
+        e.message,
+        "`keyframe_translation` of object `torus` needs `keyframes`"
     );
 }

@@ -13,7 +13,7 @@ use relume::eval::{EvalOptions, Evaluator};
 use relume::graph::{Frame, Pipeline, PipelineError, StageGraph, run_graph};
 use relume::raster::Rgb8Image;
 use relume::recording::writer::write_file_atomic;
-use relume::stages::world::{ObjectWorld, PipelineObjects};
+use relume::stages::world::{ObjectWorld, PipelineObjects, object_world};
 use std::io::Write;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -147,12 +147,17 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
             prepare::warn_every(pipeline);
         }
     }
-    // Equal objects become one allocation, so that references can be shared.
+    // Equal objects (and equal motions) become one allocation, so that references can
+    // be shared.
     for i in 1..pipelines.len() {
-        if let Some(j) = (0..i).find(|&j| pipelines[j].objects() == pipelines[i].objects()) {
+        let world = |k: usize| object_world(&pipelines[k].world);
+        let same =
+            |j: usize| world(j).scene == world(i).scene && world(j).moving == world(i).moving;
+        if let Some(j) = (0..i).find(|&j| same(j)) {
             pipelines[i].world = Arc::new(ObjectWorld {
                 declared: pipelines[i].declared_objects().to_vec(),
-                scene: pipelines[j].objects().clone(),
+                scene: world(j).scene.clone(),
+                moving: world(j).moving.clone(),
             });
         }
     }

@@ -162,9 +162,7 @@ impl Evaluator {
         let references_itself =
             |s: &ResolvedStage| renderer_kind(s.kind).is_some_and(|r| r.references_itself);
         let (objects, k) = (
-            relume_stages::world::object_world(&pipeline.world)
-                .scene
-                .clone(),
+            relume_stages::world::object_world(&pipeline.world).clone(),
             header.depth_intrinsics,
         );
         let runner = sampler.map(|s| match references_itself(s) {
@@ -181,9 +179,7 @@ impl Evaluator {
                 let scorer = match s.kind {
                     _ if references_itself(s) => Scorer::Path(Box::new(sampling::PathScorer::new(
                         s,
-                        relume_stages::world::object_world(&pipeline.world)
-                            .scene
-                            .clone(),
+                        objects.clone(),
                         header.depth_intrinsics,
                         seed,
                     ))),

@@ -25,10 +25,10 @@ use relume_base::rng;
 use relume_graph::{Frame, ResolvedStage};
 use relume_recording::Intrinsics;
 use relume_scene::light::voxels::VoxelVolume;
-use relume_scene::objects::VirtualScene;
 use relume_stages::kind::FrameProducts;
 use relume_stages::sample::path::{IrradianceLayers, PathInputs, PathParams, sample_path};
 use relume_stages::sample::query::QueryKind;
+use relume_stages::world::ObjectWorld;
 use serde_json::{Value, json};
 use std::ops::Range;
 use std::sync::Arc;
@@ -85,14 +85,15 @@ pub struct PathRunner {
     object_voxels: Option<Arc<VoxelVolume>>,
     /// The stage's own settings.
     pub params: PathParams,
-    objects: Arc<VirtualScene>,
+    /// The pipeline's objects (posed at each frame when they move).
+    objects: ObjectWorld,
     intrinsics: Intrinsics,
 }
 
 impl PathRunner {
     pub fn new(
         stage: &ResolvedStage,
-        objects: Arc<VirtualScene>,
+        objects: ObjectWorld,
         intrinsics: Intrinsics,
         seed: u64,
     ) -> PathRunner {
@@ -102,7 +103,7 @@ impl PathRunner {
                 .map(|r| super::ports::input(stage, r)),
             environment: stage.inputs.get("environment").cloned(),
             voxels: stage.inputs.get("voxels").cloned(),
-            object_voxels: params.object_volume(&objects).map(Arc::new),
+            object_voxels: params.object_volume(&objects.scene).map(Arc::new),
             params,
             objects,
             intrinsics,
@@ -116,7 +117,7 @@ impl PathRunner {
     /// against are the default's.
     pub fn reference_for(
         stage: &ResolvedStage,
-        objects: Arc<VirtualScene>,
+        objects: ObjectWorld,
         intrinsics: Intrinsics,
         seed: u64,
     ) -> PathRunner {
@@ -175,6 +176,14 @@ impl PathRunner {
             Some(name) => Some(frame.voxels(name).ok()?.as_ref()),
             None => None,
         };
+        let objects = match self.objects.scene_at(frame.index as u64) {
+            Ok(objects) => objects,
+            Err(e) => return Some(Err(format!("frame {}: {e}", frame.index))),
+        };
+        let posed_voxels = match self.objects.moves() {
+            true => params.object_volume(&objects).map(Arc::new),
+            false => None,
+        };
         let inputs = PathInputs {
             depth,
             normals,
@@ -184,8 +193,8 @@ impl PathRunner {
             table,
             environment,
             voxels,
-            objects: &self.objects,
-            object_voxels: self.object_voxels.as_deref(),
+            objects: &objects,
+            object_voxels: posed_voxels.as_deref().or(self.object_voxels.as_deref()),
             frame: frame.index as u64,
         };
         let mut out = IrradianceLayers::new(depth.width, depth.height);
@@ -360,7 +369,11 @@ impl PathRunner {
             frame.index,
             self.reference_params(0, stride),
             self.intrinsics,
-            Arc::as_ptr(&self.objects)
+            // Moving objects: their own motions, which no other pipeline shares.
+            match &self.objects.moving {
+                Some(moving) => Arc::as_ptr(moving) as *const (),
+                None => Arc::as_ptr(&self.objects.scene) as *const (),
+            }
         );
         let names = self
             .inputs
@@ -464,7 +477,7 @@ pub struct PathScorer {
 impl PathScorer {
     pub fn new(
         stage: &ResolvedStage,
-        objects: Arc<VirtualScene>,
+        objects: ObjectWorld,
         intrinsics: Intrinsics,
         seed: u64,
     ) -> Self {

@@ -24,6 +24,7 @@ use relume_recording::synth::scene::Scene;
 use relume_recording::synth::{GENERATOR_VERSION, SYNTH_TOOL};
 use relume_recording::{Header, Intrinsics};
 use relume_scene::objects::VirtualScene;
+use relume_stages::world::ObjectWorld;
 use std::sync::{Arc, Mutex};
 
 /// Paths per pixel of the truth (its error is reported with it:
@@ -107,7 +108,8 @@ impl TruthCache {
 /// Renders the true frames of a synthetic recording for one pipeline's objects.
 pub struct TruthRenderer {
     scene: Scene,
-    objects: Arc<VirtualScene>,
+    /// The pipeline's objects (posed at each frame when they move).
+    objects: ObjectWorld,
     intrinsics: Intrinsics,
     settings: TrueFrameSettings,
     shared: Option<TruthCache>,
@@ -134,8 +136,8 @@ pub fn unavailable(header: &Header) -> Option<String> {
 impl TruthRenderer {
     /// The renderer for `objects` over the recording of `header`, or `None` when the
     /// recording has no true frame ([`unavailable`]) or there are no objects.
-    pub fn new(header: &Header, objects: Arc<VirtualScene>, seed: u64) -> Option<TruthRenderer> {
-        if unavailable(header).is_some() || objects.triangles.is_empty() {
+    pub fn new(header: &Header, objects: ObjectWorld, seed: u64) -> Option<TruthRenderer> {
+        if unavailable(header).is_some() || objects.scene.triangles.is_empty() {
             return None;
         }
         Some(TruthRenderer {
@@ -164,7 +166,11 @@ impl TruthRenderer {
         let key = format!(
             "{} {stride} {:p} {:?}",
             frame.index,
-            Arc::as_ptr(&self.objects),
+            // Moving objects: their own motions, which no other pipeline shares.
+            match &self.objects.moving {
+                Some(moving) => Arc::as_ptr(moving) as *const (),
+                None => Arc::as_ptr(&self.objects.scene) as *const (),
+            },
             self.settings
         );
         if let Some(cache) = &self.shared {
@@ -196,12 +202,16 @@ impl TruthRenderer {
             intrinsics: k,
         };
         let s = stride.max(1);
+        let objects = self
+            .objects
+            .scene_at(frame.index as u64)
+            .map_err(|e| format!("frame {}: {e}", frame.index))?;
         let started = std::time::Instant::now();
         let rendered = render_inserted(
             &self.scene,
             &view,
             &truth.radiance,
-            &Objects(&self.objects),
+            &Objects(&objects),
             frame.index as u64,
             &self.settings,
             &|x, y| x % s == 0 && y % s == 0,
@@ -336,7 +346,7 @@ mod tests {
         let header = synth::header(&config);
         assert_eq!(unavailable(&header), None);
         let frame = synthetic_frame(&config, 14);
-        let renderer = TruthRenderer::new(&header, ball(), 1).unwrap();
+        let renderer = TruthRenderer::new(&header, ObjectWorld::still(ball()), 1).unwrap();
         let truth = renderer.render(&frame, 1).unwrap().unwrap();
         // The camera model reproduces the recorded frame exactly.
         let records = frame.record(SOURCE_PRODUCT).unwrap();
@@ -393,6 +403,6 @@ mod tests {
         header.provenance.tool = "relume import tum".into();
         let why = unavailable(&header).unwrap();
         assert!(why.contains("`relume import tum`"), "{why}");
-        assert!(TruthRenderer::new(&header, ball(), 1).is_none());
+        assert!(TruthRenderer::new(&header, ObjectWorld::still(ball()), 1).is_none());
     }
 }

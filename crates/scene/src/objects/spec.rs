@@ -8,6 +8,7 @@
 
 use super::anchor::{Anchor, AnchorFrame};
 use super::geometry::{Material, Triangle};
+use super::motion::Motion;
 use super::{mesh, shapes};
 use glam::{Mat3, Vec2, Vec3};
 use std::path::PathBuf;
@@ -144,6 +145,9 @@ pub struct ObjectSpec {
     /// The anchor's frame once placed against a recording (`relume_stages::world::place_objects`);
     /// `None` for world objects and for anchored ones not placed yet.
     pub anchor_frame: Option<AnchorFrame>,
+    /// How the object moves (in the placement frame), replacing `translation` and
+    /// `rotation_deg` frame by frame; `None` for an object that stays put.
+    pub motion: Option<Motion>,
 }
 
 impl ObjectSpec {
@@ -158,6 +162,7 @@ impl ObjectSpec {
             material: Material::DIFFUSE_GRAY,
             anchor: Anchor::World,
             anchor_frame: None,
+            motion: None,
         }
     }
 
@@ -190,33 +195,62 @@ impl ObjectSpec {
     }
 
     /// The object's triangles in world space with material index `material`: its
-    /// placement applied in [`ObjectSpec::placement_frame`].
+    /// placement applied in [`ObjectSpec::placement_frame`] (at frame 0 for a moving
+    /// object).
     pub fn world_triangles(&self, material: u32) -> Result<Vec<Triangle>, ObjectError> {
         self.triangles_in(&self.placement_frame()?, material)
     }
 
     /// The object's triangles with its placement applied in `frame`:
-    /// p = frame.origin + frame.axes (translation + R (scale p_local)).
+    /// p = frame.origin + frame.axes (translation + R (scale p_local)); a moving object
+    /// as it is at frame 0.
     pub fn triangles_in(
         &self,
         frame: &AnchorFrame,
         material: u32,
     ) -> Result<Vec<Triangle>, ObjectError> {
-        let invalid = |message: String| ObjectError::InvalidSpec {
-            object: self.name.clone(),
-            message,
-        };
-        self.check().map_err(invalid)?;
-        let local = match &self.shape {
+        self.place(&self.local()?, frame, 0.0, material)
+    }
+
+    /// The shape's triangles in its own coordinates, after checking the placement and
+    /// material; meshes are read from their file.
+    pub fn local(&self) -> Result<Vec<Triangle>, ObjectError> {
+        self.check().map_err(|m| self.invalid(m))?;
+        match &self.shape {
             // Mesh errors keep their own variant (they name the file).
-            Shape::Mesh { path } => mesh::load_obj(path)?,
-            shape => shape.local_triangles().map_err(invalid)?,
-        };
-        let linear = frame.axes * self.linear();
-        let translation = frame.origin + frame.axes * self.translation;
+            Shape::Mesh { path } => Ok(mesh::load_obj(path)?),
+            shape => shape.local_triangles().map_err(|m| self.invalid(m)),
+        }
+    }
+
+    /// Translation and linear part R (scale I) at recording frame `at`: the motion's
+    /// pose there, or the fixed placement.
+    pub fn placement_at(&self, at: f64) -> (Vec3, Mat3) {
+        match &self.motion {
+            None => (self.translation, self.linear()),
+            Some(motion) => (
+                motion.pose_at(at).translation,
+                motion.linear_at(at, self.scale),
+            ),
+        }
+    }
+
+    /// `local` (from [`ObjectSpec::local`]) placed as at recording frame `at` in
+    /// `frame`, with material index `material`; an error when a vertex lands beyond
+    /// [`MAX_WORLD_COORDINATE`].
+    pub fn place(
+        &self,
+        local: &[Triangle],
+        frame: &AnchorFrame,
+        at: f64,
+        material: u32,
+    ) -> Result<Vec<Triangle>, ObjectError> {
+        let (translation, linear) = self.placement_at(at);
+        let linear = frame.axes * linear;
+        let translation = frame.origin + frame.axes * translation;
         let normal_matrix = linear.inverse().transpose();
         let world: Vec<Triangle> = local
-            .into_iter()
+            .iter()
             .map(|t| Triangle {
                 vertices: t.vertices.map(|v| linear * v + translation),
                 normals: t.normals.map(|n| (normal_matrix * n).normalize_or_zero()),
@@ -236,12 +270,23 @@ impl ObjectSpec {
                     format!("{c:e}")
                 }
             });
-            return Err(invalid(format!(
-                "a vertex lies at [{}] m, more than {MAX_WORLD_COORDINATE:e} m from the origin along an axis: check the mesh's units and `scale`",
+            let when = match self.motion {
+                Some(_) => format!(" at frame {at}"),
+                None => String::new(),
+            };
+            return Err(self.invalid(format!(
+                "a vertex lies at [{}] m{when}, more than {MAX_WORLD_COORDINATE:e} m from the origin along an axis: check the mesh's units and `scale`",
                 shown.join(", ")
             )));
         }
         Ok(world)
+    }
+
+    fn invalid(&self, message: String) -> ObjectError {
+        ObjectError::InvalidSpec {
+            object: self.name.clone(),
+            message,
+        }
     }
 
     /// Checks the placement and the material.
@@ -254,6 +299,9 @@ impl ObjectSpec {
         }
         if !self.translation.is_finite() || !self.rotation_deg.is_finite() {
             return Err("translation and rotation_deg must be finite".into());
+        }
+        if let Some(motion) = &self.motion {
+            motion.check()?;
         }
         let m = &self.material;
         if !(m.albedo.cmpge(Vec3::ZERO).all() && m.albedo.cmple(Vec3::ONE).all()) {

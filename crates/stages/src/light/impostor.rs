@@ -5,8 +5,9 @@
 //! [`relume_scene::light::impostor`].
 //!
 //! The centre is the `center` parameter when given, else the centre of the pipeline's
-//! virtual objects' bounding box, else the recording's `ground_truth.object_position`.
-//! The map is rebuilt only when the cloud changes (a new `Arc`); a frame without the
+//! virtual objects' bounding box (where they stand in each frame, when they move), else
+//! the recording's `ground_truth.object_position`. The map is rebuilt only when the
+//! cloud changes (a new `Arc`) or the centre moves; a frame without the
 //! cloud (the first frame when reading `cloud@prev`) gets an empty map: radiance 0,
 //! distances infinite.
 
@@ -83,6 +84,8 @@ pub const INFO: StageInfo = StageInfo {
     },
     build: |ctx| {
         let p = ctx.params;
+        let objects = crate::world::follow::FollowedObjects::new(ctx);
+        let follow = (p.str("center").trim().is_empty() && objects.moves()).then_some(objects);
         let center = match p.str("center").trim() {
             "" => object_center(ctx).ok_or_else(|| {
                 StageError::Failed("no centre for the distance impostor: set `center = \"x,y,z\"`, add a virtual object, or use a recording with ground truth".into())
@@ -102,6 +105,7 @@ pub const INFO: StageInfo = StageInfo {
             cloud: ctx.input("cloud"),
             environment: ctx.output("environment"),
             center,
+            follow,
             builder: ImpostorBuilder::new(params).map_err(StageError::Failed)?,
             maps: PerCloud::new(),
         }))
@@ -149,12 +153,21 @@ struct Impostor {
     cloud: String,
     environment: String,
     center: Vec3,
+    /// The moving objects the centre follows (`None`: it stays put).
+    follow: Option<crate::world::follow::FollowedObjects>,
     builder: ImpostorBuilder,
     maps: PerCloud<EnvMap>,
 }
 
 impl Stage for Impostor {
     fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
+        if let Some(objects) = &mut self.follow {
+            let (scene, moved) = objects.at(frame.index as u64)?;
+            if moved {
+                self.center = scene.bounds().center();
+                self.maps.forget();
+            }
+        }
         let (builder, center, name) = (&mut self.builder, self.center, &self.cloud);
         let map = self.maps.get(frame, &self.cloud, |cloud| {
             builder

@@ -17,6 +17,12 @@ impl<T> PerCloud<T> {
         PerCloud { last: None }
     }
 
+    /// Drops what was built, so that the next [`PerCloud::get`] builds again (what it
+    /// was built from besides the cloud changed).
+    pub(crate) fn forget(&mut self) {
+        self.last = None;
+    }
+
     /// What `build` makes of the frame's product `cloud` (`None` when the frame has
     /// none), built again only when the cloud is another `Arc` than last time.
     pub(crate) fn get(

@@ -8,8 +8,9 @@ use relume_graph::config::{ConfigError, Located, ObjectDecl, RawValue, SourceFil
 use relume_graph::params::{a, did_you_mean};
 use relume_recording::MAX_IMAGE_SIDE;
 use relume_scene::objects::anchor::{Anchor, AnchorFrame};
+use relume_scene::objects::motion::MAX_KEYFRAMES;
 use relume_scene::objects::{
-    MAX_TRANSLATION, Material, ObjectError, ObjectSpec, Shape, VirtualScene,
+    Keyframe, MAX_TRANSLATION, Material, Motion, ObjectError, ObjectSpec, Shape, VirtualScene,
 };
 use std::ops::Range;
 
@@ -20,6 +21,10 @@ enum Type {
     Int(i64, i64),
     /// An array of N numbers, each in the bounds.
     Numbers(usize, f64, f64),
+    /// An array of 1 to N numbers, each in the bounds.
+    List(usize, f64, f64),
+    /// An array of 1 to N arrays of 3 numbers, each in the bounds.
+    Triples(usize, f64, f64),
     Str,
 }
 
@@ -78,6 +83,30 @@ const COMMON: &[Key] = &[
         "frame",
         Type::Int(0, 1_000_000_000),
         "the frame at_pixel is a pixel of, and the first of the 5 frames the floor is found in; default 0",
+    ),
+    key(
+        "keyframes",
+        Type::List(MAX_KEYFRAMES, 0.0, 1e9),
+        "frames (of the recording) at which the object stands at the poses keyframe_translation and keyframe_rotation_deg give, ascending: it moves along them (linear positions, slerp rotations) and holds the first pose before the first, the last after the last",
+    ),
+    key(
+        "keyframe_translation",
+        Type::Triples(
+            MAX_KEYFRAMES,
+            -(MAX_TRANSLATION as f64),
+            MAX_TRANSLATION as f64,
+        ),
+        "[[x, y, z], ...]: the translation at each of `keyframes`, metres, in place of translation",
+    ),
+    key(
+        "keyframe_rotation_deg",
+        Type::Triples(MAX_KEYFRAMES, -3600.0, 3600.0),
+        "[[x, y, z], ...]: the rotation at each of `keyframes`, degrees, in place of rotation_deg",
+    ),
+    key(
+        "velocity",
+        Type::Numbers(3, -100.0, 100.0),
+        "[x, y, z], metres per frame: the object moves from translation (where it is at frame 0) at this constant velocity",
     ),
 ];
 
@@ -171,6 +200,12 @@ pub fn key_docs() -> Vec<KeyDoc> {
             Type::Float(lo, hi) => ("number".to_string(), Some(lo), Some(hi)),
             Type::Int(lo, hi) => ("integer".to_string(), Some(lo as f64), Some(hi as f64)),
             Type::Numbers(n, lo, hi) => (format!("array of {n} numbers"), Some(lo), Some(hi)),
+            Type::List(n, lo, hi) => (format!("array of 1 to {n} numbers"), Some(lo), Some(hi)),
+            Type::Triples(n, lo, hi) => (
+                format!("array of 1 to {n} arrays of 3 numbers"),
+                Some(lo),
+                Some(hi),
+            ),
             Type::Str => ("string".to_string(), None, None),
         };
         KeyDoc {
@@ -194,6 +229,7 @@ pub fn key_docs() -> Vec<KeyDoc> {
 enum Value {
     Number(f64),
     Numbers(Vec<f64>),
+    Triples(Vec<[f64; 3]>),
     Str(String),
 }
 
@@ -358,9 +394,11 @@ pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<Objects, Config
             }
         };
         let (anchor, sites) = anchor(src, decl, &name, &values)?;
+        let motion = motion(src, &name, &values)?;
         let spec = ObjectSpec {
             anchor,
             anchor_frame: None,
+            motion,
             name: name.clone(),
             shape,
             translation: vec3(numbers("translation", &[0.0; 3])),
@@ -403,6 +441,126 @@ pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<Objects, Config
         declared,
         world_scene: VirtualScene::new(triangles, materials),
     })
+}
+
+/// The motion an object's `keyframes`, `keyframe_translation`, `keyframe_rotation_deg` and
+/// `velocity` keys ask for (`None`: it stays put); errors for keys that contradict each
+/// other or keyframes out of order, at the key.
+fn motion(
+    src: &SourceFile,
+    name: &str,
+    values: &[(&'static str, Value, Range<usize>)],
+) -> Result<Option<Motion>, ConfigError> {
+    let find = |key: &str| values.iter().find(|(n, _, _)| *n == key);
+    let vec3 = |x: &[f64]| Vec3::new(x[0] as f32, x[1] as f32, x[2] as f32);
+    let fixed = |key: &str, default: Vec3| match find(key) {
+        Some((_, Value::Numbers(x), _)) => vec3(x),
+        _ => default,
+    };
+    let triples = |key: &str| match find(key) {
+        Some((_, Value::Triples(x), span)) => Some((x, span.clone())),
+        _ => None,
+    };
+    let frames = match find("keyframes") {
+        Some((_, Value::Numbers(x), span)) => Some((x, span.clone())),
+        _ => None,
+    };
+    let (translations, rotations) = (
+        triples("keyframe_translation"),
+        triples("keyframe_rotation_deg"),
+    );
+    if let Some((_, _, span)) = find("velocity") {
+        if let Some((key, _, _)) = ["keyframes", "keyframe_translation", "keyframe_rotation_deg"]
+            .into_iter()
+            .find_map(find)
+        {
+            return Err(src.error(
+                span.clone(),
+                format!("object `{name}` has both `velocity` and `{key}`"),
+                Some("an object moves at a constant velocity or along keyframes, not both".into()),
+            ));
+        }
+        return Ok(Some(Motion::Velocity {
+            start: fixed("translation", Vec3::ZERO),
+            per_frame: fixed("velocity", Vec3::ZERO),
+            rotation_deg: fixed("rotation_deg", Vec3::ZERO),
+        }));
+    }
+    let Some((frames, frames_span)) = frames else {
+        if let Some((key, _, span)) = ["keyframe_translation", "keyframe_rotation_deg"]
+            .into_iter()
+            .find_map(find)
+        {
+            return Err(src.error(
+                span.clone(),
+                format!("`{key}` of object `{name}` needs `keyframes`"),
+                Some("keyframes = [f0, f1, ...] names the frame of each pose".into()),
+            ));
+        }
+        return Ok(None);
+    };
+    if translations.is_none() && rotations.is_none() {
+        return Err(src.error(
+            frames_span,
+            format!("object `{name}` has `keyframes` but no poses for them"),
+            Some("give keyframe_translation = [[x, y, z], ...], keyframe_rotation_deg, or both: one per keyframe".into()),
+        ));
+    }
+    for (keyed, still) in [
+        ("keyframe_translation", "translation"),
+        ("keyframe_rotation_deg", "rotation_deg"),
+    ] {
+        if let (Some(_), Some((_, _, span))) = (triples(keyed), find(still)) {
+            return Err(src.error(
+                span.clone(),
+                format!("object `{name}` has both `{still}` and `{keyed}`"),
+                Some(format!(
+                    "`{keyed}` gives the {still} at every keyframe; leave `{still}` out"
+                )),
+            ));
+        }
+    }
+    for (key, poses) in [
+        ("keyframe_translation", &translations),
+        ("keyframe_rotation_deg", &rotations),
+    ] {
+        if let Some((poses, span)) = poses
+            && poses.len() != frames.len()
+        {
+            return Err(src.error(
+                span.clone(),
+                format!(
+                    "`{key}` of object `{name}` has {} pose{} for {} keyframes",
+                    poses.len(),
+                    if poses.len() == 1 { "" } else { "s" },
+                    frames.len()
+                ),
+                Some("give one [x, y, z] per frame of `keyframes`".into()),
+            ));
+        }
+    }
+    let keys: Vec<Keyframe> = frames
+        .iter()
+        .enumerate()
+        .map(|(i, &frame)| Keyframe {
+            frame,
+            translation: translations
+                .as_ref()
+                .map_or(fixed("translation", Vec3::ZERO), |(t, _)| vec3(&t[i])),
+            rotation_deg: rotations
+                .as_ref()
+                .map_or(fixed("rotation_deg", Vec3::ZERO), |(r, _)| vec3(&r[i])),
+        })
+        .collect();
+    let motion = Motion::Keyframes(keys);
+    motion.check().map_err(|e| {
+        src.error(
+            frames_span,
+            format!("object `{name}`: {e}"),
+            Some("list each keyframe's frame once, in ascending order".into()),
+        )
+    })?;
+    Ok(Some(motion))
 }
 
 /// The anchor an object's `anchor`, `at_pixel` and `frame` keys ask for, and where they
@@ -557,6 +715,90 @@ fn check(
         }
         (Type::Numbers(n, ..), other) => Err(wrong_type(
             format!("array of {n} numbers"),
+            other,
+            &value.span,
+        )),
+        (Type::List(n, lo, hi), RawValue::Array(items)) => {
+            if items.is_empty() || items.len() > n {
+                return Err(src.error(
+                    value.span.clone(),
+                    format!(
+                        "`{}` of object `{object}` must hold 1 to {n} numbers, found {}",
+                        spec.name,
+                        items.len()
+                    ),
+                    Some(spec.doc.to_string()),
+                ));
+            }
+            items
+                .iter()
+                .map(|item| match number(&item.value) {
+                    Some(x) => in_range(x, lo, hi, &item.span),
+                    None => Err(src.error(
+                        item.span.clone(),
+                        format!(
+                            "`{}` of object `{object}` must hold numbers, found {}",
+                            spec.name,
+                            a(item.value.type_name())
+                        ),
+                        Some(spec.doc.to_string()),
+                    )),
+                })
+                .collect::<Result<Vec<f64>, _>>()
+                .map(Value::Numbers)
+        }
+        (Type::List(n, ..), other) => Err(wrong_type(
+            format!("array of 1 to {n} numbers"),
+            other,
+            &value.span,
+        )),
+        (Type::Triples(n, lo, hi), RawValue::Array(items)) => {
+            if items.is_empty() || items.len() > n {
+                return Err(src.error(
+                    value.span.clone(),
+                    format!(
+                        "`{}` of object `{object}` must hold 1 to {n} arrays of 3 numbers, found {}",
+                        spec.name,
+                        items.len()
+                    ),
+                    Some(spec.doc.to_string()),
+                ));
+            }
+            let triple = |item: &Located<RawValue>| {
+                let not_triple = || {
+                    src.error(
+                        item.span.clone(),
+                        format!(
+                            "each item of `{}` of object `{object}` must be [x, y, z], found {}",
+                            spec.name,
+                            a(item.value.type_name())
+                        ),
+                        Some(spec.doc.to_string()),
+                    )
+                };
+                let RawValue::Array(xyz) = &item.value else {
+                    return Err(not_triple());
+                };
+                if xyz.len() != 3 {
+                    return Err(not_triple());
+                }
+                let mut out = [0.0; 3];
+                for (o, c) in out.iter_mut().zip(xyz) {
+                    *o = match number(&c.value) {
+                        Some(x) => in_range(x, lo, hi, &c.span)?,
+                        None => return Err(not_triple()),
+                    };
+                }
+                Ok(out)
+            };
+            items
+                .iter()
+                .map(triple)
+                .collect::<Result<Vec<_>, _>>()
+                .map(Value::Triples)
+        }
+        (Type::Triples(n, ..), other) => Err(wrong_type(
+            format!("array of 1 to {n} arrays of 3 numbers"),
             other,
             &value.span,
         )),

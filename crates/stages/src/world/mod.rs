@@ -8,12 +8,14 @@
 //! - [`surface`]: the plane seen around one pixel (math only).
 //! - [`views`]: the frames' depth, camera models and poses read from a recording.
 //! - [`place`]: anchors resolved against a recording, with the report printed to users.
+//! - [`follow`]: the objects a stage renders, posed at each frame when they move.
 //!
 //! This lives with the stages, not with the objects, because it needs the config's spans
 //! (`relume_graph::config`) and the plane fit of [`crate::plane_fit`].
 
 pub mod config;
 pub mod floor;
+pub mod follow;
 pub mod place;
 pub mod surface;
 pub mod views;
@@ -24,7 +26,7 @@ pub use place::Placement;
 use relume_graph::config::{ConfigError, ObjectDecl, SourceFile};
 use relume_graph::{BuildContext, Pipeline, World};
 use relume_recording::Replay;
-use relume_scene::objects::VirtualScene;
+use relume_scene::objects::{MovingScene, ObjectError, VirtualScene};
 use std::any::Any;
 use std::sync::{Arc, LazyLock};
 
@@ -35,11 +37,77 @@ pub struct ObjectWorld {
     /// Every `[[object]]` table as declared, in order.
     pub declared: Vec<DeclaredObject>,
     /// The objects in world space, BVH built; anchored objects join it when
-    /// [`place_objects`] places them.
+    /// [`place_objects`] places them. Moving objects stand where they are at frame 0.
     pub scene: Arc<VirtualScene>,
+    /// The same objects with their motions, when any of them moves
+    /// ([`ObjectWorld::scene_at`] places them frame by frame).
+    pub moving: Option<Arc<MovingScene>>,
 }
 
 impl ObjectWorld {
+    /// The world of `scene`'s objects standing still (tests, benches and tools that
+    /// build a scene by hand).
+    pub fn still(scene: impl Into<Arc<VirtualScene>>) -> ObjectWorld {
+        ObjectWorld {
+            declared: Vec::new(),
+            scene: scene.into(),
+            moving: None,
+        }
+    }
+
+    /// The world of `specs` (those in `scene`, in its order): `scene` alone when
+    /// nothing moves.
+    fn of(
+        declared: Vec<DeclaredObject>,
+        scene: VirtualScene,
+        specs: &[relume_scene::objects::ObjectSpec],
+    ) -> Result<ObjectWorld, ObjectError> {
+        let moving = match specs.iter().any(|s| s.motion.is_some()) {
+            true => Some(Arc::new(MovingScene::new(specs)?)),
+            false => None,
+        };
+        Ok(ObjectWorld {
+            declared,
+            scene: Arc::new(scene),
+            moving,
+        })
+    }
+
+    /// True when an object moves.
+    pub fn moves(&self) -> bool {
+        self.moving.is_some()
+    }
+
+    /// The objects as they stand at recording frame `frame`: the scene itself when
+    /// nothing moves (the same allocation), else the objects posed there with a BVH of
+    /// their own.
+    pub fn scene_at(&self, frame: u64) -> Result<Arc<VirtualScene>, ObjectError> {
+        match &self.moving {
+            None => Ok(Arc::clone(&self.scene)),
+            Some(moving) => moving.at(frame).map(Arc::new),
+        }
+    }
+
+    /// The objects (by index in the scene) that stand otherwise at `frame` than at
+    /// `earlier`, with their bounding boxes at `frame`.
+    pub fn moved(
+        &self,
+        earlier: u64,
+        frame: u64,
+    ) -> Result<Vec<(usize, relume_scene::objects::Aabb)>, ObjectError> {
+        match &self.moving {
+            None => Ok(Vec::new()),
+            Some(moving) => moving.moved(earlier, frame),
+        }
+    }
+
+    /// True when every object stands at `frame` as it stood at `earlier`.
+    pub fn same_at(&self, earlier: u64, frame: u64) -> bool {
+        self.moving
+            .as_ref()
+            .is_none_or(|moving| moving.same_at(earlier, frame))
+    }
+
     /// The names of the objects anchored to the scene that have not been placed yet.
     pub fn unplaced(&self) -> Vec<String> {
         self.declared
@@ -64,7 +132,10 @@ impl World for ObjectWorld {
 
     fn same_as(&self, other: &dyn World) -> bool {
         match (other as &dyn Any).downcast_ref::<ObjectWorld>() {
-            Some(o) => Arc::ptr_eq(&self.scene, &o.scene) || self.scene == o.scene,
+            Some(o) => {
+                (Arc::ptr_eq(&self.scene, &o.scene) || self.scene == o.scene)
+                    && self.moving == o.moving
+            }
             None => false,
         }
     }
@@ -73,10 +144,15 @@ impl World for ObjectWorld {
 /// The [`relume_graph::WorldResolver`] of the built-in registry.
 pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<Arc<dyn World>, ConfigError> {
     let objects = config::resolve(decls, src)?;
-    Ok(Arc::new(ObjectWorld {
-        declared: objects.declared,
-        scene: Arc::new(objects.world_scene),
-    }))
+    let specs: Vec<_> = objects
+        .declared
+        .iter()
+        .filter(|d| d.sites.is_none())
+        .map(|d| d.spec.clone())
+        .collect();
+    let world = ObjectWorld::of(objects.declared, objects.world_scene, &specs)
+        .map_err(|e| ConfigError::whole_file(&src.name, e.to_string()))?;
+    Ok(Arc::new(world))
 }
 
 /// The world of `pipeline` as objects (an empty one for a world of another kind).
@@ -130,20 +206,17 @@ pub fn place_objects(
             Some((lo, hi)) => Some((p.min(lo), p.max(hi))),
         });
     }
-    pipeline.world = Arc::new(ObjectWorld {
-        declared,
-        scene: Arc::new(scene),
-    });
+    let specs: Vec<_> = declared.iter().map(|d| d.spec.clone()).collect();
+    let world = ObjectWorld::of(declared, scene, &specs)
+        .map_err(|e| ConfigError::whole_file(&pipeline.file, e.to_string()))?;
+    pipeline.world = Arc::new(world);
     Ok(placements)
 }
 
 /// The world of `scene` alone, as builders receive it (tests and benches that build a
 /// stage by hand).
 pub fn world_of(scene: impl Into<Arc<VirtualScene>>) -> Arc<dyn World> {
-    Arc::new(ObjectWorld {
-        declared: Vec::new(),
-        scene: scene.into(),
-    })
+    Arc::new(ObjectWorld::still(scene))
 }
 
 /// A pipeline's objects read through its world, as the command line, eval and tests

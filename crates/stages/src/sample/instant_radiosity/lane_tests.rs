@@ -18,6 +18,7 @@ use crate::sample::path::tests::{
 use glam::Vec3;
 use relume_base::rng::{hash, unit_f32};
 use relume_base::simd::{Kernel, LANES};
+use relume_scene::objects::VirtualScene;
 
 /// A uniform float in [lo, hi) from hash `h` and `k`.
 fn uniform(h: u64, k: u64, lo: f32, hi: f32) -> f32 {

@@ -86,9 +86,8 @@ pub use render::DirRenderer;
 use super::layers::{IrradianceLayers, renderer_input_ports};
 use super::renderer::{self, RenderFrame, Renderer};
 use crate::OpError;
+use crate::world::follow::FollowedObjects;
 use relume_graph::{BuildContext, ParamSpec, Params, Port, StageError, StageInfo};
-use relume_scene::objects::VirtualScene;
-use std::sync::Arc;
 
 pub const INFO: StageInfo = renderer::info::<SampleDir>();
 
@@ -102,11 +101,12 @@ pub fn sample_dir(inputs: &DirInputs, params: &DirParams) -> Result<IrradianceLa
 }
 
 /// `sample.dir` as a [`Renderer`]: [`DirRenderer`] (its buffers kept from frame to
-/// frame) over the frame's products, with the objects' points spread once per run.
+/// frame) over the frame's products, with the objects' points spread once per run, or
+/// again each frame an object moved.
 pub struct SampleDir {
     mesh: MeshPoints,
     params: DirParams,
-    objects: Arc<VirtualScene>,
+    objects: FollowedObjects,
     renderer: DirRenderer,
 }
 
@@ -122,12 +122,12 @@ impl Renderer for SampleDir {
     fn build(ctx: &BuildContext) -> Result<SampleDir, StageError> {
         let params = DirParams::from_params(ctx.params, ctx.seed);
         params.check()?;
-        let objects = crate::world::objects(ctx);
+        let objects = FollowedObjects::new(ctx);
         Ok(SampleDir {
-            // The objects do not move: their points are spread once.
-            mesh: MeshPoints::new(objects, params.mesh_points as usize, params.seed),
+            // Spread again only when the objects move.
+            mesh: MeshPoints::new(objects.scene(), params.mesh_points as usize, params.seed),
             params,
-            objects: Arc::clone(objects),
+            objects,
             renderer: DirRenderer::default(),
         })
     }
@@ -137,6 +137,11 @@ impl Renderer for SampleDir {
         frame: &RenderFrame<'_>,
         out: &mut IrradianceLayers,
     ) -> Result<(), StageError> {
+        let (objects, moved) = self.objects.at(frame.index)?;
+        if moved {
+            let (points, seed) = (self.params.mesh_points as usize, self.params.seed);
+            self.mesh = MeshPoints::new(objects, points, seed);
+        }
         let inputs = DirInputs {
             depth: frame.depth,
             normals: frame.normals("normals")?,
@@ -144,7 +149,7 @@ impl Renderer for SampleDir {
             camera: frame.camera,
             camera_to_world: frame.camera_to_world,
             table: frame.light_table("light_table")?,
-            objects: &self.objects,
+            objects,
             frame: frame.index,
         };
         self.renderer

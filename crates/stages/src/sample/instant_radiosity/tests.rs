@@ -14,6 +14,7 @@ use glam::Vec3;
 use relume_base::threads::with_threads;
 use relume_scene::light::LightTable;
 use relume_scene::objects::Material;
+use relume_scene::objects::VirtualScene;
 
 /// The shared floor scene's inputs with `objects` under `table`, at `frame`.
 pub(super) fn inputs<'a>(

@@ -10,6 +10,7 @@ use glam::Vec3;
 use relume_base::raster::Vec3Image;
 use relume_base::threads::with_threads;
 use relume_scene::objects::Material;
+use relume_scene::objects::VirtualScene;
 
 /// The floor with a wall across it at world z = `wall_z` (facing the camera).
 fn floor_and_wall_scene(wall_z: f32) -> Scene {

@@ -2,7 +2,7 @@
 //! estimates of the irradiance with real geometry only (E_R) and with real and virtual
 //! geometry (E_RV), each split into direct and one-bounce indirect parts. Real geometry
 //! is the depth map, traced in screen space ([`ScreenTracer`], hierarchical over a
-//! min-max pyramid); virtual geometry is the pipeline's [`VirtualScene`].
+//! min-max pyramid); virtual geometry is the pipeline's [`VirtualScene`](relume_scene::objects::VirtualScene).
 //!
 //! Per pixel:
 //! - **Primary samples** (`primary`, 4): jittered sub-pixel view rays. The real surface
@@ -149,12 +149,12 @@ use super::query::{ImpostorQuery, QueryKind, VoxelQuery};
 use super::renderer::{self, RenderFrame, Renderer};
 use super::ssrt::ScreenTracer;
 use crate::OpError;
+use crate::world::follow::FollowedObjects;
 use kernel::Kernel;
 use rays::WorldQuery;
 use relume_base::simd;
 use relume_graph::{BuildContext, ParamSpec, Params, Port, StageError, StageInfo};
 use relume_scene::light::voxels::VoxelVolume;
-use relume_scene::objects::VirtualScene;
 use span::{SPAN_PIXELS, Span};
 use std::sync::Arc;
 
@@ -283,10 +283,11 @@ fn world_query<'a>(
 }
 
 /// `sample.path` as a [`Renderer`]: the estimator of [`sample_path`] over the
-/// frame's products, with the objects' solid volume (`vct`) built once per run.
+/// frame's products, with the objects' solid volume (`vct`) built once per run, or
+/// again each frame an object moved.
 pub struct SamplePath {
     params: PathParams,
-    objects: Arc<VirtualScene>,
+    objects: FollowedObjects,
     /// The objects' solid volume (`vct`).
     object_voxels: Option<Arc<VoxelVolume>>,
 }
@@ -316,12 +317,12 @@ impl Renderer for SamplePath {
     fn build(ctx: &BuildContext) -> Result<SamplePath, StageError> {
         let params = PathParams::from_params(ctx.params, ctx.seed);
         params.check()?;
-        let objects = crate::world::objects(ctx);
+        let objects = FollowedObjects::new(ctx);
         Ok(SamplePath {
-            // The objects do not move: their solid volume is built once.
-            object_voxels: params.object_volume(objects).map(Arc::new),
+            // Built again only when the objects move.
+            object_voxels: params.object_volume(objects.scene()).map(Arc::new),
             params,
-            objects: Arc::clone(objects),
+            objects,
         })
     }
 
@@ -331,6 +332,10 @@ impl Renderer for SamplePath {
         out: &mut IrradianceLayers,
     ) -> Result<(), StageError> {
         let query = self.params.query;
+        let (objects, moved) = self.objects.at(frame.index)?;
+        if moved {
+            self.object_voxels = self.params.object_volume(objects).map(Arc::new);
+        }
         let inputs = PathInputs {
             depth: frame.depth,
             normals: frame.normals("normals")?,
@@ -346,7 +351,7 @@ impl Renderer for SamplePath {
                 true => Some(frame.voxels("voxels")?),
                 false => None,
             },
-            objects: &self.objects,
+            objects,
             object_voxels: self.object_voxels.as_deref(),
             frame: frame.index,
         };

@@ -14,6 +14,7 @@ use glam::Vec3;
 use relume_base::threads::with_threads;
 use relume_scene::light::LightTable;
 use relume_scene::objects::Material;
+use relume_scene::objects::VirtualScene;
 use std::f32::consts::PI;
 
 /// Every query, with its iterations.

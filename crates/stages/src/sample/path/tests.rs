@@ -11,6 +11,7 @@ use relume_recording::Intrinsics;
 use relume_scene::light::LightSample;
 use relume_scene::light::voxels::VoxelVolume;
 use relume_scene::light::{EnvMap, LightTable};
+use relume_scene::objects::VirtualScene;
 use relume_scene::objects::{Material, Triangle};
 use std::f32::consts::PI;
 

@@ -63,6 +63,7 @@ use super::layers::{IrradianceLayers, LAYER_OUTPUTS};
 use super::renderer::{RenderFrame, Renderer, info};
 use crate::OpError;
 use crate::kind;
+use crate::world::follow::FollowedObjects;
 use glam::Vec3;
 pub use inputs::{ValInputs, ValShadingParams};
 use relume_graph::{
@@ -193,7 +194,7 @@ pub fn sample_val(
 /// to frame) over the frame's products, with the objects' radiance transfer loaded
 /// once per run.
 pub struct SampleVal {
-    objects: Arc<VirtualScene>,
+    objects: FollowedObjects,
     transfer: Option<Arc<Transfer>>,
     params: ValShadingParams,
     renderer: ValRenderer,
@@ -218,6 +219,12 @@ impl Renderer for SampleVal {
         let p = ctx.params;
         let objects = crate::world::objects(ctx);
         let transfer = match p.str("transfer") == "prt" && !objects.is_empty() {
+            true if crate::world::object_world(ctx.world).moves() => {
+                return Err(StageError::Failed(format!(
+                    "stage `{}` (sample.val): transfer = \"prt\" precomputes the objects' occlusion of each other where they stand, and an object of this pipeline moves; use transfer = \"none\" (unoccluded SH9 irradiance) with moving objects",
+                    ctx.stage_name
+                )));
+            }
             true => {
                 let params = TransferParams {
                     samples: p.int("transfer_samples") as u32,
@@ -228,7 +235,7 @@ impl Renderer for SampleVal {
             false => None,
         };
         Ok(SampleVal {
-            objects: objects.clone(),
+            objects: FollowedObjects::new(ctx),
             transfer,
             params: ValShadingParams {
                 shadow_map_size: p.int("shadow_map_size") as usize,
@@ -251,13 +258,18 @@ impl Renderer for SampleVal {
         frame: &RenderFrame<'_>,
         out: &mut IrradianceLayers,
     ) -> Result<(), StageError> {
+        let (objects, moved) = self.objects.at(frame.index)?;
+        if moved {
+            // Maps of the objects where they stood: every light's is built again.
+            self.renderer.map_frusta.clear();
+        }
         let inputs = ValInputs {
             depth: frame.depth,
             normals: frame.normals("normals")?,
             camera: frame.camera,
             camera_to_world: frame.camera_to_world,
             lights: frame.area_lights("lights")?,
-            objects: &self.objects,
+            objects,
             transfer: self.transfer.as_deref(),
         };
         self.renderer.render(&inputs, &self.params, out)?;

@@ -1,9 +1,9 @@
 //! Temporal accumulation of the irradiance layers: each pixel's estimate of this frame
 //! averaged with the estimates that earlier frames made of the same surface point.
 //!
-//! The real scene is static and the objects are placed once, so the irradiance at a
+//! The real scene is static, so while the objects stand still the irradiance at a
 //! world point (E_R and E_RV, direct and indirect) does not change from frame to frame:
-//! only the noise of its estimate does. This is the reuse that paper 000 cites as
+//! only the noise of its estimate does. Where objects move, see step 4. This is the reuse that paper 000 cites as
 //! differential irradiance caching (its ref. 23), kept in screen space: the previous
 //! frame's accumulated layers are reprojected into the current view, as paper 001's
 //! temporal filter does (eqs. 24-26), and averaged with the new estimate.
@@ -28,6 +28,18 @@
 //!    minimum of this frame's and the history's (of the heaviest bilinear tap): with a
 //!    static scene, every earlier frame's samples saw the same occluders. `touched` is
 //!    1 where this frame's or an earlier frame's paths met an object.
+//! 4. **Objects that move** (when the caller passes a world epoch, the count of frames
+//!    so far in which an object moved): each pixel also keeps how many frames its
+//!    differential E_RV - E_R holds and the epoch that history began in. A history from
+//!    an earlier epoch at a pixel whose paths met an object, now or in the history (the
+//!    object's old and new footprint and shadows, its light on the floor), loses its
+//!    differential: E_R keeps averaging (the objects do not change it), E_RV becomes the
+//!    averaged E_R plus this frame's own E_RV - E_R, and the minimum distances and
+//!    `touched` are this frame's. From there the differential averages its own frames
+//!    (weight 1 / min(its frames + 1, `max_history`)). This is the history rejection of
+//!    reprojection-based denoisers, decided by what is known to have moved rather than
+//!    by comparing noisy estimates; where the differential holds as many frames as E_R
+//!    (everywhere in a still scene) the arithmetic is the plain one, bit for bit.
 //!
 //! E_RV == E_R holds bit for bit wherever it held in this frame's estimate and in the
 //! history: both are averaged by the same operations with the same weight.
@@ -44,6 +56,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{Image, LabelImage, ScalarImage, Vec3Image};
+use relume_scene::objects::Aabb;
 
 /// Half size of the reprojection's search window (1: 3 x 3).
 pub const SEARCH_RADIUS: i32 = 1;
@@ -98,6 +111,34 @@ pub struct Accumulated {
     /// Frames each pixel's estimate holds (this one included; the weight of the
     /// newest is 1 / min(frames, max_history)).
     pub frames: ScalarImage,
+    /// What step 4 keeps per pixel, when the objects move (`None` otherwise).
+    pub change: Option<ChangeLayers>,
+}
+
+/// Per pixel, what tells a differential history that predates an object's move from
+/// one that does not (step 4 of the module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChangeLayers {
+    /// Frames the differential E_RV - E_R holds: as `frames` until the pixel lost its
+    /// differential to a move, fewer from then on.
+    pub differential_frames: ScalarImage,
+    /// The world epoch the pixel's differential history began in.
+    pub epoch: Image<u32>,
+    /// 1 where the pixel showed a virtual object (mask below 1/2).
+    pub object: LabelImage,
+}
+
+/// What step 4 needs of this frame: the world epoch, and the renderer's mask (1 on real
+/// surfaces, 0 on objects), which tells a pixel that shows an object from one that
+/// shows the real surface behind it (both have its world position).
+#[derive(Clone, Copy)]
+pub struct WorldChange<'a> {
+    pub epoch: u32,
+    pub mask: &'a ScalarImage,
+    /// Each object that has moved: its bounding box now and the epoch of its last
+    /// move. A pixel that shows an object inside such a box, with a history from before
+    /// that move, starts anew.
+    pub moved: &'a [(Aabb, u32)],
 }
 
 /// The previous frame as [`accumulate`] reads it: its accumulated layers (as in
@@ -117,6 +158,9 @@ pub struct History<'a> {
     pub world_to_camera: Affine3A,
     /// The previous camera (its image the layers' size).
     pub camera: Pinhole,
+    /// Step 4's layers of the previous frame (`None`: nothing moved there, every
+    /// differential holds as many frames as E_R and began in epoch 0).
+    pub change: Option<&'a ChangeLayers>,
 }
 
 impl<'a> History<'a> {
@@ -139,6 +183,7 @@ impl<'a> History<'a> {
             world_normal,
             world_to_camera,
             camera,
+            change: layers.change.as_ref(),
         }
     }
 
@@ -153,6 +198,9 @@ impl<'a> History<'a> {
             && self.touched.same_size(frames)
             && self.world_position.same_size(frames)
             && self.world_normal.same_size(frames)
+            && self.change.is_none_or(|c| {
+                c.differential_frames.same_size(frames) && c.epoch.same_size(frames)
+            })
     }
 }
 
@@ -164,18 +212,27 @@ struct Pixel {
     indirect_min: f32,
     touched: u8,
     frames: f32,
+    /// Step 4: the differential's frames and the epoch its history began in.
+    differential_frames: f32,
+    epoch: u32,
+    /// Whether the pixel shows a virtual object (step 4).
+    object: bool,
 }
 
 /// Averages `fresh` with `history` (see the module docs) into a new [`Accumulated`].
 /// `camera` and `camera_to_world` are this frame's camera; all images must be its
 /// size. Without a history (the first frame, or after a cut) the result is `fresh`
 /// with one frame everywhere.
+///
+/// `change` is given when the pipeline's objects move (step 4), `None` when they stand
+/// still (the result then has no [`ChangeLayers`]).
 pub fn accumulate(
     fresh: &FreshLayers,
     history: Option<&History>,
     camera: Pinhole,
     camera_to_world: Affine3A,
     params: &AccumulateParams,
+    change: Option<WorldChange>,
 ) -> Result<Accumulated, OpError> {
     let (w, h) = (camera.width, camera.height);
     let mut sizes = vec![
@@ -207,6 +264,9 @@ pub fn accumulate(
     {
         sizes.push((name, image.width, image.height));
     }
+    if let Some(c) = change {
+        sizes.push(("mask", c.mask.width, c.mask.height));
+    }
     if let Some((what, ww, hh)) = sizes.into_iter().find(|&(_, ww, hh)| (ww, hh) != (w, h)) {
         return Err(OpError::SizeMismatch(format!(
             "temporal.accumulate: {what} is {ww}x{hh}, the camera's image is {w}x{h}"
@@ -217,15 +277,46 @@ pub fn accumulate(
     let eye = camera_to_world.translation.into();
     let max_history = params.max_history.max(1) as f32;
     let mut out = Accumulated::zeroed(w, h);
+    if change.is_some() {
+        out.change = Some(ChangeLayers {
+            differential_frames: Image::zeroed(w, h),
+            epoch: Image::zeroed(w, h),
+            object: Image::zeroed(w, h),
+        });
+    }
     let width = w as usize;
     out.rows(width).into_par_iter().for_each(|(y, mut row)| {
         for x in 0..width {
             let i = y * width + x;
-            let fresh_pixel = fresh_pixel(fresh, i);
-            let pixel = match history.and_then(|hist| previous(fresh, i, hist, camera, eye, params))
-            {
-                Some(previous) => blend(&fresh_pixel, &previous, max_history),
-                None => fresh_pixel,
+            let mut fresh_pixel = fresh_pixel(fresh, i);
+            let found = history.and_then(|hist| previous(fresh, i, hist, camera, eye, params));
+            let pixel = match (found, change) {
+                (None, change) => {
+                    if let Some(c) = change {
+                        fresh_pixel.epoch = c.epoch;
+                        fresh_pixel.object = c.mask.data[i] < 0.5;
+                    }
+                    fresh_pixel
+                }
+                (Some(previous), None) => blend(&fresh_pixel, &previous, max_history),
+                (Some(previous), Some(c)) => {
+                    fresh_pixel.epoch = c.epoch;
+                    fresh_pixel.object = c.mask.data[i] < 0.5;
+                    // Does the pixel show an object that moved since its history began?
+                    let moved_object = fresh_pixel.object
+                        && c.moved.iter().any(|&(bounds, since)| {
+                            let dir = camera_to_world
+                                .transform_vector3(camera.ray(x as f32 + 0.5, y as f32 + 0.5));
+                            since > previous.epoch
+                                && bounds
+                                    .ray_span(eye, dir.recip(), 0.0, f32::INFINITY)
+                                    .is_some()
+                        });
+                    match moved_object {
+                        true => fresh_pixel,
+                        false => blend_changing(&fresh_pixel, previous, max_history, c.epoch),
+                    }
+                }
             };
             row.set(x, &pixel);
         }
@@ -243,6 +334,7 @@ impl Accumulated {
             indirect_min_distance: Image::zeroed(width, height),
             touched: Image::zeroed(width, height),
             frames: Image::zeroed(width, height),
+            change: None,
         }
     }
 
@@ -257,6 +349,14 @@ impl Accumulated {
         let mut indirect_min = self.indirect_min_distance.data.chunks_mut(width);
         let mut touched = self.touched.data.chunks_mut(width);
         let mut frames = self.frames.data.chunks_mut(width);
+        let (mut differential_frames, mut epoch, mut object) = match &mut self.change {
+            Some(c) => (
+                Some(c.differential_frames.data.chunks_mut(width)),
+                Some(c.epoch.data.chunks_mut(width)),
+                Some(c.object.data.chunks_mut(width)),
+            ),
+            None => (None, None, None),
+        };
         let mut rows = Vec::new();
         while let (Some(a), Some(b), Some(c), Some(d), Some(e), Some(f), Some(g), Some(h)) = (
             r_dir.next(),
@@ -274,6 +374,9 @@ impl Accumulated {
                 indirect_min: f,
                 touched: g,
                 frames: h,
+                differential_frames: differential_frames.as_mut().and_then(|c| c.next()),
+                epoch: epoch.as_mut().and_then(|c| c.next()),
+                object: object.as_mut().and_then(|c| c.next()),
             };
             rows.push((rows.len(), row));
         }
@@ -288,6 +391,9 @@ struct Row<'a> {
     indirect_min: &'a mut [f32],
     touched: &'a mut [u8],
     frames: &'a mut [f32],
+    differential_frames: Option<&'a mut [f32]>,
+    epoch: Option<&'a mut [u32]>,
+    object: Option<&'a mut [u8]>,
 }
 
 impl Row<'_> {
@@ -300,6 +406,15 @@ impl Row<'_> {
         self.indirect_min[x] = p.indirect_min;
         self.touched[x] = p.touched;
         self.frames[x] = p.frames;
+        if let Some(d) = &mut self.differential_frames {
+            d[x] = p.differential_frames;
+        }
+        if let Some(e) = &mut self.epoch {
+            e[x] = p.epoch;
+        }
+        if let Some(o) = &mut self.object {
+            o[x] = p.object as u8;
+        }
     }
 }
 
@@ -310,6 +425,9 @@ fn fresh_pixel(fresh: &FreshLayers, i: usize) -> Pixel {
         indirect_min: fresh.indirect_min_distance.data[i],
         touched: fresh.touched.data[i].min(1),
         frames: 1.0,
+        differential_frames: 1.0,
+        epoch: 0,
+        object: false,
     }
 }
 
@@ -320,6 +438,12 @@ fn history_pixel(history: &History, j: usize) -> Pixel {
         indirect_min: history.indirect_min_distance.data[j],
         touched: history.touched.data[j],
         frames: history.frames.data[j],
+        differential_frames: match history.change {
+            Some(c) => c.differential_frames.data[j],
+            None => history.frames.data[j],
+        },
+        epoch: history.change.map_or(0, |c| c.epoch.data[j]),
+        object: history.change.is_some_and(|c| c.object.data[j] != 0),
     }
 }
 
@@ -339,6 +463,9 @@ fn mixed_history(history: &History, taps: &[(usize, f32)]) -> Pixel {
         indirect_min: history.indirect_min_distance.data[heaviest],
         touched: 0,
         frames: 0.0,
+        differential_frames: 0.0,
+        epoch: u32::MAX,
+        object: history.change.is_some_and(|c| c.object.data[heaviest] != 0),
     };
     for &(j, w) in taps {
         let w = w / total;
@@ -347,6 +474,17 @@ fn mixed_history(history: &History, taps: &[(usize, f32)]) -> Pixel {
         }
         mixed.frames += history.frames.data[j] * w;
         mixed.touched |= history.touched.data[j];
+        match history.change {
+            // The same operations as `frames`: equal counts mix to equal counts.
+            Some(c) => {
+                mixed.differential_frames += c.differential_frames.data[j] * w;
+                mixed.epoch = mixed.epoch.min(c.epoch.data[j]);
+            }
+            None => {
+                mixed.differential_frames += history.frames.data[j] * w;
+                mixed.epoch = 0;
+            }
+        }
     }
     mixed
 }
@@ -368,7 +506,58 @@ fn blend(fresh: &Pixel, previous: &Pixel, max_history: f32) -> Pixel {
         indirect_min: fresh.indirect_min.min(previous.indirect_min),
         touched: fresh.touched | previous.touched,
         frames: n,
+        differential_frames: n,
+        epoch: previous.epoch,
+        object: fresh.object,
     }
+}
+
+/// Step 4: [`blend`] where the objects may have moved since `previous`'s history began
+/// (this frame in `epoch`).
+#[inline]
+fn blend_changing(fresh: &Pixel, mut previous: Pixel, max_history: f32, epoch: u32) -> Pixel {
+    if fresh.object != previous.object && previous.epoch < epoch {
+        // Since objects moved, one now stands where the real surface was seen, or has
+        // left it: the history is of something else. (Without a move, a pixel on an
+        // object's outline, which shows it in some frames and not in others, blends
+        // as in a still world.)
+        return *fresh;
+    }
+    // A pixel of an object that did not move keeps its history: its shading changes
+    // little when another moves (the caller starts the pixels of moved objects anew).
+    let stale = previous.epoch < epoch && (fresh.touched | previous.touched) != 0 && !fresh.object;
+    if stale {
+        // The differential history is of objects where they no longer stand.
+        previous.differential_frames = 0.0;
+    }
+    let mut out = blend(fresh, &previous, max_history);
+    out.epoch = if stale { epoch } else { previous.epoch };
+    if previous.differential_frames == previous.frames {
+        // Every frame of the history is of the objects where they stand now.
+        return out;
+    }
+    if stale {
+        // The nearest occluders and the paths that met objects were of the old places.
+        out.direct_min = fresh.direct_min;
+        out.indirect_min = fresh.indirect_min;
+        out.touched = fresh.touched;
+    }
+    let m = (previous.differential_frames + 1.0).min(max_history);
+    let weight = 1.0 / m;
+    for (r, rv) in [(0, 2), (1, 3)] {
+        let (new_rv, old_rv) = (fresh.irradiance[rv], previous.irradiance[rv]);
+        let (new_r, old_r) = (fresh.irradiance[r], previous.irradiance[r]);
+        out.irradiance[rv] = if new_r.is_finite() && old_r.is_finite() {
+            // E_R from the whole history, the differential from its own frames.
+            let (new_d, old_d) = (new_rv - new_r, old_rv - old_r);
+            out.irradiance[r] + (old_d + (new_d - old_d) * weight)
+        } else {
+            // No real surface (a pixel of an object): E_RV alone, over its own frames.
+            old_rv + (new_rv - old_rv) * weight
+        };
+    }
+    out.differential_frames = m;
+    out
 }
 
 /// Previous pixel `j` of `history` when it may show the same surface point as `p`

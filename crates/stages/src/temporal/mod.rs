@@ -10,13 +10,17 @@
 //!
 //! The stage keeps the previous frame's output: frames are given to it in order, and
 //! the first frame of a replay (for `--frames 10..20`, frame 10) starts without a
-//! history, so its layers are that frame's estimates alone.
+//! history, so its layers are that frame's estimates alone. When the pipeline's objects
+//! move, it counts the frames in which they moved and drops the differential history
+//! where they were and are (step 4 of [`mod@accumulate`]).
 
 pub mod accumulate;
 #[cfg(test)]
 mod tests;
 
-pub use accumulate::{AccumulateParams, Accumulated, FreshLayers, History, accumulate};
+pub use accumulate::{
+    AccumulateParams, Accumulated, ChangeLayers, FreshLayers, History, WorldChange, accumulate,
+};
 
 use crate::kind;
 use glam::Affine3A;
@@ -92,6 +96,8 @@ pub const INFO: StageInfo = StageInfo {
         inputs: INPUTS
             .iter()
             .map(|(role, product, kinds)| Port::new(role, product, kinds))
+            // Which pixels show an object: read where the objects move (step 4).
+            .chain([Port::new("mask", "mask", &[kind::SCALAR]).optional()])
             .collect(),
         outputs: OUTPUTS
             .iter()
@@ -105,6 +111,12 @@ pub const INFO: StageInfo = StageInfo {
             params: params_from(ctx.params),
             intrinsics: ctx.header.depth_intrinsics,
             previous: None,
+            moving: crate::world::object_world(ctx.world)
+                .moves()
+                .then(|| crate::world::object_world(ctx.world).clone()),
+            mask: ctx.input("mask"),
+            moved: Vec::new(),
+            epoch: 0,
         }))
     },
 };
@@ -126,6 +138,9 @@ struct Previous {
     world_normal: Arc<Product>,
     world_to_camera: Affine3A,
     camera: Pinhole,
+    /// The frame it was, and step 4's layers when the objects move.
+    index: u64,
+    change: Option<ChangeLayers>,
 }
 
 impl Previous {
@@ -162,6 +177,7 @@ impl Previous {
             world_normal: vec3_image(&self.world_normal)?,
             world_to_camera: self.world_to_camera,
             camera: self.camera,
+            change: self.change.as_ref(),
         })
     }
 }
@@ -173,6 +189,14 @@ pub struct AccumulateStage {
     params: AccumulateParams,
     intrinsics: Intrinsics,
     previous: Option<Previous>,
+    /// The pipeline's objects, when they move.
+    moving: Option<crate::world::ObjectWorld>,
+    /// The renderer's mask (read only when the objects move).
+    mask: String,
+    /// Frames so far in which an object moved.
+    epoch: u32,
+    /// (object, its bounding box, the epoch of its last move) of each object that moved.
+    moved: Vec<(usize, relume_scene::objects::Aabb, u32)>,
 }
 
 /// The image inside a shared points or normals product.
@@ -220,13 +244,36 @@ impl Stage for AccumulateStage {
             ));
         }
         let camera = Pinhole::new(&self.intrinsics, w, h);
+        let index = frame.index as u64;
+        if let (Some(world), Some(previous)) = (&self.moving, &self.previous)
+            && !world.same_at(previous.index, index)
+        {
+            self.epoch += 1;
+            let moved = world
+                .moved(previous.index, index)
+                .map_err(|e| StageError::Failed(format!("frame {index}: {e}")))?;
+            for (object, bounds) in moved {
+                self.moved.retain(|(k, _, _)| *k != object);
+                self.moved.push((object, bounds, self.epoch));
+            }
+        }
+        let moved: Vec<_> = self.moved.iter().map(|&(_, b, e)| (b, e)).collect();
         let history = self.previous.as_ref().and_then(Previous::history);
+        let change = match &self.moving {
+            Some(_) => Some(WorldChange {
+                epoch: self.epoch,
+                mask: frame.scalar(&self.mask)?,
+                moved: &moved,
+            }),
+            None => None,
+        };
         let layers = accumulate(
             &fresh,
             history.as_ref(),
             camera,
             camera_to_world,
             &self.params,
+            change,
         )?;
         let shared = |name: &str| frame.get_shared(name).cloned();
         let (Some(world_position), Some(world_normal)) = (shared(position), shared(normal)) else {
@@ -238,6 +285,7 @@ impl Stage for AccumulateStage {
             indirect_min_distance,
             touched,
             frames,
+            change,
         } = layers;
         let products = [
             Product::new(kind::RADIANCE, e_r_dir),
@@ -259,6 +307,8 @@ impl Stage for AccumulateStage {
             world_normal,
             world_to_camera: camera_to_world.inverse(),
             camera,
+            index,
+            change,
         });
         Ok(())
     }

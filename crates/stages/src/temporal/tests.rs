@@ -63,8 +63,18 @@ fn wall(pose: Affine3A, value: impl Fn(Vec3) -> Vec3) -> Fresh {
 /// Runs `frames` (pose, fresh layers) through the accumulator in order; the last
 /// frame's result.
 fn run(frames: &[(Affine3A, &Fresh)], params: &AccumulateParams) -> Accumulated {
+    run_in_epochs(frames, params, None)
+}
+
+/// [`run`] with frame k in world epoch `epochs[k]` (objects that move), or as a still
+/// world (`None`).
+fn run_in_epochs(
+    frames: &[(Affine3A, &Fresh)],
+    params: &AccumulateParams,
+    epochs: Option<&[u32]>,
+) -> Accumulated {
     let mut previous: Option<(Accumulated, &Fresh, Affine3A)> = None;
-    for &(pose, fresh) in frames {
+    for (k, &(pose, fresh)) in frames.iter().enumerate() {
         let history = previous.as_ref().map(|(layers, seen, pose)| {
             History::of(
                 layers,
@@ -74,7 +84,22 @@ fn run(frames: &[(Affine3A, &Fresh)], params: &AccumulateParams) -> Accumulated 
                 camera(),
             )
         });
-        let out = accumulate(&fresh.layers(), history.as_ref(), camera(), pose, params).unwrap();
+        // No pixel shows an object (mask 1 everywhere), no object's box to test.
+        let real: ScalarImage = Image::filled(W, H, 1.0);
+        let change = epochs.map(|e| WorldChange {
+            epoch: e[k],
+            mask: &real,
+            moved: &[],
+        });
+        let out = accumulate(
+            &fresh.layers(),
+            history.as_ref(),
+            camera(),
+            pose,
+            params,
+            change,
+        )
+        .unwrap();
         previous = Some((out, fresh, pose));
     }
     previous.unwrap().0
@@ -253,6 +278,7 @@ fn a_layer_of_another_size_is_refused_by_name() {
         camera(),
         Affine3A::IDENTITY,
         &AccumulateParams::default(),
+        None,
     ) else {
         panic!("a 31x24 layer was accepted");
     };
@@ -299,4 +325,103 @@ fn a_slow_pan_does_not_drag_the_history_behind_the_surface() {
         "the edge shows at x = {crossing}, a pixel is {footprint} m"
     );
     assert!(out.frames.data[row + W as usize / 2] > 15.0);
+}
+
+/// A wall whose pixels in columns `shadow` are touched by an object that darkens E_RV
+/// there to `dark` (E_R is `lit` everywhere).
+fn shadowed_wall(shadow: std::ops::Range<u32>, lit: f32, dark: f32) -> Fresh {
+    let mut f = wall(Affine3A::IDENTITY, |_| Vec3::splat(lit));
+    for y in 0..H {
+        for x in shadow.clone() {
+            let i = (y * W + x) as usize;
+            f.irradiance[2].data[i] = Vec3::splat(dark);
+            f.irradiance[3].data[i] = Vec3::splat(dark);
+            f.touched.data[i] = 1;
+            f.direct_min.data[i] = 0.5;
+        }
+    }
+    f
+}
+
+#[test]
+fn a_still_world_gives_the_same_bits_with_and_without_change_detection() {
+    let frames: Vec<Fresh> = (0..5)
+        .map(|t| shadowed_wall(8..16, 1.0 + t as f32 * 0.37, 0.3 + t as f32 * 0.11))
+        .collect();
+    let pose = Affine3A::from_translation(Vec3::new(0.01, 0.0, 0.0));
+    let moving: Vec<(Affine3A, &Fresh)> = frames
+        .iter()
+        .enumerate()
+        .map(|(t, f)| (if t % 2 == 0 { Affine3A::IDENTITY } else { pose }, f))
+        .collect();
+    let params = AccumulateParams::default();
+    let plain = run(&moving, &params);
+    let watched = run_in_epochs(&moving, &params, Some(&[0; 5]));
+    assert_eq!(plain.irradiance, watched.irradiance);
+    assert_eq!(plain.frames, watched.frames);
+    assert_eq!(plain.touched, watched.touched);
+    let change = watched.change.unwrap();
+    assert_eq!(change.differential_frames, plain.frames);
+    assert!(plain.change.is_none());
+}
+
+#[test]
+fn a_moved_objects_old_footprint_loses_its_differential_history() {
+    // Four frames of an object's shadow over columns 8..16, then it moves: its shadow
+    // now covers columns 20..28.
+    let before = shadowed_wall(8..16, 1.0, 0.2);
+    let after = shadowed_wall(20..28, 1.0, 0.2);
+    let still = Affine3A::IDENTITY;
+    let frames = [
+        (still, &before),
+        (still, &before),
+        (still, &before),
+        (still, &after),
+    ];
+    let params = AccumulateParams::default();
+    let moved = run_in_epochs(&frames, &params, Some(&[0, 0, 0, 1]));
+    let ignored = run(&frames, &params);
+    let at = |x: u32| (12 * W + x) as usize;
+    // The old footprint: no ghost; E_R keeps its four frames.
+    let old = at(10);
+    assert_eq!(moved.irradiance[2].data[old], Vec3::ONE);
+    assert_eq!(moved.irradiance[0].data[old], Vec3::ONE);
+    assert_eq!(moved.frames.data[old], 4.0);
+    assert_eq!(moved.touched.data[old], 0);
+    assert_eq!(moved.direct_min_distance.data[old], f32::INFINITY);
+    // Without change detection the ghost holds three quarters of the old shadow.
+    assert!((ignored.irradiance[2].data[old].x - 0.4).abs() < 1e-6);
+    // The new footprint: this frame's shadow, not a quarter of it.
+    let new = at(24);
+    assert!((moved.irradiance[2].data[new].x - 0.2).abs() < 1e-6);
+    assert!((ignored.irradiance[2].data[new].x - 0.8).abs() < 1e-6);
+    let change = moved.change.as_ref().unwrap();
+    assert_eq!(change.differential_frames.data[new], 1.0);
+    assert_eq!(change.epoch.data[new], 1);
+    // Where no object was or is, the history is whole (and E_RV == E_R, bit for bit).
+    let clear = at(2);
+    assert_eq!(moved.frames.data[clear], 4.0);
+    assert_eq!(change.differential_frames.data[clear], 4.0);
+    assert_eq!(
+        moved.irradiance[2].data[clear],
+        moved.irradiance[0].data[clear]
+    );
+    // The next frame with the object still: the new shadow averages its own two
+    // frames, and the history of the old place stays as clean as E_R.
+    let darker = shadowed_wall(20..28, 1.0, 0.1);
+    let frames = [
+        (still, &before),
+        (still, &before),
+        (still, &before),
+        (still, &after),
+        (still, &darker),
+    ];
+    let next = run_in_epochs(&frames, &params, Some(&[0, 0, 0, 1, 1]));
+    assert!((next.irradiance[2].data[new].x - 0.15).abs() < 1e-6);
+    assert_eq!(next.frames.data[new], 5.0);
+    assert_eq!(
+        next.change.as_ref().unwrap().differential_frames.data[new],
+        2.0
+    );
+    assert_eq!(next.irradiance[2].data[old], Vec3::ONE);
 }

@@ -70,6 +70,6 @@ pub use error::ObjectError;
 pub use geometry::{Aabb, Material, Triangle, ray_triangle, ray_triangle_edges, tri_normal};
 pub use mesh::{load_obj, parse_obj};
 pub use motion::{Keyframe, Motion};
-pub use moving::MovingScene;
+pub use moving::{MovingScene, ObjectMove};
 pub use spec::{MAX_TRANSLATION, MAX_WORLD_COORDINATE, ObjectSpec, Shape};
 pub use virtual_scene::{VirtualHit, VirtualScene};

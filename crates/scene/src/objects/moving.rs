@@ -11,6 +11,19 @@ use super::error::ObjectError;
 use super::geometry::{Aabb, Triangle};
 use super::spec::ObjectSpec;
 use super::virtual_scene::VirtualScene;
+use glam::Affine3A;
+
+/// One object between two frames (see [`MovingScene::moves_between`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObjectMove {
+    /// Its bounding box at the later frame.
+    pub bounds: Aabb,
+    /// Whether it stands otherwise than at the earlier frame.
+    pub moved: bool,
+    /// A point riding on it at the later frame to where it was at the earlier one
+    /// (the identity for an object that did not move).
+    pub to_earlier: Affine3A,
+}
 
 /// One object: its spec, the frame it is placed in, and its shape's own triangles.
 #[derive(Clone, Debug, PartialEq)]
@@ -60,22 +73,36 @@ impl MovingScene {
         Ok(VirtualScene::new(triangles, materials))
     }
 
-    /// The objects (by index) that stand otherwise at `frame` than at `earlier`, each
-    /// with its bounding box at `frame`.
-    pub fn moved(&self, earlier: u64, frame: u64) -> Result<Vec<(usize, Aabb)>, ObjectError> {
-        let mut out = Vec::new();
+    /// Every object between `earlier` and `frame`: its bounding box at `frame`, whether
+    /// it stands otherwise than at `earlier`, and the rigid map that takes a point
+    /// riding on it at `frame` to where that point was at `earlier`.
+    pub fn moves_between(&self, earlier: u64, frame: u64) -> Result<Vec<ObjectMove>, ObjectError> {
+        let mut out = Vec::with_capacity(self.objects.len());
         for (k, o) in self.objects.iter().enumerate() {
             let placement = |at: u64| o.spec.placement_at(at as f64);
-            if o.spec.motion.is_none() || placement(earlier) == placement(frame) {
-                continue;
-            }
             let mut bounds = Aabb::EMPTY;
             let placed = o.spec.place(&o.local, &o.frame, frame as f64, k as u32)?;
             placed
                 .iter()
                 .flat_map(|t| t.vertices)
                 .for_each(|v| bounds.grow(v));
-            out.push((k, bounds));
+            let moved = o.spec.motion.is_some() && placement(earlier) != placement(frame);
+            let to_world = |at: u64| {
+                let (translation, linear) = placement(at);
+                Affine3A::from_mat3_translation(
+                    o.frame.axes * linear,
+                    o.frame.origin + o.frame.axes * translation,
+                )
+            };
+            let to_earlier = match moved {
+                true => to_world(earlier) * to_world(frame).inverse(),
+                false => Affine3A::IDENTITY,
+            };
+            out.push(ObjectMove {
+                bounds,
+                moved,
+                to_earlier,
+            });
         }
         Ok(out)
     }
@@ -144,10 +171,30 @@ mod tests {
             VirtualScene::from_specs(&specs).unwrap()
         );
         assert!(moving.same_at(0, 10) && moving.same_at(20, 99));
-        assert!(moving.moved(0, 10).unwrap().is_empty());
-        let moved = moving.moved(14, 15).unwrap();
-        assert_eq!(moved.len(), 1);
-        assert_eq!((moved[0].0, moved[0].1), (1, bounds));
+        assert!(
+            moving
+                .moves_between(0, 10)
+                .unwrap()
+                .iter()
+                .all(|m| !m.moved)
+        );
+        let moves = moving.moves_between(14, 15).unwrap();
+        assert_eq!(moves.len(), 2);
+        assert!(!moves[0].moved && moves[0].to_earlier == Affine3A::IDENTITY);
+        assert!(moves[1].moved && moves[1].bounds == bounds);
+        // A point riding on the box at frame 15 (its top corner) was at frame 14
+        // where the box's placement then puts that corner.
+        let at = |frame: u64| {
+            let scene = moving.at(frame).unwrap();
+            scene
+                .triangles
+                .iter()
+                .find(|t| t.material == 1)
+                .unwrap()
+                .vertices[0]
+        };
+        let back = moves[1].to_earlier.transform_point3(at(15));
+        assert!(back.abs_diff_eq(at(14), 1e-5), "{back} vs {}", at(14));
         assert!(!moving.same_at(10, 11) && !moving.same_at(19, 20));
     }
 

@@ -28,18 +28,32 @@
 //!    minimum of this frame's and the history's (of the heaviest bilinear tap): with a
 //!    static scene, every earlier frame's samples saw the same occluders. `touched` is
 //!    1 where this frame's or an earlier frame's paths met an object.
-//! 4. **Objects that move** (when the caller passes a world epoch, the count of frames
-//!    so far in which an object moved): each pixel also keeps how many frames its
-//!    differential E_RV - E_R holds and the epoch that history began in. A history from
-//!    an earlier epoch at a pixel whose paths met an object, now or in the history (the
-//!    object's old and new footprint and shadows, its light on the floor), loses its
-//!    differential: E_R keeps averaging (the objects do not change it), E_RV becomes the
-//!    averaged E_R plus this frame's own E_RV - E_R, and the minimum distances and
-//!    `touched` are this frame's. From there the differential averages its own frames
-//!    (weight 1 / min(its frames + 1, `max_history`)). This is the history rejection of
-//!    reprojection-based denoisers, decided by what is known to have moved rather than
-//!    by comparing noisy estimates; where the differential holds as many frames as E_R
-//!    (everywhere in a still scene) the arithmetic is the plain one, bit for bit.
+//! 4. **Objects that move** (when the caller passes how each object moved since the
+//!    previous frame, [`WorldChange`]): each pixel also keeps how many frames its
+//!    differential E_RV - E_R holds, and whether it showed an object. E_R always
+//!    averages as above (the objects do not change it); the differential's history
+//!    follows the objects:
+//!    - a pixel of an object that moved this frame takes, whole, the history of the same
+//!      point of the object where it stood a frame ago (its world position carried back
+//!      by the object's rigid move, then step 1 there), or starts anew when the
+//!      previous frame did not see that point;
+//!    - a real surface point whose paths met an object (now or in its history), or that
+//!      an object covered a frame ago, and whose nearest object moved this frame, takes
+//!      its differential from the history of the point that stood where it does
+//!      relative to that object a frame ago: a shadow or a glow that travels with its
+//!      object travels with its history. Where that point was not seen, the
+//!      differential starts anew (this frame's E_RV - E_R over the averaged E_R);
+//!    - elsewhere (no object moved, or the nearest one did not) the history is kept.
+//!
+//!    The carried differential averages its own frames (weight 1 / min(its frames + 1,
+//!    `max_history`)); the minimum distances and `touched` are this frame's and the
+//!    carried point's. Nothing is left where an object was (no trailing shadow); the
+//!    approximation is that a shadow moves rigidly with its object, exact for a
+//!    translation along a plane under distant light. Where the differential holds as
+//!    many frames as E_R (everywhere in a still scene) the arithmetic is the plain one,
+//!    bit for bit. Reprojection-based denoisers reject such history by comparing noisy
+//!    estimates or re-shading a few pixels (temporal gradients); here what moved, and
+//!    how, is known.
 //!
 //! E_RV == E_R holds bit for bit wherever it held in this frame's estimate and in the
 //! history: both are averaged by the same operations with the same weight.
@@ -56,7 +70,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{Image, LabelImage, ScalarImage, Vec3Image};
-use relume_scene::objects::Aabb;
+use relume_scene::objects::ObjectMove;
 
 /// Half size of the reprojection's search window (1: 3 x 3).
 pub const SEARCH_RADIUS: i32 = 1;
@@ -115,30 +129,24 @@ pub struct Accumulated {
     pub change: Option<ChangeLayers>,
 }
 
-/// Per pixel, what tells a differential history that predates an object's move from
-/// one that does not (step 4 of the module docs).
+/// Per pixel, what step 4 keeps beside the layers when objects move.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ChangeLayers {
-    /// Frames the differential E_RV - E_R holds: as `frames` until the pixel lost its
-    /// differential to a move, fewer from then on.
+    /// Frames the differential E_RV - E_R holds: as `frames` until an object moved
+    /// near the pixel, its own count from then on.
     pub differential_frames: ScalarImage,
-    /// The world epoch the pixel's differential history began in.
-    pub epoch: Image<u32>,
     /// 1 where the pixel showed a virtual object (mask below 1/2).
     pub object: LabelImage,
 }
 
-/// What step 4 needs of this frame: the world epoch, and the renderer's mask (1 on real
-/// surfaces, 0 on objects), which tells a pixel that shows an object from one that
-/// shows the real surface behind it (both have its world position).
+/// What step 4 needs of this frame: the renderer's mask (1 on real surfaces, 0 on
+/// objects), which tells a pixel that shows an object from one that shows the real
+/// surface, and how each object moved since the previous frame.
 #[derive(Clone, Copy)]
 pub struct WorldChange<'a> {
-    pub epoch: u32,
     pub mask: &'a ScalarImage,
-    /// Each object that has moved: its bounding box now and the epoch of its last
-    /// move. A pixel that shows an object inside such a box, with a history from before
-    /// that move, starts anew.
-    pub moved: &'a [(Aabb, u32)],
+    /// Every object, in the scene's order.
+    pub objects: &'a [ObjectMove],
 }
 
 /// The previous frame as [`accumulate`] reads it: its accumulated layers (as in
@@ -159,7 +167,7 @@ pub struct History<'a> {
     /// The previous camera (its image the layers' size).
     pub camera: Pinhole,
     /// Step 4's layers of the previous frame (`None`: nothing moved there, every
-    /// differential holds as many frames as E_R and began in epoch 0).
+    /// differential holds as many frames as E_R).
     pub change: Option<&'a ChangeLayers>,
 }
 
@@ -199,7 +207,7 @@ impl<'a> History<'a> {
             && self.world_position.same_size(frames)
             && self.world_normal.same_size(frames)
             && self.change.is_none_or(|c| {
-                c.differential_frames.same_size(frames) && c.epoch.same_size(frames)
+                c.differential_frames.same_size(frames) && c.object.same_size(frames)
             })
     }
 }
@@ -212,9 +220,8 @@ struct Pixel {
     indirect_min: f32,
     touched: u8,
     frames: f32,
-    /// Step 4: the differential's frames and the epoch its history began in.
+    /// Step 4: the frames the differential holds.
     differential_frames: f32,
-    epoch: u32,
     /// Whether the pixel shows a virtual object (step 4).
     object: bool,
 }
@@ -280,7 +287,6 @@ pub fn accumulate(
     if change.is_some() {
         out.change = Some(ChangeLayers {
             differential_frames: Image::zeroed(w, h),
-            epoch: Image::zeroed(w, h),
             object: Image::zeroed(w, h),
         });
     }
@@ -293,28 +299,36 @@ pub fn accumulate(
             let pixel = match (found, change) {
                 (None, change) => {
                     if let Some(c) = change {
-                        fresh_pixel.epoch = c.epoch;
                         fresh_pixel.object = c.mask.data[i] < 0.5;
                     }
                     fresh_pixel
                 }
                 (Some(previous), None) => blend(&fresh_pixel, &previous, max_history),
                 (Some(previous), Some(c)) => {
-                    fresh_pixel.epoch = c.epoch;
                     fresh_pixel.object = c.mask.data[i] < 0.5;
-                    // Does the pixel show an object that moved since its history began?
-                    let moved_object = fresh_pixel.object
-                        && c.moved.iter().any(|&(bounds, since)| {
-                            let dir = camera_to_world
-                                .transform_vector3(camera.ray(x as f32 + 0.5, y as f32 + 0.5));
-                            since > previous.epoch
-                                && bounds
-                                    .ray_span(eye, dir.recip(), 0.0, f32::INFINITY)
-                                    .is_some()
-                        });
-                    match moved_object {
-                        true => fresh_pixel,
-                        false => blend_changing(&fresh_pixel, previous, max_history, c.epoch),
+                    let source = match history {
+                        Some(hist) => differential_source(
+                            &fresh_pixel,
+                            &previous,
+                            fresh,
+                            i,
+                            (x, y),
+                            hist,
+                            (camera, camera_to_world),
+                            params,
+                            c,
+                        ),
+                        None => Differential::Kept,
+                    };
+                    match source {
+                        Differential::Restart => fresh_pixel,
+                        Differential::Whole(source) => {
+                            let mut out = blend(&fresh_pixel, &source, max_history);
+                            out.differential_frames =
+                                (source.differential_frames + 1.0).min(max_history);
+                            out
+                        }
+                        source => blend_changing(&fresh_pixel, &previous, source, max_history),
                     }
                 }
             };
@@ -323,7 +337,6 @@ pub fn accumulate(
     });
     Ok(out)
 }
-
 impl Accumulated {
     /// Layers of `width` x `height` zeros.
     pub fn zeroed(width: u32, height: u32) -> Accumulated {
@@ -349,13 +362,12 @@ impl Accumulated {
         let mut indirect_min = self.indirect_min_distance.data.chunks_mut(width);
         let mut touched = self.touched.data.chunks_mut(width);
         let mut frames = self.frames.data.chunks_mut(width);
-        let (mut differential_frames, mut epoch, mut object) = match &mut self.change {
+        let (mut differential_frames, mut object) = match &mut self.change {
             Some(c) => (
                 Some(c.differential_frames.data.chunks_mut(width)),
-                Some(c.epoch.data.chunks_mut(width)),
                 Some(c.object.data.chunks_mut(width)),
             ),
-            None => (None, None, None),
+            None => (None, None),
         };
         let mut rows = Vec::new();
         while let (Some(a), Some(b), Some(c), Some(d), Some(e), Some(f), Some(g), Some(h)) = (
@@ -375,7 +387,6 @@ impl Accumulated {
                 touched: g,
                 frames: h,
                 differential_frames: differential_frames.as_mut().and_then(|c| c.next()),
-                epoch: epoch.as_mut().and_then(|c| c.next()),
                 object: object.as_mut().and_then(|c| c.next()),
             };
             rows.push((rows.len(), row));
@@ -392,7 +403,6 @@ struct Row<'a> {
     touched: &'a mut [u8],
     frames: &'a mut [f32],
     differential_frames: Option<&'a mut [f32]>,
-    epoch: Option<&'a mut [u32]>,
     object: Option<&'a mut [u8]>,
 }
 
@@ -409,9 +419,6 @@ impl Row<'_> {
         if let Some(d) = &mut self.differential_frames {
             d[x] = p.differential_frames;
         }
-        if let Some(e) = &mut self.epoch {
-            e[x] = p.epoch;
-        }
         if let Some(o) = &mut self.object {
             o[x] = p.object as u8;
         }
@@ -426,7 +433,6 @@ fn fresh_pixel(fresh: &FreshLayers, i: usize) -> Pixel {
         touched: fresh.touched.data[i].min(1),
         frames: 1.0,
         differential_frames: 1.0,
-        epoch: 0,
         object: false,
     }
 }
@@ -442,7 +448,6 @@ fn history_pixel(history: &History, j: usize) -> Pixel {
             Some(c) => c.differential_frames.data[j],
             None => history.frames.data[j],
         },
-        epoch: history.change.map_or(0, |c| c.epoch.data[j]),
         object: history.change.is_some_and(|c| c.object.data[j] != 0),
     }
 }
@@ -464,7 +469,6 @@ fn mixed_history(history: &History, taps: &[(usize, f32)]) -> Pixel {
         touched: 0,
         frames: 0.0,
         differential_frames: 0.0,
-        epoch: u32::MAX,
         object: history.change.is_some_and(|c| c.object.data[heaviest] != 0),
     };
     for &(j, w) in taps {
@@ -478,11 +482,9 @@ fn mixed_history(history: &History, taps: &[(usize, f32)]) -> Pixel {
             // The same operations as `frames`: equal counts mix to equal counts.
             Some(c) => {
                 mixed.differential_frames += c.differential_frames.data[j] * w;
-                mixed.epoch = mixed.epoch.min(c.epoch.data[j]);
             }
             None => {
                 mixed.differential_frames += history.frames.data[j] * w;
-                mixed.epoch = 0;
             }
         }
     }
@@ -507,46 +509,120 @@ fn blend(fresh: &Pixel, previous: &Pixel, max_history: f32) -> Pixel {
         touched: fresh.touched | previous.touched,
         frames: n,
         differential_frames: n,
-        epoch: previous.epoch,
         object: fresh.object,
     }
 }
 
-/// Step 4: [`blend`] where the objects may have moved since `previous`'s history began
-/// (this frame in `epoch`).
+/// Where step 4 takes a pixel's differential history from.
+#[derive(Clone, Copy)]
+enum Differential {
+    /// From the pixel's own history, as for E_R.
+    Kept,
+    /// Nowhere: this frame's differential alone.
+    Dropped,
+    /// From the history of the point that stood where this one does relative to the
+    /// object that moved (its layers as a [`Pixel`]).
+    Carried(Pixel),
+    /// The whole pixel from the history of the same point of a moved object.
+    Whole(Pixel),
+    /// The whole pixel starts anew.
+    Restart,
+}
+
+/// Step 4's choice for pixel `i` (at `(x, y)`) with history `previous`.
+#[allow(clippy::too_many_arguments)]
 #[inline]
-fn blend_changing(fresh: &Pixel, mut previous: Pixel, max_history: f32, epoch: u32) -> Pixel {
-    if fresh.object != previous.object && previous.epoch < epoch {
-        // Since objects moved, one now stands where the real surface was seen, or has
-        // left it: the history is of something else. (Without a move, a pixel on an
-        // object's outline, which shows it in some frames and not in others, blends
-        // as in a still world.)
-        return *fresh;
+fn differential_source(
+    fresh_pixel: &Pixel,
+    previous: &Pixel,
+    fresh: &FreshLayers,
+    i: usize,
+    (x, y): (usize, usize),
+    history: &History,
+    (camera, camera_to_world): (Pinhole, Affine3A),
+    params: &AccumulateParams,
+    change: WorldChange,
+) -> Differential {
+    let eye: Vec3 = camera_to_world.translation.into();
+    let _ = (x, y);
+    let p = fresh.world_position.data[i];
+    let n = fresh.world_normal.data[i];
+    let fresh_has = [0, 2].map(|k| fresh.irradiance[k].data[i].is_finite());
+    // The object nearest the pixel's point (on it, for a pixel of an object), if it
+    // moved this frame.
+    let distance = |m: &ObjectMove| (p.clamp(m.bounds.min, m.bounds.max) - p).length_squared();
+    let nearest_moved = change
+        .objects
+        .iter()
+        .min_by(|a, b| distance(a).total_cmp(&distance(b)))
+        .filter(|m| m.moved);
+    if fresh_pixel.object {
+        // A pixel of a moved object takes the history of the same point of the object
+        // where it stood; a still object's shading changes little when another moves.
+        return match nearest_moved {
+            Some(m) => {
+                let q = m.to_earlier.transform_point3(p);
+                let n = m.to_earlier.transform_vector3(n).normalize_or_zero();
+                match previous_at(q, n, fresh_has, history, camera, eye, params) {
+                    Some(source) if source.object => Differential::Whole(source),
+                    _ => Differential::Restart,
+                }
+            }
+            None => Differential::Kept,
+        };
     }
-    // A pixel of an object that did not move keeps its history: its shading changes
-    // little when another moves (the caller starts the pixels of moved objects anew).
-    let stale = previous.epoch < epoch && (fresh.touched | previous.touched) != 0 && !fresh.object;
-    if stale {
-        // The differential history is of objects where they no longer stand.
-        previous.differential_frames = 0.0;
+    // A real surface point: its differential changes where an object that moved this
+    // frame is the nearest one and reached it, now or before (or stood on it).
+    let reached = (fresh_pixel.touched | previous.touched) != 0 || previous.object;
+    match nearest_moved {
+        Some(m) if reached => {
+            let q = m.to_earlier.transform_point3(p);
+            match previous_at(q, n, fresh_has, history, camera, eye, params) {
+                Some(source) if !source.object => Differential::Carried(source),
+                _ => Differential::Dropped,
+            }
+        }
+        _ => Differential::Kept,
     }
-    let mut out = blend(fresh, &previous, max_history);
-    out.epoch = if stale { epoch } else { previous.epoch };
-    if previous.differential_frames == previous.frames {
-        // Every frame of the history is of the objects where they stand now.
-        return out;
+}
+
+/// Step 4: [`blend`] for E_R and the rest, the differential from `source`.
+#[inline]
+fn blend_changing(
+    fresh: &Pixel,
+    previous: &Pixel,
+    source: Differential,
+    max_history: f32,
+) -> Pixel {
+    let mut out = blend(fresh, previous, max_history);
+    let (from, frames) = match source {
+        Differential::Kept => {
+            if previous.differential_frames == previous.frames {
+                // Every frame of the history is of the objects where they stand now.
+                return out;
+            }
+            (*previous, previous.differential_frames)
+        }
+        Differential::Dropped | Differential::Restart | Differential::Whole(_) => (*previous, 0.0),
+        Differential::Carried(source) => (source, source.differential_frames),
+    };
+    if !matches!(source, Differential::Kept) {
+        // The nearest occluders and the paths that met objects: this frame's, and
+        // those the carried history saw of the object where it stood.
+        (out.direct_min, out.indirect_min, out.touched) = match source {
+            Differential::Carried(s) => (
+                fresh.direct_min.min(s.direct_min),
+                fresh.indirect_min.min(s.indirect_min),
+                fresh.touched | s.touched,
+            ),
+            _ => (fresh.direct_min, fresh.indirect_min, fresh.touched),
+        };
     }
-    if stale {
-        // The nearest occluders and the paths that met objects were of the old places.
-        out.direct_min = fresh.direct_min;
-        out.indirect_min = fresh.indirect_min;
-        out.touched = fresh.touched;
-    }
-    let m = (previous.differential_frames + 1.0).min(max_history);
+    let m = (frames + 1.0).min(max_history);
     let weight = 1.0 / m;
     for (r, rv) in [(0, 2), (1, 3)] {
-        let (new_rv, old_rv) = (fresh.irradiance[rv], previous.irradiance[rv]);
-        let (new_r, old_r) = (fresh.irradiance[r], previous.irradiance[r]);
+        let (new_rv, old_rv) = (fresh.irradiance[rv], from.irradiance[rv]);
+        let (new_r, old_r) = (fresh.irradiance[r], from.irradiance[r]);
         out.irradiance[rv] = if new_r.is_finite() && old_r.is_finite() {
             // E_R from the whole history, the differential from its own frames.
             let (new_d, old_d) = (new_rv - new_r, old_rv - old_r);
@@ -609,6 +685,23 @@ fn previous(
 ) -> Option<Pixel> {
     let p = fresh.world_position.data[i];
     let n = fresh.world_normal.data[i];
+    // Which layers this pixel has (E_R^dir, E_RV^dir stand for their pairs), once.
+    let fresh_has = [0, 2].map(|k| fresh.irradiance[k].data[i].is_finite());
+    previous_at(p, n, fresh_has, history, camera, eye, params)
+}
+
+/// The history of the surface point `p` (normal `n`, with the layers `fresh_has`), if
+/// the previous frame saw it: step 1 for any point.
+#[inline(always)]
+fn previous_at(
+    p: Vec3,
+    n: Vec3,
+    fresh_has: [bool; 2],
+    history: &History,
+    camera: Pinhole,
+    eye: Vec3,
+    params: &AccumulateParams,
+) -> Option<Pixel> {
     if !p.is_finite() {
         return None;
     }
@@ -623,8 +716,6 @@ fn previous(
     let tolerance = params.tolerance * footprint * grazing;
     let in_previous = history.world_to_camera.transform_point3(p);
     let (width, height) = (history.camera.width as i32, history.camera.height as i32);
-    // Which layers this pixel has (E_R^dir, E_RV^dir stand for their pairs), once.
-    let fresh_has = [0, 2].map(|k| fresh.irradiance[k].data[i].is_finite());
     let tolerance2 = tolerance * tolerance;
     let same_point = |j: usize| {
         candidate(

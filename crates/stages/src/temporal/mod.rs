@@ -115,8 +115,6 @@ pub const INFO: StageInfo = StageInfo {
                 .moves()
                 .then(|| crate::world::object_world(ctx.world).clone()),
             mask: ctx.input("mask"),
-            moved: Vec::new(),
-            epoch: 0,
         }))
     },
 };
@@ -193,10 +191,6 @@ pub struct AccumulateStage {
     moving: Option<crate::world::ObjectWorld>,
     /// The renderer's mask (read only when the objects move).
     mask: String,
-    /// Frames so far in which an object moved.
-    epoch: u32,
-    /// (object, its bounding box, the epoch of its last move) of each object that moved.
-    moved: Vec<(usize, relume_scene::objects::Aabb, u32)>,
 }
 
 /// The image inside a shared points or normals product.
@@ -245,25 +239,18 @@ impl Stage for AccumulateStage {
         }
         let camera = Pinhole::new(&self.intrinsics, w, h);
         let index = frame.index as u64;
-        if let (Some(world), Some(previous)) = (&self.moving, &self.previous)
-            && !world.same_at(previous.index, index)
-        {
-            self.epoch += 1;
-            let moved = world
-                .moved(previous.index, index)
+        let mut objects = Vec::new();
+        if let Some(world) = &self.moving {
+            let earlier = self.previous.as_ref().map_or(index, |p| p.index);
+            objects = world
+                .moves_between(earlier, index)
                 .map_err(|e| StageError::Failed(format!("frame {index}: {e}")))?;
-            for (object, bounds) in moved {
-                self.moved.retain(|(k, _, _)| *k != object);
-                self.moved.push((object, bounds, self.epoch));
-            }
         }
-        let moved: Vec<_> = self.moved.iter().map(|&(_, b, e)| (b, e)).collect();
         let history = self.previous.as_ref().and_then(Previous::history);
         let change = match &self.moving {
             Some(_) => Some(WorldChange {
-                epoch: self.epoch,
                 mask: frame.scalar(&self.mask)?,
-                moved: &moved,
+                objects: &objects,
             }),
             None => None,
         };

@@ -4,6 +4,7 @@ use glam::{Affine3A, Vec3};
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{Image, LabelImage, ScalarImage, Vec3Image};
 use relume_recording::Intrinsics;
+use relume_scene::objects::{Aabb, ObjectMove};
 
 const W: u32 = 32;
 const H: u32 = 24;
@@ -63,16 +64,17 @@ fn wall(pose: Affine3A, value: impl Fn(Vec3) -> Vec3) -> Fresh {
 /// Runs `frames` (pose, fresh layers) through the accumulator in order; the last
 /// frame's result.
 fn run(frames: &[(Affine3A, &Fresh)], params: &AccumulateParams) -> Accumulated {
-    run_in_epochs(frames, params, None)
+    run_with_objects(frames, params, None)
 }
 
-/// [`run`] with frame k in world epoch `epochs[k]` (objects that move), or as a still
-/// world (`None`).
-fn run_in_epochs(
+/// [`run`] with the objects' moves into frame k given by `moves[k]` (objects that
+/// move), or as a still world (`None`). No pixel shows an object.
+fn run_with_objects(
     frames: &[(Affine3A, &Fresh)],
     params: &AccumulateParams,
-    epochs: Option<&[u32]>,
+    moves: Option<&[Vec<ObjectMove>]>,
 ) -> Accumulated {
+    let real: ScalarImage = Image::filled(W, H, 1.0);
     let mut previous: Option<(Accumulated, &Fresh, Affine3A)> = None;
     for (k, &(pose, fresh)) in frames.iter().enumerate() {
         let history = previous.as_ref().map(|(layers, seen, pose)| {
@@ -84,12 +86,9 @@ fn run_in_epochs(
                 camera(),
             )
         });
-        // No pixel shows an object (mask 1 everywhere), no object's box to test.
-        let real: ScalarImage = Image::filled(W, H, 1.0);
-        let change = epochs.map(|e| WorldChange {
-            epoch: e[k],
+        let change = moves.map(|m| WorldChange {
             mask: &real,
-            moved: &[],
+            objects: &m[k],
         });
         let out = accumulate(
             &fresh.layers(),
@@ -343,6 +342,24 @@ fn shadowed_wall(shadow: std::ops::Range<u32>, lit: f32, dark: f32) -> Fresh {
     f
 }
 
+/// An object's move on the wall (z = 2) of [`wall`]: its box around `x` (metres, at
+/// the wall) and, when it moved, by how much along x since the frame before.
+fn object_at(x: f32, moved_by: Option<f32>) -> ObjectMove {
+    ObjectMove {
+        bounds: Aabb {
+            min: Vec3::new(x - 0.05, -1.0, 1.9),
+            max: Vec3::new(x + 0.05, 1.0, 1.95),
+        },
+        moved: moved_by.is_some(),
+        to_earlier: Affine3A::from_translation(Vec3::new(-moved_by.unwrap_or(0.0), 0.0, 0.0)),
+    }
+}
+
+/// The wall's x (metres at z = 2) seen at column `x` of the identity camera.
+fn wall_x(x: u32) -> f32 {
+    camera().ray(x as f32, 0.0).x * 2.0
+}
+
 #[test]
 fn a_still_world_gives_the_same_bits_with_and_without_change_detection() {
     let frames: Vec<Fresh> = (0..5)
@@ -356,7 +373,9 @@ fn a_still_world_gives_the_same_bits_with_and_without_change_detection() {
         .collect();
     let params = AccumulateParams::default();
     let plain = run(&moving, &params);
-    let watched = run_in_epochs(&moving, &params, Some(&[0; 5]));
+    // The object stands still beside the shadow in every frame.
+    let still = vec![vec![object_at(wall_x(12), None)]; 5];
+    let watched = run_with_objects(&moving, &params, Some(&still));
     assert_eq!(plain.irradiance, watched.irradiance);
     assert_eq!(plain.frames, watched.frames);
     assert_eq!(plain.touched, watched.touched);
@@ -366,62 +385,56 @@ fn a_still_world_gives_the_same_bits_with_and_without_change_detection() {
 }
 
 #[test]
-fn a_moved_objects_old_footprint_loses_its_differential_history() {
-    // Four frames of an object's shadow over columns 8..16, then it moves: its shadow
-    // now covers columns 20..28.
-    let before = shadowed_wall(8..16, 1.0, 0.2);
-    let after = shadowed_wall(20..28, 1.0, 0.2);
+fn a_moved_objects_shadow_takes_its_history_along_and_leaves_no_ghost() {
+    // Four frames of an object's shadow over columns 8..16 (each frame's shadow a
+    // little darker or lighter: the history is their mean), then the object moves
+    // by 12 columns: its shadow now covers columns 20..28.
+    let shift = wall_x(20) - wall_x(8);
+    let darkness = [0.2, 0.4, 0.2, 0.4];
+    let before: Vec<Fresh> = darkness
+        .iter()
+        .map(|&d| shadowed_wall(8..16, 1.0, d))
+        .collect();
+    let after = shadowed_wall(20..28, 1.0, 0.1);
     let still = Affine3A::IDENTITY;
-    let frames = [
-        (still, &before),
-        (still, &before),
-        (still, &before),
-        (still, &after),
-    ];
+    let mut frames: Vec<(Affine3A, &Fresh)> = before.iter().map(|f| (still, f)).collect();
+    frames.push((still, &after));
+    let mut moves = vec![vec![object_at(wall_x(12), None)]; 4];
+    moves.push(vec![object_at(wall_x(24), Some(shift))]);
     let params = AccumulateParams::default();
-    let moved = run_in_epochs(&frames, &params, Some(&[0, 0, 0, 1]));
+    let moved = run_with_objects(&frames, &params, Some(&moves));
     let ignored = run(&frames, &params);
     let at = |x: u32| (12 * W + x) as usize;
-    // The old footprint: no ghost; E_R keeps its four frames.
-    let old = at(10);
+    // The old footprint: no ghost (its point relative to the object, 12 columns to
+    // the left, was unshadowed); E_R keeps its five frames.
+    let old = at(14);
     assert_eq!(moved.irradiance[2].data[old], Vec3::ONE);
     assert_eq!(moved.irradiance[0].data[old], Vec3::ONE);
-    assert_eq!(moved.frames.data[old], 4.0);
-    assert_eq!(moved.touched.data[old], 0);
-    assert_eq!(moved.direct_min_distance.data[old], f32::INFINITY);
-    // Without change detection the ghost holds three quarters of the old shadow.
-    assert!((ignored.irradiance[2].data[old].x - 0.4).abs() < 1e-6);
-    // The new footprint: this frame's shadow, not a quarter of it.
+    assert_eq!(moved.frames.data[old], 5.0);
+    // Without change detection the ghost holds four fifths of the old shadow:
+    // 0.3 + (1 - 0.3) / 5.
+    assert!((ignored.irradiance[2].data[old].x - 0.44).abs() < 1e-6);
+    // The new footprint: the old shadow's history (mean 0.3 over four frames)
+    // carried along and averaged with this frame's 0.1: (4 * 0.3 + 0.1) / 5 = 0.26.
     let new = at(24);
-    assert!((moved.irradiance[2].data[new].x - 0.2).abs() < 1e-6);
-    assert!((ignored.irradiance[2].data[new].x - 0.8).abs() < 1e-6);
+    let v = moved.irradiance[2].data[new].x;
+    assert!((v - 0.26).abs() < 1e-5, "{v}");
+    assert!((ignored.irradiance[2].data[new].x - 0.82).abs() < 1e-5);
     let change = moved.change.as_ref().unwrap();
-    assert_eq!(change.differential_frames.data[new], 1.0);
-    assert_eq!(change.epoch.data[new], 1);
-    // Where no object was or is, the history is whole (and E_RV == E_R, bit for bit).
+    assert_eq!(change.differential_frames.data[new], 5.0);
+    // Where no object was or is, the history is whole, E_RV == E_R bit for bit.
     let clear = at(2);
-    assert_eq!(moved.frames.data[clear], 4.0);
-    assert_eq!(change.differential_frames.data[clear], 4.0);
+    assert_eq!(change.differential_frames.data[clear], 5.0);
     assert_eq!(
         moved.irradiance[2].data[clear],
         moved.irradiance[0].data[clear]
     );
-    // The next frame with the object still: the new shadow averages its own two
-    // frames, and the history of the old place stays as clean as E_R.
-    let darker = shadowed_wall(20..28, 1.0, 0.1);
-    let frames = [
-        (still, &before),
-        (still, &before),
-        (still, &before),
-        (still, &after),
-        (still, &darker),
-    ];
-    let next = run_in_epochs(&frames, &params, Some(&[0, 0, 0, 1, 1]));
-    assert!((next.irradiance[2].data[new].x - 0.15).abs() < 1e-6);
-    assert_eq!(next.frames.data[new], 5.0);
-    assert_eq!(
-        next.change.as_ref().unwrap().differential_frames.data[new],
-        2.0
-    );
-    assert_eq!(next.irradiance[2].data[old], Vec3::ONE);
+    // A point whose place relative to the object was not seen a frame ago (past the
+    // image's left edge) starts its differential anew.
+    let mut far = vec![vec![object_at(wall_x(12), None)]; 4];
+    far.push(vec![object_at(wall_x(24), Some(10.0))]);
+    let lost = run_with_objects(&frames, &params, Some(&far));
+    let v = lost.irradiance[2].data[new].x;
+    assert!((v - 0.1).abs() < 1e-6, "{v}");
+    assert_eq!(lost.change.unwrap().differential_frames.data[new], 1.0);
 }

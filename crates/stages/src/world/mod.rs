@@ -88,16 +88,16 @@ impl ObjectWorld {
         }
     }
 
-    /// The objects (by index in the scene) that stand otherwise at `frame` than at
-    /// `earlier`, with their bounding boxes at `frame`.
-    pub fn moved(
+    /// Every object between `earlier` and `frame` (see
+    /// [`MovingScene::moves_between`]); empty when nothing moves.
+    pub fn moves_between(
         &self,
         earlier: u64,
         frame: u64,
-    ) -> Result<Vec<(usize, relume_scene::objects::Aabb)>, ObjectError> {
+    ) -> Result<Vec<relume_scene::objects::ObjectMove>, ObjectError> {
         match &self.moving {
             None => Ok(Vec::new()),
-            Some(moving) => moving.moved(earlier, frame),
+            Some(moving) => moving.moves_between(earlier, frame),
         }
     }
 

@@ -32,6 +32,18 @@
 //! frame = 0                      # (at_pixel alone: the surface seen at that pixel)
 //! ```
 //!
+//! An object can move ([`motion`]): through keyframes at recording frames (linear
+//! positions, slerp rotations, clamped outside the path), or at a constant velocity:
+//!
+//! ```toml
+//! keyframes = [10, 40]           # frames of the recording
+//! keyframe_translation = [[-0.5, 0.09, 0.1], [0.5, 0.09, 0.1]]  # in place of translation
+//! keyframe_rotation_deg = [[0, 0, 0], [0, 90, 0]]                # in place of rotation_deg
+//! # or: velocity = [0.0, 0.0, 0.01]  # metres per frame from `translation` at frame 0
+//! ```
+//!
+//! [`MovingScene`] places such objects at each frame.
+//!
 //! Shapes are centred on their origin with y up (meshes keep the file's origin):
 //!
 //! | shape | keys (defaults) | triangles |

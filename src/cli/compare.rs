@@ -177,6 +177,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
             stages: Vec::new(),
             reference_stride: stride,
             frames: Some(frames.clone()),
+            score_frames: None,
         };
         for p in &pipelines {
             let mut e = Evaluator::new(p, header, a.seed, &options)

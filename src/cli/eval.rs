@@ -61,7 +61,11 @@ Examples:
   relume eval room.relume -p pipelines/mixed-reality-sampling.toml --json
   relume eval room.relume --json                    the default (mixed-reality) pipeline
   relume eval room.relume --frames 0..15 --stage filter.axis_aligned --reference-stride 4
-                                                    the filter's scores on frame 14, fast";
+                                                    the filter's scores on frame 14, fast
+  relume eval room60.relume -p pipelines/mixed-reality-moving.toml --score-frames 8..50 \
+      --stage composite.differential --reference-stride 4
+                                                    the composite frame by frame while
+                                                    the torus slides";
 
 #[derive(Parser, Debug)]
 #[command(after_help = SCORES)]
@@ -89,6 +93,12 @@ pub struct EvalArgs {
     #[arg(long, value_name = "N", default_value_t = 1,
           value_parser = clap::value_parser!(u32).range(1..))]
     reference_stride: u32,
+    /// Score every frame of A..B (references and true frames on each) instead of frames
+    /// 14 and 29: composite scores over time, e.g. while an object moves
+    /// (psnr_db_by_frame and psnr_db_truth_by_frame then have one entry per frame,
+    /// scored_frames says which). Each scored frame costs what one of the usual two does.
+    #[arg(long, value_name = "A..B", value_parser = super::replay::parse_frames)]
+    score_frames: Option<std::ops::Range<usize>>,
 }
 
 pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
@@ -109,10 +119,23 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
             w.min(h)
         );
     }
+    if let Some(score) = &a.score_frames {
+        let run = &loaded.frames;
+        if score.start >= run.end || score.end <= run.start || score.is_empty() {
+            bail!(
+                "--score-frames {}..{} has no frame of the replay ({}..{}): score frames the run replays",
+                score.start,
+                score.end,
+                run.start,
+                run.end
+            );
+        }
+    }
     let options = EvalOptions {
         stages: a.stages.clone(),
         reference_stride: a.reference_stride,
         frames: Some(loaded.frames.clone()),
+        score_frames: a.score_frames.clone(),
     };
     prepare::warn_every(&loaded.pipeline);
     let mut evaluator = Evaluator::new(&loaded.pipeline, header, a.run.seed, &options)

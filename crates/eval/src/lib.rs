@@ -116,6 +116,10 @@ pub struct EvalOptions {
     /// The frames the run will replay (`None`: not known). A replay without frames 14
     /// and 29 gets references on its last frame ([`sampling::fallback_frame`]).
     pub frames: Option<std::ops::Range<usize>>,
+    /// Score every frame of this range (its references and true frames computed on
+    /// each) instead of frames 14 and 29: the scores over time, e.g. while an object
+    /// moves. `None`: the usual schedule.
+    pub score_frames: Option<std::ops::Range<usize>>,
 }
 
 impl Default for EvalOptions {
@@ -124,6 +128,7 @@ impl Default for EvalOptions {
             stages: Vec::new(),
             reference_stride: 1,
             frames: None,
+            score_frames: None,
         }
     }
 }
@@ -313,7 +318,15 @@ impl Evaluator {
             }
         }
         let references = runner.filter(|_| needs_references).map(|r| {
-            sampling::ReferenceSchedule::new(r, options.reference_stride, options.frames.clone())
+            let schedule = sampling::ReferenceSchedule::new(
+                r,
+                options.reference_stride,
+                options.frames.clone(),
+            );
+            match &options.score_frames {
+                Some(frames) => schedule.scoring(frames.clone()),
+                None => schedule,
+            }
         });
         let scores_composite = scorers
             .iter()

@@ -303,6 +303,8 @@ pub struct ReferenceSchedule {
     runner: PathRunner,
     stride: u32,
     fallback: Option<usize>,
+    /// Every frame of this range instead (`relume eval --score-frames`).
+    every: Option<Range<usize>>,
     computed: usize,
     shared: Option<ReferenceCache>,
 }
@@ -395,8 +397,19 @@ impl ReferenceSchedule {
             runner,
             stride: stride.max(1),
             fallback: fallback_frame(frames),
+            every: None,
             computed: 0,
             shared: None,
+        }
+    }
+
+    /// The schedule that scores every frame of `frames` (and no other), without the
+    /// limit of [`MAX_SCORED_FRAMES`].
+    pub fn scoring(self, frames: Range<usize>) -> ReferenceSchedule {
+        ReferenceSchedule {
+            every: Some(frames),
+            fallback: None,
+            ..self
         }
     }
 
@@ -409,8 +422,14 @@ impl ReferenceSchedule {
     /// The reference layers of `frame` when it is a scored frame and holds the
     /// sampling's inputs, else `None`.
     pub fn reference(&mut self, frame: &Frame) -> Result<Option<Arc<ReferenceLayers>>, String> {
-        let scored = frame.index % SCORE_EVERY == SCORE_EVERY - 1;
-        if self.computed >= MAX_SCORED_FRAMES || !(scored || self.fallback == Some(frame.index)) {
+        let wanted = match &self.every {
+            Some(frames) => frames.contains(&frame.index),
+            None => {
+                let scored = frame.index % SCORE_EVERY == SCORE_EVERY - 1;
+                self.computed < MAX_SCORED_FRAMES && (scored || self.fallback == Some(frame.index))
+            }
+        };
+        if !wanted {
             return Ok(None);
         }
         let key = self

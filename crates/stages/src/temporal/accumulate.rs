@@ -312,7 +312,6 @@ pub fn accumulate(
                             &previous,
                             fresh,
                             i,
-                            (x, y),
                             hist,
                             (camera, camera_to_world),
                             params,
@@ -529,7 +528,7 @@ enum Differential {
     Restart,
 }
 
-/// Step 4's choice for pixel `i` (at `(x, y)`) with history `previous`.
+/// Step 4's choice for pixel `i` with history `previous`.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn differential_source(
@@ -537,14 +536,12 @@ fn differential_source(
     previous: &Pixel,
     fresh: &FreshLayers,
     i: usize,
-    (x, y): (usize, usize),
     history: &History,
     (camera, camera_to_world): (Pinhole, Affine3A),
     params: &AccumulateParams,
     change: WorldChange,
 ) -> Differential {
     let eye: Vec3 = camera_to_world.translation.into();
-    let _ = (x, y);
     let p = fresh.world_position.data[i];
     let n = fresh.world_normal.data[i];
     let fresh_has = [0, 2].map(|k| fresh.irradiance[k].data[i].is_finite());

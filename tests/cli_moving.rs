@@ -1,6 +1,7 @@
 //! Objects that move, from the command line: a torus sliding along keyframes is rendered
 //! where its path puts it in every frame (the same products as the torus standing still
-//! there), and `relume eval --score-frames` scores each frame of the slide.
+//! there), the same bits at any thread count, and `relume eval --score-frames` scores
+//! each frame of the slide.
 
 mod common;
 
@@ -73,6 +74,14 @@ fn a_sliding_torus_is_rendered_where_its_path_puts_it_and_scored_frame_by_frame(
     // Between, the torus is elsewhere than at either end.
     let start = digests(d, "still-0.5.toml", &products);
     assert_ne!(moving[5][0], start[5][0]);
+    // Every product of every frame, the carried histories included, whatever the
+    // thread count.
+    let one = common::replay_hashes(d, "s.relume", "moving.toml", "1");
+    assert_eq!(one.lines().count(), 16);
+    assert_eq!(
+        common::replay_hashes(d, "s.relume", "moving.toml", "3"),
+        one
+    );
 
     // Scores over time: every frame of 3..8, the truth and the references following the
     // torus.

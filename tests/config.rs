@@ -640,10 +640,58 @@ fn object_paths_are_read_and_checked() {
         "object `torus` has both `velocity` and `keyframes`"
     );
     let e = error(&format!(
+        "{DECODE}{torus}keyframes = [3]\nkeyframe_translation = [[0, 0, 0]]\n"
+    ));
+    assert_eq!(e.message, "object `torus` has a single keyframe");
+    let e = error(&format!("{DECODE}{torus}velocity = [0, 0, 0]\n"));
+    assert_eq!(e.message, "`velocity` of object `torus` is zero");
+    let e = error(&format!(
+        "{DECODE}{torus}keyframes = [0, 9]\nkeyframe_rotation_deg = [[0, 0, 0], [0, 270, 0]]\n"
+    ));
+    assert!(
+        e.message.contains("turn by 270 degrees about one axis"),
+        "{}",
+        e.message
+    );
+    let e = error(&format!(
         "{DECODE}{torus}keyframe_translation = [[0, 0, 0]]\n"
     ));
     assert_eq!(
         e.message,
         "`keyframe_translation` of object `torus` needs `keyframes`"
     );
+}
+
+#[test]
+fn an_input_read_where_made_does_not_stop_a_pipeline_that_makes_none() {
+    // temporal.accumulate reads the renderer's mask only where objects move: the
+    // default with its renderer's mask renamed (nothing makes `mask`) still loads.
+    let default = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/pipelines/default.toml"
+    ))
+    .unwrap();
+    let renamed = default
+        .replace(
+            "touched = \"fresh_touched\"\n",
+            "touched = \"fresh_touched\"\nmask = \"path_mask\"\n",
+        )
+        .replace(
+            "kind = \"composite.differential\"\n",
+            "kind = \"composite.differential\"\ninputs = { mask = \"path_mask\" }\n",
+        );
+    assert_ne!(renamed, default);
+    let p = load(&renamed).unwrap();
+    let accumulate = p
+        .stages
+        .iter()
+        .find(|s| s.kind == "temporal.accumulate")
+        .unwrap();
+    assert_eq!(accumulate.inputs["mask"], "mask");
+    // Bound to a product no stage makes, it is still an error, as any input is.
+    let e = error(&renamed.replace(
+        "kind = \"temporal.accumulate\"\n",
+        "kind = \"temporal.accumulate\"\ninputs = { mask = \"patch_mask\" }\n",
+    ));
+    assert!(e.message.contains("patch_mask"), "{}", e.message);
 }

@@ -53,14 +53,15 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
     for info in registry.kinds() {
         let ports = (info.ports)(&Params::defaults(info.params));
         let port_list = |ports: &[relume::graph::Port]| {
-            ports.iter().map(|p| serde_json::json!({ "role": p.role, "default": p.default_product, "kinds": p.kinds.iter().map(|k| k.name()).collect::<Vec<_>>(), "optional": p.optional })).collect::<Vec<_>>()
+            ports.iter().map(|p| serde_json::json!({ "role": p.role, "default": p.default_product, "kinds": p.kinds.iter().map(|k| k.name()).collect::<Vec<_>>(), "optional": p.optional, "when_made": p.when_made })).collect::<Vec<_>>()
         };
         let params: Vec<serde_json::Value> = info.params.iter().map(|p| serde_json::json!({ "name": p.name, "type": p.type_name(), "default": json_value(&p.default_value()), "min": p.min, "max": p.max, "choices": p.choices, "doc": p.doc })).collect();
         if !a.json {
             outln!("{}\n    {}", info.kind, info.summary)?;
             // Each port by its role, which configs bind (`inputs = { depth = "..." }`),
             // with its default product where that has another name; "(optional)" marks
-            // the inputs that may read the previous frame.
+            // the inputs that may read the previous frame, "(where made)" those read only
+            // where a stage makes them.
             let show = |ports: &[relume::graph::Port]| {
                 if ports.is_empty() {
                     return "-".to_string();
@@ -73,6 +74,9 @@ pub fn stages(a: StagesArgs) -> anyhow::Result<i32> {
                     };
                     if p.optional {
                         shown.push_str(" (optional)");
+                    }
+                    if p.when_made {
+                        shown.push_str(" (where made)");
                     }
                     shown
                 };

@@ -130,6 +130,17 @@ pub fn eval(a: EvalArgs) -> anyhow::Result<i32> {
                 run.end
             );
         }
+        if score.start < run.start || score.end > run.end {
+            eprintln!(
+                "warning: --score-frames {}..{} reaches past the replay ({}..{}): scoring frames {}..{}",
+                score.start,
+                score.end,
+                run.start,
+                run.end,
+                score.start.max(run.start),
+                score.end.min(run.end)
+            );
+        }
     }
     let options = EvalOptions {
         stages: a.stages.clone(),

@@ -178,7 +178,7 @@ impl PathRunner {
         };
         let objects = match self.objects.scene_at(frame.index as u64) {
             Ok(objects) => objects,
-            Err(e) => return Some(Err(format!("frame {}: {e}", frame.index))),
+            Err(e) => return Some(Err(e.to_string())),
         };
         let posed_voxels = match self.objects.moves() {
             true => params.object_volume(&objects).map(Arc::new),

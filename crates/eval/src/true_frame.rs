@@ -205,7 +205,7 @@ impl TruthRenderer {
         let objects = self
             .objects
             .scene_at(frame.index as u64)
-            .map_err(|e| format!("frame {}: {e}", frame.index))?;
+            .map_err(|e| e.to_string())?;
         let started = std::time::Instant::now();
         let rendered = render_inserted(
             &self.scene,

@@ -227,6 +227,16 @@ impl Pipeline {
                     false => producers.get(product).filter(|e| upstream(e)),
                 };
                 let Some(&(producer, kind)) = found else {
+                    let bound_here = located_span(&d.inputs, &port.role).is_some();
+                    if port.when_made
+                        && !previous
+                        && !bound_here
+                        && !producers.contains_key(product)
+                    {
+                        // Nothing makes it and the config did not ask for it: the stage
+                        // does without.
+                        continue;
+                    }
                     let available: BTreeMap<String, (usize, ProductKind)> = producers
                         .iter()
                         .filter(|(_, e)| upstream(e))

@@ -39,6 +39,10 @@ pub struct Port {
     /// An input the stage can run without. Only such an input may read the previous
     /// frame (`product@prev`): the first frame of a run has none.
     pub optional: bool,
+    /// An input read only where some stage makes it: a pipeline in which no stage
+    /// does (and whose config does not bind it) still loads, and the stage finds no
+    /// such product in its frames (it must then do without, or say what is missing).
+    pub when_made: bool,
 }
 
 impl Port {
@@ -48,6 +52,7 @@ impl Port {
             default_product: default_product.to_string(),
             kinds,
             optional: false,
+            when_made: false,
         }
     }
 
@@ -55,6 +60,14 @@ impl Port {
     pub fn optional(self) -> Port {
         Port {
             optional: true,
+            ..self
+        }
+    }
+
+    /// The same input, read only where a stage makes it (see [`Port::when_made`]).
+    pub fn when_made(self) -> Port {
+        Port {
+            when_made: true,
             ..self
         }
     }

@@ -81,6 +81,16 @@ impl Motion {
                             keys[i - 1].frame
                         ));
                     }
+                    if i > 0 {
+                        let turn = (k.rotation_deg - keys[i - 1].rotation_deg).abs();
+                        if turn.max_element() >= 180.0 {
+                            return Err(format!(
+                                "keyframes {} and {i} turn by {} degrees about one axis: a rotation between two keyframes takes the shorter way, so turns of 180 degrees or more need keyframes in between",
+                                i - 1,
+                                turn.max_element()
+                            ));
+                        }
+                    }
                 }
                 Ok(())
             }
@@ -122,13 +132,18 @@ impl Motion {
                     return pose(&keys[keys.len() - 1]);
                 }
                 let (a, b) = (&keys[next - 1], &keys[next]);
+                if frame == a.frame {
+                    // On the keyframe itself, exactly its pose.
+                    return pose(a);
+                }
                 let s = ((frame - a.frame) / (b.frame - a.frame)) as f32;
                 let (pa, pb) = (pose(a), pose(b));
                 // a + (b - a) s, not a (1 - s) + b s: a pose held between two keyframes
                 // stays the same bits, so that nothing counts as moved.
                 Pose {
                     translation: pa.translation + (pb.translation - pa.translation) * s,
-                    rotation: match pa.rotation == pb.rotation {
+                    // q and -q are the same rotation.
+                    rotation: match pa.rotation == pb.rotation || pa.rotation == -pb.rotation {
                         true => pa.rotation,
                         false => pa.rotation.slerp(pb.rotation, s).normalize(),
                     },
@@ -202,6 +217,19 @@ mod tests {
         assert_eq!(path.pose_at(11.0).translation.x, 1.0);
         let single = Motion::Keyframes(vec![key(3.0, 0.7, 10.0)]);
         assert_eq!(single.pose_at(0.0), single.pose_at(100.0));
+        // On a keyframe, exactly its pose.
+        let turned = Motion::Keyframes(vec![key(0.0, 0.0, 30.0), key(10.0, 0.0, 60.0)]);
+        let pose = turned.pose_at(0.0);
+        assert_eq!(
+            pose.rotation,
+            rotation_of_degrees(Vec3::new(0.0, 30.0, 0.0))
+        );
+        let full = Motion::Keyframes(vec![
+            key(0.0, 0.0, 0.0),
+            key(10.0, 0.0, 179.0),
+            key(20.0, 0.0, 358.0),
+        ]);
+        assert!(full.check().is_ok());
         // A pose held between keyframes is the same bits at every frame.
         let held = Motion::Keyframes(vec![key(0.0, 0.1333, 17.0), key(40.0, 0.1333, 17.0)]);
         for frame in [1.0, 13.0, 29.0, 39.5] {
@@ -250,6 +278,15 @@ mod tests {
         );
         let e = Motion::Keyframes(vec![]).check().unwrap_err();
         assert_eq!(e, "a path needs 1 to 4096 keyframes, got 0");
+        let e = Motion::Keyframes(vec![key(0.0, 0.0, 0.0), key(9.0, 0.0, 270.0)])
+            .check()
+            .unwrap_err();
+        assert_eq!(
+            e,
+            "keyframes 0 and 1 turn by 270 degrees about one axis: a rotation between two \
+             keyframes takes the shorter way, so turns of 180 degrees or more need keyframes \
+             in between"
+        );
         let e = Motion::Keyframes(vec![key(f64::NAN, 0.0, 0.0)])
             .check()
             .unwrap_err();

@@ -321,12 +321,8 @@ pub fn accumulate(
                     };
                     match source {
                         Differential::Restart => fresh_pixel,
-                        Differential::Whole(source) => {
-                            let mut out = blend(&fresh_pixel, &source, max_history);
-                            out.differential_frames =
-                                (source.differential_frames + 1.0).min(max_history);
-                            out
-                        }
+                        // The whole pixel, its frame counts included.
+                        Differential::Whole(source) => blend(&fresh_pixel, &source, max_history),
                         source => blend_changing(&fresh_pixel, &previous, source, max_history),
                     }
                 }
@@ -546,12 +542,24 @@ fn differential_source(
     let n = fresh.world_normal.data[i];
     let fresh_has = [0, 2].map(|k| fresh.irradiance[k].data[i].is_finite());
     // The object nearest the pixel's point (on it, for a pixel of an object), if it
-    // moved this frame.
-    let distance = |m: &ObjectMove| (p.clamp(m.bounds.min, m.bounds.max) - p).length_squared();
+    // moved this frame: by the distance to its box, and among boxes that hold the
+    // point (overlapping objects), by the distance to the box's centre in units of its
+    // half diagonal (the point lies deeper in the box of the object it is on).
+    let distance = |m: &ObjectMove| {
+        let outside = (p.clamp(m.bounds.min, m.bounds.max) - p).length_squared();
+        let half = (m.bounds.max - m.bounds.min)
+            .length()
+            .max(f32::MIN_POSITIVE)
+            * 0.5;
+        (outside, (p - m.bounds.center()).length() / half)
+    };
     let nearest_moved = change
         .objects
         .iter()
-        .min_by(|a, b| distance(a).total_cmp(&distance(b)))
+        .min_by(|a, b| {
+            let (da, db) = (distance(a), distance(b));
+            da.0.total_cmp(&db.0).then(da.1.total_cmp(&db.1))
+        })
         .filter(|m| m.moved);
     if fresh_pixel.object {
         // A pixel of a moved object takes the history of the same point of the object

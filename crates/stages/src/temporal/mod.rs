@@ -11,8 +11,8 @@
 //! The stage keeps the previous frame's output: frames are given to it in order, and
 //! the first frame of a replay (for `--frames 10..20`, frame 10) starts without a
 //! history, so its layers are that frame's estimates alone. When the pipeline's objects
-//! move, it counts the frames in which they moved and drops the differential history
-//! where they were and are (step 4 of [`mod@accumulate`]).
+//! move, the differential history (E_RV - E_R) near them moves with them (step 4 of
+//! [`mod@accumulate`]); it then also reads the renderer's `mask`.
 
 pub mod accumulate;
 #[cfg(test)]
@@ -96,8 +96,9 @@ pub const INFO: StageInfo = StageInfo {
         inputs: INPUTS
             .iter()
             .map(|(role, product, kinds)| Port::new(role, product, kinds))
-            // Which pixels show an object: read where the objects move (step 4).
-            .chain([Port::new("mask", "mask", &[kind::SCALAR]).optional()])
+            // Which pixels show an object: read where the objects move (step 4), and
+            // only where a stage makes it (a still pipeline need not).
+            .chain([Port::new("mask", "mask", &[kind::SCALAR]).when_made()])
             .collect(),
         outputs: OUTPUTS
             .iter()
@@ -244,12 +245,17 @@ impl Stage for AccumulateStage {
             let earlier = self.previous.as_ref().map_or(index, |p| p.index);
             objects = world
                 .moves_between(earlier, index)
-                .map_err(|e| StageError::Failed(format!("frame {index}: {e}")))?;
+                .map_err(|e| StageError::Failed(e.to_string()))?;
         }
         let history = self.previous.as_ref().and_then(Previous::history);
         let change = match &self.moving {
             Some(_) => Some(WorldChange {
-                mask: frame.scalar(&self.mask)?,
+                mask: frame.scalar(&self.mask).map_err(|_| {
+                    StageError::Failed(format!(
+                        "the pipeline's objects move and no `{}` (the renderer's mask, which tells the pixels of objects) reaches temporal.accumulate: bind its `mask` input to the renderer's mask output, e.g. inputs = {{ mask = \"val_mask\" }}",
+                        self.mask
+                    ))
+                })?,
                 objects: &objects,
             }),
             None => None,

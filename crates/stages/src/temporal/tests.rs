@@ -438,3 +438,76 @@ fn a_moved_objects_shadow_takes_its_history_along_and_leaves_no_ghost() {
     assert!((v - 0.1).abs() < 1e-6, "{v}");
     assert_eq!(lost.change.unwrap().differential_frames.data[new], 1.0);
 }
+
+#[test]
+fn a_moved_objects_own_pixels_take_the_history_of_the_same_object_points() {
+    // An object covers columns 8..16 (mask 0, its surface standing in the wall's
+    // plane) for four frames, then moves 12 columns on, to 20..28. Its pixels there
+    // take the four frames of the same object points.
+    let shift = wall_x(20) - wall_x(8);
+    let object = |columns: std::ops::Range<u32>| {
+        let mut mask: ScalarImage = Image::filled(W, H, 1.0);
+        for y in 0..H {
+            for x in columns.clone() {
+                mask.data[(y * W + x) as usize] = 0.0;
+            }
+        }
+        mask
+    };
+    let (before_mask, after_mask) = (object(8..16), object(20..28));
+    let darkness = [0.2, 0.4, 0.2, 0.4];
+    let before: Vec<Fresh> = darkness
+        .iter()
+        .map(|&d| shadowed_wall(8..16, 1.0, d))
+        .collect();
+    let after = shadowed_wall(20..28, 1.0, 0.1);
+    let params = AccumulateParams::default();
+    let mut frames: Vec<(&Fresh, &ScalarImage, Vec<ObjectMove>)> = before
+        .iter()
+        .map(|f| (f, &before_mask, vec![object_at(wall_x(12), None)]))
+        .collect();
+    frames.push((
+        &after,
+        &after_mask,
+        vec![object_at(wall_x(24), Some(shift))],
+    ));
+    let mut previous: Option<(Accumulated, &Fresh)> = None;
+    for (fresh, mask, objects) in &frames {
+        let history = previous.as_ref().map(|(layers, seen)| {
+            History::of(
+                layers,
+                &seen.position,
+                &seen.normal,
+                Affine3A::IDENTITY,
+                camera(),
+            )
+        });
+        let change = Some(WorldChange { mask, objects });
+        let out = accumulate(
+            &fresh.layers(),
+            history.as_ref(),
+            camera(),
+            Affine3A::IDENTITY,
+            &params,
+            change,
+        )
+        .unwrap();
+        previous = Some((out, *fresh));
+    }
+    let out = previous.unwrap().0;
+    let at = |x: u32| (12 * W + x) as usize;
+    // The object's pixels: (4 * 0.3 + 0.1) / 5 of the same points, five frames.
+    let v = out.irradiance[2].data[at(24)].x;
+    assert!((v - 0.26).abs() < 1e-5, "{v}");
+    assert_eq!(out.frames.data[at(24)], 5.0);
+    assert_eq!(out.change.as_ref().unwrap().object.data[at(24)], 1);
+    // Where it stood the wall shows again, its differential that of the point as far
+    // from the object a frame ago (none): E_RV is E_R, whose history (the real surface
+    // behind the object, estimated all along) holds its five frames.
+    assert_eq!(out.irradiance[2].data[at(12)], Vec3::ONE);
+    assert_eq!(
+        out.irradiance[2].data[at(12)],
+        out.irradiance[0].data[at(12)]
+    );
+    assert_eq!(out.frames.data[at(12)], 5.0);
+}

@@ -480,6 +480,13 @@ fn motion(
                 Some("an object moves at a constant velocity or along keyframes, not both".into()),
             ));
         }
+        if fixed("velocity", Vec3::ZERO) == Vec3::ZERO {
+            return Err(src.error(
+                span.clone(),
+                format!("`velocity` of object `{name}` is zero"),
+                Some("leave `velocity` out for an object that stays put".into()),
+            ));
+        }
         return Ok(Some(Motion::Velocity {
             start: fixed("translation", Vec3::ZERO),
             per_frame: fixed("velocity", Vec3::ZERO),
@@ -499,6 +506,16 @@ fn motion(
         }
         return Ok(None);
     };
+    if frames.len() < 2 {
+        return Err(src.error(
+            frames_span,
+            format!("object `{name}` has a single keyframe"),
+            Some(
+                "a path needs two keyframes or more; one pose is `translation` and `rotation_deg`"
+                    .into(),
+            ),
+        ));
+    }
     if translations.is_none() && rotations.is_none() {
         return Err(src.error(
             frames_span,
@@ -553,13 +570,19 @@ fn motion(
         })
         .collect();
     let motion = Motion::Keyframes(keys);
-    motion.check().map_err(|e| {
-        src.error(
-            frames_span,
-            format!("object `{name}`: {e}"),
-            Some("list each keyframe's frame once, in ascending order".into()),
-        )
-    })?;
+    motion
+        .check()
+        .map_err(|e| match (e.contains(" turn by "), &rotations) {
+            // A turn too wide for one step: at the rotations.
+            (true, Some((_, span))) => {
+                src.error(span.clone(), format!("object `{name}`: {e}"), None)
+            }
+            _ => src.error(
+                frames_span,
+                format!("object `{name}`: {e}"),
+                Some("list each keyframe's frame once, in ascending order".into()),
+            ),
+        })?;
     Ok(Some(motion))
 }
 

@@ -53,7 +53,7 @@ impl FollowedObjects {
             self.scene = self
                 .world
                 .scene_at(frame)
-                .map_err(|e| StageError::Failed(format!("frame {frame}: {e}")))?;
+                .map_err(|e| StageError::Failed(e.to_string()))?;
         }
         self.frame = Some(frame);
         Ok((&self.scene, moved))

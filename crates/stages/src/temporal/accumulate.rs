@@ -473,16 +473,16 @@ fn mixed_history(history: &History, taps: &[(usize, f32)]) -> Pixel {
         }
         mixed.frames += history.frames.data[j] * w;
         mixed.touched |= history.touched.data[j];
-        match history.change {
-            // The same operations as `frames`: equal counts mix to equal counts.
-            Some(c) => {
-                mixed.differential_frames += c.differential_frames.data[j] * w;
-            }
-            None => {
-                mixed.differential_frames += history.frames.data[j] * w;
-            }
-        }
     }
+    // Step 4's count, by the same operations as `frames` (equal counts mix to equal
+    // counts); without step 4's layers it is `frames` itself.
+    mixed.differential_frames = match history.change {
+        Some(c) => taps
+            .iter()
+            .map(|&(j, w)| c.differential_frames.data[j] * (w / total))
+            .fold(0.0, |sum, x| sum + x),
+        None => mixed.frames,
+    };
     mixed
 }
 

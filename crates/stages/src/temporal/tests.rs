@@ -75,6 +75,17 @@ fn run_with_objects(
     moves: Option<&[Vec<ObjectMove>]>,
 ) -> Accumulated {
     let real: ScalarImage = Image::filled(W, H, 1.0);
+    let masks = vec![&real; frames.len()];
+    run_with_masks(frames, params, moves.map(|m| (m, &masks[..])))
+}
+
+/// [`run_with_objects`] with frame k's renderer mask `masks[k]` (0 where the pixel
+/// shows an object).
+fn run_with_masks(
+    frames: &[(Affine3A, &Fresh)],
+    params: &AccumulateParams,
+    world: Option<(&[Vec<ObjectMove>], &[&ScalarImage])>,
+) -> Accumulated {
     let mut previous: Option<(Accumulated, &Fresh, Affine3A)> = None;
     for (k, &(pose, fresh)) in frames.iter().enumerate() {
         let history = previous.as_ref().map(|(layers, seen, pose)| {
@@ -86,9 +97,9 @@ fn run_with_objects(
                 camera(),
             )
         });
-        let change = moves.map(|m| WorldChange {
-            mask: &real,
-            objects: &m[k],
+        let change = world.map(|(moves, masks)| WorldChange {
+            mask: masks[k],
+            objects: &moves[k],
         });
         let out = accumulate(
             &fresh.layers(),
@@ -384,23 +395,26 @@ fn a_still_world_gives_the_same_bits_with_and_without_change_detection() {
     assert!(plain.change.is_none());
 }
 
-#[test]
-fn a_moved_objects_shadow_takes_its_history_along_and_leaves_no_ghost() {
-    // Four frames of an object's shadow over columns 8..16 (each frame's shadow a
-    // little darker or lighter: the history is their mean), then the object moves
-    // by 12 columns: its shadow now covers columns 20..28.
+/// Four frames of an object's shadow over columns 8..16 of a still camera (each
+/// frame's shadow a little darker or lighter: the history is their mean 0.3), then the
+/// object moves by 12 columns and its shadow (0.1) covers columns 20..28: the fresh
+/// frames, and each frame's objects.
+fn shadow_then_move() -> (Vec<Fresh>, Vec<Vec<ObjectMove>>) {
     let shift = wall_x(20) - wall_x(8);
-    let darkness = [0.2, 0.4, 0.2, 0.4];
-    let before: Vec<Fresh> = darkness
+    let mut fresh: Vec<Fresh> = [0.2, 0.4, 0.2, 0.4]
         .iter()
         .map(|&d| shadowed_wall(8..16, 1.0, d))
         .collect();
-    let after = shadowed_wall(20..28, 1.0, 0.1);
-    let still = Affine3A::IDENTITY;
-    let mut frames: Vec<(Affine3A, &Fresh)> = before.iter().map(|f| (still, f)).collect();
-    frames.push((still, &after));
+    fresh.push(shadowed_wall(20..28, 1.0, 0.1));
     let mut moves = vec![vec![object_at(wall_x(12), None)]; 4];
     moves.push(vec![object_at(wall_x(24), Some(shift))]);
+    (fresh, moves)
+}
+
+#[test]
+fn a_moved_objects_shadow_takes_its_history_along_and_leaves_no_ghost() {
+    let (fresh, moves) = shadow_then_move();
+    let frames: Vec<(Affine3A, &Fresh)> = fresh.iter().map(|f| (Affine3A::IDENTITY, f)).collect();
     let params = AccumulateParams::default();
     let moved = run_with_objects(&frames, &params, Some(&moves));
     let ignored = run(&frames, &params);
@@ -444,7 +458,6 @@ fn a_moved_objects_own_pixels_take_the_history_of_the_same_object_points() {
     // An object covers columns 8..16 (mask 0, its surface standing in the wall's
     // plane) for four frames, then moves 12 columns on, to 20..28. Its pixels there
     // take the four frames of the same object points.
-    let shift = wall_x(20) - wall_x(8);
     let object = |columns: std::ops::Range<u32>| {
         let mut mask: ScalarImage = Image::filled(W, H, 1.0);
         for y in 0..H {
@@ -454,47 +467,12 @@ fn a_moved_objects_own_pixels_take_the_history_of_the_same_object_points() {
         }
         mask
     };
-    let (before_mask, after_mask) = (object(8..16), object(20..28));
-    let darkness = [0.2, 0.4, 0.2, 0.4];
-    let before: Vec<Fresh> = darkness
-        .iter()
-        .map(|&d| shadowed_wall(8..16, 1.0, d))
-        .collect();
-    let after = shadowed_wall(20..28, 1.0, 0.1);
+    let (before, after) = (object(8..16), object(20..28));
+    let masks = [&before, &before, &before, &before, &after];
+    let (fresh, moves) = shadow_then_move();
+    let frames: Vec<(Affine3A, &Fresh)> = fresh.iter().map(|f| (Affine3A::IDENTITY, f)).collect();
     let params = AccumulateParams::default();
-    let mut frames: Vec<(&Fresh, &ScalarImage, Vec<ObjectMove>)> = before
-        .iter()
-        .map(|f| (f, &before_mask, vec![object_at(wall_x(12), None)]))
-        .collect();
-    frames.push((
-        &after,
-        &after_mask,
-        vec![object_at(wall_x(24), Some(shift))],
-    ));
-    let mut previous: Option<(Accumulated, &Fresh)> = None;
-    for (fresh, mask, objects) in &frames {
-        let history = previous.as_ref().map(|(layers, seen)| {
-            History::of(
-                layers,
-                &seen.position,
-                &seen.normal,
-                Affine3A::IDENTITY,
-                camera(),
-            )
-        });
-        let change = Some(WorldChange { mask, objects });
-        let out = accumulate(
-            &fresh.layers(),
-            history.as_ref(),
-            camera(),
-            Affine3A::IDENTITY,
-            &params,
-            change,
-        )
-        .unwrap();
-        previous = Some((out, *fresh));
-    }
-    let out = previous.unwrap().0;
+    let out = run_with_masks(&frames, &params, Some((&moves, &masks)));
     let at = |x: u32| (12 * W + x) as usize;
     // The object's pixels: (4 * 0.3 + 0.1) / 5 of the same points, five frames.
     let v = out.irradiance[2].data[at(24)].x;

@@ -696,6 +696,17 @@ fn check(
         RawValue::Int(i) => Some(i as f64),
         _ => None,
     };
+    // An array of the wrong length: "`key` of object `o` must <what>, found <count>".
+    let wrong_count = |what: String, count: usize| {
+        src.error(
+            value.span.clone(),
+            format!(
+                "`{}` of object `{object}` must {what}, found {count}",
+                spec.name
+            ),
+            Some(spec.doc.to_string()),
+        )
+    };
     match (spec.ty, &value.value) {
         (Type::Str, RawValue::Str(s)) => Ok(Value::Str(s.clone())),
         (Type::Str, other) => Err(wrong_type("string".into(), other, &value.span)),
@@ -707,86 +718,46 @@ fn check(
             Some(x) => in_range(x, lo, hi, &value.span).map(Value::Number),
             None => Err(wrong_type("float".into(), v, &value.span)),
         },
-        (Type::Numbers(n, lo, hi), RawValue::Array(items)) => {
-            if items.len() != n {
-                return Err(src.error(
-                    value.span.clone(),
+        (Type::Numbers(n, ..), RawValue::Array(items)) if items.len() != n => Err(wrong_count(
+            format!("be an array of {n} numbers"),
+            items.len(),
+        )),
+        (Type::List(n, ..), RawValue::Array(items)) if items.is_empty() || items.len() > n => {
+            Err(wrong_count(format!("hold 1 to {n} numbers"), items.len()))
+        }
+        (Type::Numbers(_, lo, hi) | Type::List(_, lo, hi), RawValue::Array(items)) => items
+            .iter()
+            .map(|item| match number(&item.value) {
+                Some(x) => in_range(x, lo, hi, &item.span),
+                None => Err(src.error(
+                    item.span.clone(),
                     format!(
-                        "`{}` of object `{object}` must be an array of {n} numbers, found {}",
+                        "`{}` of object `{object}` must hold numbers, found {}",
                         spec.name,
-                        items.len()
+                        a(item.value.type_name())
                     ),
                     Some(spec.doc.to_string()),
-                ));
-            }
-            items
-                .iter()
-                .map(|item| match number(&item.value) {
-                    Some(x) => in_range(x, lo, hi, &item.span),
-                    None => Err(src.error(
-                        item.span.clone(),
-                        format!(
-                            "`{}` of object `{object}` must hold numbers, found {}",
-                            spec.name,
-                            a(item.value.type_name())
-                        ),
-                        Some(spec.doc.to_string()),
-                    )),
-                })
-                .collect::<Result<Vec<f64>, _>>()
-                .map(Value::Numbers)
-        }
+                )),
+            })
+            .collect::<Result<Vec<f64>, _>>()
+            .map(Value::Numbers),
         (Type::Numbers(n, ..), other) => Err(wrong_type(
             format!("array of {n} numbers"),
             other,
             &value.span,
         )),
-        (Type::List(n, lo, hi), RawValue::Array(items)) => {
-            if items.is_empty() || items.len() > n {
-                return Err(src.error(
-                    value.span.clone(),
-                    format!(
-                        "`{}` of object `{object}` must hold 1 to {n} numbers, found {}",
-                        spec.name,
-                        items.len()
-                    ),
-                    Some(spec.doc.to_string()),
-                ));
-            }
-            items
-                .iter()
-                .map(|item| match number(&item.value) {
-                    Some(x) => in_range(x, lo, hi, &item.span),
-                    None => Err(src.error(
-                        item.span.clone(),
-                        format!(
-                            "`{}` of object `{object}` must hold numbers, found {}",
-                            spec.name,
-                            a(item.value.type_name())
-                        ),
-                        Some(spec.doc.to_string()),
-                    )),
-                })
-                .collect::<Result<Vec<f64>, _>>()
-                .map(Value::Numbers)
-        }
         (Type::List(n, ..), other) => Err(wrong_type(
             format!("array of 1 to {n} numbers"),
             other,
             &value.span,
         )),
-        (Type::Triples(n, lo, hi), RawValue::Array(items)) => {
-            if items.is_empty() || items.len() > n {
-                return Err(src.error(
-                    value.span.clone(),
-                    format!(
-                        "`{}` of object `{object}` must hold 1 to {n} arrays of 3 numbers, found {}",
-                        spec.name,
-                        items.len()
-                    ),
-                    Some(spec.doc.to_string()),
-                ));
-            }
+        (Type::Triples(n, ..), RawValue::Array(items)) if items.is_empty() || items.len() > n => {
+            Err(wrong_count(
+                format!("hold 1 to {n} arrays of 3 numbers"),
+                items.len(),
+            ))
+        }
+        (Type::Triples(_, lo, hi), RawValue::Array(items)) => {
             let triple = |item: &Located<RawValue>| {
                 let not_triple = || {
                     src.error(

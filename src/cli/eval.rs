@@ -49,7 +49,13 @@ Scores (per stage, keyed by the stage's name):
                     (pixels off the objects the truth changes by more than one level:
                     shadows, bleeding), psnr_db_truth_objects, shadow_ratio_bias (the
                     composite's ratio to the camera frame minus the truth's, in its
-                    shadows), truth_noise_psnr_db (the truth's own error)
+                    shadows), truth_noise_psnr_db (the truth's own error),
+                    differential_ratio_by_frame (per frame, the share of the truth's
+                    shadows and bleeding the composite shows: the least-squares gain of
+                    its differential on the truth's, off the objects); on a recording
+                    whose light changes (relume synth --panel-off-at F), scored over the
+                    change: change_frame, change_lag_frames (frames until that share
+                    stays within 5 % of its final value), change_final_ratio
 
 The 1024-sample references and the true frame cost most of an eval at 640x480: about 30 s
 each per scored frame on 2 cores (the default pipeline's eval of the built-in recording

@@ -49,6 +49,13 @@ pub struct SynthArgs {
     /// 0.25 to 16.
     #[arg(long, default_value_t = SynthConfig::default().zoom)]
     zoom: f64,
+    /// Switch the ceiling panel off at this frame (a light that changes): the room darkens
+    /// at once, the objects' shadows from the panel vanish, and every frame's truth, and
+    /// `relume eval`'s true frames, are of the room as it is lit then. The `environment`
+    /// attachment stays frame 0's (a probe taken before). `relume eval --score-frames`
+    /// over the switch measures how fast a pipeline follows it.
+    #[arg(long, value_name = "FRAME")]
+    panel_off_at: Option<usize>,
 }
 
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
@@ -74,6 +81,7 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
         contrast: a.contrast,
         zoom: a.zoom,
         depth_noise: !a.no_depth_noise,
+        panel_off_at: a.panel_off_at,
         ..SynthConfig::default()
     };
     output::check_output_file("-o", &a.out)?;

@@ -25,10 +25,16 @@
 //! - `truth_noise_psnr_db`: the truth's own error (one standard error, in levels) as a
 //!   PSNR over the pixels it changed: a method scored far below it is scored on its
 //!   own error, not the truth's;
-//! - `psnr_db_truth_by_frame`.
+//! - `psnr_db_truth_by_frame`;
+//! - `differential_ratio_by_frame`: per frame, the composite's differential over the
+//!   pixels off the objects as a share of the truth's ([`super::change`]), and, on a
+//!   recording whose light changes (`relume synth --panel-off-at`), `change_frame`,
+//!   `change_lag_frames` (frames until that share settles within 5 % of its final value)
+//!   and `change_final_ratio`, or `change_unmeasured` saying why not.
 //!
 //! What the references and the truth cost is reported apart ([`CompositeScorer::costs`]).
 
+use super::change::{self, DifferentialSums};
 use super::sampling::ReferenceLayers;
 use super::true_frame::{TrueComposite, linear_of_level};
 use glam::Vec3;
@@ -77,10 +83,20 @@ struct TruthScores {
     /// Sum and count of the ratio errors in the shadow region.
     shadow_bias: (f64, u64),
     by_frame: Vec<f64>,
+    /// The composite's and the truth's differential off the objects, per frame.
+    differential_by_frame: Vec<DifferentialSums>,
+    /// The frame at which the recording's world changes (its light), if it does.
+    change: Option<usize>,
 }
 
 impl CompositeScorer {
-    pub fn new(stage: &ResolvedStage, sampler: Option<&ResolvedStage>) -> CompositeScorer {
+    /// The scorer of `stage`, whose layers `sampler` renders; `change` is the frame at
+    /// which the recording's light changes, whose lag is measured.
+    pub fn new(
+        stage: &ResolvedStage,
+        sampler: Option<&ResolvedStage>,
+        change: Option<usize>,
+    ) -> CompositeScorer {
         let params = CompositeParams::from_params(&stage.params);
         CompositeScorer {
             stage: stage.clone(),
@@ -96,7 +112,10 @@ impl CompositeScorer {
             by_frame: Vec::new(),
             references: Vec::new(),
             reference_render_s: Vec::new(),
-            truth: TruthScores::default(),
+            truth: TruthScores {
+                change,
+                ..TruthScores::default()
+            },
         }
     }
 
@@ -169,7 +188,10 @@ impl CompositeScorer {
         self.references.push((frame.index, truth));
         self.reference_render_s.push(reference.render_s);
         if let Some(t) = truth_frame {
-            self.truth.observe(own, t);
+            let mask = frame
+                .scalar(&super::ports::input(&self.stage, "mask"))
+                .map_err(|e| e.to_string())?;
+            self.truth.observe(own, t, &mask.data);
         }
         Ok(())
     }
@@ -224,9 +246,12 @@ impl CompositeScorer {
 }
 
 impl TruthScores {
-    /// Scores the composite `own` against the true frame `t` on its lattice.
-    fn observe(&mut self, own: &Rgb8Image, t: &Arc<TrueComposite>) {
+    /// Scores the composite `own` (whose object coverage is `mask`) against the true
+    /// frame `t` on its lattice.
+    fn observe(&mut self, own: &Rgb8Image, t: &Arc<TrueComposite>, mask: &[f32]) {
         let mut frame = (0.0f64, 0u64);
+        let mut sums = DifferentialSums::default();
+        let linear = |level: u8| linear_of_level(level, t.contrast) as f64;
         for i in (0..own.data.len()).filter(|&i| t.has_pixel(i)) {
             let (mine, truth, camera) = (own.data[i], t.image.data[i], t.camera.data[i]);
             let error = level_distance(mine, truth);
@@ -242,6 +267,13 @@ impl TruthScores {
                 self.objects.0 += error;
                 self.objects.1 += 3;
                 continue;
+            }
+            // The mask is 1 on real pixels (paper 001 eq. 2), below on the objects.
+            if mask.get(i).is_some_and(|&m| m >= 1.0) {
+                for c in 0..3 {
+                    let base = linear(camera[c]);
+                    sums.add(linear(mine[c]) - base, linear(truth[c]) - base);
+                }
             }
             let differs = (0..3).any(|c| truth[c].abs_diff(camera[c]) > 1);
             if !differs {
@@ -265,6 +297,7 @@ impl TruthScores {
         self.whole.0 += frame.0;
         self.whole.1 += frame.1;
         self.by_frame.push(psnr_db(frame.0 / frame.1.max(1) as f64));
+        self.differential_by_frame.push(sums);
         self.frames.push(t.clone());
     }
 
@@ -274,7 +307,12 @@ impl TruthScores {
         }
         let psnr =
             |(squared, values): (f64, u64)| (values > 0).then(|| psnr_db(squared / values as f64));
-        json!({
+        let ratios: Vec<f64> = self
+            .differential_by_frame
+            .iter()
+            .map(DifferentialSums::ratio)
+            .collect();
+        let mut report = json!({
             "psnr_db_truth": psnr(self.whole),
             "psnr_db_truth_differential": psnr(self.differential),
             "psnr_db_truth_objects": psnr(self.objects),
@@ -284,7 +322,20 @@ impl TruthScores {
                 .then(|| self.shadow_bias.0 / self.shadow_bias.1 as f64),
             "truth_noise_psnr_db": psnr(self.noise),
             "psnr_db_truth_by_frame": self.by_frame,
-        })
+            "differential_ratio_by_frame": ratios.iter().map(|r| r.is_finite().then_some(*r)).collect::<Vec<_>>(),
+        });
+        if let Some(at) = self.change {
+            let frames: Vec<usize> = self.frames.iter().map(|t| t.frame).collect();
+            report["change_frame"] = json!(at);
+            match change::settling(&frames, &ratios, at) {
+                Ok(s) => {
+                    report["change_lag_frames"] = json!(s.lag_frames);
+                    report["change_final_ratio"] = json!(s.final_ratio);
+                }
+                Err(why) => report["change_unmeasured"] = json!(why),
+            }
+        }
+        report
     }
 }
 

@@ -17,10 +17,11 @@
 //! | `sample.dir`, `sample.val` | `ratio_rmse`, `ratio_rmse_all`, `frames_scored`, `scored_frames`, `region_pixels` (against the default `sample.path`'s 1024-sample references on the renderer's inputs; see [`renderer`]) | no |
 //! | `filter.axis_aligned` | `mse_unfiltered`, `mse_filtered`, `mse_gaussian_same_radius`, `mse_unfiltered_by_layer`, `mse_filtered_by_layer` (per layer: E_R^dir, E_R^ind, E_RV^dir, E_RV^ind), `temporal_flicker`, `temporal_flicker_spatial_only`, `flicker_as_configured`, `frames_scored`, `scored_frames` (against the same references; see [`filter`]) | no |
 //! | `composite.differential` | `psnr_db`, `psnr_db_unfiltered`, `psnr_db_by_frame`, `frames_scored`, `scored_frames` (against a composite of the references; see [`composite`]) | no |
-//! | `composite.differential` | `psnr_db_truth`, `psnr_db_truth_differential`, `psnr_db_truth_objects`, `shadow_ratio_bias`, `differential_pixels`, `object_pixels`, `truth_noise_psnr_db`, `psnr_db_truth_by_frame` (against the true frame with the objects in the room, on recordings of `relume synth`; `truth_unavailable` says why a recording of another generator version has none; see [`composite`] and [`true_frame`]) | yes |
+//! | `composite.differential` | `psnr_db_truth`, `psnr_db_truth_differential`, `psnr_db_truth_objects`, `shadow_ratio_bias`, `differential_pixels`, `object_pixels`, `truth_noise_psnr_db`, `psnr_db_truth_by_frame`, `differential_ratio_by_frame`; over a light change (`relume synth --panel-off-at`): `change_frame`, `change_lag_frames`, `change_final_ratio` or `change_unmeasured` (see [`change`]) (against the true frame with the objects in the room, on recordings of `relume synth`; `truth_unavailable` says why a recording of another generator version has none; see [`composite`] and [`true_frame`]) | yes |
 //!
 //! Ground truth comes from the recording's truth stream (synthetic recordings).
 
+pub mod change;
 mod color;
 pub mod composite;
 mod depth;
@@ -177,6 +178,12 @@ impl Evaluator {
         // The filter's flicker scores re-run the sampler itself: one that references
         // itself only.
         let resampler = sampler.filter(|s| references_itself(s));
+        // The frame at which a synthetic room's light changes, whose lag the composite's
+        // scores measure.
+        let light_change = (header.provenance.tool == relume_recording::synth::SYNTH_TOOL)
+            .then(|| relume_recording::synth::panel_off_at(&header.provenance).ok())
+            .flatten()
+            .flatten();
         let mut scorers: Vec<_> = pipeline
             .stages
             .iter()
@@ -238,9 +245,9 @@ impl Evaluator {
                             .zip(resampler.cloned()),
                         find("temporal.accumulate"),
                     ))),
-                    "composite.differential" => {
-                        Scorer::Composite(Box::new(composite::CompositeScorer::new(s, sampler)))
-                    }
+                    "composite.differential" => Scorer::Composite(Box::new(
+                        composite::CompositeScorer::new(s, sampler, light_change),
+                    )),
                     _ => return None,
                 };
                 Some((s.name.clone(), s.kind, scorer))

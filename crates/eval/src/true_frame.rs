@@ -6,7 +6,7 @@
 //!
 //! Only recordings of `relume synth` with this build's generator version have one: the
 //! truth re-traces the analytic room the recording was rendered from, so it must be the
-//! same room. Where the objects change nothing the true pixel is the recorded one
+//! same room, lit as it was at each frame (`relume synth --panel-off-at`). Where the objects change nothing the true pixel is the recorded one
 //! exactly (the renderer returns the recorded radiance bit for bit, and the recorded
 //! color was made from it by the same camera model).
 
@@ -21,7 +21,7 @@ use relume_recording::synth::insert::{
 };
 use relume_recording::synth::render::View;
 use relume_recording::synth::scene::Scene;
-use relume_recording::synth::{GENERATOR_VERSION, SYNTH_TOOL};
+use relume_recording::synth::{self, GENERATOR_VERSION, SYNTH_TOOL};
 use relume_recording::{Header, Intrinsics};
 use relume_scene::objects::VirtualScene;
 use relume_stages::world::ObjectWorld;
@@ -107,7 +107,8 @@ impl TruthCache {
 
 /// Renders the true frames of a synthetic recording for one pipeline's objects.
 pub struct TruthRenderer {
-    scene: Scene,
+    /// The frame from which the room's ceiling panel is off (`relume synth --panel-off-at`).
+    panel_off_at: Option<usize>,
     /// The pipeline's objects (posed at each frame when they move).
     objects: ObjectWorld,
     intrinsics: Intrinsics,
@@ -125,7 +126,7 @@ pub fn unavailable(header: &Header) -> Option<String> {
         ));
     }
     match p.settings.get("generator") {
-        Some(v) if v == GENERATOR_VERSION => None,
+        Some(v) if v == GENERATOR_VERSION => synth::panel_off_at(p).err(),
         v => Some(format!(
             "the recording was made by generator version {}, this build renders version {GENERATOR_VERSION}'s room; make it again with `relume synth`",
             v.map_or("(none)", |v| v.as_str())
@@ -141,7 +142,8 @@ impl TruthRenderer {
             return None;
         }
         Some(TruthRenderer {
-            scene: relume_recording::synth::interreflection::room(),
+            // `unavailable` has checked the setting.
+            panel_off_at: synth::panel_off_at(&header.provenance).ok()?,
             objects,
             intrinsics: header.color_intrinsics,
             settings: TrueFrameSettings {
@@ -207,8 +209,9 @@ impl TruthRenderer {
             .scene_at(frame.index as u64)
             .map_err(|e| e.to_string())?;
         let started = std::time::Instant::now();
+        let scene: Scene = synth::scene_at(self.panel_off_at, frame.index);
         let rendered = render_inserted(
-            &self.scene,
+            &scene,
             &view,
             &truth.radiance,
             &Objects(&objects),

@@ -56,6 +56,24 @@ pub fn room() -> Scene {
     .clone()
 }
 
+/// The room of [`room`] with its ceiling panel switched off (the window alone lights it;
+/// the panel's emission is zero, so it looks black), with its own interreflection, solved
+/// on the first call and kept for the process. Light samples are still drawn on the dark
+/// panel, so the window's samples, and their noise, are those of the lit room.
+pub fn room_panel_off() -> Scene {
+    static ROOM: OnceLock<Scene> = OnceLock::new();
+    ROOM.get_or_init(|| {
+        let mut scene = Scene::room_without_interreflection();
+        scene.lights[PANEL].radiance = Vec3::ZERO;
+        scene.indirect = Some(Arc::new(solve(&scene)));
+        scene
+    })
+    .clone()
+}
+
+/// Index of the ceiling panel in [`Scene::lights`].
+pub const PANEL: usize = 0;
+
 /// Solves the interreflection of `scene` (its lights, boxes, sphere and room).
 pub fn solve(scene: &Scene) -> IndirectLight {
     let mut layout = layout_of(scene);

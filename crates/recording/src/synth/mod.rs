@@ -100,6 +100,11 @@ pub struct SynthConfig {
     /// 320x240 pixels of the 640x480 camera, at the same metres per pixel. Tests use it
     /// for small images whose pixels are as fine as the full camera's.
     pub zoom: f64,
+    /// The frame from which the ceiling panel is switched off (default `None`: on
+    /// throughout). The room then darkens at once, its interreflection with it, and the
+    /// truth of every frame is of the room as it is lit then; the header's `environment`
+    /// attachment stays the one of frame 0 (a light probe captured before the recording).
+    pub panel_off_at: Option<usize>,
 }
 
 impl Default for SynthConfig {
@@ -115,6 +120,7 @@ impl Default for SynthConfig {
             white_balance: 0.2,
             contrast: 0.0,
             zoom: 1.0,
+            panel_off_at: None,
         }
     }
 }
@@ -166,6 +172,14 @@ impl SynthConfig {
         if !(0.25..=16.0).contains(&self.zoom) {
             return Err(format!("zoom {} must lie in [0.25, 16]", self.zoom));
         }
+        if let Some(off) = self.panel_off_at
+            && off >= self.frames
+        {
+            return Err(format!(
+                "the panel cannot switch off at frame {off}: the recording's frames are 0 to {}",
+                self.frames - 1
+            ));
+        }
         Ok(())
     }
 
@@ -177,7 +191,42 @@ impl SynthConfig {
         k.fy *= self.zoom;
         k
     }
+
+    /// The room as it is lit at `frame`: [`interreflection::room`], or
+    /// [`interreflection::room_panel_off`] from [`SynthConfig::panel_off_at`] on.
+    pub fn scene_at(&self, frame: usize) -> Scene {
+        scene_at(self.panel_off_at, frame)
+    }
 }
+
+/// The room as it is lit at `frame` when the panel switches off at `panel_off_at`.
+pub fn scene_at(panel_off_at: Option<usize>, frame: usize) -> Scene {
+    match panel_off_at {
+        Some(off) if frame >= off => interreflection::room_panel_off(),
+        _ => interreflection::room(),
+    }
+}
+
+/// The frame from which the ceiling panel of the recording with `provenance` is off, as
+/// its settings say (`None`: on throughout); an error when the setting is not a frame
+/// number.
+pub fn panel_off_at(provenance: &Provenance) -> Result<Option<usize>, String> {
+    provenance
+        .settings
+        .get(PANEL_OFF_AT_SETTING)
+        .map(|v| {
+            v.parse::<usize>().map_err(|_| {
+                format!(
+                    "the recording's setting {PANEL_OFF_AT_SETTING} = {v:?} is not a frame number"
+                )
+            })
+        })
+        .transpose()
+}
+
+/// The provenance setting naming [`SynthConfig::panel_off_at`]; absent when the panel
+/// stays on, so recordings made before the switch existed keep their header bytes.
+pub const PANEL_OFF_AT_SETTING: &str = "panel_off_at";
 
 /// Summary of what was generated.
 #[derive(Clone, Debug, PartialEq)]
@@ -205,8 +254,9 @@ pub fn provenance(config: &SynthConfig) -> Provenance {
         white_balance,
         contrast,
         zoom,
+        panel_off_at,
     } = config;
-    let settings: BTreeMap<String, String> = [
+    let mut settings: BTreeMap<String, String> = [
         ("generator", GENERATOR_VERSION.to_string()),
         ("frames", frames.to_string()),
         ("width", width.to_string()),
@@ -225,6 +275,9 @@ pub fn provenance(config: &SynthConfig) -> Provenance {
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
     .collect();
+    if let Some(off) = panel_off_at {
+        settings.insert(PANEL_OFF_AT_SETTING.into(), off.to_string());
+    }
     Provenance {
         tool: SYNTH_TOOL.into(),
         tool_version: env!("CARGO_PKG_VERSION").into(),
@@ -395,9 +448,9 @@ pub fn generate_with_progress(
     config
         .validate()
         .map_err(|reason| invalid(format!("invalid synthetic recording settings: {reason}")))?;
-    let scene = interreflection::room();
     let mut writer = RecordingWriter::create(path, &header(config))?;
     for frame in 0..config.frames {
+        let scene = config.scene_at(frame);
         for record in frame_records(config, &scene, frame).map_err(invalid)? {
             writer.write(&record)?;
         }
@@ -487,6 +540,66 @@ mod tests {
         assert_eq!(p.settings["exposure_range"], "0.5,2");
         assert_eq!(p.settings["contrast"], "0.25");
         assert_ne!(provenance(&SynthConfig::default()), p);
+    }
+
+    #[test]
+    fn the_panel_switches_off_at_its_frame_and_the_provenance_says_so() {
+        let config = SynthConfig {
+            frames: 10,
+            panel_off_at: Some(4),
+            ..SynthConfig::default()
+        };
+        assert_eq!(config.validate(), Ok(()));
+        let lit = |frame| config.scene_at(frame).lights[interreflection::PANEL].radiance;
+        assert_eq!(lit(3), Vec3::new(7.0, 5.6, 4.0));
+        assert_eq!(lit(4), Vec3::ZERO);
+        assert_eq!(lit(9), Vec3::ZERO);
+        // The window and the geometry stay; the interreflection is the dark room's.
+        let (on, off) = (config.scene_at(0), config.scene_at(4));
+        assert_eq!(on.lights[1], off.lights[1]);
+        assert_eq!(on.blocks, off.blocks);
+        let floor = scene::Hit {
+            t: 1.0,
+            position: Vec3::new(0.0, 0.0, 0.0),
+            normal: Vec3::Y,
+            surface: room::Surface::Floor,
+        };
+        let (bright, dark) = (
+            on.indirect_irradiance(&floor),
+            off.indirect_irradiance(&floor),
+        );
+        // Measured: 0.92, 0.84, 0.83 lit, 0.71, 0.72, 0.77 dark: the warm panel's red
+        // goes most.
+        let kept = dark / bright;
+        assert!(
+            dark.min_element() > 0.0 && kept.max_element() < 0.95 && kept.x < kept.z,
+            "{bright} {dark}"
+        );
+
+        let p = provenance(&config);
+        assert_eq!(p.settings[PANEL_OFF_AT_SETTING], "4");
+        assert_eq!(panel_off_at(&p), Ok(Some(4)));
+        // A recording without the switch keeps the header it always had.
+        let plain = provenance(&SynthConfig::default());
+        assert!(!plain.settings.contains_key(PANEL_OFF_AT_SETTING));
+        assert_eq!(panel_off_at(&plain), Ok(None));
+        let mut bad = p.clone();
+        bad.settings
+            .insert(PANEL_OFF_AT_SETTING.into(), "soon".into());
+        assert_eq!(
+            panel_off_at(&bad),
+            Err("the recording's setting panel_off_at = \"soon\" is not a frame number".into())
+        );
+        let late = SynthConfig {
+            panel_off_at: Some(10),
+            ..config
+        };
+        assert_eq!(
+            late.validate(),
+            Err(
+                "the panel cannot switch off at frame 10: the recording's frames are 0 to 9".into()
+            )
+        );
     }
 
     #[test]

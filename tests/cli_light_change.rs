@@ -72,6 +72,10 @@ fn the_panel_switched_off_is_followed_and_its_lag_measured() {
     let lag = switched["change_lag_frames"].as_u64().unwrap();
     assert!(lag <= 14, "{switched}");
     assert!(switched["change_final_ratio"].as_f64().unwrap() > 0.0);
+    // Before the switch: the median of the shares of frames 3, 4 and 5.
+    let mut before = switched_ratios[..3].to_vec();
+    before.sort_by(f64::total_cmp);
+    assert_eq!(switched["change_ratio_before"].as_f64().unwrap(), before[1]);
     assert!(lit.get("change_frame").is_none(), "{lit}");
 
     // Too few scored frames after the switch: said instead of a lag.

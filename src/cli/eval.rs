@@ -55,7 +55,8 @@ Scores (per stage, keyed by the stage's name):
                     its differential on the truth's, off the objects); on a recording
                     whose light changes (relume synth --panel-off-at F), scored over the
                     change: change_frame, change_lag_frames (frames until that share
-                    stays within 5 % of its final value), change_final_ratio
+                    stays within 5 % of its final value), change_final_ratio,
+                    change_ratio_before (the median share before the change)
 
 The 1024-sample references and the true frame cost most of an eval at 640x480: about 30 s
 each per scored frame on 2 cores (the default pipeline's eval of the built-in recording

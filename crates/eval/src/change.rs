@@ -24,6 +24,8 @@ pub const FRAMES_AFTER_CHANGE: usize = 2 * FINAL_FRAMES;
 /// The settling of a composite's differential after a change.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Settling {
+    /// The median ratio of the scored frames before the change (`None`: none scored).
+    pub ratio_before: Option<f64>,
     /// The final ratio of the composite's differential to the truth's.
     pub final_ratio: f64,
     /// Frames from the change until the ratio stays within the tolerance of the final one.
@@ -55,17 +57,23 @@ pub fn settling(frames: &[usize], ratios: &[f64], change: usize) -> Result<Settl
             "frame {f} has no differential to compare (the truth changes no pixel off the objects)"
         ));
     }
-    let mut last: Vec<f64> = after[after.len() - FINAL_FRAMES..]
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied()
+    };
+    let last = after[after.len() - FINAL_FRAMES..].iter().map(|(_, r)| *r);
+    let final_ratio = median(last.collect()).unwrap_or(f64::NAN);
+    let before = frames
         .iter()
-        .map(|(_, r)| *r)
-        .collect();
-    last.sort_by(f64::total_cmp);
-    let final_ratio = last[FINAL_FRAMES / 2];
+        .zip(ratios)
+        .filter(|(f, r)| **f < change && r.is_finite());
+    let ratio_before = median(before.map(|(_, r)| *r).collect());
     let settled = |r: f64| (r - final_ratio).abs() <= SETTLED_TOLERANCE * final_ratio.abs();
     // The first frame after which every ratio has settled.
     let unsettled = after.iter().rposition(|(_, r)| !settled(*r));
     let lag_frames = unsettled.map_or(0, |i| after[i].0 + 1 - change);
     Ok(Settling {
+        ratio_before,
         final_ratio,
         lag_frames,
     })
@@ -114,11 +122,13 @@ mod tests {
             0.6, 0.82, 0.8, 0.78, 0.8, 0.8, 0.81, 0.8, 0.79, 0.8, 0.8, 0.8,
         ]);
         let s = settling(&f, &r, 15).unwrap();
-        assert_eq!(s.final_ratio, 0.8);
+        assert_eq!((s.ratio_before, s.final_ratio), (Some(0.5), 0.8));
         // Frame 18 (0.6) is the last unsettled one: 4 frames after 15.
         assert_eq!(s.lag_frames, 4);
         // A ratio settled at the change has lag 0; a late outlier sets the lag.
         assert_eq!(settling(&f, &[0.8; 20], 15).unwrap().lag_frames, 0);
+        let from_the_change = settling(&frames(15..30), &[0.8; 15], 15).unwrap();
+        assert_eq!(from_the_change.ratio_before, None);
         let mut late = vec![0.8; 20];
         late[13] = 0.9;
         assert_eq!(settling(&f, &late, 15).unwrap().lag_frames, 9);

@@ -30,7 +30,8 @@
 //!   pixels off the objects as a share of the truth's ([`super::change`]), and, on a
 //!   recording whose light changes (`relume synth --panel-off-at`), `change_frame`,
 //!   `change_lag_frames` (frames until that share settles within 5 % of its final value)
-//!   and `change_final_ratio`, or `change_unmeasured` saying why not.
+//!   `change_final_ratio` and `change_ratio_before` (the median share on the scored
+//!   frames before it), or `change_unmeasured` saying why not.
 //!
 //! What the references and the truth cost is reported apart ([`CompositeScorer::costs`]).
 
@@ -331,6 +332,7 @@ impl TruthScores {
                 Ok(s) => {
                     report["change_lag_frames"] = json!(s.lag_frames);
                     report["change_final_ratio"] = json!(s.final_ratio);
+                    report["change_ratio_before"] = json!(s.ratio_before);
                 }
                 Err(why) => report["change_unmeasured"] = json!(why),
             }

@@ -29,7 +29,7 @@
 //! - `differential_ratio_by_frame`: per frame, the composite's differential over the
 //!   pixels off the objects as a share of the truth's ([`super::change`]), and, on a
 //!   recording whose light changes (`relume synth --panel-off-at`), `change_frame`,
-//!   `change_lag_frames` (frames until that share settles within 5 % of its final value)
+//!   `change_lag_frames` (frames until that share settles within 5 % of its final value),
 //!   `change_final_ratio` and `change_ratio_before` (the median share on the scored
 //!   frames before it), or `change_unmeasured` saying why not.
 //!

@@ -52,7 +52,7 @@ pub struct SynthArgs {
     /// Switch the ceiling panel off at this frame (a light that changes): the room darkens
     /// at once, the objects' shadows from the panel vanish, and every frame's truth, and
     /// `relume eval`'s true frames, are of the room as it is lit then. The `environment`
-    /// attachment stays frame 0's (a probe taken before). `relume eval --score-frames`
+    /// attachment is frame 0's room (a probe taken at the start). `relume eval --score-frames`
     /// over the switch measures how fast a pipeline follows it.
     #[arg(long, value_name = "FRAME")]
     panel_off_at: Option<usize>,

@@ -103,7 +103,7 @@ pub struct SynthConfig {
     /// The frame from which the ceiling panel is switched off (default `None`: on
     /// throughout). The room then darkens at once, its interreflection with it, and the
     /// truth of every frame is of the room as it is lit then; the header's `environment`
-    /// attachment stays the one of frame 0 (a light probe captured before the recording).
+    /// attachment is the room as frame 0 shows it (a light probe taken at the start).
     pub panel_off_at: Option<usize>,
 }
 
@@ -316,8 +316,8 @@ pub fn scene_truth() -> SceneTruth {
 /// The header of the recording of `config`, with the rendered environment map.
 pub fn header(config: &SynthConfig) -> Header {
     let (env_width, env_height) = ENVIRONMENT_SIZE;
-    let env =
-        render::render_environment(&interreflection::room(), config.seed, env_width, env_height);
+    // A light probe taken at the start: the room as frame 0 shows it.
+    let env = render::render_environment(&config.scene_at(0), config.seed, env_width, env_height);
     let intrinsics = config.intrinsics();
     Header {
         name: "synthetic-room".into(),
@@ -575,6 +575,16 @@ mod tests {
             dark.min_element() > 0.0 && kept.max_element() < 0.95 && kept.x < kept.z,
             "{bright} {dark}"
         );
+
+        // The light probe is the room as frame 0 shows it.
+        let small = |panel_off_at| SynthConfig {
+            frames: 5,
+            panel_off_at,
+            ..SynthConfig::default()
+        };
+        let probe = |c: &SynthConfig| header(c).attachments[0].image.clone();
+        assert_eq!(probe(&small(Some(4))), probe(&small(None)));
+        assert_ne!(probe(&small(Some(0))), probe(&small(None)));
 
         let p = provenance(&config);
         assert_eq!(p.settings[PANEL_OFF_AT_SETTING], "4");

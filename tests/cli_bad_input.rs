@@ -611,7 +611,8 @@ fn a_nul_byte_in_a_write_folder_is_refused_by_validate() {
 }
 
 /// A thread the system will not start (here: each stack reserves 1 GB, under a 3 GB
-/// address-space ceiling) ends the run with an error naming the stage, not a panic.
+/// address-space ceiling) ends the run with an error naming the stage, or the worker
+/// threads when those are refused first, not a panic.
 #[test]
 fn a_stage_thread_the_system_refuses_is_an_error_naming_the_stage() {
     let tmp = tempfile::tempdir().unwrap();
@@ -638,16 +639,26 @@ fn a_stage_thread_the_system_refuses_is_an_error_naming_the_stage() {
     assert!(ends_with_a_thread_error(&e), "{e}");
 }
 
-/// Whether `stderr` ends with the thread error for some stage of the geometry pipeline.
+/// Whether `stderr` ends with the thread error for some stage of the geometry pipeline or
+/// the recording's reader, or for rayon's worker threads (started before them): which
+/// the system refuses first depends on what it has mapped already.
 fn ends_with_a_thread_error(stderr: &str) -> bool {
     let Some(line) = stderr.lines().last() else {
         return false;
     };
+    if line.starts_with(
+        "error: cannot start the worker threads (a higher thread or memory limit, or \
+         RAYON_NUM_THREADS=1, lets them start): ",
+    ) {
+        return true;
+    }
     ["decode", "depth.to_points", "normals.cross", "write"]
         .iter()
-        .any(|stage| {
+        .map(|stage| format!("stage `{stage}`"))
+        .chain(["the recording's reader".to_string()])
+        .any(|what| {
             line.starts_with(&format!(
-                "error: replay of r.relume stopped: cannot start the thread of stage `{stage}` \
+                "error: replay of r.relume stopped: cannot start the thread of {what} \
                  (each stage runs on a thread of its own: a pipeline this large needs a higher \
                  thread or memory limit, or fewer stages): "
             ))

@@ -117,7 +117,8 @@ Examples:
 const MAX_THREADS: usize = 1024;
 
 /// An error when `RAYON_NUM_THREADS` asks for more than [`MAX_THREADS`] threads (rayon
-/// ignores values that are not a number, and 0 means one per core).
+/// ignores values that are not a number, and 0 means one per core), or when the worker
+/// threads cannot start.
 fn check_thread_count() -> anyhow::Result<()> {
     let requested = std::env::var("RAYON_NUM_THREADS")
         .ok()
@@ -128,7 +129,14 @@ fn check_thread_count() -> anyhow::Result<()> {
              unset for one per core"
         );
     }
-    Ok(())
+    // Started before any stage: a system that refuses them (a thread or address-space
+    // limit) then ends the run with this error, where a stage's first parallel loop would
+    // panic starting them.
+    rayon::ThreadPoolBuilder::new().build_global().map_err(|e| {
+        anyhow::anyhow!(
+            "cannot start the worker threads (a higher thread or memory limit, or RAYON_NUM_THREADS=1, lets them start): {e}"
+        )
+    })
 }
 
 /// Runs the command line; returns the exit code.

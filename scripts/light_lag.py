@@ -47,7 +47,11 @@ def scores(a, recording, pipeline):
     out = run([a.relume, "eval", recording, "-p", f"pipelines/{pipeline}.toml",
                "--score-frames", f"10..{a.frames}", "--reference-stride", str(a.stride),
                "--stage", "composite.differential", "--json"])
-    return json.loads(out)["stages"]["composite.differential"]
+    composite = json.loads(out)["stages"]["composite.differential"]
+    if "differential_ratio_by_frame" not in composite:
+        why = composite.get("truth_unavailable", "no true frames were scored")
+        sys.exit(f"{recording}: {why} (delete it to have it made again)")
+    return composite
 
 
 def lag(frames, switched, settled, off_at, absolute=False):

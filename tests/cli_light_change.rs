@@ -5,27 +5,16 @@
 
 mod common;
 
-use common::{ok, run_in, stderr, stdout};
+use common::{ok, run_in, stderr};
 use serde_json::Value;
 
 /// The composite's scores of `relume eval` on `recording` over frames 3..20.
 fn composite_scores(dir: &std::path::Path, recording: &str) -> Value {
-    let o = ok(run_in(
+    common::composite_scores(
         dir,
-        &[
-            "eval",
-            recording,
-            "--score-frames",
-            "3..20",
-            "--stage",
-            "composite.differential",
-            "--reference-stride",
-            "4",
-            "--json",
-        ],
-    ));
-    let doc: Value = serde_json::from_str(&stdout(&o)).unwrap();
-    doc["stages"]["composite.differential"].clone()
+        recording,
+        &["--score-frames", "3..20", "--reference-stride", "4"],
+    )
 }
 
 #[test]
@@ -79,23 +68,13 @@ fn the_panel_switched_off_is_followed_and_its_lag_measured() {
     assert!(lit.get("change_frame").is_none(), "{lit}");
 
     // Too few scored frames after the switch: said instead of a lag.
-    let o = ok(run_in(
+    let short = common::composite_scores(
         d,
-        &[
-            "eval",
-            "switched.relume",
-            "--score-frames",
-            "3..12",
-            "--stage",
-            "composite.differential",
-            "--reference-stride",
-            "4",
-            "--json",
-        ],
-    ));
-    let doc: Value = serde_json::from_str(&stdout(&o)).unwrap();
+        "switched.relume",
+        &["--score-frames", "3..12", "--reference-stride", "4"],
+    );
     assert_eq!(
-        doc["stages"]["composite.differential"]["change_unmeasured"],
+        short["change_unmeasured"],
         "the change at frame 6 needs 10 scored frames from it on, 6 were scored (give --score-frames a range that runs further past it)"
     );
 

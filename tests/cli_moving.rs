@@ -6,7 +6,6 @@
 mod common;
 
 use common::{ok, pipeline, run_in, stdout};
-use serde_json::Value;
 use std::path::Path;
 
 /// `pipelines/mixed-reality-moving.toml` with its torus sliding from x = -0.5 at frame 2
@@ -85,24 +84,18 @@ fn a_sliding_torus_is_rendered_where_its_path_puts_it_and_scored_frame_by_frame(
 
     // Scores over time: every frame of 3..8, the truth and the references following the
     // torus.
-    let o = ok(run_in(
+    let composite = &common::composite_scores(
         d,
+        "s.relume",
         &[
-            "eval",
-            "s.relume",
             "-p",
             "moving.toml",
             "--score-frames",
             "3..8",
-            "--stage",
-            "composite.differential",
             "--reference-stride",
             "4",
-            "--json",
         ],
-    ));
-    let doc: Value = serde_json::from_str(&stdout(&o)).unwrap();
-    let composite = &doc["stages"]["composite.differential"];
+    );
     assert_eq!(
         composite["scored_frames"],
         serde_json::json!([3, 4, 5, 6, 7])

@@ -96,6 +96,25 @@ pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// The `composite.differential` scores of `relume eval RECORDING --stage
+/// composite.differential --json` with `options`, run in `dir`.
+pub fn composite_scores(
+    dir: &std::path::Path,
+    recording: &str,
+    options: &[&str],
+) -> serde_json::Value {
+    let mut args = vec![
+        "eval",
+        recording,
+        "--stage",
+        "composite.differential",
+        "--json",
+    ];
+    args.extend(options);
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&ok(run_in(dir, &args)))).unwrap();
+    doc["stages"]["composite.differential"].clone()
+}
+
 /// Asserts success, printing both streams otherwise.
 pub fn ok(o: Output) -> Output {
     assert!(

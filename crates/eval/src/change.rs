@@ -14,6 +14,8 @@
 //! frame from `c + k` on has `r_t` within [`SETTLED_TOLERANCE`] of its final value, the
 //! median of the last [`FINAL_FRAMES`] scored frames' ratios.
 
+use super::color::median;
+
 /// A ratio within this fraction of the final one has settled (the 5 %).
 pub const SETTLED_TOLERANCE: f64 = 0.05;
 /// The final ratio is the median of this many last scored frames.
@@ -57,17 +59,18 @@ pub fn settling(frames: &[usize], ratios: &[f64], change: usize) -> Result<Settl
             "frame {f} has no differential to compare (the truth changes no pixel off the objects)"
         ));
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied()
-    };
-    let last = after[after.len() - FINAL_FRAMES..].iter().map(|(_, r)| *r);
-    let final_ratio = median(last.collect()).unwrap_or(f64::NAN);
-    let before = frames
+    let last: Vec<f64> = after[after.len() - FINAL_FRAMES..]
+        .iter()
+        .map(|(_, r)| *r)
+        .collect();
+    let final_ratio = median(&last);
+    let before: Vec<f64> = frames
         .iter()
         .zip(ratios)
-        .filter(|(f, r)| **f < change && r.is_finite());
-    let ratio_before = median(before.map(|(_, r)| *r).collect());
+        .filter(|(f, r)| **f < change && r.is_finite())
+        .map(|(_, r)| *r)
+        .collect();
+    let ratio_before = Some(median(&before)).filter(|m| !m.is_nan());
     let settled = |r: f64| (r - final_ratio).abs() <= SETTLED_TOLERANCE * final_ratio.abs();
     // The first frame after which every ratio has settled.
     let unsettled = after.iter().rposition(|(_, r)| !settled(*r));

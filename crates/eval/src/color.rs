@@ -21,7 +21,8 @@ fn frobenius(m: Mat3) -> f32 {
     m.to_cols_array().iter().map(|v| v * v).sum::<f32>().sqrt()
 }
 
-fn median(values: &[f64]) -> f64 {
+/// The median of `values` (the mean of the middle two for an even count), NaN for none.
+pub(crate) fn median(values: &[f64]) -> f64 {
     if values.is_empty() {
         return f64::NAN;
     }

@@ -48,12 +48,7 @@ const GATHER_PURPOSE: u64 = 12;
 /// first call, in about a second on two cores, and kept for the process).
 pub fn room() -> Scene {
     static ROOM: OnceLock<Scene> = OnceLock::new();
-    ROOM.get_or_init(|| {
-        let mut scene = Scene::room_without_interreflection();
-        scene.indirect = Some(Arc::new(solve(&scene)));
-        scene
-    })
-    .clone()
+    solved_once(&ROOM, |_| {})
 }
 
 /// The room of [`room`] with its ceiling panel switched off (the window alone lights it;
@@ -62,9 +57,15 @@ pub fn room() -> Scene {
 /// panel, so the window's samples, and their noise, are those of the lit room.
 pub fn room_panel_off() -> Scene {
     static ROOM: OnceLock<Scene> = OnceLock::new();
-    ROOM.get_or_init(|| {
+    solved_once(&ROOM, |scene| scene.lights[PANEL].radiance = Vec3::ZERO)
+}
+
+/// The room changed by `light`, with its interreflection solved into `cell` on the first
+/// call.
+fn solved_once(cell: &OnceLock<Scene>, light: impl FnOnce(&mut Scene)) -> Scene {
+    cell.get_or_init(|| {
         let mut scene = Scene::room_without_interreflection();
-        scene.lights[PANEL].radiance = Vec3::ZERO;
+        light(&mut scene);
         scene.indirect = Some(Arc::new(solve(&scene)));
         scene
     })

@@ -1,7 +1,7 @@
 //! Objects that move, from the command line: a torus sliding along keyframes is rendered
 //! where its path puts it in every frame (the same products as the torus standing still
 //! there), the same bits at any thread count, and `relume eval --score-frames` scores
-//! each frame of the slide.
+//! each frame of the slide and the ghost it leaves.
 
 mod common;
 
@@ -82,32 +82,70 @@ fn a_sliding_torus_is_rendered_where_its_path_puts_it_and_scored_frame_by_frame(
         one
     );
 
-    // Scores over time: every frame of 3..8, the truth and the references following the
-    // torus.
-    let composite = &common::composite_scores(
-        d,
-        "s.relume",
-        &[
-            "-p",
-            "moving.toml",
-            "--score-frames",
-            "3..8",
-            "--reference-stride",
-            "4",
-        ],
-    );
+    // Scores over time: every frame of 3..12, the truth and the references following
+    // the torus.
+    let scores = |pipeline: &str| {
+        common::composite_scores(
+            d,
+            "s.relume",
+            &[
+                "-p",
+                pipeline,
+                "--score-frames",
+                "3..12",
+                "--reference-stride",
+                "2",
+            ],
+        )
+    };
+    let composite = &scores("moving.toml");
     assert_eq!(
         composite["scored_frames"],
-        serde_json::json!([3, 4, 5, 6, 7])
+        serde_json::json!([3, 4, 5, 6, 7, 8, 9, 10, 11])
     );
     for key in ["psnr_db_by_frame", "psnr_db_truth_by_frame"] {
         let values = composite[key].as_array().unwrap();
-        assert_eq!(values.len(), 5, "{key}: {composite}");
+        assert_eq!(values.len(), 9, "{key}: {composite}");
         assert!(
             values.iter().all(|v| v.as_f64().unwrap().is_finite()),
             "{key}: {composite}"
         );
     }
+    // The ghost: the torus slides 10 cm a frame here (three times the shipped path's
+    // speed); what its shadows and light left behind fades from the composite frame by
+    // frame, and is gone (within 5 % of the truth's loss) within the 5 frames measured.
+    let shares: Vec<f64> = composite["ghost_share_by_age"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_f64().unwrap())
+        .collect();
+    assert_eq!(shares.len(), 5, "{composite}");
+    assert!(shares.windows(2).all(|w| w[1] < w[0]), "{shares:?}");
+    let gone = composite["ghost_gone_after_frames"].as_u64().unwrap();
+    assert!(gone <= 5, "{composite}");
+    assert!(composite["ghost_pixels_by_age"][0].as_u64().unwrap() > 100);
+    // A torus held still between two keyframes leaves nothing: the region is empty,
+    // and eval says why there is no score.
+    let held = std::fs::read_to_string(d.join("moving.toml"))
+        .unwrap()
+        .replace(
+            "[[-0.5, 0.09, 0.1], [0.5, 0.09, 0.1]]",
+            "[[0.0, 0.09, 0.1], [0.0, 0.09, 0.1]]",
+        );
+    std::fs::write(d.join("held.toml"), held).unwrap();
+    let held = &scores("held.toml");
+    assert_eq!(
+        held["ghost_pixels_by_age"],
+        serde_json::json!([0, 0, 0, 0, 0])
+    );
+    assert!(
+        held["ghost_unmeasured"]
+            .as_str()
+            .unwrap()
+            .starts_with("no scored frame shows a point the objects' shadows or light left"),
+        "{held}"
+    );
     // A range the replay does not reach is refused, saying so.
     let o = run_in(
         d,

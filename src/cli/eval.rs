@@ -56,7 +56,15 @@ Scores (per stage, keyed by the stage's name):
                     whose light changes (relume synth --panel-off-at F), scored over the
                     change: change_frame, change_lag_frames (frames until that share
                     stays within 5 % of its final value), change_final_ratio,
-                    change_ratio_before (the median share before the change)
+                    change_ratio_before (the median share before the change); when
+                    the pipeline's objects move (keyframes, velocity), the ghost they
+                    leave where their shadows and light left, per age 1..5 (frames
+                    since then): ghost_share_by_age (how much of what the truth lost
+                    there the composite still shows, beyond its usual share of the
+                    truth's differential: 0 none, below 0 too little),
+                    ghost_psnr_db_by_age, ghost_pixels_by_age,
+                    ghost_gone_after_frames (the age from which every share is within
+                    5 % of 0) or ghost_unmeasured (why not)
 
 The 1024-sample references and the true frame cost most of an eval at 640x480: about 30 s
 each per scored frame on 2 cores (the default pipeline's eval of the built-in recording

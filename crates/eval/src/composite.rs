@@ -31,11 +31,18 @@
 //!   recording whose light changes (`relume synth --panel-off-at`), `change_frame`,
 //!   `change_lag_frames` (frames until that share settles within 5 % of its final value),
 //!   `change_final_ratio` and `change_ratio_before` (the median share on the scored
-//!   frames before it), or `change_unmeasured` saying why not.
+//!   frames before it), or `change_unmeasured` saying why not;
+//! - when the pipeline's objects move, the ghost they leave ([`super::ghost`]), per age
+//!   1 to 5 (frames since their shadows and light left a point): `ghost_pixels_by_age`,
+//!   `ghost_share_by_age` (how much of what the truth lost there the composite still
+//!   shows, beyond its usual share of the truth's differential) and
+//!   `ghost_psnr_db_by_age`, and `ghost_gone_after_frames` (the age from
+//!   which every share is within 5 % of 0) or `ghost_unmeasured` saying why not.
 //!
 //! What the references and the truth cost is reported apart ([`CompositeScorer::costs`]).
 
 use super::change::{self, DifferentialSums};
+use super::ghost::{self, GHOST_AGES, GhostSums};
 use super::sampling::ReferenceLayers;
 use super::true_frame::{TrueComposite, linear_of_level};
 use glam::Vec3;
@@ -88,15 +95,19 @@ struct TruthScores {
     differential_by_frame: Vec<DifferentialSums>,
     /// The frame at which the recording's world changes (its light), if it does.
     change: Option<usize>,
+    /// The ghost of the objects, per age, when they move.
+    ghosts: Option<[GhostSums; GHOST_AGES]>,
 }
 
 impl CompositeScorer {
     /// The scorer of `stage`, whose layers `sampler` renders; `change` is the frame at
-    /// which the recording's light changes, whose lag is measured.
+    /// which the recording's light changes, whose lag is measured; `moving`: the
+    /// pipeline's objects move, and the ghost they leave is measured.
     pub fn new(
         stage: &ResolvedStage,
         sampler: Option<&ResolvedStage>,
         change: Option<usize>,
+        moving: bool,
     ) -> CompositeScorer {
         let params = CompositeParams::from_params(&stage.params);
         CompositeScorer {
@@ -115,6 +126,7 @@ impl CompositeScorer {
             reference_render_s: Vec::new(),
             truth: TruthScores {
                 change,
+                ghosts: moving.then(|| [GhostSums::default(); GHOST_AGES]),
                 ..TruthScores::default()
             },
         }
@@ -298,6 +310,15 @@ impl TruthScores {
         self.whole.0 += frame.0;
         self.whole.1 += frame.1;
         self.by_frame.push(psnr_db(frame.0 / frame.1.max(1) as f64));
+        if let Some(ghosts) = &mut self.ghosts {
+            let gain = sums.ratio();
+            for (age, ghost) in (1..).zip(ghosts.iter_mut()) {
+                let then = t.frame.checked_sub(age);
+                if let Some(before) = self.frames.iter().rev().find(|b| Some(b.frame) == then) {
+                    ghost.observe(own, t, before, gain);
+                }
+            }
+        }
         self.differential_by_frame.push(sums);
         self.frames.push(t.clone());
     }
@@ -325,6 +346,15 @@ impl TruthScores {
             "psnr_db_truth_by_frame": self.by_frame,
             "differential_ratio_by_frame": ratios.iter().map(|r| r.is_finite().then_some(*r)).collect::<Vec<_>>(),
         });
+        if let Some(ghosts) = &self.ghosts {
+            report["ghost_pixels_by_age"] = json!(ghosts.map(|g| g.pixels));
+            report["ghost_share_by_age"] = json!(ghosts.map(|g| g.share()));
+            report["ghost_psnr_db_by_age"] = json!(ghosts.map(|g| g.mean_squared().map(psnr_db)));
+            match ghost::gone_after(ghosts) {
+                Ok(frames) => report["ghost_gone_after_frames"] = json!(frames),
+                Err(why) => report["ghost_unmeasured"] = json!(why),
+            }
+        }
         if let Some(at) = self.change {
             let frames: Vec<usize> = self.frames.iter().map(|t| t.frame).collect();
             report["change_frame"] = json!(at);

@@ -27,6 +27,7 @@ pub mod composite;
 mod depth;
 pub mod diff;
 pub mod filter;
+pub mod ghost;
 pub mod light;
 pub mod material;
 mod normals;
@@ -245,9 +246,14 @@ impl Evaluator {
                             .zip(resampler.cloned()),
                         find("temporal.accumulate"),
                     ))),
-                    "composite.differential" => Scorer::Composite(Box::new(
-                        composite::CompositeScorer::new(s, sampler, light_change),
-                    )),
+                    "composite.differential" => {
+                        Scorer::Composite(Box::new(composite::CompositeScorer::new(
+                            s,
+                            sampler,
+                            light_change,
+                            objects.moving.is_some(),
+                        )))
+                    }
                     _ => return None,
                 };
                 Some((s.name.clone(), s.kind, scorer))

@@ -53,6 +53,12 @@ pub struct TrueComposite {
     pub contrast: f32,
     /// Seconds the render took.
     pub render_s: f64,
+    /// The room's depth at every pixel (metres, 0 where nothing is hit), without the
+    /// objects: with `view`, where each pixel's real point is (the ghost's region,
+    /// [`super::ghost`]).
+    pub depth: Vec<f32>,
+    /// The camera the frame was rendered through.
+    pub view: View,
 }
 
 impl TrueComposite {
@@ -259,6 +265,8 @@ impl TruthRenderer {
             object: rendered.object,
             contrast: truth.contrast,
             render_s,
+            depth: truth.depth,
+            view,
         });
         if let Some(cache) = &self.shared {
             let mut held = cache.0.lock().unwrap_or_else(|p| p.into_inner());

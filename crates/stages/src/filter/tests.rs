@@ -1,6 +1,7 @@
 //! Tests of `filter.axis_aligned`'s behaviour: constancy, edges, noise, temporal reuse,
 //! NaNs, E_RV == E_R bits, determinism. Its formulas (bandwidths, curvature, the fast
-//! exp, B_e) are tested in `tests/formulas.rs`, the passes against eqs. 21-23
+//! exp, B_e) are tested in `tests/formulas.rs`, paper 001 Fig. 4's flatland bandwidth in
+//! `tests/flatland.rs`, the passes against eqs. 21-23
 //! evaluated directly in `tests/reference.rs`, the reprojection in `tests/temporal.rs`.
 
 use super::temporal::find_previous;
@@ -8,6 +9,7 @@ use super::*;
 use relume_base::rng::{hash, unit_f32};
 use relume_base::simd::{self as lanes, Lanes};
 
+mod flatland;
 mod formulas;
 mod reference;
 mod temporal;

@@ -42,7 +42,14 @@
 //!      its differential from the history of the point that stood where it does
 //!      relative to that object a frame ago: a shadow or a glow that travels with its
 //!      object travels with its history. Where that point was not seen, the
-//!      differential starts anew (this frame's E_RV - E_R over the averaged E_R);
+//!      differential starts anew (this frame's E_RV - E_R over the averaged E_R).
+//!      A point the previous frame did not see itself (the object's motion uncovered
+//!      it: the floor seen through a moving torus's hole, or just below its outline)
+//!      is carried too when its paths met the object this frame, and takes the carried
+//!      point's E_R history as well (a point one object step away on the same surface:
+//!      E_R there is nearly its own, and an E_R of this frame alone, divided into a
+//!      carried differential, is noisier than the fresh estimates it replaces, whose
+//!      E_RV and E_R share their samples);
 //!    - elsewhere (no object moved, or the nearest one did not) the history is kept.
 //!
 //!    The carried differential averages its own frames (weight 1 / min(its frames + 1,
@@ -297,19 +304,14 @@ pub fn accumulate(
             let mut fresh_pixel = fresh_pixel(fresh, i);
             let found = history.and_then(|hist| previous(fresh, i, hist, camera, eye, params));
             let pixel = match (found, change) {
-                (None, change) => {
-                    if let Some(c) = change {
-                        fresh_pixel.object = c.mask.data[i] < 0.5;
-                    }
-                    fresh_pixel
-                }
+                (None, None) => fresh_pixel,
                 (Some(previous), None) => blend(&fresh_pixel, &previous, max_history),
-                (Some(previous), Some(c)) => {
+                (found, Some(c)) => {
                     fresh_pixel.object = c.mask.data[i] < 0.5;
                     let source = match history {
                         Some(hist) => differential_source(
                             &fresh_pixel,
-                            &previous,
+                            found.as_ref(),
                             fresh,
                             i,
                             hist,
@@ -319,11 +321,21 @@ pub fn accumulate(
                         ),
                         None => Differential::Kept,
                     };
-                    match source {
-                        Differential::Restart => fresh_pixel,
+                    match (found, source) {
+                        (_, Differential::Restart) => fresh_pixel,
                         // The whole pixel, its frame counts included.
-                        Differential::Whole(source) => blend(&fresh_pixel, &source, max_history),
-                        source => blend_changing(&fresh_pixel, &previous, source, max_history),
+                        (_, Differential::Whole(source)) => {
+                            blend(&fresh_pixel, &source, max_history)
+                        }
+                        (Some(previous), source) => {
+                            blend_changing(&fresh_pixel, &previous, source, max_history)
+                        }
+                        // A point the previous frame did not see (the object's motion
+                        // uncovered it): E_R and the differential from the carried point.
+                        (None, source @ Differential::Carried(carried)) => {
+                            blend_changing(&fresh_pixel, &carried, source, max_history)
+                        }
+                        (None, _) => fresh_pixel,
                     }
                 }
             };
@@ -524,12 +536,13 @@ enum Differential {
     Restart,
 }
 
-/// Step 4's choice for pixel `i` with history `previous`.
+/// Step 4's choice for pixel `i` with history `previous` (`None`: the previous frame
+/// did not see its point).
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn differential_source(
     fresh_pixel: &Pixel,
-    previous: &Pixel,
+    previous: Option<&Pixel>,
     fresh: &FreshLayers,
     i: usize,
     history: &History,
@@ -578,7 +591,7 @@ fn differential_source(
     }
     // A real surface point: its differential changes where an object that moved this
     // frame is the nearest one and reached it, now or before (or stood on it).
-    let reached = (fresh_pixel.touched | previous.touched) != 0 || previous.object;
+    let reached = fresh_pixel.touched != 0 || previous.is_some_and(|p| p.touched != 0 || p.object);
     match nearest_moved {
         Some(m) if reached => {
             let q = m.to_earlier.transform_point3(p);

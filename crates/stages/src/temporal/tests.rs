@@ -489,3 +489,34 @@ fn a_moved_objects_own_pixels_take_the_history_of_the_same_object_points() {
     );
     assert_eq!(out.frames.data[at(12)], 5.0);
 }
+
+#[test]
+fn a_point_uncovered_by_the_move_takes_the_carried_points_history() {
+    // As in shadow_then_move, but the previous frames did not see columns 20..28 (no
+    // surface there then: the moved object uncovers them, as a torus's hole moves over
+    // the floor). Their E_R and differential come from the points as far from the
+    // object a frame ago: E_R 1 over four frames, the shadow's mean 0.3.
+    let (mut fresh, moves) = shadow_then_move();
+    for f in &mut fresh[..4] {
+        for y in 0..H {
+            for x in 20..28 {
+                f.position.data[(y * W + x) as usize] = Vec3::NAN;
+            }
+        }
+    }
+    let frames: Vec<(Affine3A, &Fresh)> = fresh.iter().map(|f| (Affine3A::IDENTITY, f)).collect();
+    let params = AccumulateParams::default();
+    let out = run_with_objects(&frames, &params, Some(&moves));
+    let new = (12 * W + 24) as usize;
+    let v = out.irradiance[2].data[new].x;
+    assert!((v - 0.26).abs() < 1e-5, "{v}");
+    assert_eq!(out.irradiance[0].data[new], Vec3::ONE);
+    assert_eq!(out.frames.data[new], 5.0);
+    assert_eq!(out.change.unwrap().differential_frames.data[new], 5.0);
+    // Without a move, the same unseen points start anew: this frame's 0.1 alone.
+    let mut still = moves.clone();
+    still[4] = vec![object_at(wall_x(24), None)];
+    let out = run_with_objects(&frames, &params, Some(&still));
+    assert_eq!(out.irradiance[2].data[new], Vec3::splat(0.1));
+    assert_eq!(out.frames.data[new], 1.0);
+}

@@ -53,7 +53,7 @@ pub const GHOST_AGES: usize = 5;
 /// A point was left when the objects changed one of its channels by more than this
 /// share of the recorded (linear) value more than they change it now.
 pub const LOST: f64 = 0.1;
-/// A ghost share at most this is gone (the 5 %, as for the lag).
+/// A ghost share within this of 0 is gone (the 5 %, as for the lag).
 pub const GONE_SHARE: f64 = 0.05;
 
 /// The sums of one age's ghost over the frames scored.

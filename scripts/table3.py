@@ -22,13 +22,41 @@ import sys
 QUERIES = ["ssrt", "em", "dit", "vct"]
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def bench_arguments(ap, counts):
+    """The options every paper-table script takes (scripts/table4.py too)."""
     ap.add_argument("recording", nargs="?", help="default: the built-in recording")
     ap.add_argument("--frames", default="10..12")
-    ap.add_argument("--counts", default="16,32,64")
+    ap.add_argument("--counts", default=counts)
     ap.add_argument("--repeat", default="1")
     ap.add_argument("--relume", default="target/release/relume")
+
+
+def sample_path_ms(a, settings):
+    """sample.path's median ms a frame in one `relume bench --isolated` of
+    pipelines/mixed-reality-vct.toml with the sample.path `settings` (key, value)."""
+    cmd = [a.relume, "bench", "--isolated", "--json", "--repeat", a.repeat,
+           "--frames", a.frames, "-p", "pipelines/mixed-reality-vct.toml"]
+    if a.recording:
+        cmd.append(a.recording)
+    for key, value in settings:
+        cmd += ["--set", f"sample.path.{key}={value}"]
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        sys.exit(f"{' '.join(cmd)}\n{done.stderr}")
+    return json.loads(done.stdout)["stages"]["sample.path"]["median_ms"]
+
+
+def print_table(head, rows):
+    """A Markdown table on stdout."""
+    print("| " + " | ".join(head) + " |")
+    print("|" + "---|" * len(head))
+    for row in rows:
+        print("| " + " | ".join(row) + " |")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    bench_arguments(ap, "16,32,64")
     a = ap.parse_args()
     counts = [int(n) for n in a.counts.split(",")]
     rows = []
@@ -37,28 +65,16 @@ def main():
         for n in counts:
             for visibility in ["true", "false"]:
                 per_primary = max(n // 4, 1)
-                cmd = [a.relume, "bench", "--isolated", "--json", "--repeat", a.repeat,
-                       "--frames", a.frames, "-p", "pipelines/mixed-reality-vct.toml"]
-                if a.recording:
-                    cmd.append(a.recording)
-                for key, value in [("query", query), ("visibility", visibility),
-                                   ("object_aware", "true"),
-                                   ("object_aware_direct", "true"),
-                                   ("candidates", n), ("cache_size", 32),
-                                   ("direct", per_primary), ("indirect", per_primary)]:
-                    cmd += ["--set", f"sample.path.{key}={value}"]
-                done = subprocess.run(cmd, capture_output=True, text=True)
-                if done.returncode != 0:
-                    sys.exit(f"{' '.join(cmd)}\n{done.stderr}")
-                ms = json.loads(done.stdout)["stages"]["sample.path"]["median_ms"]
+                ms = sample_path_ms(a, [("query", query), ("visibility", visibility),
+                                        ("object_aware", "true"),
+                                        ("object_aware_direct", "true"),
+                                        ("candidates", n), ("cache_size", 32),
+                                        ("direct", per_primary), ("indirect", per_primary)])
                 row.append(f"{ms:.0f}")
                 print(f"{query} N={n} visibility={visibility}: {ms:.0f} ms", file=sys.stderr)
         rows.append(row)
-    head = ["query"] + [f"N={n}{'' if v else ' novis'}" for n in counts for v in (True, False)]
-    print("| " + " | ".join(head) + " |")
-    print("|" + "---|" * len(head))
-    for row in rows:
-        print("| " + " | ".join(row) + " |")
+    print_table(["query"] + [f"N={n}{'' if v else ' novis'}" for n in counts
+                             for v in (True, False)], rows)
 
 
 if __name__ == "__main__":

@@ -15,24 +15,21 @@ N / 4 direct and indirect samples for each of the 4 primaries (N per pixel and l
 as in scripts/table3.py). Where it departs from the paper's table: relume times the
 whole of sample.path (the objects, their material and the background together; the
 paper times the background's differential alone, at half resolution), on the CPU.
-A cache larger than N is skipped (it cannot fill). Standard library only.
+A cache larger than N is skipped (it cannot fill). Standard library only; the
+bench call and the table are scripts/table3.py's.
 """
 
 import argparse
-import json
-import subprocess
 import sys
+
+from table3 import bench_arguments, print_table, sample_path_ms
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("recording", nargs="?", help="default: the built-in recording")
-    ap.add_argument("--frames", default="10..12")
-    ap.add_argument("--counts", default="8,16,32,64,128")
+    bench_arguments(ap, "8,16,32,64,128")
     ap.add_argument("--caches", default="8,16,32")
     ap.add_argument("--queries", default="em,dit,vct")
-    ap.add_argument("--repeat", default="1")
-    ap.add_argument("--relume", default="target/release/relume")
     a = ap.parse_args()
     counts = [int(n) for n in a.counts.split(",")]
     caches = [int(c) for c in a.caches.split(",")]
@@ -45,27 +42,14 @@ def main():
                     row.append("")
                     continue
                 per_primary = max(n // 4, 1)
-                cmd = [a.relume, "bench", "--isolated", "--json", "--repeat", a.repeat,
-                       "--frames", a.frames, "-p", "pipelines/mixed-reality-vct.toml"]
-                if a.recording:
-                    cmd.append(a.recording)
-                for key, value in [("query", query), ("object_aware", "true"),
-                                   ("object_aware_direct", "true"),
-                                   ("candidates", n), ("cache_size", cache),
-                                   ("direct", per_primary), ("indirect", per_primary)]:
-                    cmd += ["--set", f"sample.path.{key}={value}"]
-                done = subprocess.run(cmd, capture_output=True, text=True)
-                if done.returncode != 0:
-                    sys.exit(f"{' '.join(cmd)}\n{done.stderr}")
-                ms = json.loads(done.stdout)["stages"]["sample.path"]["median_ms"]
+                ms = sample_path_ms(a, [("query", query), ("object_aware", "true"),
+                                        ("object_aware_direct", "true"),
+                                        ("candidates", n), ("cache_size", cache),
+                                        ("direct", per_primary), ("indirect", per_primary)])
                 row.append(f"{ms:.0f}")
                 print(f"{query} cache {cache} N={n}: {ms:.0f} ms", file=sys.stderr)
             rows.append(row)
-    head = ["query"] + [f"N={n}" for n in counts]
-    print("| " + " | ".join(head) + " |")
-    print("|" + "---|" * len(head))
-    for row in rows:
-        print("| " + " | ".join(row) + " |")
+    print_table(["query"] + [f"N={n}" for n in counts], rows)
 
 
 if __name__ == "__main__":

@@ -3,6 +3,7 @@
 use super::progress;
 use super::replay::{Pacing, RunArgs, load, some_frame_replayed, stop_on_interrupt};
 use clap::Args;
+use relume::graph::timing::parts_of;
 use relume::graph::{RunReport, Stats};
 use std::sync::atomic::Ordering;
 
@@ -22,8 +23,10 @@ pub struct BenchArgs {
     #[arg(long)]
     isolated: bool,
     /// Print JSON: stages.<name>.{median_ms, p95_ms, max_ms, alloc_peak_mb (with
-    /// --isolated)}, fps, peak_resident_mb (the process's, over the load and every run),
-    /// isolated, repeat (the runs measured), interrupted.
+    /// --isolated), parts (a stage that splits its time: sample.path's material,
+    /// object, differential and setup, paper 000 Table 2's rows, each with its
+    /// median_ms, p95_ms, max_ms)}, fps, peak_resident_mb (the process's, over the load
+    /// and every run), isolated, repeat (the runs measured), interrupted.
     #[arg(long)]
     json: bool,
 }
@@ -103,6 +106,11 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
                 .map(|b| b as f64 / 1e6)
         })
         .collect();
+    // Each stage's parts, for a stage that times them (sample.path: paper 000 Table
+    // 2's rows), over every measured frame.
+    let parts: Vec<Vec<(&str, Stats)>> = (0..names.len())
+        .map(|i| parts_of(reports.iter().flat_map(|r| r.stages[i].frames.iter())))
+        .collect();
     let peak_resident_mb = relume::graph::memory::peak_resident_bytes().map(|b| b as f64 / 1e6);
     let mut fps: Vec<f64> = reports.iter().map(|r| r.fps()).collect();
     fps.sort_by(f64::total_cmp);
@@ -122,8 +130,9 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
         let stages: serde_json::Map<String, serde_json::Value> = names
             .iter()
             .zip(per_stage.iter().zip(&alloc_peak_mb))
-            .map(|((n, k), (s, alloc))| {
-                let timing = serde_json::json!({
+            .zip(&parts)
+            .map(|(((n, k), (s, alloc)), parts)| {
+                let mut timing = serde_json::json!({
                     "kind": k,
                     "median_ms": s.median_ms,
                     "p95_ms": s.p95_ms,
@@ -133,6 +142,13 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
                     "lag": lag_of(n),
                     "alloc_peak_mb": alloc,
                 });
+                if !parts.is_empty() {
+                    let parts: serde_json::Map<String, serde_json::Value> = parts
+                        .iter()
+                        .map(|(name, stats)| (name.to_string(), serde_json::json!(stats)))
+                        .collect();
+                    timing["parts"] = parts.into();
+                }
                 (n.clone(), timing)
             })
             .collect();
@@ -182,7 +198,11 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
         "frames/s"
     )?;
     let (mut amortized, mut behind) = (Vec::new(), Vec::new());
-    for ((n, k), (s, alloc)) in names.iter().zip(per_stage.iter().zip(&alloc_peak_mb)) {
+    let stage_rows = names
+        .iter()
+        .zip(per_stage.iter().zip(&alloc_peak_mb))
+        .zip(&parts);
+    for (((n, k), (s, alloc)), parts) in stage_rows {
         let lag = lag_of(n);
         if lag > 0 {
             behind.push(format!("`{n}` (lag {lag})"));
@@ -210,6 +230,22 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<i32> {
             s.p95_ms,
             s.max_ms,
             rate
+        )?;
+        for (part, p) in parts {
+            let label = format!("  {part}");
+            outln!(
+                "{label:<width$}  {:<width$}  {:>9.3}  {:>9.3}  {:>9.3}",
+                "(part)",
+                p.median_ms,
+                p.p95_ms,
+                p.max_ms
+            )?;
+        }
+    }
+    if parts.iter().any(|p| !p.is_empty()) {
+        outln!(
+            "(part): a stage's own split of its time, each part's median over the frames (the \
+             medians need not add up to the stage's)"
         )?;
     }
     if !amortized.is_empty() {

@@ -6,6 +6,7 @@
 //! - [`pinhole`]: the pinhole camera model and a sensor's intrinsics.
 //! - [`simd`]: eight-wide lanes with a portable twin, and the one CPU probe.
 //! - [`threads`]: running work on a rayon pool of a given size.
+//! - [`ticks`]: a clock cheap enough to read per pixel, for splitting a stage's time.
 //! - [`payload`]: what a pipeline product holds: the [`payload::Payload`] trait and kinds.
 //! - [`files`]: reading the files a user names, regular files only.
 
@@ -17,3 +18,4 @@ pub mod raster;
 pub mod rng;
 pub mod simd;
 pub mod threads;
+pub mod ticks;

@@ -22,6 +22,7 @@ use super::frame::Frame;
 use super::product::Product;
 use super::resolved::ResolvedStage;
 use super::stage::{Stage, StageError};
+use super::timing::Parts;
 use std::sync::Arc;
 
 /// The largest `every` a config may give.
@@ -87,6 +88,10 @@ impl Stage for EveryK {
 
     fn program_ns(&self) -> Option<u64> {
         self.ran.then(|| self.inner.program_ns()).flatten()
+    }
+
+    fn parts(&self) -> Option<Parts> {
+        self.ran.then(|| self.inner.parts()).flatten()
     }
 
     fn finish(&mut self) -> Result<(), StageError> {

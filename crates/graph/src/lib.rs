@@ -31,6 +31,6 @@ pub use product::{Payload, Product, ProductKind};
 pub use registry::Registry;
 pub use runtime::{Branch, FrameSource, PipelineError, RunFailure, RunOptions, run, run_graph};
 pub use stage::{BuildContext, Port, Ports, Stage, StageError, StageInfo};
-pub use timing::{FrameTiming, RunReport, StageTimings, Stats};
+pub use timing::{FrameTiming, MAX_PARTS, Parts, RunReport, StageTimings, Stats};
 pub use tree::{GraphFeedback, GraphNode, StageGraph};
 pub use world::{EmptyWorld, World, WorldResolver};

@@ -507,6 +507,7 @@ fn source_loop(
             wait_out_ns: (sent - processed).as_nanos() as u64,
             program_ns: None,
             alloc_peak_bytes: None,
+            parts: None,
         });
     }
     (timings, false)
@@ -552,6 +553,7 @@ fn stage_loop(
         let processed = Instant::now();
         let alloc_peak_bytes = mark.map(|m| super::memory::allocation_peak(m) as u64);
         let program_ns = stage.program_ns();
+        let parts = stage.parts();
         let error = match result {
             Ok(Ok(())) => None,
             Ok(Err(source)) => Some(PipelineError::Stage {
@@ -593,6 +595,7 @@ fn stage_loop(
             wait_out_ns: (sent - processed).as_nanos() as u64,
             program_ns,
             alloc_peak_bytes,
+            parts,
         });
     }
     // Close our channels before finishing, so neighbours are never held up by `finish`.

@@ -4,6 +4,7 @@
 pub use super::error::StageError;
 use super::frame::{Frame, ProductKind};
 use super::params::{ParamSpec, Params};
+use super::timing::Parts;
 use relume_recording::Header;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -18,6 +19,13 @@ pub trait Stage: Send {
     /// relume on its own work, as it reported (an external stage's `compute_ms`): the
     /// timing table reports it apart from the rest, the transport.
     fn program_ns(&self) -> Option<u64> {
+        None
+    }
+
+    /// How the last [`Stage::process`] call's time splits into named parts, as the
+    /// stage measured them (`sample.path`: material, object, differential, setup):
+    /// the timing table reports each part's median under the stage.
+    fn parts(&self) -> Option<Parts> {
         None
     }
 

@@ -25,6 +25,38 @@ pub struct FrameTiming {
     /// only: see [`super::memory::CountingAllocator`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub alloc_peak_bytes: Option<u64>,
+    /// `process_ns` split into the parts the stage names (see
+    /// [`Stage::parts`](crate::Stage::parts)); `None` for stages that do not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub parts: Option<Parts>,
+}
+
+/// Most parts a stage splits a frame's time into.
+pub const MAX_PARTS: usize = 4;
+
+/// A stage's processing time of one frame split into named parts, as the stage
+/// measured them: `sample.path`'s material estimation, virtual object and
+/// differential background (paper 000 Table 2's rows), say. Serialized as a map from
+/// name to nanoseconds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Parts {
+    /// The parts' names, at most [`MAX_PARTS`].
+    pub names: &'static [&'static str],
+    /// Nanoseconds per part, in `names`' order (the rest are 0).
+    pub ns: [u64; MAX_PARTS],
+}
+
+impl Parts {
+    /// Each part's name and nanoseconds.
+    pub fn iter(&self) -> impl Iterator<Item = (&'static str, u64)> + '_ {
+        self.names.iter().copied().zip(self.ns.iter().copied())
+    }
+}
+
+impl Serialize for Parts {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_map(self.iter())
+    }
 }
 
 /// All frames of one stage.
@@ -67,9 +99,40 @@ impl StageTimings {
         ))
     }
 
+    /// Summary of each named part's time, for a stage whose frames report parts
+    /// ([`FrameTiming::parts`]), in the order the stage names them.
+    pub fn parts(&self) -> Vec<(&'static str, Stats)> {
+        parts_of(self.frames.iter())
+    }
+
     pub fn wait(&self) -> Stats {
         Stats::of(self.frames.iter().map(|f| f.wait_in_ns + f.wait_out_ns))
     }
+}
+
+/// Summary of each named part's time over `frames` (those that report parts), in the
+/// order of the first frame that does.
+pub fn parts_of<'a>(frames: impl Iterator<Item = &'a FrameTiming>) -> Vec<(&'static str, Stats)> {
+    let mut names: Vec<&'static str> = Vec::new();
+    let mut samples: Vec<Vec<u64>> = Vec::new();
+    for parts in frames.filter_map(|f| f.parts) {
+        for (name, ns) in parts.iter() {
+            let i = match names.iter().position(|n| *n == name) {
+                Some(i) => i,
+                None => {
+                    names.push(name);
+                    samples.push(Vec::new());
+                    names.len() - 1
+                }
+            };
+            samples[i].push(ns);
+        }
+    }
+    names
+        .into_iter()
+        .zip(samples)
+        .map(|(name, ns)| (name, Stats::of(ns)))
+        .collect()
 }
 
 /// Median, 95th percentile and maximum, in milliseconds.
@@ -98,6 +161,19 @@ impl Stats {
             mean_ms: ms(v.iter().map(|&ns| ns as f64).sum::<f64>() / v.len() as f64),
         }
     }
+}
+
+/// "material median 1.000 ms, object 2.000 ms, ..." for a stage's parts.
+pub fn parts_line(parts: &[(&str, Stats)]) -> String {
+    let each: Vec<String> = parts
+        .iter()
+        .enumerate()
+        .map(|(i, (name, stats))| match i {
+            0 => format!("{name} median {:.3} ms", stats.median_ms),
+            _ => format!("{name} {:.3} ms", stats.median_ms),
+        })
+        .collect();
+    each.join(", ")
 }
 
 /// Linear-interpolated percentile of sorted samples.
@@ -166,6 +242,12 @@ impl RunReport {
                 p.max_ms,
                 s.wait().median_ms
             );
+        }
+        for s in &self.stages {
+            let parts = s.parts();
+            if !parts.is_empty() {
+                let _ = writeln!(out, "{}: {}", s.name, parts_line(&parts));
+            }
         }
         for s in &self.stages {
             if let Some((program, transport)) = s.program_and_transport() {
@@ -254,6 +336,14 @@ impl RunReport {
             .map(|s| {
                 let p = s.process();
                 let mut stage = serde_json::json!({ "kind": s.kind, "frames": s.frames.len(), "median_ms": p.median_ms, "p95_ms": p.p95_ms, "max_ms": p.max_ms, "wait_median_ms": s.wait().median_ms });
+                let parts = s.parts();
+                if !parts.is_empty() {
+                    stage["parts_median_ms"] = parts
+                        .iter()
+                        .map(|(name, stats)| (name.to_string(), stats.median_ms.into()))
+                        .collect::<serde_json::Map<_, _>>()
+                        .into();
+                }
                 if let Some((program, transport)) = s.program_and_transport() {
                     stage["program_median_ms"] = program.median_ms.into();
                     stage["transport_median_ms"] = transport.median_ms.into();

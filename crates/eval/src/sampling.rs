@@ -26,7 +26,9 @@ use relume_graph::{Frame, ResolvedStage};
 use relume_recording::Intrinsics;
 use relume_scene::light::voxels::VoxelVolume;
 use relume_stages::kind::FrameProducts;
-use relume_stages::sample::path::{IrradianceLayers, PathInputs, PathParams, sample_path};
+use relume_stages::sample::path::{
+    IrradianceLayers, ObjectVisibility, PathInputs, PathParams, sample_path,
+};
 use relume_stages::sample::query::QueryKind;
 use relume_stages::world::ObjectWorld;
 use serde_json::{Value, json};
@@ -200,9 +202,36 @@ impl PathRunner {
         let mut out = IrradianceLayers::new(depth.width, depth.height);
         Some(
             sample_path(&inputs, params, &mut out)
-                .map(|()| out)
+                .map(|_| out)
                 .map_err(|e| e.to_string()),
         )
+    }
+}
+
+/// The settings of reference run `k` (of [`REFERENCE_RUNS`]) for a stage with
+/// `params`, on the lattice of `stride`. Every query and sample count is scored against
+/// the same reference: screen-space marching with self-occlusion, as `sample.path` runs
+/// by default, with [`REFERENCE_PRIMARY`] primaries on every pixel, the objects tested
+/// as meshes with as many samples as the room and their secondary bounce (whatever
+/// paper 000's presets set for them).
+fn reference_params(params: &PathParams, k: u64, stride: u32) -> PathParams {
+    PathParams {
+        query: QueryKind::Ssrt,
+        material_dit: false,
+        visibility: true,
+        object_visibility: ObjectVisibility::Mesh,
+        object_direct: 0,
+        object_indirect: 0,
+        self_bounce: true,
+        object_aware_direct: false,
+        primary: REFERENCE_PRIMARY,
+        near_primary: 0,
+        direct: REFERENCE_SAMPLES,
+        indirect: REFERENCE_SAMPLES,
+        object_aware: false,
+        seed: rng::hash(&[params.seed, REFERENCE_SALT, k]),
+        pixel_stride: stride,
+        ..*params
     }
 }
 
@@ -344,23 +373,9 @@ impl ReferenceCache {
 
 impl PathRunner {
     /// The settings of reference run `k` (of [`REFERENCE_RUNS`]) on the lattice of
-    /// `stride`. Every query and sample count is scored against the same reference:
-    /// screen-space marching with self-occlusion, as `sample.path` runs by default,
-    /// with [`REFERENCE_PRIMARY`] primaries on every pixel.
+    /// `stride`: [`reference_params`] of the stage's.
     fn reference_params(&self, k: u64, stride: u32) -> PathParams {
-        PathParams {
-            query: QueryKind::Ssrt,
-            visibility: true,
-            object_aware_direct: false,
-            primary: REFERENCE_PRIMARY,
-            near_primary: 0,
-            direct: REFERENCE_SAMPLES,
-            indirect: REFERENCE_SAMPLES,
-            object_aware: false,
-            seed: rng::hash(&[self.params.seed, REFERENCE_SALT, k]),
-            pixel_stride: stride,
-            ..self.params
-        }
+        reference_params(&self.params, k, stride)
     }
 
     /// What a reference of `frame` depends on, as one string: the frame, the stride,
@@ -629,7 +644,33 @@ impl PathScorer {
 
 #[cfg(test)]
 mod tests {
-    use super::{fallback_frame, two_sided_p};
+    use super::{ObjectVisibility, PathParams, QueryKind, fallback_frame, two_sided_p};
+
+    #[test]
+    fn paper_000s_presets_are_scored_against_the_default_reference() {
+        let seed = 9;
+        let default = PathParams {
+            seed,
+            ..PathParams::default()
+        };
+        let preset = PathParams {
+            query: QueryKind::Em,
+            material_dit: true,
+            visibility: false,
+            object_visibility: ObjectVisibility::Voxels,
+            object_direct: 32,
+            object_indirect: 32,
+            self_bounce: false,
+            object_aware: true,
+            ..default
+        };
+        for (k, stride) in [(0, 1), (3, 4)] {
+            assert_eq!(
+                super::reference_params(&preset, k, stride),
+                super::reference_params(&default, k, stride)
+            );
+        }
+    }
 
     #[test]
     fn a_replay_without_frames_14_or_29_is_scored_on_its_last() {

@@ -21,7 +21,8 @@ use glam::Affine3A;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Vec3Image};
 use relume_graph::{
-    BuildContext, Frame, ParamSpec, Params, Port, Ports, ProductKind, Stage, StageError, StageInfo,
+    BuildContext, Frame, ParamSpec, Params, Parts, Port, Ports, ProductKind, Stage, StageError,
+    StageInfo,
 };
 use relume_recording::Intrinsics;
 use relume_scene::light::voxels::VoxelVolume;
@@ -76,6 +77,12 @@ pub trait Renderer: Send + Sized + 'static {
         frame: &RenderFrame<'_>,
         out: &mut IrradianceLayers,
     ) -> Result<(), StageError>;
+
+    /// How the last [`Renderer::render`] call's time split into parts, for a renderer
+    /// that times them ([`Stage::parts`]).
+    fn parts(&self) -> Option<Parts> {
+        None
+    }
 }
 
 /// One frame as a renderer sees it: the depth map, the camera at its size and pose,
@@ -170,6 +177,10 @@ impl<R: Renderer> Stage for RendererStage<R> {
         self.renderer.render(&view, &mut out)?;
         out.insert_into(frame, &self.outputs);
         Ok(())
+    }
+
+    fn parts(&self) -> Option<Parts> {
+        self.renderer.parts()
     }
 }
 

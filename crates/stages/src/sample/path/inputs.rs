@@ -26,8 +26,9 @@ pub struct PathInputs<'a> {
     /// The scene's voxel volume the `vct` query reads (unused by the others).
     pub voxels: Option<&'a VoxelVolume>,
     pub objects: &'a VirtualScene,
-    /// `vct`: the objects' solid volume ([`PathParams::object_volume`](super::PathParams::object_volume)); built for
-    /// the call when `None`.
+    /// With `object_visibility` voxels: the objects' solid volume
+    /// ([`PathParams::object_volume`](super::PathParams::object_volume)); built for the
+    /// call when `None`.
     pub object_voxels: Option<&'a VoxelVolume>,
     /// The frame index (a key of the random numbers).
     pub frame: u64,

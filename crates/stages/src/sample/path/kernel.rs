@@ -29,6 +29,7 @@
 use super::bounds::{Cone, Objects, object_pixel_bounds};
 use super::object_aware::Reservoir;
 use super::params::MAX_CANDIDATES;
+use super::parts::{PartClock, PartTicks, since};
 use super::rays::{FrameQuery, WorldQuery};
 use super::records::{
     Acc, DirectRay, Drawn, IndirectRay, RealPoint, RealSamples, SURFACE_OFFSET, Surface,
@@ -44,13 +45,13 @@ use crate::sample::query::{Hit, Source, cone_spread};
 use crate::sample::ssrt::ScreenTracer;
 use glam::{Mat3A, Vec3, Vec3A};
 use relume_base::raster::depth_is_valid;
-use relume_base::simd;
+use relume_base::{simd, ticks};
 use relume_scene::light::LightSample;
 use relume_scene::light::voxels::{ConeMarch, VoxelVolume};
 use relume_scene::objects::VirtualHit;
 use std::f32::consts::{FRAC_1_PI, PI};
 
-/// `vct`: how many of the object volume's voxels a cone leaving a virtual surface
+/// Object visibility by voxels: how many of the object volume's voxels a cone leaving a virtual surface
 /// starts off it (the solid voxelization puts the surface up to a voxel from where it
 /// is, and trilinear sampling reaches a voxel further).
 pub(super) const LEAVE_VOXELS: f32 = 1.5;
@@ -60,7 +61,8 @@ pub(super) struct Kernel<'a> {
     pub(super) params: &'a PathParams,
     /// How rays meet the real scene (the stage's radiance query).
     pub(super) query: FrameQuery<'a>,
-    /// `vct`: the objects' solid volume, whose cones give their shadows.
+    /// With object visibility by voxels: the objects' solid volume, whose cones give
+    /// their shadows.
     pub(super) object_volume: Option<&'a VoxelVolume>,
     pub(super) to_world: Mat3A,
     pub(super) to_camera: Mat3A,
@@ -75,6 +77,10 @@ pub(super) struct Kernel<'a> {
     /// and `near_primary` x `direct` for the pixels near the objects.
     pub(super) strata: Vec<u32>,
     pub(super) near_strata: Vec<u32>,
+    /// The same for the samples of primaries that meet an object: `primary` x
+    /// `object_direct` (the same as above when `object_direct` is `direct`).
+    pub(super) object_strata: Vec<u32>,
+    pub(super) near_object_strata: Vec<u32>,
     /// The table's strata for the object-aware direct candidates.
     pub(super) candidate_strata: Vec<u32>,
     /// Blocked direct samples dimmer than this (largest channel of the sample's
@@ -82,6 +88,8 @@ pub(super) struct Kernel<'a> {
     pub(super) occluder_min_radiance: f32,
     /// How the screen-space rays are marched (the same hits with any).
     pub(super) lanes: simd::Kernel,
+    /// The spans' clock ticks by part (see `parts.rs`).
+    pub(super) parts: PartClock,
 }
 
 impl<'a> Kernel<'a> {
@@ -89,7 +97,7 @@ impl<'a> Kernel<'a> {
         inputs: &'a PathInputs<'a>,
         params: &'a PathParams,
         tracer: ScreenTracer<'a>,
-        world_query: Option<WorldQuery<'a>>,
+        (world_query, real_query): (Option<WorldQuery<'a>>, Option<WorldQuery<'a>>),
         object_volume: Option<&'a VoxelVolume>,
         lanes: simd::Kernel,
     ) -> Self {
@@ -120,6 +128,7 @@ impl<'a> Kernel<'a> {
             query: FrameQuery::new(
                 tracer,
                 world_query,
+                real_query,
                 inputs.radiance,
                 params.max_distance,
                 inputs.table,
@@ -139,6 +148,14 @@ impl<'a> Kernel<'a> {
                 params.near_primaries() * params.direct,
                 inputs.table.samples.len(),
             ),
+            object_strata: strata_bounds(
+                params.primary * params.object_directs(),
+                inputs.table.samples.len(),
+            ),
+            near_object_strata: strata_bounds(
+                params.near_primaries() * params.object_directs(),
+                inputs.table.samples.len(),
+            ),
             candidate_strata: strata_bounds(params.candidates, inputs.table.samples.len()),
             occluder_min_radiance: params.occluder_threshold
                 * inputs
@@ -148,10 +165,11 @@ impl<'a> Kernel<'a> {
                     .map(|s| s.radiance.max_element())
                     .fold(0.0, f32::max),
             lanes,
+            parts: PartClock::default(),
         }
     }
 
-    /// `vct`: the cone of a direct sample's aperture from `origin` along `dir` through
+    /// Object visibility by voxels: the cone of a direct sample's aperture from `origin` along `dir` through
     /// the objects' solid volume, up to `t_max`: its opacity is the share of the
     /// light the objects block (paper 000 eq. 6's 1 - alpha).
     #[inline]
@@ -165,7 +183,7 @@ impl<'a> Kernel<'a> {
         volume.march(origin, dir, self.query.direct_spread, 0.0, t_max)
     }
 
-    /// `vct`: [`Kernel::object_cone`] leaving a virtual surface at `position` with
+    /// Object visibility by voxels: [`Kernel::object_cone`] leaving a virtual surface at `position` with
     /// normal `normal`: it starts [`LEAVE_VOXELS`] of the volume's voxels off the
     /// surface, out of the voxels that hold the surface itself.
     #[inline]
@@ -200,6 +218,7 @@ impl<'a> Kernel<'a> {
         y: u32,
         drawn: &Drawn,
         hits: &[Option<Hit>],
+        parts: &mut PartTicks,
     ) -> PixelLayers {
         let Drawn {
             real,
@@ -225,6 +244,7 @@ impl<'a> Kernel<'a> {
             indirect_min: f32::INFINITY,
             touched: false,
             bounces: 0,
+            ticks: PartTicks::default(),
         };
         let (mut virtual_count, mut albedo, mut exponent) = (0u32, Vec3::ZERO, 0.0f32);
         let (mut surfaces, mut position, mut normal) = (0u32, Vec3::ZERO, Vec3::ZERO);
@@ -234,7 +254,10 @@ impl<'a> Kernel<'a> {
                 self.real_samples(rp, samples, hits, j, &bounce_stream, with_rv, acc);
             }
         };
-        let (direct_n, indirect_n) = (params.direct as usize, params.indirect as usize);
+        let (direct_n, indirect_n) = (
+            params.object_directs() as usize,
+            params.object_indirects() as usize,
+        );
         let (mut virtual_direct, mut virtual_indirect) =
             (virtual_samples.direct, virtual_samples.indirect);
         let primary = primaries.len() as u32;
@@ -260,6 +283,7 @@ impl<'a> Kernel<'a> {
                     let (direct, rest) = virtual_direct.split_at(direct_n);
                     let (indirect, rest_indirect) = virtual_indirect.split_at(indirect_n);
                     (virtual_direct, virtual_indirect) = (rest, rest_indirect);
+                    let start = ticks::now();
                     self.virtual_samples(
                         hit,
                         -*view,
@@ -269,9 +293,11 @@ impl<'a> Kernel<'a> {
                         &bounce_stream,
                         &mut acc,
                     );
+                    acc.ticks.object += since(start);
                 }
             }
         }
+        let differential_start = ticks::now();
         let mut direct_differential = Vec3::ZERO;
         if params.object_aware_direct
             && acc.rv_dir_real_n > 0
@@ -290,6 +316,13 @@ impl<'a> Kernel<'a> {
             differential = d;
             acc.touched = true;
         }
+        if self.objects.is_some() && (params.object_aware || params.object_aware_direct) {
+            acc.ticks.differential += since(differential_start);
+        }
+        *parts = PartTicks {
+            object: parts.object + acc.ticks.object,
+            differential: parts.differential + acc.ticks.differential,
+        };
         let nan = Vec3::NAN;
         let (dir_n, ind_n) = (primary * params.direct, primary * params.indirect);
         let (e_r_dir, e_r_ind) = if real.is_some() {
@@ -447,21 +480,38 @@ impl<'a> Kernel<'a> {
         }
     }
 
-    /// The table sample of direct sample `s` of a pixel with `primary` primary
-    /// samples, with its index, if the table has any.
+    /// The table's strata of the direct samples of a real point whose pixel has
+    /// `primary` primary samples.
+    #[inline]
+    pub(super) fn real_strata(&self, primary: u32) -> &[u32] {
+        if primary == self.params.primary {
+            &self.strata
+        } else {
+            &self.near_strata
+        }
+    }
+
+    /// The table's strata of the direct samples of the virtual hits of a pixel with
+    /// `primary` primary samples.
+    #[inline]
+    pub(super) fn object_strata(&self, primary: u32) -> &[u32] {
+        if primary == self.params.primary {
+            &self.object_strata
+        } else {
+            &self.near_object_strata
+        }
+    }
+
+    /// The table sample of direct sample `s` drawn from `strata` ([`Self::real_strata`]
+    /// or [`Self::object_strata`]), with its index, if the table has any.
     #[inline]
     pub(super) fn direct_sample(
         &self,
         stream: &Stream,
         s: u32,
-        primary: u32,
+        strata: &[u32],
     ) -> Option<(usize, &'a LightSample)> {
         let table = &self.inputs.table.samples;
-        let strata = if primary == self.params.primary {
-            &self.strata
-        } else {
-            &self.near_strata
-        };
         let i = stratum_index(strata, s as usize, table.len(), stream.bits(s as u64))?;
         Some((i, &table[i]))
     }
@@ -508,6 +558,7 @@ impl<'a> Kernel<'a> {
                         c_rv = c;
                         match (rv_blockers, self.object_volume) {
                             (Some(_), Some(volume)) if rp.cone_world.admits(ls.direction) => {
+                                let start = ticks::now();
                                 let cone =
                                     self.object_cone(volume, rp.world, ls.direction, t_light);
                                 if cone.opacity > 0.0 {
@@ -515,13 +566,16 @@ impl<'a> Kernel<'a> {
                                     acc.touched = true;
                                     self.record_occluder(acc, ls.radiance, cone.t_half, cos);
                                 }
+                                acc.ticks.differential += since(start);
                             }
                             (Some(o), None) if rp.cone_world.admits(ls.direction) => {
+                                let start = ticks::now();
                                 if let Some(hit) = o.hit(rp.world, ls.direction, t_light) {
                                     c_rv = Vec3::ZERO;
                                     acc.touched = true;
                                     self.record_occluder(acc, ls.radiance, hit.t, cos);
                                 }
+                                acc.ticks.differential += since(start);
                             }
                             _ => {}
                         }
@@ -559,21 +613,23 @@ impl<'a> Kernel<'a> {
             acc.r_ind += l;
             if with_rv {
                 let mut l_rv = l;
-                let reflector = match rv_objects {
-                    // With object-aware sampling the candidates stand for these paths.
-                    Some(o) if !params.object_aware && rp.cone_camera.admits(dir_camera) => {
-                        let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
-                        o.hit(rp.world, dir, t_real).filter(|hit| {
-                            !self.query.impostor_bounds_reflectors()
-                                || self.query.before_impostor(o, rp, dir, dir_camera, hit.t)
-                        })
+                // With object-aware sampling the candidates stand for these paths.
+                if let Some(o) = rv_objects
+                    && !params.object_aware
+                    && rp.cone_camera.admits(dir_camera)
+                {
+                    let start = ticks::now();
+                    let dir = Vec3::from(self.to_world * Vec3A::from(dir_camera));
+                    let reflector = o.hit(rp.world, dir, t_real).filter(|hit| {
+                        !self.query.impostor_bounds_reflectors()
+                            || self.query.before_impostor(o, rp, dir, dir_camera, hit.t)
+                    });
+                    if let Some(hit) = reflector {
+                        l_rv = self.object_radiance(&hit, bounce_stream, acc);
+                        acc.touched = true;
+                        acc.indirect_min = acc.indirect_min.min(hit.t);
                     }
-                    _ => None,
-                };
-                if let Some(hit) = reflector {
-                    l_rv = self.object_radiance(&hit, bounce_stream, acc);
-                    acc.touched = true;
-                    acc.indirect_min = acc.indirect_min.min(hit.t);
+                    acc.ticks.differential += since(start);
                 }
                 acc.rv_ind += l_rv;
             }
@@ -596,6 +652,11 @@ impl<'a> Kernel<'a> {
     ) {
         let surface = Surface::new(hit, to_viewer);
         let table = &self.inputs.table.samples;
+        // The primary weighs in the pixel's means as a real primary does: its samples
+        // count `direct` (`indirect`) however many there are (a weight of exactly 1
+        // when there are as many).
+        let (direct_weight, direct_count) = primary_share(direct.len(), self.params.direct);
+        let (indirect_weight, indirect_count) = primary_share(indirect.len(), self.params.indirect);
         for drawn in direct {
             let mut c = Vec3::ZERO;
             match *drawn {
@@ -631,16 +692,16 @@ impl<'a> Kernel<'a> {
                     }
                 }
             }
-            acc.rv_dir += c;
+            acc.rv_dir += c * direct_weight;
         }
-        acc.rv_dir_n += self.params.direct;
+        acc.rv_dir_n += direct_count;
         for sample in indirect {
             if let Some(ray) = sample.ray {
                 let l = self.incoming(surface.origin, sample.dir, hits[ray], bounce_stream, acc);
-                acc.rv_ind += l * sample.weight;
+                acc.rv_ind += l * (sample.weight * indirect_weight);
             }
         }
-        acc.rv_ind_n += self.params.indirect;
+        acc.rv_ind_n += indirect_count;
     }
 
     /// Radiance arriving at a virtual surface from `dir`: the nearer of the object
@@ -663,7 +724,10 @@ impl<'a> Kernel<'a> {
             && let Some(hit) = objects.hit(origin, dir, t_real)
         {
             acc.indirect_min = acc.indirect_min.min(hit.t);
-            return self.object_radiance(&hit, bounce_stream, acc);
+            return match self.params.self_bounce {
+                true => self.object_radiance(&hit, bounce_stream, acc),
+                false => Vec3::ZERO,
+            };
         }
         match real {
             Some(Hit {
@@ -854,6 +918,17 @@ impl<'a> Kernel<'a> {
             sum -= radiance * (cos / ls.pdf);
         }
         met.then(|| sum * reservoir.scale(n, 1.0))
+    }
+}
+
+/// How a virtual primary's `drawn` samples (direct or indirect) enter its pixel's
+/// sums, where a real primary brings `per_primary`: each weighted by
+/// `per_primary / drawn`, counting `per_primary` (exactly 1 and `drawn` when the two
+/// are equal; 1 and `drawn` when real primaries bring none).
+pub(super) fn primary_share(drawn: usize, per_primary: u32) -> (f32, u32) {
+    match (drawn as u32, per_primary) {
+        (n, m) if n == m || m == 0 || n == 0 => (1.0, n),
+        (n, m) => (m as f32 / n as f32, m),
     }
 }
 

@@ -108,6 +108,30 @@
 //! cheaper rows). The estimates keep their correlation: E_RV == E_R bit for bit where
 //! no path meets an object, with any query.
 //!
+//! **Paper 000's presets** (Table 2) need four more knobs. `object_visibility =
+//! "voxels"` tests shadow rays against the objects' solid volume with any query, as
+//! paper 000 Sec. 6.2 does for every technique ("testing the whole triangle mesh for
+//! intersections is too expensive"); `auto` keeps the mesh for all but `vct`.
+//! `object_direct` / `object_indirect` give the primaries that meet an object their own
+//! sample counts ("high": 128 for the object, 64 for the room); such a primary still
+//! weighs in its pixel's mean as a real primary does. `self_bounce = false` makes an
+//! object's indirect ray that meets the objects again bring nothing ("medium": a
+//! visibility test only) instead of the light reflected there ("high": a secondary
+//! bounce). `material_query = "dit"` under `em` traces the impostor for the real
+//! points' rays (the material estimation and the differential background) while the
+//! objects' own rays keep em's lookup ("low": "for the material estimation DIT is also
+//! used in EM cases", Sec. 7). Where the paper's objects carry their normals and
+//! materials in the volume, relume's indirect rays still take the objects' radiance
+//! from the mesh.
+//!
+//! **Where the time goes** ([`PathTimes`], `parts.rs`): the material estimation (the
+//! real points' samples, rays and E_R), the virtual object (finding the primaries that
+//! meet it, their samples, rays and E_RV), the differential background (the real
+//! samples' tests against the objects, the object-aware candidates) and the setup (the
+//! depth pyramid, the tables, the objects' volume). The parts interleave pixel by
+//! pixel, so each span reads a cheap clock around them; the stage reports them
+//! ([`Renderer::parts`]) and `relume bench` prints them under its row.
+//!
 //! `max_distance` bounds the screen-space march (default 1 m): real geometry nearer
 //! than that occludes and reflects; beyond it the environment map stands for the room.
 //! It also bounds the cost of each march. Real ray origins are raised along the normal
@@ -132,6 +156,7 @@ mod inputs;
 mod kernel;
 mod object_aware;
 mod params;
+mod parts;
 mod rays;
 mod records;
 pub mod sampling;
@@ -140,8 +165,9 @@ mod span;
 pub use super::layers::IrradianceLayers;
 use crate::kind;
 pub use inputs::PathInputs;
-pub use params::{MAX_CANDIDATES, MAX_SAMPLES, PathParams};
+pub use params::{MAX_CANDIDATES, MAX_SAMPLES, ObjectVisibility, PathParams};
 use params::{PARAMS, query_kind};
+pub use parts::{PART_NAMES, PathTimes};
 
 use super::layers::{check_sizes, renderer_input_ports, shade_rows};
 use super::pyramid::DepthPyramid;
@@ -153,10 +179,11 @@ use crate::world::follow::FollowedObjects;
 use kernel::Kernel;
 use rays::WorldQuery;
 use relume_base::simd;
-use relume_graph::{BuildContext, ParamSpec, Params, Port, StageError, StageInfo};
+use relume_graph::{BuildContext, ParamSpec, Params, Parts, Port, StageError, StageInfo};
 use relume_scene::light::voxels::VoxelVolume;
 use span::{SPAN_PIXELS, Span};
 use std::sync::Arc;
+use std::time::Instant;
 
 pub const INFO: StageInfo = renderer::info::<SamplePath>();
 
@@ -164,14 +191,19 @@ pub const INFO: StageInfo = renderer::info::<SamplePath>();
 /// surface and the minimum hit distances of every pixel (paper 001 Sec. 5; see the
 /// module docs). Builds the depth pyramid of the frame (O(pixels)) and fills `out`,
 /// which must be the depth map's size.
+/// Returns where the time went ([`PathTimes`], paper 000 Table 2's rows).
 pub fn sample_path(
     inputs: &PathInputs,
     params: &PathParams,
     out: &mut IrradianceLayers,
-) -> Result<(), OpError> {
+) -> Result<PathTimes, OpError> {
+    let start = Instant::now();
     params.check()?;
     let pyramid = DepthPyramid::new(inputs.depth);
-    sample_path_with_pyramid(inputs, params, &pyramid, out)
+    let mut times = sample_path_with_pyramid(inputs, params, &pyramid, out)?;
+    let (total, parts) = (start.elapsed(), times.ns.iter().sum::<u64>());
+    times.ns[3] += (total.as_nanos() as u64).saturating_sub(parts);
+    Ok(times)
 }
 
 /// [`sample_path`] with the depth map's pyramid already built (a stage reuses its
@@ -181,7 +213,7 @@ pub fn sample_path_with_pyramid(
     params: &PathParams,
     pyramid: &DepthPyramid,
     out: &mut IrradianceLayers,
-) -> Result<(), OpError> {
+) -> Result<PathTimes, OpError> {
     sample_path_with_kernel(inputs, params, pyramid, simd::Kernel::detect(), out)
 }
 
@@ -193,7 +225,8 @@ pub(crate) fn sample_path_with_kernel(
     pyramid: &DepthPyramid,
     lanes: simd::Kernel,
     out: &mut IrradianceLayers,
-) -> Result<(), OpError> {
+) -> Result<PathTimes, OpError> {
+    let start = Instant::now();
     params.check()?;
     let (w, h) = (inputs.depth.width, inputs.depth.height);
     check_sizes(
@@ -215,13 +248,18 @@ pub(crate) fn sample_path_with_kernel(
             "sample.path: the camera pose is not finite".into(),
         ));
     }
-    let world_query = world_query(inputs, params)?;
+    let world_query = query_over(inputs, params, params.query)?;
+    // The material estimation's own query: dit where the objects' rays look up em.
+    let real_query = match params.query {
+        QueryKind::Em if params.material_dit => query_over(inputs, params, QueryKind::Dit)?,
+        _ => None,
+    };
     if w == 0 || h == 0 {
-        return Ok(());
+        return Ok(PathTimes::default());
     }
     let built;
-    let object_volume = match (params.query, inputs.object_voxels) {
-        (QueryKind::Vct, Some(volume)) => Some(volume),
+    let object_volume = match inputs.object_voxels {
+        Some(volume) if params.object_visibility_by_voxels() => Some(volume),
         _ => {
             built = params.object_volume(inputs.objects);
             built.as_ref()
@@ -234,9 +272,11 @@ pub(crate) fn sample_path_with_kernel(
         inputs.camera_to_world,
         params.trace,
     );
-    let kernel = Kernel::new(inputs, params, tracer, world_query, object_volume, lanes);
+    let queries = (world_query, real_query);
+    let kernel = Kernel::new(inputs, params, tracer, queries, object_volume, lanes);
     let stride = params.pixel_stride as usize;
     let xs: Vec<u32> = (0..w).step_by(stride).collect();
+    let rows_start = Instant::now();
     shade_rows(
         out,
         w as usize,
@@ -248,18 +288,20 @@ pub(crate) fn sample_path_with_kernel(
             }
         },
     );
-    Ok(())
+    let rows = rows_start.elapsed();
+    Ok(kernel.parts.times(rows, rows_start - start))
 }
 
-/// The world-space query `params` ask for (`None` for screen-space marching), over
+/// The world-space query of kind `kind` with `params` (`None` for screen-space marching), over
 /// the inputs' environment map or voxel volume; the error says what is missing or
 /// malformed.
-fn world_query<'a>(
+fn query_over<'a>(
     inputs: &PathInputs<'a>,
     params: &PathParams,
+    kind: QueryKind,
 ) -> Result<Option<WorldQuery<'a>>, OpError> {
-    let query = params.query.name();
-    let iterations = match params.query {
+    let query = kind.name();
+    let iterations = match kind {
         QueryKind::Ssrt => return Ok(None),
         QueryKind::Vct => {
             let Some(volume) = inputs.voxels else {
@@ -288,8 +330,10 @@ fn world_query<'a>(
 pub struct SamplePath {
     params: PathParams,
     objects: FollowedObjects,
-    /// The objects' solid volume (`vct`).
+    /// The objects' solid volume (visibility by voxels).
     object_voxels: Option<Arc<VoxelVolume>>,
+    /// Where the last frame's time went.
+    times: Option<PathTimes>,
 }
 
 impl Renderer for SamplePath {
@@ -323,6 +367,7 @@ impl Renderer for SamplePath {
             object_voxels: params.object_volume(objects.scene()).map(Arc::new),
             params,
             objects,
+            times: None,
         })
     }
 
@@ -331,6 +376,7 @@ impl Renderer for SamplePath {
         frame: &RenderFrame<'_>,
         out: &mut IrradianceLayers,
     ) -> Result<(), StageError> {
+        let start = Instant::now();
         let query = self.params.query;
         let (objects, moved) = self.objects.at(frame.index)?;
         if moved {
@@ -355,8 +401,19 @@ impl Renderer for SamplePath {
             object_voxels: self.object_voxels.as_deref(),
             frame: frame.index,
         };
-        sample_path(&inputs, &self.params, out)?;
+        let mut times = sample_path(&inputs, &self.params, out)?;
+        let (total, parts) = (start.elapsed(), times.ns.iter().sum::<u64>());
+        times.ns[3] += (total.as_nanos() as u64).saturating_sub(parts);
+        self.times = Some(times);
         Ok(())
+    }
+
+    fn parts(&self) -> Option<Parts> {
+        let times = self.times?;
+        Some(Parts {
+            names: PART_NAMES,
+            ns: times.ns,
+        })
     }
 }
 
@@ -366,6 +423,8 @@ mod determinism_tests;
 mod near_tests;
 #[cfg(test)]
 mod object_aware_tests;
+#[cfg(test)]
+mod preset_tests;
 #[cfg(test)]
 mod query_tests;
 #[cfg(test)]

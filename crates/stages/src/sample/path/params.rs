@@ -30,9 +30,21 @@ pub(super) const PARAMS: &[ParamSpec] = &[
     )
     .range(0.0, MAX_ITERATIONS as f64),
     ParamSpec::new(
+        "material_query",
+        ParamDefault::Str("same"),
+        "the query of the real points' rays (the material estimation's E_R and the differential's E_RV at real pixels): same = the stage's query; dit = the impostor traced with `iterations` steps while the objects' own rays keep em's lookup (paper 000 Sec. 7: \"for the material estimation DIT is also used in EM cases\"; its \"low\"). dit needs query em or dit",
+    )
+    .choices(&["same", "dit"]),
+    ParamSpec::new(
+        "object_visibility",
+        ParamDefault::Str("auto"),
+        "how shadow rays are tested against the objects (their shadows on the room and on themselves): mesh = the triangles' BVH, exact and hard-edged; voxels = cones through the objects' solid volume (object_voxels a side), soft and partial, as paper 000 Sec. 6.2 does for every technique; auto = voxels for vct, mesh otherwise. The objects' radiance along indirect rays comes from the mesh either way",
+    )
+    .choices(ObjectVisibility::NAMES),
+    ParamSpec::new(
         "object_voxels",
         ParamDefault::Int(32),
-        "vct: voxels along the longest side of the objects' solid volume, whose cones give their shadows and self-shadows (paper 000 Table 2: 32 for low and medium, 128 for high)",
+        "object_visibility = voxels (vct's auto): voxels along the longest side of the objects' solid volume (paper 000 Table 2: 32 for low and medium, 128 for high)",
     )
     .range(1.0, MAX_OBJECT_VOXELS as f64),
     ParamSpec::new(
@@ -58,6 +70,23 @@ pub(super) const PARAMS: &[ParamSpec] = &[
         "indirect (one-bounce) samples per primary sample (paper 001: 4, 16 per pixel)",
     )
     .range(0.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "object_direct",
+        ParamDefault::Int(0),
+        "direct-light samples per primary sample that meets an object (0: direct). Paper 000's \"high\" renders the object with 128 samples where the room gets 64",
+    )
+    .range(0.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "object_indirect",
+        ParamDefault::Int(0),
+        "indirect samples per primary sample that meets an object (0: indirect)",
+    )
+    .range(0.0, MAX_SAMPLES as f64),
+    ParamSpec::new(
+        "self_bounce",
+        ParamDefault::Bool(true),
+        "with visibility: an object's indirect ray that meets the objects again brings the light reflected there (one light-table sample: paper 000's secondary bounce, its \"high\"); off, it brings nothing (a visibility test only, its \"medium\")",
+    ),
     ParamSpec::new(
         "object_aware",
         ParamDefault::Bool(false),
@@ -129,6 +158,33 @@ pub(super) fn query_kind(p: &Params) -> QueryKind {
     QueryKind::from_name(p.str("query")).unwrap_or_default()
 }
 
+/// How shadow rays meet the virtual objects (the `object_visibility` parameter).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ObjectVisibility {
+    /// Voxels for `vct` (its cones march volumes throughout), the mesh otherwise.
+    #[default]
+    Auto,
+    /// The triangles' BVH: a ray is blocked or not.
+    Mesh,
+    /// Cones through the objects' solid volume (paper 000 Sec. 6.2): the light that
+    /// passes is 1 - opacity (eq. 6).
+    Voxels,
+}
+
+impl ObjectVisibility {
+    /// The parameter's choices.
+    pub const NAMES: &'static [&'static str] = &["auto", "mesh", "voxels"];
+
+    /// `name`, one of [`Self::NAMES`] (anything else is `auto`).
+    pub fn from_name(name: &str) -> ObjectVisibility {
+        match name {
+            "mesh" => ObjectVisibility::Mesh,
+            "voxels" => ObjectVisibility::Voxels,
+            _ => ObjectVisibility::Auto,
+        }
+    }
+}
+
 /// Settings of [`sample_path`](super::sample_path).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathParams {
@@ -136,7 +192,13 @@ pub struct PathParams {
     pub query: QueryKind,
     /// `dit`: refinement steps of the impostor lookup.
     pub iterations: u32,
-    /// `vct`: voxels along the longest side of the objects' solid volume.
+    /// Whether the real points' rays trace the impostor (`dit`, with `iterations`
+    /// steps) whatever `query` is (`em` or `dit`).
+    pub material_dit: bool,
+    /// How shadow rays meet the objects.
+    pub object_visibility: ObjectVisibility,
+    /// [`ObjectVisibility::Voxels`]: voxels along the longest side of the objects'
+    /// solid volume.
     pub object_voxels: u32,
     /// Whether the objects' own rays are tested against the objects (self-occlusion).
     pub visibility: bool,
@@ -146,6 +208,13 @@ pub struct PathParams {
     pub direct: u32,
     /// Indirect samples per primary sample.
     pub indirect: u32,
+    /// Direct samples per primary sample that meets an object (0: `direct`).
+    pub object_direct: u32,
+    /// Indirect samples per primary sample that meets an object (0: `indirect`).
+    pub object_indirect: u32,
+    /// Whether an object's indirect ray that meets the objects again brings the light
+    /// reflected there (else nothing).
+    pub self_bounce: bool,
     /// Primary samples of the pixels near the objects (0: `primary`).
     pub near_primary: u32,
     /// Metres from the objects' bounding box within which a real point is near.
@@ -181,11 +250,16 @@ impl Default for PathParams {
         PathParams {
             query: QueryKind::Ssrt,
             iterations: 6,
+            material_dit: false,
+            object_visibility: ObjectVisibility::Auto,
             object_voxels: 32,
             visibility: true,
             primary: 4,
             direct: 4,
             indirect: 4,
+            object_direct: 0,
+            object_indirect: 0,
+            self_bounce: true,
             near_primary: 0,
             near_distance: 0.3,
             seed: 0,
@@ -209,11 +283,16 @@ impl PathParams {
         PathParams {
             query: query_kind(p),
             iterations: p.int("iterations") as u32,
+            material_dit: p.str("material_query") == "dit",
+            object_visibility: ObjectVisibility::from_name(p.str("object_visibility")),
             object_voxels: p.int("object_voxels") as u32,
             visibility: p.bool("visibility"),
             primary: p.int("primary") as u32,
             direct: p.int("direct") as u32,
             indirect: p.int("indirect") as u32,
+            object_direct: p.int("object_direct") as u32,
+            object_indirect: p.int("object_indirect") as u32,
+            self_bounce: p.bool("self_bounce"),
             near_primary: p.int("near_primary") as u32,
             near_distance: p.float("near_distance") as f32,
             seed,
@@ -241,12 +320,38 @@ impl PathParams {
         }
     }
 
-    /// The objects' solid volume the `vct` query marches for their shadows
-    /// (`object_voxels` a side); `None` for the other queries. Objects do not move:
-    /// callers build it once and pass it as [`PathInputs::object_voxels`](super::PathInputs::object_voxels).
+    /// Direct samples per primary sample that meets an object.
+    pub fn object_directs(&self) -> u32 {
+        match self.object_direct {
+            0 => self.direct,
+            n => n,
+        }
+    }
+
+    /// Indirect samples per primary sample that meets an object.
+    pub fn object_indirects(&self) -> u32 {
+        match self.object_indirect {
+            0 => self.indirect,
+            n => n,
+        }
+    }
+
+    /// Whether shadow rays meet the objects as cones through their solid volume
+    /// (`object_visibility`, with `auto` resolved by the query).
+    pub fn object_visibility_by_voxels(&self) -> bool {
+        match self.object_visibility {
+            ObjectVisibility::Auto => self.query.needs_voxels(),
+            ObjectVisibility::Mesh => false,
+            ObjectVisibility::Voxels => true,
+        }
+    }
+
+    /// The objects' solid volume whose cones give their shadows (`object_voxels` a
+    /// side) when [`Self::object_visibility_by_voxels`]; `None` for the mesh. Callers
+    /// build it once (again when the objects move) and pass it as
+    /// [`PathInputs::object_voxels`](super::PathInputs::object_voxels).
     pub fn object_volume(&self, objects: &VirtualScene) -> Option<VoxelVolume> {
-        self.query
-            .needs_voxels()
+        self.object_visibility_by_voxels()
             .then(|| solid_volume(objects, self.object_voxels))
     }
 
@@ -275,12 +380,18 @@ impl PathParams {
                 format!("{}, expected 0 or more metres", self.near_distance),
             );
         }
-        if self.direct > MAX_SAMPLES || self.indirect > MAX_SAMPLES {
+        let counts = [
+            self.direct,
+            self.indirect,
+            self.object_direct,
+            self.object_indirect,
+        ];
+        if counts.iter().any(|&n| n > MAX_SAMPLES) {
             return bad(
-                "direct or indirect",
+                "direct, indirect, object_direct or object_indirect",
                 format!(
-                    "{} / {}, expected 0..={MAX_SAMPLES}",
-                    self.direct, self.indirect
+                    "{} / {} / {} / {}, expected 0..={MAX_SAMPLES}",
+                    self.direct, self.indirect, self.object_direct, self.object_indirect
                 ),
             );
         }
@@ -288,6 +399,15 @@ impl PathParams {
             return bad(
                 "iterations",
                 format!("{}, expected 0..={MAX_ITERATIONS}", self.iterations),
+            );
+        }
+        if self.material_dit && !self.query.needs_environment() {
+            return bad(
+                "material_query",
+                format!(
+                    "\"dit\" with query \"{}\", expected query \"em\" or \"dit\" (the impostor it traces)",
+                    self.query.name()
+                ),
             );
         }
         if !(1..=MAX_OBJECT_VOXELS).contains(&self.object_voxels) {

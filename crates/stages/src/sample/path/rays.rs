@@ -101,13 +101,15 @@ impl<'t> RayBatch<'t> {
         }
     }
 
-    /// Answers every ray pushed since the last clear (marching the screen-space ones
-    /// with `lanes` where the CPU has it: the hits are the same with any).
+    /// Answers every ray pushed since the last clear or trace (marching the
+    /// screen-space ones with `lanes` where the CPU has it: the hits are the same with
+    /// any, and the same however the rays are split between calls).
     pub(super) fn trace(&mut self, lanes: simd::Kernel) {
         if let RayBatch::Screen { batch, query, hits } = self {
             batch.trace(lanes);
-            hits.clear();
-            hits.extend(batch.hits().iter().map(|h| h.map(|real| query.hit(real))));
+            let answered = hits.len();
+            let new = &batch.hits()[answered..];
+            hits.extend(new.iter().map(|h| h.map(|real| query.hit(real))));
         }
     }
 
@@ -127,6 +129,10 @@ pub(super) struct FrameQuery<'a> {
     pub(super) tracer: ScreenTracer<'a>,
     /// The world-space query (`em`, `dit`, `vct`); `None` for screen-space marching.
     pub(super) world_query: Option<WorldQuery<'a>>,
+    /// The query of the real points' rays where it is not `world_query`: `dit` for
+    /// the material estimation under `em` (`material_query = "dit"`, paper 000
+    /// Sec. 7: "for the material estimation DIT is also used in EM cases").
+    pub(super) real_query: Option<WorldQuery<'a>>,
     /// What a real hit of the screen-space march brings: the camera's radiance.
     pub(super) radiance: &'a Vec3Image,
     /// The screen-space march's reach (metres).
@@ -146,13 +152,14 @@ pub(super) struct FrameQuery<'a> {
 }
 
 impl<'a> FrameQuery<'a> {
-    /// The query of one frame: `tracer` or `world_query` over it, the table's
-    /// directions turned into camera space by `to_camera` (and, for `em`, answered
-    /// once here).
+    /// The query of one frame: `tracer` or `world_query` over it (`real_query`, where
+    /// given, for the real points' rays), the table's directions turned into camera
+    /// space by `to_camera` (and, for `em`, answered once here).
     #[allow(clippy::too_many_arguments)]
     pub(super) fn new(
         tracer: ScreenTracer<'a>,
         world_query: Option<WorldQuery<'a>>,
+        real_query: Option<WorldQuery<'a>>,
         radiance: &'a Vec3Image,
         max_distance: f32,
         table: &'a LightTable,
@@ -173,6 +180,7 @@ impl<'a> FrameQuery<'a> {
         FrameQuery {
             tracer,
             world_query,
+            real_query,
             radiance,
             max_distance,
             table,
@@ -210,7 +218,7 @@ impl<'a> FrameQuery<'a> {
     /// The world cone (of an indirect sample's aperture) from the real point along
     /// camera-space direction `dir_camera`.
     #[inline]
-    pub(super) fn real_ray(&self, rp: &RealPoint, dir_camera: Vec3) -> Ray {
+    fn real_ray(&self, rp: &RealPoint, dir_camera: Vec3) -> Ray {
         Ray::cone(
             rp.query_origin,
             Vec3::from(self.to_world * Vec3A::from(dir_camera)),
@@ -232,7 +240,7 @@ impl<'a> FrameQuery<'a> {
     /// real point.
     #[inline]
     pub(super) fn answer_from_real(&self, rp: &RealPoint, dir_camera: Vec3) -> Option<Hit> {
-        match &self.world_query {
+        match self.real_query.as_ref().or(self.world_query.as_ref()) {
             Some(query) => query.query(&self.real_ray(rp, dir_camera)),
             None => self.screen_from_real(rp, dir_camera),
         }
@@ -256,12 +264,30 @@ impl<'a> FrameQuery<'a> {
         }
     }
 
+    /// [`Self::world_direct`] from a real point's `origin`, asked of `real_query`
+    /// where there is one (`query` is then not asked).
+    #[inline]
+    pub(super) fn real_direct(
+        &self,
+        query: &WorldQuery,
+        origin: Vec3,
+        sample: usize,
+    ) -> Option<Hit> {
+        match &self.real_query {
+            Some(real) => {
+                let dir = self.table.samples[sample].direction;
+                real.query(&Ray::cone(origin, dir, self.direct_spread))
+            }
+            None => self.world_direct(query, origin, sample),
+        }
+    }
+
     /// What the query answers along table sample `sample`'s direction from the real
     /// point.
     #[inline]
     pub(super) fn direct_arrival(&self, rp: &RealPoint, sample: usize) -> Option<Hit> {
         match &self.world_query {
-            Some(query) => self.world_direct(query, rp.query_origin, sample),
+            Some(query) => self.real_direct(query, rp.query_origin, sample),
             None => self.screen_from_real(rp, self.table_camera[sample]),
         }
     }

@@ -4,6 +4,7 @@
 //! (`span.rs`) fills them; the estimator (`kernel.rs`) reads them.
 
 use super::bounds::Cone;
+use super::parts::PartTicks;
 use super::sampling::Basis;
 use crate::sample::ssrt::RayOrigin;
 use glam::Vec3;
@@ -48,6 +49,8 @@ pub(super) struct Acc {
     pub(super) touched: bool,
     /// Draws taken from the bounce stream so far.
     pub(super) bounces: u64,
+    /// Clock ticks spent on the object and on the differential (see `parts.rs`).
+    pub(super) ticks: PartTicks,
 }
 
 /// A direct sample whose ray is traced: its table sample, the cosine of its direction

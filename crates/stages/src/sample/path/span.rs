@@ -8,6 +8,7 @@
 
 use super::PathParams;
 use super::kernel::Kernel;
+use super::parts::{PartTicks, since};
 use super::rays::{NOT_ASKED, RayBatch, WorldQuery};
 use super::records::{
     DirectRay, Drawn, IndirectRay, RealPoint, RealSamples, Surface, VirtualDirect, VirtualIndirect,
@@ -18,6 +19,7 @@ use crate::sample::layers::PixelLayers;
 use crate::sample::query::{RadianceQuery, Ray, cone_spread};
 use crate::sample::ssrt::batch::TraceBatch;
 use glam::Vec3;
+use relume_base::ticks;
 use relume_scene::light::voxels::OPAQUE;
 use relume_scene::objects::VirtualHit;
 
@@ -69,6 +71,9 @@ impl<'t> Span<'t> {
     }
 
     /// Estimates pixels `xs` of row `y` with `kernel`, handing each result to `emit`.
+    /// The real points' samples are drawn and their rays answered first, then the
+    /// virtual hits' (the same rays and answers in any order), so that the clock can
+    /// tell the material estimation from the object (see `parts.rs`).
     pub(super) fn shade(
         &mut self,
         kernel: &Kernel<'_>,
@@ -76,6 +81,8 @@ impl<'t> Span<'t> {
         xs: &[u32],
         mut emit: impl FnMut(u32, &PixelLayers),
     ) {
+        let start = ticks::now();
+        let mut parts = PartTicks::default();
         let span = self;
         let inputs = kernel.inputs;
         span.batch.clear();
@@ -86,20 +93,26 @@ impl<'t> Span<'t> {
         span.primary_counts.clear();
         span.virtual_direct.clear();
         span.virtual_indirect.clear();
+        let pixel = |x: u32| y as usize * inputs.depth.width as usize + x as usize;
+        let rng = |x: u32| PixelRng::new(kernel.params.seed, inputs.frame, pixel(x) as u64);
         for &x in xs {
-            let p = y as usize * inputs.depth.width as usize + x as usize;
-            let rng = PixelRng::new(kernel.params.seed, inputs.frame, p as u64);
-            let z = inputs.depth.data[p];
-            let real = kernel.real_point(x, y, z, inputs.normals.data[p]);
+            let p = pixel(x);
+            let real = kernel.real_point(x, y, inputs.depth.data[p], inputs.normals.data[p]);
             let primary = kernel.primaries_at(x, y, real.as_ref());
             if let Some(rp) = &real {
-                span.draw_real_samples(kernel, rp, &rng, primary);
+                span.draw_real_samples(kernel, rp, &rng(x), primary);
             }
             span.real.push(real);
             span.primary_counts.push(primary);
-            span.draw_primaries(kernel, x, y, z, &rng, primary);
         }
         span.batch.trace(kernel.lanes);
+        let object_start = ticks::now();
+        for (i, &x) in xs.iter().enumerate() {
+            let (z, primary) = (inputs.depth.data[pixel(x)], span.primary_counts[i]);
+            span.draw_primaries(kernel, x, y, z, &rng(x), primary);
+        }
+        span.batch.trace(kernel.lanes);
+        parts.object += since(object_start);
         let params = kernel.params;
         let (mut direct, mut indirect) = (&span.direct[..], &span.indirect[..]);
         let (mut virtual_direct, mut virtual_indirect) =
@@ -129,9 +142,9 @@ impl<'t> Span<'t> {
             };
             let virtual_count = primaries.iter().flatten().count();
             let (pixel_direct, rest) =
-                virtual_direct.split_at(virtual_count * params.direct as usize);
+                virtual_direct.split_at(virtual_count * params.object_directs() as usize);
             let (pixel_indirect, rest_indirect) =
-                virtual_indirect.split_at(virtual_count * params.indirect as usize);
+                virtual_indirect.split_at(virtual_count * params.object_indirects() as usize);
             (virtual_direct, virtual_indirect) = (rest, rest_indirect);
             let drawn = Drawn {
                 real: real.as_ref(),
@@ -142,9 +155,10 @@ impl<'t> Span<'t> {
                     indirect: pixel_indirect,
                 },
             };
-            let result = kernel.shade_pixel(x, y, &drawn, span.batch.hits());
+            let result = kernel.shade_pixel(x, y, &drawn, span.batch.hits(), &mut parts);
             emit(x, &result);
         }
+        kernel.parts.add(since(start), parts);
     }
 
     /// Finds which primaries of pixel (x, y) (depth `z`) meet the objects, and draws
@@ -201,22 +215,22 @@ impl<'t> Span<'t> {
         let (direct_stream, indirect_stream) =
             (rng.stream(StreamId::Direct), rng.stream(StreamId::Indirect));
         let t_max = params.max_distance;
+        let strata = kernel.real_strata(primary);
         for s in 0..primary * params.direct {
-            let drawn =
-                kernel
-                    .direct_sample(&direct_stream, s, primary)
-                    .and_then(|(sample, ls)| {
-                        let cos = rp.normal_world.dot(ls.direction);
-                        (cos > 0.0 && ls.pdf > 0.0).then(|| DirectRay {
-                            sample,
-                            cos,
-                            ray: self.batch.push(
-                                |q| query.world_direct(q, rp.query_origin, sample),
-                                || (rp.origin, query.table_camera[sample]),
-                                t_max,
-                            ),
-                        })
-                    });
+            let drawn = kernel
+                .direct_sample(&direct_stream, s, strata)
+                .and_then(|(sample, ls)| {
+                    let cos = rp.normal_world.dot(ls.direction);
+                    (cos > 0.0 && ls.pdf > 0.0).then(|| DirectRay {
+                        sample,
+                        cos,
+                        ray: self.batch.push(
+                            |q| query.real_direct(q, rp.query_origin, sample),
+                            || (rp.origin, query.table_camera[sample]),
+                            t_max,
+                        ),
+                    })
+                });
             self.direct.push(drawn);
         }
         for s in 0..primary * params.indirect {
@@ -225,14 +239,14 @@ impl<'t> Span<'t> {
             // For the world-space queries, only rays that may meet an object need
             // their distance (see `real_samples`); the impostor's is asked there, and
             // only of the rays that do meet one.
-            let world = |q: &WorldQuery| {
+            let world = |_: &WorldQuery| {
                 if params.object_aware
                     || query.impostor_bounds_reflectors()
                     || !rp.cone_camera.admits(dir_camera)
                 {
                     return Some(NOT_ASKED);
                 }
-                q.query(&query.real_ray(rp, dir_camera))
+                query.answer_from_real(rp, dir_camera)
             };
             self.indirect.push(IndirectRay {
                 dir_camera,
@@ -269,9 +283,11 @@ impl<'t> Span<'t> {
         // Self-occlusion of the objects' own illumination (paper 000 Table 3's
         // visibility test).
         let objects = kernel.objects.as_ref().filter(|_| params.visibility);
-        for k in 0..params.direct {
-            let s = j * params.direct + k;
-            let drawn = match kernel.direct_sample(direct_stream, s, primary) {
+        let (directs, indirects) = (params.object_directs(), params.object_indirects());
+        let strata = kernel.object_strata(primary);
+        for k in 0..directs {
+            let s = j * directs + k;
+            let drawn = match kernel.direct_sample(direct_stream, s, strata) {
                 Some((sample, ls)) => {
                     let cos = n.dot(ls.direction);
                     if cos > 0.0 && ls.pdf > 0.0 {
@@ -317,12 +333,14 @@ impl<'t> Span<'t> {
         });
         // `vct`: the cones share the lobe (narrowed to the Phong lobe when glossy).
         let spread = if surface.glossy {
-            cone_spread(primary * params.indirect, hit.material.exponent)
-        } else {
+            cone_spread(primary * indirects, hit.material.exponent)
+        } else if indirects == params.indirect {
             query.indirect_spread
+        } else {
+            cone_spread(params.primary * indirects, 0.0)
         };
-        for k in 0..params.indirect {
-            let s = j * params.indirect + k;
+        for k in 0..indirects {
+            let s = j * indirects + k;
             let (u1, u2) = indirect_stream.pair(s as u64);
             let (dir, weight) = if surface.glossy {
                 let dir = basis.to_world(phong_lobe(u1, u2, hit.material.exponent));

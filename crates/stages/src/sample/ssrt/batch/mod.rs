@@ -85,10 +85,11 @@ impl<'t> TraceBatch<'t> {
         ray
     }
 
-    /// Marches every ray pushed since the last clear, with `kernel` where the CPU has
-    /// it: afterwards [`TraceBatch::hits`] holds what [`ScreenTracer::trace_from`]
-    /// returns for each. Returns the kernel that ran. Rays pushed after this call need
-    /// another.
+    /// Marches every ray pushed since the last clear or trace, with `kernel` where the
+    /// CPU has it: afterwards [`TraceBatch::hits`] holds what
+    /// [`ScreenTracer::trace_from`] returns for each ray pushed since the last clear.
+    /// Returns the kernel that ran. Rays pushed after this call need another (which
+    /// marches only them).
     pub fn trace(&mut self, kernel: Kernel) -> Kernel {
         let tracer = self.tracer;
         self.queued.clear();
@@ -123,7 +124,7 @@ impl<'t> TraceBatch<'t> {
         Kernel::Portable
     }
 
-    /// The hit records of the samples found.
+    /// The hit records of the samples found; the rays are then marched.
     fn record_hits(&mut self) {
         for (q, found) in self.queued.iter().zip(&self.found) {
             if let Some((a, inv)) = *found {
@@ -132,6 +133,7 @@ impl<'t> TraceBatch<'t> {
                     Some(self.tracer.hit(m, q.origin, q.dir, a, m.minor(a), inv));
             }
         }
+        self.pending.clear();
     }
 
     /// Per ray, in push order: the first real surface on its way, if any.

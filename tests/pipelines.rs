@@ -92,8 +92,9 @@ fn the_fast_pipeline_is_mixed_reality_with_fewer_samples_and_a_fixed_b_e() {
     assert_eq!(filter.unwrap().params.float("environment_bandwidth"), 4.0);
 }
 
-/// Paper 000's low / medium / high presets are the reference chain with only
-/// sample.path's parameters changed: its query, samples, cache and visibility.
+/// Paper 000's low / medium / high presets are the reference chain with sample.path's
+/// parameters changed (its query, samples, cache, visibility and bounce, the objects
+/// tested through their voxel volume) and no filter (Table 2 has none).
 #[test]
 fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
     let file = |name: &str| {
@@ -103,22 +104,37 @@ fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
     let presets = [
         (
             "low",
-            "query = \"em\", visibility = false, object_aware = true, candidates = 16, cache_size = 8",
+            "query = \"em\", material_query = \"dit\", iterations = 6, visibility = false, object_visibility = \"voxels\", object_voxels = 32, object_aware = true, candidates = 16, cache_size = 8",
         ),
         (
             "medium",
-            "query = \"dit\", iterations = 6, object_aware = true, candidates = 16, cache_size = 8",
+            "query = \"dit\", iterations = 6, self_bounce = false, object_visibility = \"voxels\", object_voxels = 32, object_aware = true, candidates = 16, cache_size = 8",
         ),
         (
             "high",
-            "query = \"dit\", iterations = 8, primary = 4, direct = 16, indirect = 16, object_aware = true, candidates = 64, cache_size = 32",
+            "query = \"dit\", iterations = 8, primary = 4, direct = 16, indirect = 16, object_direct = 32, object_indirect = 32, self_bounce = true, object_visibility = \"voxels\", object_voxels = 128, object_aware = true, candidates = 64, cache_size = 32",
         ),
     ];
+    let unfiltered = |chain: String| {
+        chain
+            .replacen(" -> filter.axis_aligned", "", 1)
+            .replacen(
+                "# --- Sampling, filtering, compositing. ---",
+                "# --- Sampling and compositing: no filter (paper 000 has none). ---",
+                1,
+            )
+            .replacen("[[stage]]\nkind = \"filter.axis_aligned\"\n\n", "", 1)
+            .replacen(
+                "kind = \"composite.differential\"\n",
+                "kind = \"composite.differential\"\ninputs = { e_r_dir = \"e_r_dir\", e_r_ind = \"e_r_ind\", e_rv_dir = \"e_rv_dir\", e_rv_ind = \"e_rv_ind\" }\n",
+                1,
+            )
+    };
     for (level, params) in presets {
         let name = format!("mixed-reality-nei-{level}");
         let text = file(&format!("{name}.toml"));
         assert_eq!(
-            body(&file("mixed-reality-reference.toml"))
+            unfiltered(body(&file("mixed-reality-reference.toml")))
                 .replacen(
                     "name = \"mixed-reality-reference\"",
                     &format!("name = \"{name}\""),
@@ -143,6 +159,14 @@ fn the_nei_presets_are_mixed_reality_with_another_radiance_query() {
         let path = p.stages.iter().find(|s| s.kind == "sample.path").unwrap();
         assert_eq!(path.inputs["environment"], "environment", "{name}");
         assert_eq!(path.params.bool("visibility"), level != "low", "{name}");
+        assert_eq!(path.params.bool("self_bounce"), level != "medium", "{name}");
+        assert_eq!(path.params.str("object_visibility"), "voxels", "{name}");
+        let material = if level == "low" { "dit" } else { "same" };
+        assert_eq!(path.params.str("material_query"), material, "{name}");
+        assert!(
+            p.stages.iter().all(|s| s.kind != "filter.axis_aligned"),
+            "{name}"
+        );
     }
 }
 

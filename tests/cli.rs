@@ -239,6 +239,19 @@ fn bench_reports_stage_medians_as_json() {
             );
         }
     }
+    // sample.path splits its time into paper 000 Table 2's rows; no other stage does.
+    let parts = doc["stages"]["sample.path"]["parts"].as_object().unwrap();
+    let names: Vec<&str> = parts.keys().map(|k| k.as_str()).collect();
+    assert_eq!(names, ["differential", "material", "object", "setup"]);
+    for (name, stats) in parts {
+        let median = stats["median_ms"].as_f64().unwrap();
+        assert!(
+            median >= 0.0 && median <= stats["max_ms"].as_f64().unwrap(),
+            "{name}"
+        );
+    }
+    assert!(parts["material"]["median_ms"].as_f64().unwrap() > 0.0);
+    assert!(doc["stages"]["decode"].get("parts").is_none());
     assert!(doc["fps"].as_f64().unwrap() > 0.0);
     assert_eq!(doc["repeat"], 2);
     assert!(

@@ -11,7 +11,9 @@ with `--set sample.path.query=... --set sample.path.direct=N/4 ...` (4 primaries
 and, as the table's caption says ("Differential Background (with cache size 32)"),
 the background's differential estimated object-aware (paper 000 Sec. 7, indirect and
 direct light) from N candidate directions with cache size 32 (scripts/table4.py varies
-the cache). Standard library only.
+the cache). The visibility test of em, dit and vct goes through the objects' solid
+voxel volume (object_visibility = voxels, 32 voxels a side), as paper 000 Sec. 6.2 does
+for every technique; ssrt, relume's own, keeps the mesh. Standard library only.
 """
 
 import argparse
@@ -65,7 +67,9 @@ def main():
         for n in counts:
             for visibility in ["true", "false"]:
                 per_primary = max(n // 4, 1)
+                objects = "mesh" if query == "ssrt" else "voxels"
                 ms = sample_path_ms(a, [("query", query), ("visibility", visibility),
+                                        ("object_visibility", objects),
                                         ("object_aware", "true"),
                                         ("object_aware_direct", "true"),
                                         ("candidates", n), ("cache_size", 32),

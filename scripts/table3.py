@@ -11,9 +11,10 @@ with `--set sample.path.query=... --set sample.path.direct=N/4 ...` (4 primaries
 and, as the table's caption says ("Differential Background (with cache size 32)"),
 the background's differential estimated object-aware (paper 000 Sec. 7, indirect and
 direct light) from N candidate directions with cache size 32 (scripts/table4.py varies
-the cache). The visibility test of em, dit and vct goes through the objects' solid
+the cache). The direct-light shadow rays of em, dit and vct meet the objects' solid
 voxel volume (object_visibility = voxels, 32 voxels a side), as paper 000 Sec. 6.2 does
-for every technique; ssrt, relume's own, keeps the mesh. Standard library only.
+for every technique (the object-aware candidates and indirect rays meet the mesh);
+ssrt, relume's own, keeps the mesh. Standard library only.
 """
 
 import argparse

@@ -36,7 +36,7 @@ mod tests {
         while instant.elapsed() < d {
             std::hint::spin_loop();
         }
-        now() - start
+        now().saturating_sub(start)
     }
 
     #[test]

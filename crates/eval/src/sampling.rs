@@ -215,6 +215,7 @@ impl PathRunner {
 /// as meshes with as many samples as the room and their secondary bounce (whatever
 /// paper 000's presets set for them).
 fn reference_params(params: &PathParams, k: u64, stride: u32) -> PathParams {
+    let defaults = PathParams::default();
     PathParams {
         query: QueryKind::Ssrt,
         material_dit: false,
@@ -231,6 +232,12 @@ fn reference_params(params: &PathParams, k: u64, stride: u32) -> PathParams {
         object_aware: false,
         seed: rng::hash(&[params.seed, REFERENCE_SALT, k]),
         pixel_stride: stride,
+        // Unused by the reference: reset so that pipelines differing only in them share
+        // one (`reference_key`).
+        iterations: defaults.iterations,
+        object_voxels: defaults.object_voxels,
+        candidates: defaults.candidates,
+        cache_size: defaults.cache_size,
         ..*params
     }
 }
@@ -662,6 +669,10 @@ mod tests {
             object_indirect: 32,
             self_bounce: false,
             object_aware: true,
+            iterations: 8,
+            object_voxels: 128,
+            candidates: 64,
+            cache_size: 32,
             ..default
         };
         for (k, stride) in [(0, 1), (3, 4)] {

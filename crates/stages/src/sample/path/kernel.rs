@@ -51,9 +51,9 @@ use relume_scene::light::voxels::{ConeMarch, VoxelVolume};
 use relume_scene::objects::VirtualHit;
 use std::f32::consts::{FRAC_1_PI, PI};
 
-/// Object visibility by voxels: how many of the object volume's voxels a cone leaving a virtual surface
-/// starts off it (the solid voxelization puts the surface up to a voxel from where it
-/// is, and trilinear sampling reaches a voxel further).
+/// Object visibility by voxels: how many of the object volume's voxels a cone leaving a
+/// virtual surface starts off it (the solid voxelization puts the surface up to a voxel
+/// from where it is, and trilinear sampling reaches a voxel further).
 pub(super) const LEAVE_VOXELS: f32 = 1.5;
 /// Everything constant over a frame.
 pub(super) struct Kernel<'a> {
@@ -83,6 +83,10 @@ pub(super) struct Kernel<'a> {
     pub(super) near_object_strata: Vec<u32>,
     /// The table's strata for the object-aware direct candidates.
     pub(super) candidate_strata: Vec<u32>,
+    /// The aperture of the cones of an object's own direct samples (`primary` x
+    /// `object_direct` of them share the hemisphere; the room's is the query's
+    /// `direct_spread`).
+    pub(super) object_direct_spread: f32,
     /// Blocked direct samples dimmer than this (largest channel of the sample's
     /// radiance) do not count towards `direct_min_distance`.
     pub(super) occluder_min_radiance: f32,
@@ -157,6 +161,7 @@ impl<'a> Kernel<'a> {
                 inputs.table.samples.len(),
             ),
             candidate_strata: strata_bounds(params.candidates, inputs.table.samples.len()),
+            object_direct_spread: cone_spread(params.primary * params.object_directs(), 0.0),
             occluder_min_radiance: params.occluder_threshold
                 * inputs
                     .table
@@ -169,33 +174,34 @@ impl<'a> Kernel<'a> {
         }
     }
 
-    /// Object visibility by voxels: the cone of a direct sample's aperture from `origin` along `dir` through
-    /// the objects' solid volume, up to `t_max`: its opacity is the share of the
-    /// light the objects block (paper 000 eq. 6's 1 - alpha).
+    /// Object visibility by voxels: the cone of a direct sample's aperture (`spread`)
+    /// from `origin` along `dir` through the objects' solid volume, up to `t_max`: its
+    /// opacity is the share of the light the objects block (paper 000 eq. 6's
+    /// 1 - alpha).
     #[inline]
     pub(super) fn object_cone(
         &self,
         volume: &VoxelVolume,
-        origin: Vec3,
-        dir: Vec3,
+        (origin, dir, spread): (Vec3, Vec3, f32),
         t_max: f32,
     ) -> ConeMarch {
-        volume.march(origin, dir, self.query.direct_spread, 0.0, t_max)
+        volume.march(origin, dir, spread, 0.0, t_max)
     }
 
-    /// Object visibility by voxels: [`Kernel::object_cone`] leaving a virtual surface at `position` with
-    /// normal `normal`: it starts [`LEAVE_VOXELS`] of the volume's voxels off the
-    /// surface, out of the voxels that hold the surface itself.
+    /// Object visibility by voxels: [`Kernel::object_cone`] of aperture `spread`
+    /// leaving a virtual surface at `position` with normal `normal`: it starts
+    /// [`LEAVE_VOXELS`] of the volume's voxels off the surface, out of the voxels that
+    /// hold the surface itself.
     #[inline]
     pub(super) fn object_shadow(
         &self,
         volume: &VoxelVolume,
-        position: Vec3,
-        normal: Vec3,
+        (position, normal): (Vec3, Vec3),
         dir: Vec3,
+        spread: f32,
     ) -> ConeMarch {
         let origin = position + normal * (LEAVE_VOXELS * volume.voxel_size);
-        self.object_cone(volume, origin, dir, f32::INFINITY)
+        self.object_cone(volume, (origin, dir, spread), f32::INFINITY)
     }
 
     /// Records a blocked direct sample for the filter: its occluder at distance `t`
@@ -559,8 +565,8 @@ impl<'a> Kernel<'a> {
                         match (rv_blockers, self.object_volume) {
                             (Some(_), Some(volume)) if rp.cone_world.admits(ls.direction) => {
                                 let start = ticks::now();
-                                let cone =
-                                    self.object_cone(volume, rp.world, ls.direction, t_light);
+                                let ray = (rp.world, ls.direction, self.query.direct_spread);
+                                let cone = self.object_cone(volume, ray, t_light);
                                 if cone.opacity > 0.0 {
                                     c_rv = c * (1.0 - cone.opacity);
                                     acc.touched = true;
@@ -771,8 +777,10 @@ impl<'a> Kernel<'a> {
         {
             match self.object_volume {
                 Some(volume) => {
+                    let surface = (hit.position, hit.normal);
+                    let spread = self.query.direct_spread;
                     visible -= self
-                        .object_shadow(volume, hit.position, hit.normal, ls.direction)
+                        .object_shadow(volume, surface, ls.direction, spread)
                         .opacity;
                 }
                 None if objects.hit(origin, ls.direction, f32::INFINITY).is_some() => {

@@ -109,9 +109,10 @@
 //! no path meets an object, with any query.
 //!
 //! **Paper 000's presets** (Table 2) need four more knobs. `object_visibility =
-//! "voxels"` tests shadow rays against the objects' solid volume with any query, as
-//! paper 000 Sec. 6.2 does for every technique ("testing the whole triangle mesh for
-//! intersections is too expensive"); `auto` keeps the mesh for all but `vct`.
+//! "voxels"` tests direct light's shadow rays against the objects' solid volume with
+//! any query, as paper 000 Sec. 6.2 does for every technique ("testing the whole
+//! triangle mesh for intersections is too expensive"); `auto` keeps the mesh for all
+//! but `vct`. Indirect rays and `object_aware_direct`'s candidates meet the mesh.
 //! `object_direct` / `object_indirect` give the primaries that meet an object their own
 //! sample counts ("high": 128 for the object, 64 for the room); such a primary still
 //! weighs in its pixel's mean as a real primary does. `self_bounce = false` makes an
@@ -190,8 +191,8 @@ pub const INFO: StageInfo = renderer::info::<SamplePath>();
 /// Estimates E_R and E_RV (direct and indirect), the mask, k_V, the mean visible
 /// surface and the minimum hit distances of every pixel (paper 001 Sec. 5; see the
 /// module docs). Builds the depth pyramid of the frame (O(pixels)) and fills `out`,
-/// which must be the depth map's size.
-/// Returns where the time went ([`PathTimes`], paper 000 Table 2's rows).
+/// which must be the depth map's size. Returns where the time went ([`PathTimes`],
+/// paper 000 Table 2's rows).
 pub fn sample_path(
     inputs: &PathInputs,
     params: &PathParams,
@@ -292,9 +293,9 @@ pub(crate) fn sample_path_with_kernel(
     Ok(kernel.parts.times(rows, rows_start - start))
 }
 
-/// The world-space query of kind `kind` with `params` (`None` for screen-space marching), over
-/// the inputs' environment map or voxel volume; the error says what is missing or
-/// malformed.
+/// The world-space query of kind `kind` with `params` (`None` for screen-space
+/// marching), over the inputs' environment map or voxel volume; the error says what is
+/// missing or malformed.
 fn query_over<'a>(
     inputs: &PathInputs<'a>,
     params: &PathParams,
@@ -377,6 +378,8 @@ impl Renderer for SamplePath {
         out: &mut IrradianceLayers,
     ) -> Result<(), StageError> {
         let start = Instant::now();
+        // A frame that fails reports no parts (not the last good frame's).
+        self.times = None;
         let query = self.params.query;
         let (objects, moved) = self.objects.at(frame.index)?;
         if moved {

@@ -38,7 +38,7 @@ pub(super) const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
         "object_visibility",
         ParamDefault::Str("auto"),
-        "how shadow rays are tested against the objects (their shadows on the room and on themselves): mesh = the triangles' BVH, exact and hard-edged; voxels = cones through the objects' solid volume (object_voxels a side), soft and partial, as paper 000 Sec. 6.2 does for every technique; auto = voxels for vct, mesh otherwise. The objects' radiance along indirect rays comes from the mesh either way",
+        "how direct-light shadow rays are tested against the objects (their shadows on the room and on themselves): mesh = the triangles' BVH, exact and hard-edged; voxels = cones through the objects' solid volume (object_voxels a side), soft and partial, as paper 000 Sec. 6.2 does for every technique; auto = voxels for vct, mesh otherwise. Indirect rays meet the objects' mesh either way, and so do object_aware_direct's candidates",
     )
     .choices(ObjectVisibility::NAMES),
     ParamSpec::new(
@@ -392,6 +392,20 @@ impl PathParams {
                 format!(
                     "{} / {} / {} / {}, expected 0..={MAX_SAMPLES}",
                     self.direct, self.indirect, self.object_direct, self.object_indirect
+                ),
+            );
+        }
+        // An object's own counts weigh in its pixel's mean as the room's count does
+        // (`primary_share`): there is nothing to weigh them against when the room has none.
+        let unweighable = |room: u32, object: u32| room == 0 && object > 0;
+        if unweighable(self.direct, self.object_direct)
+            || unweighable(self.indirect, self.object_indirect)
+        {
+            return bad(
+                "object_direct or object_indirect",
+                format!(
+                    "{} / {} with direct / indirect {} / {}, expected 0 where the room's count is 0",
+                    self.object_direct, self.object_indirect, self.direct, self.indirect
                 ),
             );
         }

@@ -26,10 +26,11 @@ pub(super) struct PartTicks {
     pub(super) differential: u64,
 }
 
-/// The ticks since `start` (a reading of [`ticks::now`]).
+/// The ticks since `start` (a reading of [`ticks::now`]); 0 if the clock reads
+/// earlier (a thread moved to a core whose counter lags).
 #[inline]
 pub(super) fn since(start: u64) -> u64 {
-    ticks::now().wrapping_sub(start)
+    ticks::now().saturating_sub(start)
 }
 
 /// The ticks of every span of a call, summed over the threads.

@@ -326,3 +326,24 @@ fn em_can_estimate_the_material_with_dit_and_keep_em_on_the_object() {
         "sample.path: material_query is \"dit\" with query \"ssrt\", expected query \"em\" or \"dit\" (the impostor it traces)"
     );
 }
+
+#[test]
+fn object_counts_need_room_counts_to_weigh_against() {
+    let p = PathParams {
+        direct: 0,
+        object_direct: 8,
+        ..Default::default()
+    };
+    assert_eq!(
+        p.check().unwrap_err().to_string(),
+        "sample.path: object_direct or object_indirect is 8 / 0 with direct / indirect 0 / 4, expected 0 where the room's count is 0"
+    );
+    let fine = PathParams {
+        direct: 0,
+        object_direct: 0,
+        indirect: 4,
+        object_indirect: 16,
+        ..Default::default()
+    };
+    fine.check().unwrap();
+}

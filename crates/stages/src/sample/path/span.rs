@@ -1,10 +1,11 @@
 //! Pixels are estimated a span of a row at a time: first every real point's samples are
-//! drawn, each pixel's primaries meet the objects or not, and the virtual hits' samples
-//! are drawn, with all their rays queued; then the rays are answered in one
-//! [`RayBatch`] (with `ssrt`, marched eight at a time with AVX2); then each pixel is
-//! estimated from its samples and their hits. The rays, the hits and therefore the
-//! estimates are those of tracing each ray in turn. Each pixel's result goes to the
-//! caller.
+//! drawn and their rays answered in the span's [`RayBatch`] (with `ssrt`, marched
+//! eight at a time with AVX2); then each pixel's primaries meet the objects or not, the
+//! virtual hits' samples are drawn and their rays answered in a second pass over the
+//! batch (so that the clock can tell the material estimation from the object); then
+//! each pixel is estimated from its samples and their hits. The rays, the hits and
+//! therefore the estimates are those of tracing each ray in turn. Each pixel's result
+//! goes to the caller.
 
 use super::PathParams;
 use super::kernel::Kernel;
@@ -293,8 +294,13 @@ impl<'t> Span<'t> {
                     if cos > 0.0 && ls.pdf > 0.0 {
                         let (blocker, visible) = match (objects, kernel.object_volume) {
                             (Some(_), Some(volume)) => {
-                                let cone =
-                                    kernel.object_shadow(volume, hit.position, n, ls.direction);
+                                let spread = kernel.object_direct_spread;
+                                let cone = kernel.object_shadow(
+                                    volume,
+                                    (hit.position, n),
+                                    ls.direction,
+                                    spread,
+                                );
                                 let blocked = cone.opacity >= OPAQUE;
                                 (blocked.then_some(cone.t_half), 1.0 - cone.opacity)
                             }

@@ -18,11 +18,9 @@ library only.
 """
 
 import argparse
-import json
-import subprocess
 import sys
 
-from table3 import print_table
+from table3 import bench_stages, print_table
 
 # (column, pipeline, sample.path settings)
 COLUMNS = [
@@ -45,20 +43,6 @@ ROWS = [
 ]
 NOT_IN_TABLE = "Not in Table 2: acquisition, light, filter"
 WRITES = {"write"}
-
-
-def bench(a, pipeline, settings):
-    """The stages of one `relume bench --isolated --json` of `pipeline`."""
-    cmd = [a.relume, "bench", "--isolated", "--json", "--repeat", a.repeat,
-           "--frames", a.frames, "-p", f"pipelines/{pipeline}.toml"]
-    if a.recording:
-        cmd.append(a.recording)
-    for key, value in settings:
-        cmd += ["--set", f"sample.path.{key}={value}"]
-    done = subprocess.run(cmd, capture_output=True, text=True)
-    if done.returncode != 0:
-        sys.exit(f"{' '.join(cmd)}\n{done.stderr}")
-    return json.loads(done.stdout)["stages"]
 
 
 def column(stages):
@@ -85,7 +69,7 @@ def main():
     a = ap.parse_args()
     columns = []
     for name, pipeline, settings in COLUMNS:
-        columns.append(column(bench(a, pipeline, settings)))
+        columns.append(column(bench_stages(a, pipeline, settings)))
         print(f"{name}: {columns[-1][-2]:.0f} ms a frame", file=sys.stderr)
     labels = [r[0] for r in ROWS] + [NOT_IN_TABLE, "Total frame", "Frame rate [Hz]"]
     rows = []

@@ -34,11 +34,11 @@ def bench_arguments(ap, counts):
     ap.add_argument("--relume", default="target/release/relume")
 
 
-def sample_path_ms(a, settings):
-    """sample.path's median ms a frame in one `relume bench --isolated` of
-    pipelines/mixed-reality-vct.toml with the sample.path `settings` (key, value)."""
+def bench_stages(a, pipeline, settings):
+    """The stages of one `relume bench --isolated --json` of pipelines/`pipeline`.toml
+    with the sample.path `settings` (key, value); exits with relume's error."""
     cmd = [a.relume, "bench", "--isolated", "--json", "--repeat", a.repeat,
-           "--frames", a.frames, "-p", "pipelines/mixed-reality-vct.toml"]
+           "--frames", a.frames, "-p", f"pipelines/{pipeline}.toml"]
     if a.recording:
         cmd.append(a.recording)
     for key, value in settings:
@@ -46,7 +46,13 @@ def sample_path_ms(a, settings):
     done = subprocess.run(cmd, capture_output=True, text=True)
     if done.returncode != 0:
         sys.exit(f"{' '.join(cmd)}\n{done.stderr}")
-    return json.loads(done.stdout)["stages"]["sample.path"]["median_ms"]
+    return json.loads(done.stdout)["stages"]
+
+
+def sample_path_ms(a, settings):
+    """sample.path's median ms a frame in one `relume bench --isolated` of
+    pipelines/mixed-reality-vct.toml with the sample.path `settings` (key, value)."""
+    return bench_stages(a, "mixed-reality-vct", settings)["sample.path"]["median_ms"]
 
 
 def print_table(head, rows):

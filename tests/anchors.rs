@@ -466,6 +466,18 @@ fn the_objects_help_page_lists_every_key() {
     ] {
         assert!(names.contains(&key), "{key}");
     }
+    // The [[light]] tables' keys follow, under their own heading.
+    let lights = text
+        .split("Keys of [[light]] tables")
+        .nth(1)
+        .expect("a [[light]] section");
+    for key in relume::stages::world::lights::key_docs() {
+        assert!(
+            lights.contains(&format!("\n  {} ({}", key.name, key.kind)),
+            "light key `{}` missing",
+            key.name
+        );
+    }
     let json: serde_json::Value =
         serde_json::from_str(&stdout(&ok(run_in(dir.path(), &["objects", "--json"])))).unwrap();
     assert_eq!(json.as_array().unwrap().len(), keys.len());

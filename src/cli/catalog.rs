@@ -257,6 +257,19 @@ pub fn objects(a: ObjectsArgs) -> anyhow::Result<i32> {
             outln!("      {line}")?;
         }
     }
+    outln!(
+        "\nKeys of [[light]] tables (spot lights the pipeline knows of; sample.dir lights with them):"
+    )?;
+    for key in relume::stages::world::lights::key_docs() {
+        let bounds = match (key.min, key.max) {
+            (Some(lo), Some(hi)) => format!(", {lo} to {hi}"),
+            _ => String::new(),
+        };
+        outln!("  {} ({}{bounds})", key.name, key.kind)?;
+        for line in wrap(key.doc, 82) {
+            outln!("      {line}")?;
+        }
+    }
     outln!("\n{OBJECTS_EXAMPLE}")?;
     Ok(0)
 }

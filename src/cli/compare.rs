@@ -158,6 +158,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
                 declared: pipelines[i].declared_objects().to_vec(),
                 scene: world(j).scene.clone(),
                 moving: world(j).moving.clone(),
+                lights: world(i).lights.clone(),
             });
         }
     }

@@ -268,13 +268,34 @@ pub struct StageDecl {
     pub span: Range<usize>,
 }
 
-/// One `[[object]]` entry as written; checked by the registry's world resolver
-/// (`relume_stages::world::resolve`).
+/// One `[[object]]` or `[[light]]` entry as written; checked by the registry's world
+/// resolver (`relume_stages::world::resolve`).
 #[derive(Clone, Debug)]
-pub struct ObjectDecl {
+pub struct TableDecl {
     pub entries: Vec<(Located<String>, Located<RawValue>)>,
-    /// Span of the whole object table.
+    /// Span of the whole table.
     pub span: Range<usize>,
+}
+
+/// The tables of a pipeline file that declare its world, in file order: the virtual
+/// objects (`[[object]]`) and the light sources the pipeline knows of (`[[light]]`).
+#[derive(Clone, Debug, Default)]
+pub struct WorldDecls {
+    pub objects: Vec<TableDecl>,
+    pub lights: Vec<TableDecl>,
+}
+
+impl WorldDecls {
+    /// True when the file declares neither objects nor lights.
+    pub fn is_empty(&self) -> bool {
+        self.objects.is_empty() && self.lights.is_empty()
+    }
+
+    /// The first table written, for errors about the tables as a whole.
+    pub fn first(&self) -> Option<&TableDecl> {
+        let by_start = |t: &&TableDecl| t.span.start;
+        self.objects.iter().chain(&self.lights).min_by_key(by_start)
+    }
 }
 
 /// A pipeline file as written.
@@ -284,7 +305,7 @@ pub struct PipelineDecl {
     pub description: Option<String>,
     pub channel_capacity: Option<Located<i64>>,
     pub stages: Vec<StageDecl>,
-    pub objects: Vec<ObjectDecl>,
+    pub world: WorldDecls,
 }
 
 type DeTable<'i> = toml::de::DeTable<'i>;
@@ -300,13 +321,21 @@ pub fn parse(src: &SourceFile) -> Result<PipelineDecl, ConfigError> {
     })?;
     let doc_span = doc.span();
     let doc = doc.into_inner();
-    check_keys(src, &doc, &["pipeline", "stage", "object"], "top-level key")?;
+    check_keys(
+        src,
+        &doc,
+        &["pipeline", "stage", "object", "light"],
+        "top-level key",
+    )?;
     let mut decl = PipelineDecl {
         name: None,
         description: None,
         channel_capacity: None,
         stages: Vec::new(),
-        objects: parse_objects(src, &doc)?,
+        world: WorldDecls {
+            objects: parse_tables(src, &doc, "object")?,
+            lights: parse_tables(src, &doc, "light")?,
+        },
     };
     if let Some(p) = doc.get("pipeline") {
         let table = expect_table(src, p, "[pipeline]")?;
@@ -362,22 +391,31 @@ pub fn parse(src: &SourceFile) -> Result<PipelineDecl, ConfigError> {
     Ok(decl)
 }
 
-/// The `[[object]]` tables, each as its raw key-value pairs.
-fn parse_objects(src: &SourceFile, doc: &DeTable<'_>) -> Result<Vec<ObjectDecl>, ConfigError> {
-    let Some(objects) = doc.get("object") else {
+/// The `[[object]]` or `[[light]]` tables (`key`), each as its raw key-value pairs.
+fn parse_tables(
+    src: &SourceFile,
+    doc: &DeTable<'_>,
+    key: &str,
+) -> Result<Vec<TableDecl>, ConfigError> {
+    let Some(tables) = doc.get(key) else {
         return Ok(Vec::new());
     };
-    let DeValue::Array(list) = objects.get_ref() else {
+    let DeValue::Array(list) = tables.get_ref() else {
         return Err(src.error(
-            objects.span(),
-            "`object` must be an array of tables, written [[object]]",
+            tables.span(),
+            format!("`{key}` must be an array of tables, written [[{key}]]"),
             None,
         ));
     };
+    let article = if key.starts_with(['a', 'e', 'i', 'o', 'u']) {
+        "an"
+    } else {
+        "a"
+    };
     list.iter()
         .map(|item| {
-            let table = expect_table(src, item, "an [[object]] entry")?;
-            Ok(ObjectDecl {
+            let table = expect_table(src, item, &format!("{article} [[{key}]] entry"))?;
+            Ok(TableDecl {
                 entries: table
                     .iter()
                     .map(|(k, v)| (located_key(k), raw(v)))

@@ -273,7 +273,7 @@ impl Pipeline {
             }
         }
         // Objects last: meshes are read from disk only for an otherwise valid pipeline.
-        let world = registry.resolve_world(&decl.objects, src)?;
+        let world = registry.resolve_world(&decl.world, src)?;
         Ok(Pipeline {
             name: decl.name.clone().unwrap_or_else(|| src.name.clone()),
             description: decl.description.clone().unwrap_or_default(),

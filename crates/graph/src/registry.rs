@@ -1,7 +1,7 @@
 //! The registry of stage kinds: configs name a kind, the registry knows its parameters,
 //! ports and builder.
 
-use super::config::{ConfigError, ObjectDecl, SourceFile};
+use super::config::{ConfigError, SourceFile, WorldDecls};
 use super::stage::StageInfo;
 use super::world::{EmptyWorld, World, WorldResolver};
 use std::sync::Arc;
@@ -20,17 +20,17 @@ impl Registry {
         Registry::default()
     }
 
-    /// Sets how configs' `[[object]]` tables are checked and resolved.
+    /// Sets how configs' `[[object]]` and `[[light]]` tables are checked and resolved.
     pub fn set_world_resolver(&mut self, resolver: WorldResolver) {
         self.world = Some(resolver);
     }
 
-    /// The world of a config's `[[object]]` tables: the resolver's, or
+    /// The world of a config's `[[object]]` and `[[light]]` tables: the resolver's, or
     /// [`EmptyWorld`] when there are no tables; tables without a resolver are an error
     /// at the first one.
     pub fn resolve_world(
         &self,
-        decls: &[ObjectDecl],
+        decls: &WorldDecls,
         src: &SourceFile,
     ) -> Result<Arc<dyn World>, ConfigError> {
         match (self.world, decls.first()) {
@@ -38,7 +38,7 @@ impl Registry {
             (None, None) => Ok(Arc::new(EmptyWorld)),
             (None, Some(first)) => Err(src.error(
                 first.span.clone(),
-                "this registry has no resolver for `[[object]]` tables",
+                "this registry has no resolver for `[[object]]` or `[[light]]` tables",
                 Some("build the registry with relume_stages::registry()".to_string()),
             )),
         }

@@ -1,5 +1,5 @@
-//! A pipeline's world as the runtime sees it: what the config's `[[object]]` tables
-//! declare, resolved by the registry's [`WorldResolver`] into a value that the runtime
+//! A pipeline's world as the runtime sees it: what the config's `[[object]]` and
+//! `[[light]]` tables declare, resolved by the registry's [`WorldResolver`] into a value that the runtime
 //! only compares (branches share a stage only when their worlds are the same) and hands
 //! to every stage builder ([`super::BuildContext::world`]).
 //!
@@ -7,7 +7,7 @@
 //! objects (`relume_stages::world`), registers its resolver with the built-in registry,
 //! and reads the world back in its builders by downcasting.
 
-use super::config::{ConfigError, ObjectDecl, SourceFile};
+use super::config::{ConfigError, SourceFile, WorldDecls};
 use std::any::Any;
 use std::fmt::Debug;
 use std::sync::Arc;
@@ -38,6 +38,6 @@ impl World for EmptyWorld {
     }
 }
 
-/// Checks a config's `[[object]]` tables (in file order) and builds its world; errors
-/// stand at the offending key, as every config error does.
-pub type WorldResolver = fn(&[ObjectDecl], &SourceFile) -> Result<Arc<dyn World>, ConfigError>;
+/// Checks a config's `[[object]]` and `[[light]]` tables (in file order) and builds its
+/// world; errors stand at the offending key, as every config error does.
+pub type WorldResolver = fn(&WorldDecls, &SourceFile) -> Result<Arc<dyn World>, ConfigError>;

@@ -4,7 +4,7 @@
 //! there are, the closest spelling).
 
 use glam::{Vec2, Vec3};
-use relume_graph::config::{ConfigError, Located, ObjectDecl, RawValue, SourceFile};
+use relume_graph::config::{ConfigError, Located, RawValue, SourceFile, TableDecl};
 use relume_graph::params::{a, did_you_mean};
 use relume_recording::MAX_IMAGE_SIDE;
 use relume_scene::objects::anchor::{Anchor, AnchorFrame};
@@ -16,7 +16,7 @@ use std::ops::Range;
 
 /// The type and bounds of an object key.
 #[derive(Clone, Copy)]
-enum Type {
+pub(super) enum Type {
     Float(f64, f64),
     Int(i64, i64),
     /// An array of N numbers, each in the bounds.
@@ -28,13 +28,13 @@ enum Type {
     Str,
 }
 
-struct Key {
-    name: &'static str,
-    ty: Type,
-    doc: &'static str,
+pub(super) struct Key {
+    pub(super) name: &'static str,
+    pub(super) ty: Type,
+    pub(super) doc: &'static str,
 }
 
-const fn key(name: &'static str, ty: Type, doc: &'static str) -> Key {
+pub(super) const fn key(name: &'static str, ty: Type, doc: &'static str) -> Key {
     Key { name, ty, doc }
 }
 
@@ -193,40 +193,42 @@ pub struct KeyDoc {
     pub doc: &'static str,
 }
 
+/// The help page's entry of `k` (taken by `shape`, or by every table: `None`).
+pub(super) fn key_doc(shape: Option<&'static str>, k: &Key) -> KeyDoc {
+    let (kind, min, max) = match k.ty {
+        Type::Float(lo, hi) => ("number".to_string(), Some(lo), Some(hi)),
+        Type::Int(lo, hi) => ("integer".to_string(), Some(lo as f64), Some(hi as f64)),
+        Type::Numbers(n, lo, hi) => (format!("array of {n} numbers"), Some(lo), Some(hi)),
+        Type::List(n, lo, hi) => (format!("array of 1 to {n} numbers"), Some(lo), Some(hi)),
+        Type::Triples(n, lo, hi) => (
+            format!("array of 1 to {n} arrays of 3 numbers"),
+            Some(lo),
+            Some(hi),
+        ),
+        Type::Str => ("string".to_string(), None, None),
+    };
+    KeyDoc {
+        name: k.name,
+        shape,
+        kind,
+        min,
+        max,
+        doc: k.doc,
+    }
+}
+
 /// Every key `[[object]]` tables take: those of every object, then each shape's.
 pub fn key_docs() -> Vec<KeyDoc> {
-    let doc = |shape: Option<&'static str>, k: &Key| {
-        let (kind, min, max) = match k.ty {
-            Type::Float(lo, hi) => ("number".to_string(), Some(lo), Some(hi)),
-            Type::Int(lo, hi) => ("integer".to_string(), Some(lo as f64), Some(hi as f64)),
-            Type::Numbers(n, lo, hi) => (format!("array of {n} numbers"), Some(lo), Some(hi)),
-            Type::List(n, lo, hi) => (format!("array of 1 to {n} numbers"), Some(lo), Some(hi)),
-            Type::Triples(n, lo, hi) => (
-                format!("array of 1 to {n} arrays of 3 numbers"),
-                Some(lo),
-                Some(hi),
-            ),
-            Type::Str => ("string".to_string(), None, None),
-        };
-        KeyDoc {
-            name: k.name,
-            shape,
-            kind,
-            min,
-            max,
-            doc: k.doc,
-        }
-    };
-    let common = COMMON.iter().map(|k| doc(None, k));
+    let common = COMMON.iter().map(|k| key_doc(None, k));
     let shapes = Shape::NAMES
         .iter()
         .zip(SHAPE_KEYS)
-        .flat_map(|(&shape, keys)| keys.iter().map(move |k| doc(Some(shape), k)));
+        .flat_map(|(&shape, keys)| keys.iter().map(move |k| key_doc(Some(shape), k)));
     common.chain(shapes).collect()
 }
 
 /// A checked value.
-enum Value {
+pub(super) enum Value {
     Number(f64),
     Numbers(Vec<f64>),
     Triples(Vec<[f64; 3]>),
@@ -237,7 +239,7 @@ enum Value {
 /// world coordinates (empty when there are none); anchored objects are checked the
 /// same way, built in the world frame and set aside. Mesh paths resolve against the
 /// directory of `src.name`.
-pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<Objects, ConfigError> {
+pub fn resolve(decls: &[TableDecl], src: &SourceFile) -> Result<Objects, ConfigError> {
     let base = src.base_dir();
     let mut names: Vec<(String, usize)> = Vec::new();
     let mut triangles = Vec::new();
@@ -330,7 +332,11 @@ pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<Objects, Config
                     Some(hint),
                 ));
             };
-            values.push((spec.name, check(src, spec, v, &name)?, v.span.clone()));
+            values.push((
+                spec.name,
+                check(src, spec, v, &format!("object `{name}`"))?,
+                v.span.clone(),
+            ));
         }
         let find = |key: &str| values.iter().find(|(n, _, _)| *n == key);
         let number = |key: &str, default: f64| match find(key) {
@@ -590,7 +596,7 @@ fn motion(
 /// stand (`None` for world coordinates); errors for combinations that say nothing.
 fn anchor(
     src: &SourceFile,
-    decl: &ObjectDecl,
+    decl: &TableDecl,
     name: &str,
     values: &[(&'static str, Value, Range<usize>)],
 ) -> Result<(Anchor, Option<AnchorSites>), ConfigError> {
@@ -660,17 +666,19 @@ fn anchor(
 }
 
 /// Checks one value against its key's type and bounds.
-fn check(
+/// Checks `value` against `spec`; errors name the key "of {owner}" (`object `torus``,
+/// `light `lamp``).
+pub(super) fn check(
     src: &SourceFile,
     spec: &Key,
     value: &Located<RawValue>,
-    object: &str,
+    owner: &str,
 ) -> Result<Value, ConfigError> {
     let wrong_type = |expected: String, found: &RawValue, span: &Range<usize>| {
         src.error(
             span.clone(),
             format!(
-                "`{}` of object `{object}` must be {}, found {}",
+                "`{}` of {owner} must be {}, found {}",
                 spec.name,
                 a(&expected),
                 a(found.type_name())
@@ -685,7 +693,7 @@ fn check(
         Err(src.error(
             span.clone(),
             format!(
-                "`{}` of object `{object}` = {x} is out of range ({lo} to {hi})",
+                "`{}` of {owner} = {x} is out of range ({lo} to {hi})",
                 spec.name
             ),
             Some(spec.doc.to_string()),
@@ -700,10 +708,7 @@ fn check(
     let wrong_count = |what: String, count: usize| {
         src.error(
             value.span.clone(),
-            format!(
-                "`{}` of object `{object}` must {what}, found {count}",
-                spec.name
-            ),
+            format!("`{}` of {owner} must {what}, found {count}", spec.name),
             Some(spec.doc.to_string()),
         )
     };
@@ -732,7 +737,7 @@ fn check(
                 None => Err(src.error(
                     item.span.clone(),
                     format!(
-                        "`{}` of object `{object}` must hold numbers, found {}",
+                        "`{}` of {owner} must hold numbers, found {}",
                         spec.name,
                         a(item.value.type_name())
                     ),
@@ -763,7 +768,7 @@ fn check(
                     src.error(
                         item.span.clone(),
                         format!(
-                            "each item of `{}` of object `{object}` must be [x, y, z], found {}",
+                            "each item of `{}` of {owner} must be [x, y, z], found {}",
                             spec.name,
                             a(item.value.type_name())
                         ),

@@ -4,6 +4,7 @@
 //! the runtime carries opaquely ([`relume_graph::World`]) and hands to every builder.
 //!
 //! - [`config`]: `[[object]]` tables checked key by key, errors at file, line and column.
+//! - [`lights`](mod@lights): `[[light]]` tables checked the same way into spot lights.
 //! - [`floor`]: the floor plane from the first frames' depth (math only).
 //! - [`surface`]: the plane seen around one pixel (math only).
 //! - [`views`]: the frames' depth, camera models and poses read from a recording.
@@ -16,6 +17,7 @@
 pub mod config;
 pub mod floor;
 pub mod follow;
+pub mod lights;
 pub mod place;
 pub mod surface;
 pub mod views;
@@ -23,9 +25,10 @@ pub mod views;
 pub use config::DeclaredObject;
 pub use place::Placement;
 
-use relume_graph::config::{ConfigError, ObjectDecl, SourceFile};
+use relume_graph::config::{ConfigError, SourceFile, WorldDecls};
 use relume_graph::{BuildContext, Pipeline, World};
 use relume_recording::Replay;
+use relume_scene::light::SpotLight;
 use relume_scene::objects::{MovingScene, ObjectError, VirtualScene};
 use std::any::Any;
 use std::sync::{Arc, LazyLock};
@@ -42,6 +45,9 @@ pub struct ObjectWorld {
     /// The same objects with their motions, when any of them moves
     /// ([`ObjectWorld::scene_at`] places them frame by frame).
     pub moving: Option<Arc<MovingScene>>,
+    /// The `[[light]]` tables: the light sources besides the environment that the
+    /// renderers which take them (`sample.dir`) light with, in file order.
+    pub lights: Vec<SpotLight>,
 }
 
 impl ObjectWorld {
@@ -52,6 +58,7 @@ impl ObjectWorld {
             declared: Vec::new(),
             scene: scene.into(),
             moving: None,
+            lights: Vec::new(),
         }
     }
 
@@ -70,6 +77,7 @@ impl ObjectWorld {
             declared,
             scene: Arc::new(scene),
             moving,
+            lights: Vec::new(),
         })
     }
 
@@ -135,6 +143,7 @@ impl World for ObjectWorld {
             Some(o) => {
                 (Arc::ptr_eq(&self.scene, &o.scene) || self.scene == o.scene)
                     && self.moving == o.moving
+                    && self.lights == o.lights
             }
             None => false,
         }
@@ -142,8 +151,9 @@ impl World for ObjectWorld {
 }
 
 /// The [`relume_graph::WorldResolver`] of the built-in registry.
-pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<Arc<dyn World>, ConfigError> {
-    let objects = config::resolve(decls, src)?;
+pub fn resolve(decls: &WorldDecls, src: &SourceFile) -> Result<Arc<dyn World>, ConfigError> {
+    let lights = lights::resolve(&decls.lights, src)?;
+    let objects = config::resolve(&decls.objects, src)?;
     let specs: Vec<_> = objects
         .declared
         .iter()
@@ -152,7 +162,7 @@ pub fn resolve(decls: &[ObjectDecl], src: &SourceFile) -> Result<Arc<dyn World>,
         .collect();
     let world = ObjectWorld::of(objects.declared, objects.world_scene, &specs)
         .map_err(|e| ConfigError::whole_file(&src.name, e.to_string()))?;
-    Ok(Arc::new(world))
+    Ok(Arc::new(ObjectWorld { lights, ..world }))
 }
 
 /// The world of `pipeline` as objects (an empty one for a world of another kind).
@@ -166,6 +176,11 @@ pub fn object_world(world: &Arc<dyn World>) -> &ObjectWorld {
 /// The virtual objects a stage's builder receives, in world space.
 pub fn objects<'a>(ctx: &BuildContext<'a>) -> &'a Arc<VirtualScene> {
     &object_world(ctx.world).scene
+}
+
+/// The light sources a stage's builder receives (`[[light]]`), in world space.
+pub fn lights<'a>(ctx: &BuildContext<'a>) -> &'a [SpotLight] {
+    &object_world(ctx.world).lights
 }
 
 /// Places the objects of `pipeline` anchored to the scene (`anchor = "floor"`,
@@ -209,7 +224,8 @@ pub fn place_objects(
     let specs: Vec<_> = declared.iter().map(|d| d.spec.clone()).collect();
     let world = ObjectWorld::of(declared, scene, &specs)
         .map_err(|e| ConfigError::whole_file(&pipeline.file, e.to_string()))?;
-    pipeline.world = Arc::new(world);
+    let lights = object_world(&pipeline.world).lights.clone();
+    pipeline.world = Arc::new(ObjectWorld { lights, ..world });
     Ok(placements)
 }
 

@@ -49,6 +49,7 @@ fn bench_dir(c: &mut Criterion) {
         ),
         table: done.light_table(&spec.inputs["light_table"]).unwrap(),
         objects: pipeline.objects(),
+        spots: &[],
         frame: WARM_FRAMES as u64,
     };
     let params = DirParams::from_params(&spec.params, 1);

@@ -346,6 +346,28 @@ fn the_dir_pipelines_are_their_twins_with_sample_dir_swapped_in() {
     }
 }
 
+/// The virtual lamp pipeline is the Differential Instant Radiosity one with a virtual
+/// spot light added and nothing else changed.
+#[test]
+fn the_lamp_pipeline_is_the_dir_pipeline_with_a_virtual_spot_light() {
+    let lamp = "exponent = 40\n\n# A warm desk lamp";
+    let p = assert_twin(
+        "mixed-reality-dir",
+        "mixed-reality-dir-lamp",
+        &[(
+            "exponent = 40\n\n# --- Acquisition",
+            &format!(
+                "{}{}",
+                lamp,
+                " 1.3 m up in front of the torus on its right, aimed at it: 1.56 m\n# away, it brings intensity cos / d^2 = 1.4 (green 1.0) to the floor at the torus's centre.\n[[light]]\nname = \"desk lamp\"\nworld = \"virtual\"\nposition = [0.7, 1.3, -0.5]\naim = [0.0, 0.0, 0.0]\ncutoff_deg = 35\nbeam_deg = 20\nintensity = [4.0, 3.0, 1.8]\n\n# --- Acquisition"
+            ),
+        )],
+    );
+    let lights = &relume::stages::world::object_world(&p.world).lights;
+    assert_eq!(lights.len(), 1);
+    assert_eq!(lights[0].world, relume::light::LightWorld::Virtual);
+}
+
 /// The Distance Impostor Tracing pipeline is the default chain with the query swapped
 /// and nothing else changed (its temporal reuse and filter settings included).
 #[test]

@@ -120,6 +120,7 @@ fn dir(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> Irradiance
         camera_to_world: pose(),
         table: &table,
         objects,
+        spots: &[],
         frame: 7,
     };
     let params = DirParams::default();

@@ -7,6 +7,7 @@
 //! so a pixel gets the same bits either way; the tests check that.
 
 use super::ism::{MAX_SLOPE, MapView, Projection};
+use super::params::Flags;
 use super::shade::{Gathered, LightSet, Receiver, gather};
 use super::vpl::Emitter;
 use glam::Vec3;
@@ -46,6 +47,8 @@ pub(super) fn gather_each<T>(
     point_of: impl Fn(&T) -> Option<(Vec3, Vec3)>,
     mut put: impl FnMut(Option<Gathered>),
 ) {
+    // The lanes follow the paper's flags only.
+    let kernel = kernel.filter(|_| lights.flags == Flags::Reciprocal);
     for group in items.chunks(LANES) {
         if let (Some(kernel), Ok(group)) = (kernel, <&[T; LANES]>::try_from(group)) {
             let points = group.each_ref().map(&point_of);

@@ -122,6 +122,7 @@ fn the_lane_gather_equals_the_scalar_gather_of_each_receiver() {
         slope: 6.0,
         clamp_squared: 0.01,
         reach: 1.5,
+        flags: Flags::Reciprocal,
     };
     let members: Vec<u32> = (0..vpls.len() as u32).collect();
     let (mut touched, mut shadowed, mut lit) = (0, 0, 0);

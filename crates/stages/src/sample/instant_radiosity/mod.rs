@@ -36,6 +36,13 @@
 //!    gathers L_rv at the object's surface without the ir = 1 VPLs, and L_r at the
 //!    real point behind it), times k^2.
 //! 5. **Geometry-aware blur** (`blur.rs`) over each k x k window.
+//! 6. **Spot lights** (`spots.rs`, the pipeline's `[[light]]` tables, Secs. 3.3-3.7):
+//!    each real or virtual spot gets a shadow map of the real surface (every real
+//!    pixel) and traces the objects' shadows, its direct light is gathered at every pixel after the blur (a real spot
+//!    in L_r and L_rv, a virtual one in L_rv only), it joins the first bounce's
+//!    candidates' direct light, and the virtual spots' light on the real surface
+//!    takes `spot_vpls` bounce VPLs of its own. `flags = "knecht2010"` switches to the
+//!    earlier method \[4\] for the comparison (one map per light, no ir = 1 VPLs).
 //!
 //! Where the CPU has AVX2, the gather, the blur and the maps' projections run eight
 //! receivers, pixels or points at a time (`gather_lanes.rs`, `blur_lanes.rs`,
@@ -75,11 +82,16 @@ mod render;
 mod shade;
 pub mod splat;
 #[cfg(test)]
+mod spot_tests;
+pub mod spots;
+#[cfg(test)]
 mod tests;
 pub mod vpl;
 
 use params::PARAMS;
-pub use params::{DirInputs, DirParams, MAX_MAP_BYTES, MAX_SHADOW_MAP_SIZE, MAX_VPLS};
+pub use params::{
+    DirInputs, DirParams, Flags, MAX_MAP_BYTES, MAX_SHADOW_MAP_SIZE, MAX_SPOT_MAP_SIZE, MAX_VPLS,
+};
 pub use points::MeshPoints;
 pub use render::DirRenderer;
 
@@ -88,6 +100,7 @@ use super::renderer::{self, RenderFrame, Renderer};
 use crate::OpError;
 use crate::world::follow::FollowedObjects;
 use relume_graph::{BuildContext, ParamSpec, Params, Port, StageError, StageInfo};
+use relume_scene::light::SpotLight;
 
 pub const INFO: StageInfo = renderer::info::<SampleDir>();
 
@@ -107,6 +120,8 @@ pub struct SampleDir {
     mesh: MeshPoints,
     params: DirParams,
     objects: FollowedObjects,
+    /// The pipeline's `[[light]]` spot lights.
+    spots: Vec<SpotLight>,
     renderer: DirRenderer,
 }
 
@@ -128,6 +143,7 @@ impl Renderer for SampleDir {
             mesh: MeshPoints::new(objects.scene(), params.mesh_points as usize, params.seed),
             params,
             objects,
+            spots: crate::world::lights(ctx).to_vec(),
             renderer: DirRenderer::default(),
         })
     }
@@ -150,6 +166,7 @@ impl Renderer for SampleDir {
             camera_to_world: frame.camera_to_world,
             table: frame.light_table("light_table")?,
             objects,
+            spots: &self.spots,
             frame: frame.index,
         };
         self.renderer

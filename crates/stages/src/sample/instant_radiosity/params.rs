@@ -7,7 +7,7 @@ use glam::Affine3A;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Vec3Image};
 use relume_graph::{ParamDefault, ParamSpec, Params};
-use relume_scene::light::LightTable;
+use relume_scene::light::{LightTable, SpotLight};
 use relume_scene::objects::VirtualScene;
 
 /// Most texels per side of a shadow map.
@@ -102,7 +102,52 @@ pub(super) const PARAMS: &[ParamSpec] = &[
         "points spread over the virtual meshes once (the maps and the virtual candidates take subsets)",
     )
     .range(1.0, 1e7),
+    ParamSpec::new(
+        "flags",
+        ParamDefault::Str("reciprocal"),
+        "how light paths are sorted into L_r and L_rv (paper 002 Sec. 3.3): reciprocal = the paper's two shadow maps per light (a real and a virtual blocker behind each other both count) and its ir = 1 VPLs that cancel the real colour bleeding the objects take away; knecht2010 = the earlier method [4] it compares against: one map per light whose nearest blocker alone counts (double shadows where a virtual object stands in front of a real shadow) and no ir = 1 VPLs (inconsistent colour bleeding)",
+    )
+    .choices(Flags::NAMES),
+    ParamSpec::new(
+        "spot_vpls",
+        ParamDefault::Int(32),
+        "bounce VPLs of the virtual [[light]] spots' light on the real surface (in L_rv only), on top of vpls: the colour bleeding of a virtual lamp",
+    )
+    .range(0.0, MAX_VPLS as f64),
+    ParamSpec::new(
+        "spot_map_size",
+        ParamDefault::Int(512),
+        "texels per side of each [[light]] spot light's shadow map of the real surface (every pixel of the depth map), a paraboloid over the hemisphere about its axis; the objects' shadows of a spot are traced",
+    )
+    .range(16.0, MAX_SPOT_MAP_SIZE as f64),
 ];
+
+/// Most texels per side of a spot light's shadow map.
+pub const MAX_SPOT_MAP_SIZE: u32 = 1024;
+
+/// How light paths are sorted into L_r and L_rv (the `flags` parameter).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Flags {
+    /// Paper 002's: two shadow maps per light, ir = 1 VPLs.
+    #[default]
+    Reciprocal,
+    /// Knecht et al. 2010 (\[4\] of paper 002): one map per light, the nearest blocker
+    /// decides; no ir = 1 VPLs.
+    Knecht2010,
+}
+
+impl Flags {
+    /// The parameter's choices.
+    pub const NAMES: &'static [&'static str] = &["reciprocal", "knecht2010"];
+
+    /// `name`, one of [`Self::NAMES`] (anything else is `reciprocal`).
+    pub fn from_name(name: &str) -> Flags {
+        match name {
+            "knecht2010" => Flags::Knecht2010,
+            _ => Flags::Reciprocal,
+        }
+    }
+}
 
 /// The settings [`DirRenderer::render`](super::DirRenderer::render) runs with (the stage's parameters).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -121,6 +166,9 @@ pub struct DirParams {
     pub slope_bias: f32,
     pub real_grid: u32,
     pub mesh_points: u32,
+    pub flags: Flags,
+    pub spot_vpls: u32,
+    pub spot_map_size: u32,
     pub seed: u64,
 }
 
@@ -148,6 +196,9 @@ impl DirParams {
             slope_bias: p.float("slope_bias") as f32,
             real_grid: p.int("real_grid") as u32,
             mesh_points: p.int("mesh_points") as u32,
+            flags: Flags::from_name(p.str("flags")),
+            spot_vpls: p.int("spot_vpls") as u32,
+            spot_map_size: p.int("spot_map_size") as u32,
             seed,
         }
     }
@@ -167,15 +218,23 @@ impl DirParams {
                 self.shadow_map_size
             ));
         }
-        let bytes = 2 * self.vpls as u64 * (self.shadow_map_size as u64).pow(2) * 4;
+        let slots = self.vpls as u64 + self.spot_vpls as u64;
+        let bytes = 2 * slots * (self.shadow_map_size as u64).pow(2) * 4;
         if bytes > MAX_MAP_BYTES {
             return fail(format!(
-                "{} VPLs with two {}x{} maps each need {} MiB of shadow maps; at most {} MiB: lower vpls or shadow_map_size",
+                "{} + {} VPLs (vpls + spot_vpls) with two {}x{} maps each need {} MiB of shadow maps; at most {} MiB: lower vpls, spot_vpls or shadow_map_size",
                 self.vpls,
+                self.spot_vpls,
                 self.shadow_map_size,
                 self.shadow_map_size,
                 bytes >> 20,
                 MAX_MAP_BYTES >> 20
+            ));
+        }
+        if !(16..=MAX_SPOT_MAP_SIZE).contains(&self.spot_map_size) {
+            return fail(format!(
+                "spot_map_size must be 16 to {MAX_SPOT_MAP_SIZE}, not {}",
+                self.spot_map_size
             ));
         }
         if self.interleave == 0 || self.real_grid == 0 || self.points_per_vpl == 0 {
@@ -200,6 +259,8 @@ pub struct DirInputs<'a> {
     /// Importance samples of the environment, in stratified order.
     pub table: &'a LightTable,
     pub objects: &'a VirtualScene,
+    /// The pipeline's spot lights (`[[light]]`), real and virtual.
+    pub spots: &'a [SpotLight],
     /// The frame index (a key of the random choices).
     pub frame: u64,
 }

@@ -28,12 +28,14 @@
 
 use super::blur::blur_layers;
 use super::gather_lanes::gather_each;
-use super::interleave::{Interleaved, RowScratch, object_rect};
+use super::interleave::{Interleaved, RowScratch, object_rect, primary_hit};
 use super::ism::{Projection, fill_holes, frame_about};
+use super::params::Flags;
 use super::params::{DirInputs, DirParams};
 use super::points::{MeshPoints, RealSurface};
 use super::shade::{LightSet, Receiver, gather};
 use super::splat::splat_with;
+use super::spots::{SpotMaps, SpotSet};
 use super::vpl::{Candidate, Emitter, Vpl, environment_vpls, resample};
 use crate::OpError;
 use crate::sample::layers::{IrradianceLayers, check_sizes, shade_rows};
@@ -57,10 +59,15 @@ pub struct DirRenderer {
     pub(super) candidates: Vec<Candidate>,
     /// Per candidate, what its surface reflects (see [Bounces](self#bounces)).
     pub(super) reflectors: Vec<Reflector>,
+    /// Real points lit by the virtual spots: what they reflect of that light (in
+    /// L_rv only), the candidates of the spots' own bounce VPLs.
+    pub(super) spot_candidates: Vec<Candidate>,
     /// Per interleaving class, the indices of its VPLs.
     members: Vec<Vec<u32>>,
     /// The environment VPLs' indices (0..n).
     pub(super) environment: Vec<u32>,
+    /// The spot lights' shadow maps.
+    pub(super) spot_maps: SpotMaps,
     raw: Option<IrradianceLayers>,
     /// The blur's pass along x.
     between: Option<IrradianceLayers>,
@@ -95,8 +102,10 @@ impl DirRenderer {
             map_size: 0,
             candidates: Vec::new(),
             reflectors: Vec::new(),
+            spot_candidates: Vec::new(),
             members: Vec::new(),
             environment: Vec::new(),
+            spot_maps: SpotMaps::default(),
             raw: None,
             between: None,
             lit: None,
@@ -148,6 +157,14 @@ impl DirRenderer {
             inputs.camera_to_world,
         );
         let key = rng::hash(&[params.seed, inputs.frame, 0xD1_0001]);
+        self.spot_maps.build(
+            inputs.spots,
+            &self.real,
+            inputs.camera_to_world.translation.into(),
+            params.spot_map_size as usize,
+            params.fill_levels as usize,
+            self.kernel,
+        );
 
         // The primary light's VPLs and their maps.
         let (center, object_radius) = objects_sphere(inputs, &self.real);
@@ -248,7 +265,31 @@ impl DirRenderer {
             slot => slot.insert(IrradianceLayers::new(w, h)),
         };
         blur_layers(raw, &self.real, k, self.kernel, between, out);
+        let spots = self.spot_set(inputs, params);
+        if !spots.is_empty() {
+            let real = &self.real;
+            let rect = object_rect(inputs);
+            shade_rows(
+                out,
+                w as usize,
+                1,
+                || (),
+                |_, y, mut row| add_spots(&spots, inputs, real, rect, y, &mut row),
+            );
+        }
         Ok(())
+    }
+
+    /// The spots with their maps from the last [`DirRenderer::lights`].
+    pub(super) fn spot_set<'a>(&'a self, inputs: &'a DirInputs, params: &DirParams) -> SpotSet<'a> {
+        SpotSet {
+            spots: inputs.spots,
+            maps: &self.spot_maps,
+            objects: inputs.objects,
+            bias: params.bias,
+            slope: params.slope_bias,
+            flags: params.flags,
+        }
     }
 
     /// Splats and fills the maps of slots `first..`: `points_per_vpl` real points into
@@ -345,6 +386,46 @@ pub(super) fn light_set<'a>(
         slope: params.slope_bias,
         clamp_squared: params.clamp_distance * params.clamp_distance,
         reach: params.max_distance,
+        flags: params.flags,
+    }
+}
+
+/// Adds the spots' direct light to row `y` of the blurred layers: at the real point
+/// to E_R, and to E_RV at the object the view ray meets in front of it, else at the
+/// real point (see `spots.rs`).
+fn add_spots(
+    spots: &SpotSet,
+    inputs: &DirInputs,
+    real: &RealSurface,
+    object_rect: [usize; 4],
+    y: usize,
+    row: &mut crate::sample::layers::LayerRow<'_>,
+) {
+    let w = inputs.depth.width as usize;
+    let in_rect_row = (object_rect[1]..object_rect[3]).contains(&y);
+    for x in 0..w {
+        let i = y * w + x;
+        let (p, n) = (real.position[i], real.normal[i]);
+        let at_real = (n != Vec3::ZERO).then(|| spots.gather(p, n, Receiver::Real));
+        let inside = in_rect_row && (object_rect[0]..object_rect[2]).contains(&x);
+        let hit = inside
+            .then(|| primary_hit(inputs, x, y, at_real.map(|_| p)))
+            .flatten();
+        let at_hit = hit.map(|h| spots.gather(h.position, h.normal, Receiver::Virtual));
+        if let Some(r) = at_real {
+            row.e_r_dir[x] += r.r_dir;
+        }
+        let Some(v) = at_hit.or(at_real) else {
+            continue;
+        };
+        row.e_rv_dir[x] += v.rv_dir();
+        let nearest = at_real.map_or(f32::INFINITY, |r| r.direct_min_distance);
+        row.direct_min_distance[x] = row.direct_min_distance[x]
+            .min(nearest)
+            .min(v.direct_min_distance);
+        if v.touched || at_real.is_some_and(|r| r.touched) {
+            row.touched[x] = 1;
+        }
     }
 }
 
@@ -370,6 +451,16 @@ fn objects_sphere(inputs: &DirInputs, real: &RealSurface) -> (Vec3, f32) {
     )
 }
 
+/// rho / pi of a real surface from its camera radiance and the direct irradiance of
+/// the real solution, clamped to 1 / pi (0 where it receives none: nothing to tell).
+fn implied_reflectance(radiance: Vec3, received_r: Vec3) -> Vec3 {
+    Vec3::select(
+        received_r.cmpgt(Vec3::splat(1e-6)),
+        (radiance.max(Vec3::ZERO) / received_r).min(Vec3::splat(FRAC_1_PI)),
+        Vec3::ZERO,
+    )
+}
+
 /// What a candidate's surface reflects into the next bounce.
 #[derive(Clone, Copy, Debug)]
 pub struct Reflector {
@@ -392,9 +483,10 @@ impl DirRenderer {
     ) {
         self.candidates.clear();
         self.reflectors.clear();
+        self.spot_candidates.clear();
         self.real_candidates(inputs, params, key);
         let real_count = self.candidates.len();
-        self.virtual_candidates(params, mesh, key);
+        self.virtual_candidates(inputs, params, mesh, key);
         let slots = (params.vpls as usize).saturating_sub(environment);
         let bounces = params.bounces.max(1) as usize;
         let mut first = environment;
@@ -412,19 +504,41 @@ impl DirRenderer {
             };
             let slots_before = self.projections.len();
             self.place(params, real_count, share, bounce_key);
-            for v in &self.vpls[first..] {
-                if v.slot as usize == self.projections.len() {
-                    let Emitter::Surface { position, normal } = v.emitter else {
-                        unreachable!("bounce VPLs are surfaces")
-                    };
-                    let p = super::ism::Projection::Paraboloid {
-                        origin: position,
-                        frame: super::ism::frame_about(normal),
-                    };
-                    self.projections.push([p, p]);
-                }
-            }
+            self.project_new_slots(first);
             self.build_maps(slots_before, params, mesh, key);
+        }
+        // The virtual spots' light on the real surface, in slots of its own after
+        // every bounce's: the slots above, and so E_R, are those of a run without them.
+        if params.spot_vpls > 0 && !self.spot_candidates.is_empty() {
+            let (first, slots_before) = (self.vpls.len(), self.projections.len());
+            let spot_key = rng::hash(&[key, 0x5B07]);
+            let slots = params.spot_vpls as usize;
+            resample(
+                &self.spot_candidates,
+                slots,
+                slots_before as u32,
+                spot_key,
+                &mut self.vpls,
+            );
+            self.project_new_slots(first);
+            self.build_maps(slots_before, params, mesh, key);
+        }
+    }
+
+    /// The maps' projections of the slots that the VPLs from `first` on opened: a
+    /// paraboloid over each one's hemisphere.
+    fn project_new_slots(&mut self, first: usize) {
+        for v in &self.vpls[first..] {
+            if v.slot as usize == self.projections.len() {
+                let Emitter::Surface { position, normal } = v.emitter else {
+                    unreachable!("bounce VPLs are surfaces")
+                };
+                let p = super::ism::Projection::Paraboloid {
+                    origin: position,
+                    frame: super::ism::frame_about(normal),
+                };
+                self.projections.push([p, p]);
+            }
         }
     }
 
@@ -482,14 +596,15 @@ impl DirRenderer {
                     );
                 }
                 let received_r = s.received_r + got.r_ind;
-                let reflectance = Vec3::select(
-                    received_r.cmpgt(Vec3::splat(1e-6)),
-                    (s.radiance_or_reflectance / received_r).min(Vec3::splat(FRAC_1_PI)),
-                    Vec3::ZERO,
-                );
+                let reflectance = implied_reflectance(s.radiance_or_reflectance, received_r);
+                let power_rv = reflectance * got.rv_ind * c.area;
+                let power_r = reflectance * got.r_ind * c.area;
                 let candidate = Candidate {
-                    power_r: reflectance * got.r_ind * c.area,
-                    power_rv: reflectance * got.rv_ind * c.area,
+                    power_r: match params.flags {
+                        Flags::Reciprocal => power_r,
+                        Flags::Knecht2010 => power_r.min(power_rv),
+                    },
+                    power_rv,
                     ..*c
                 };
                 (candidate, Reflector { received_r, ..*s })
@@ -516,7 +631,8 @@ impl DirRenderer {
         );
         let cam = inputs.camera;
         let (real, environment, kernel) = (&self.real, &self.environment[..], self.kernel);
-        let found: Vec<(Candidate, Reflector)> = (0..h.div_ceil(g))
+        let (spots, flags) = (self.spot_set(inputs, params), params.flags);
+        let found: Vec<(Candidate, Reflector, Option<Candidate>)> = (0..h.div_ceil(g))
             .into_par_iter()
             .flat_map_iter(|cy| {
                 // The row's cells with a usable pixel, and the area each stands for.
@@ -555,38 +671,76 @@ impl DirRenderer {
                 );
                 cells.into_iter().zip(lit).map(|((i, area), lit)| {
                     let radiance = inputs.radiance.data[i];
-                    let (r, rv) = (luminance(lit.r_dir), luminance(lit.rv_dir));
+                    let (p, n) = (real.position[i], real.normal[i]);
+                    // The spots join the environment's direct light (without them,
+                    // the same bits as before they existed).
+                    let (r_dir, rv_dir, virtual_light) = if spots.is_empty() {
+                        (lit.r_dir, lit.rv_dir, Vec3::ZERO)
+                    } else {
+                        let s = spots.gather(p, n, Receiver::Real);
+                        (
+                            lit.r_dir + s.r_dir,
+                            lit.rv_dir + s.rv_dir_real,
+                            s.rv_dir_virtual,
+                        )
+                    };
+                    let (r, rv) = (luminance(r_dir), luminance(rv_dir));
                     let unblocked = if r > 0.0 {
                         (rv / r).clamp(0.0, 1.0)
                     } else {
                         1.0
                     };
                     let power_r = radiance.max(Vec3::ZERO) * area;
+                    let power_rv = power_r * unblocked;
+                    // A virtual spot's light, reflected with the albedo the camera
+                    // and the real direct light imply: a path with a virtual light
+                    // on it (x-bar = 0), in L_rv only.
+                    let spot_lit = Candidate {
+                        position: p,
+                        normal: n,
+                        power_r: Vec3::ZERO,
+                        power_rv: implied_reflectance(radiance, r_dir) * virtual_light * area,
+                        real: true,
+                        area,
+                    };
                     let candidate = Candidate {
-                        position: real.position[i],
-                        normal: real.normal[i],
-                        power_r,
-                        power_rv: power_r * unblocked,
+                        position: p,
+                        normal: n,
+                        // [4] places no VPL where the objects block the light: no
+                        // ir = 1 VPL cancels the real bleeding there.
+                        power_r: match flags {
+                            Flags::Reciprocal => power_r,
+                            Flags::Knecht2010 => power_r.min(power_rv),
+                        },
+                        power_rv,
                         real: true,
                         area,
                     };
                     let reflector = Reflector {
                         radiance_or_reflectance: radiance.max(Vec3::ZERO),
-                        received_r: lit.r_dir,
+                        received_r: r_dir,
                     };
-                    (candidate, reflector)
+                    let spot_lit = (spot_lit.power_rv.max_element() > 0.0).then_some(spot_lit);
+                    (candidate, reflector, spot_lit)
                 })
             })
             .collect();
-        for (c, s) in found {
+        for (c, s, spot_lit) in found {
             self.candidates.push(c);
             self.reflectors.push(s);
+            self.spot_candidates.extend(spot_lit);
         }
     }
 
     /// Virtual candidates: `points_per_vpl` mesh points (a subset that changes per
     /// frame), each lit by the environment VPLs in the combined world.
-    fn virtual_candidates(&mut self, params: &DirParams, mesh: &MeshPoints, key: u64) {
+    fn virtual_candidates(
+        &mut self,
+        inputs: &DirInputs,
+        params: &DirParams,
+        mesh: &MeshPoints,
+        key: u64,
+    ) {
         let lights = light_set(
             &self.vpls,
             &self.projections,
@@ -599,6 +753,7 @@ impl DirRenderer {
                 .collect();
         let area = mesh.area * mesh.len() as f32 / picks.len().max(1) as f32;
         let (environment, kernel) = (&self.environment[..], self.kernel);
+        let spots = self.spot_set(inputs, params);
         let found: Vec<(Candidate, Reflector)> = picks
             .par_chunks(64)
             .flat_map_iter(|picks| {
@@ -618,11 +773,16 @@ impl DirRenderer {
             .map(|(j, lit)| {
                 let (p, n) = (mesh.position[j], mesh.normal[j]);
                 let reflectance = mesh.material[j].albedo / PI;
+                let rv_dir = if spots.is_empty() {
+                    lit.rv_dir
+                } else {
+                    lit.rv_dir + spots.gather(p, n, Receiver::Virtual).rv_dir()
+                };
                 let candidate = Candidate {
                     position: p,
                     normal: n,
                     power_r: Vec3::ZERO,
-                    power_rv: reflectance * lit.rv_dir * area,
+                    power_rv: reflectance * rv_dir * area,
                     real: false,
                     area,
                 };

@@ -2,6 +2,7 @@
 //! reassembles the interleaved shares.
 
 use super::ism::{MapView, Projection};
+use super::params::Flags;
 use super::vpl::{Emitter, Vpl};
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
@@ -24,6 +25,9 @@ pub struct LightSet<'a> {
     pub clamp_squared: f32,
     /// Metres beyond which a surface VPL lights nothing.
     pub reach: f32,
+    /// How a VPL's two maps decide its visibility in L_r and L_rv
+    /// ([`shadow_terms`]); only [`Flags::Reciprocal`] runs in lanes.
+    pub flags: Flags,
 }
 
 impl LightSet<'_> {
@@ -88,7 +92,8 @@ pub enum Receiver {
 /// cos_vpl cos / max(d^2, clamp^2, patch / pi) within `reach` for a surface), the real visibility
 /// st_r and the virtual st_v from its maps; L_r adds `power transfer st_r` when the
 /// VPL's path is real (r(pl) r(VPL) r(p), eq. 7), L_rv adds `power transfer
-/// min(st_r, st_v)` unless the VPL is ir = 1 (eqs. 6, 8). Both sums add the same
+/// min(st_r, st_v)` unless the VPL is ir = 1 (eqs. 6, 8); [`Flags::Knecht2010`] lets a
+/// virtual blocker hide a real one behind it ([`shadow_terms`]). Both sums add the same
 /// terms in the same order wherever every VPL counts for both and st_v >= st_r, so
 /// they are then equal bit for bit.
 pub fn gather(
@@ -149,7 +154,10 @@ pub fn gather(
             virtual_map.visibility(position, cos)
         };
         let light = vpl.power * transfer;
-        let st_rv = st_r.min(st_v);
+        let (st_r, st_rv) = match lights.flags {
+            Flags::Reciprocal => (st_r, st_r.min(st_v)),
+            flags => shadow_terms(flags, vpl.real_path, (st_r, behind_r), (st_v, behind_v)),
+        };
         if for_real != for_combined || st_v < st_r {
             g.touched = true;
         }
@@ -176,6 +184,26 @@ pub fn gather(
     g
 }
 
+/// The visibility a light's path gets in L_r and in L_rv from its real map's test
+/// `(st_r, behind_r)` and its virtual map's `(st_v, behind_v)` (visibility, and metres
+/// from the receiver back to the blocker). Paper 002 (`Reciprocal`): st_r and
+/// min(st_r, st_v). Its \[4\] (`Knecht2010`) keeps one map whose nearest blocker (to the
+/// light: the one farther from the receiver) alone decides: for a real light blocked
+/// by both, with the virtual blocker nearer the light, L_r sees no real blocker (1) and
+/// L_rv a virtual one (0).
+pub fn shadow_terms(
+    flags: Flags,
+    real_light: bool,
+    (st_r, behind_r): (f32, f32),
+    (st_v, behind_v): (f32, f32),
+) -> (f32, f32) {
+    let hidden_real_blocker = st_r == 0.0 && st_v == 0.0 && behind_v > behind_r;
+    if flags == Flags::Knecht2010 && real_light && hidden_real_blocker {
+        return (1.0, 0.0);
+    }
+    (st_r, st_r.min(st_v))
+}
+
 /// Whether neighbour `q` (position, normal) shows the same surface as `p` for the
 /// blur: both present, normals within about 25 degrees, `q` within `tolerance` metres
 /// of `p`'s tangent plane.
@@ -186,4 +214,40 @@ pub fn same_surface(p: Vec3, n: Vec3, q: Vec3, m: Vec3, tolerance: f32) -> bool 
         && q.is_finite()
         && n.dot(m) >= 0.9
         && (q - p).dot(n).abs() <= tolerance
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_earlier_method_lets_a_virtual_blocker_hide_a_real_one_behind_it() {
+        let (free, real_near, virtual_far) = ((1.0, f32::INFINITY), (0.0, 0.2), (0.0, 0.9));
+        let paper = Flags::Reciprocal;
+        let earlier = Flags::Knecht2010;
+        // Both blocked, the virtual blocker nearer the light (farther from the receiver).
+        assert_eq!(
+            shadow_terms(paper, true, real_near, virtual_far),
+            (0.0, 0.0)
+        );
+        assert_eq!(
+            shadow_terms(earlier, true, real_near, virtual_far),
+            (1.0, 0.0)
+        );
+        // The real blocker nearer the light: both methods see it.
+        assert_eq!(
+            shadow_terms(earlier, true, (0.0, 0.9), (0.0, 0.2)),
+            (0.0, 0.0)
+        );
+        // One blocker, or a virtual light: the same terms.
+        for flags in [paper, earlier] {
+            assert_eq!(shadow_terms(flags, true, free, virtual_far), (1.0, 0.0));
+            assert_eq!(shadow_terms(flags, true, real_near, free), (0.0, 0.0));
+            assert_eq!(
+                shadow_terms(flags, false, real_near, virtual_far),
+                (0.0, 0.0)
+            );
+            assert_eq!(shadow_terms(flags, true, free, free), (1.0, 1.0));
+        }
+    }
 }

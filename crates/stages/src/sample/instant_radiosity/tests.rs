@@ -31,6 +31,7 @@ pub(super) fn inputs<'a>(
         camera_to_world: pose(),
         table,
         objects,
+        spots: &[],
         frame,
     }
 }
@@ -236,6 +237,7 @@ fn open_lights(vpls: &[Vpl], projections: &[[Projection; 2]], maps: &[f32]) -> L
         slope: 0.0,
         clamp_squared: 0.0,
         reach: 10.0,
+        flags: Flags::Reciprocal,
     }
 }
 
@@ -483,7 +485,7 @@ fn shadow_maps_beyond_a_gibibyte_are_refused_before_allocating() {
     };
     assert_eq!(
         params.check().unwrap_err().to_string(),
-        "sample.dir: 4096 VPLs with two 512x512 maps each need 8192 MiB of shadow maps; at most 1024 MiB: lower vpls or shadow_map_size"
+        "sample.dir: 4096 + 32 VPLs (vpls + spot_vpls) with two 512x512 maps each need 8256 MiB of shadow maps; at most 1024 MiB: lower vpls, spot_vpls or shadow_map_size"
     );
 }
 

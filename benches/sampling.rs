@@ -97,6 +97,7 @@ fn bench_sampling(c: &mut Criterion) {
             objects: pipeline.objects(),
             object_voxels: None,
             frame: WARM_FRAMES as u64,
+            spots: &[],
         };
         bench_tracer(
             &mut group,

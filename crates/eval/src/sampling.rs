@@ -198,6 +198,7 @@ impl PathRunner {
             objects: &objects,
             object_voxels: posed_voxels.as_deref().or(self.object_voxels.as_deref()),
             frame: frame.index as u64,
+            spots: &self.objects.lights,
         };
         let mut out = IrradianceLayers::new(depth.width, depth.height);
         Some(

@@ -74,6 +74,7 @@ fn path(
         objects,
         object_voxels: None,
         frame: 7,
+        spots: &[],
     };
     let params = PathParams {
         query,

@@ -82,7 +82,7 @@ mod render;
 mod shade;
 pub mod splat;
 #[cfg(test)]
-mod spot_tests;
+pub(crate) mod spot_tests;
 pub mod spots;
 #[cfg(test)]
 mod tests;

@@ -14,17 +14,17 @@ use relume_scene::light::{LightWorld, SpotLight};
 use relume_scene::objects::{Material, VirtualScene};
 
 /// The plate: x in [-0.3, 0.3], z in [0.7, 1.3], at this height.
-const PLATE_Y: f32 = 0.3;
+pub(crate) const PLATE_Y: f32 = 0.3;
 const PLATE: [f32; 4] = [-0.3, 0.3, 0.7, 1.3];
-const SPOT_AT: Vec3 = Vec3::new(0.0, 2.3, 1.0);
-const SPHERE_AT: Vec3 = Vec3::new(0.0, 0.9, 1.0);
+pub(crate) const SPOT_AT: Vec3 = Vec3::new(0.0, 2.3, 1.0);
+pub(crate) const SPHERE_AT: Vec3 = Vec3::new(0.0, 0.9, 1.0);
 
 fn on_plate(p: Vec3) -> bool {
     (PLATE[0]..=PLATE[1]).contains(&p.x) && (PLATE[2]..=PLATE[3]).contains(&p.z)
 }
 
 /// The floor scene with the real plate in its depth map.
-fn plate_scene() -> Scene {
+pub(crate) fn plate_scene() -> Scene {
     let mut scene = floor_scene();
     let (cam, pose) = (camera(), pose());
     let origin: Vec3 = pose.translation.into();
@@ -39,7 +39,7 @@ fn plate_scene() -> Scene {
     scene
 }
 
-fn spot(world: LightWorld) -> SpotLight {
+pub(crate) fn spot(world: LightWorld) -> SpotLight {
     SpotLight {
         name: "lamp".into(),
         world,
@@ -51,7 +51,7 @@ fn spot(world: LightWorld) -> SpotLight {
     }
 }
 
-fn ball() -> VirtualScene {
+pub(crate) fn ball() -> VirtualScene {
     sphere(SPHERE_AT, 0.2, Material::DIFFUSE_GRAY)
 }
 
@@ -71,7 +71,7 @@ fn render(
 
 /// The real pixels whose point is on the floor (`plate` false) or the plate, within
 /// `radius` metres of the vertical through the spot.
-fn under_spot(out: &IrradianceLayers, plate: bool, radius: f32) -> Vec<usize> {
+pub(crate) fn under_spot(out: &IrradianceLayers, plate: bool, radius: f32) -> Vec<usize> {
     (0..out.mask.data.len())
         .filter(|&i| {
             let p = out.world_position.data[i];
@@ -82,7 +82,7 @@ fn under_spot(out: &IrradianceLayers, plate: bool, radius: f32) -> Vec<usize> {
         .collect()
 }
 
-fn luminance(v: Vec3) -> f32 {
+pub(crate) fn luminance(v: Vec3) -> f32 {
     v.dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
 

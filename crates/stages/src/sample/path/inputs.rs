@@ -4,7 +4,7 @@ use glam::Affine3A;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Vec3Image};
 use relume_scene::light::voxels::VoxelVolume;
-use relume_scene::light::{EnvMap, LightTable};
+use relume_scene::light::{EnvMap, LightTable, SpotLight};
 use relume_scene::objects::VirtualScene;
 
 /// What [`sample_path`](super::sample_path) reads for one frame.
@@ -30,6 +30,8 @@ pub struct PathInputs<'a> {
     /// ([`PathParams::object_volume`](super::PathParams::object_volume)); built for the
     /// call when `None`.
     pub object_voxels: Option<&'a VoxelVolume>,
+    /// The pipeline's spot lights (`[[light]]`), real and virtual.
+    pub spots: &'a [SpotLight],
     /// The frame index (a key of the random numbers).
     pub frame: u64,
 }

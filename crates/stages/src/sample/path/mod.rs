@@ -125,6 +125,13 @@
 //! materials in the volume, relume's indirect rays still take the objects' radiance
 //! from the mesh.
 //!
+//! **Spot lights** (`spots.rs`, the pipeline's `[[light]]` tables, paper 002 Sec. 3.7):
+//! a point source's direct light is exact with one shadow ray, so it is added after
+//! the estimate, deterministically: a real spot to E_R (real visibility: the
+//! screen-space march within `max_distance`; nothing real blocks under the world-space
+//! queries) and to E_RV (also the objects' BVH), a virtual spot to E_RV only. Pixels
+//! that show an object mix in the light at the object the pixel centre's ray meets.
+//!
 //! **Where the time goes** ([`PathTimes`], `parts.rs`): the material estimation (the
 //! real points' samples, rays and E_R), the virtual object (finding the primaries that
 //! meet it, their samples, rays and E_RV), the differential background (the real
@@ -162,6 +169,7 @@ mod rays;
 mod records;
 pub mod sampling;
 mod span;
+mod spots;
 
 pub use super::layers::IrradianceLayers;
 use crate::kind;
@@ -181,6 +189,7 @@ use kernel::Kernel;
 use rays::WorldQuery;
 use relume_base::simd;
 use relume_graph::{BuildContext, ParamSpec, Params, Parts, Port, StageError, StageInfo};
+use relume_scene::light::SpotLight;
 use relume_scene::light::voxels::VoxelVolume;
 use span::{SPAN_PIXELS, Span};
 use std::sync::Arc;
@@ -290,6 +299,10 @@ pub(crate) fn sample_path_with_kernel(
         },
     );
     let rows = rows_start.elapsed();
+    if !inputs.spots.is_empty() {
+        // Their time is the setup's (the renderer's wall time less the parts).
+        spots::add_spots(&kernel, inputs.spots, stride, out);
+    }
     Ok(kernel.parts.times(rows, rows_start - start))
 }
 
@@ -331,6 +344,8 @@ fn query_over<'a>(
 pub struct SamplePath {
     params: PathParams,
     objects: FollowedObjects,
+    /// The pipeline's `[[light]]` spot lights.
+    spots: Vec<SpotLight>,
     /// The objects' solid volume (visibility by voxels).
     object_voxels: Option<Arc<VoxelVolume>>,
     /// Where the last frame's time went.
@@ -368,6 +383,7 @@ impl Renderer for SamplePath {
             object_voxels: params.object_volume(objects.scene()).map(Arc::new),
             params,
             objects,
+            spots: crate::world::lights(ctx).to_vec(),
             times: None,
         })
     }
@@ -403,6 +419,7 @@ impl Renderer for SamplePath {
             objects,
             object_voxels: self.object_voxels.as_deref(),
             frame: frame.index,
+            spots: &self.spots,
         };
         let mut times = sample_path(&inputs, &self.params, out)?;
         let (total, parts) = (start.elapsed(), times.ns.iter().sum::<u64>());
@@ -430,6 +447,8 @@ mod object_aware_tests;
 mod preset_tests;
 #[cfg(test)]
 mod query_tests;
+#[cfg(test)]
+mod spot_tests;
 #[cfg(test)]
 mod stage_tests;
 #[cfg(test)]

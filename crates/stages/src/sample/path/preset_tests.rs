@@ -237,6 +237,7 @@ fn the_time_is_split_into_table_2s_rows() {
             objects,
             object_voxels: None,
             frame: 7,
+            spots: &[],
         };
         let p = PathParams {
             object_aware,

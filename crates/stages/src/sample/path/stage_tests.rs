@@ -48,6 +48,7 @@ fn empty_tables_images_and_bad_sizes_are_handled() {
         object_voxels: None,
         objects: &objects,
         frame: 0,
+        spots: &[],
     };
     sample_path(
         &inputs,
@@ -142,6 +143,7 @@ fn the_stage_reads_its_products_and_writes_every_output() {
         object_voxels: None,
         objects: &objects,
         frame: 7,
+        spots: &[],
     };
     let mut direct = IrradianceLayers::new(W, H);
     let p = PathParams {

@@ -165,6 +165,7 @@ pub(crate) fn run_with_environment(
         objects,
         object_voxels: None,
         frame: 7,
+        spots: &[],
     };
     let mut out = IrradianceLayers::new(W, H);
     let pyramid = DepthPyramid::new(&scene.depth);

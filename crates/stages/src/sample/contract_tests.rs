@@ -6,7 +6,11 @@
 //!   pi L on the floor (each renderer splits it between the layers its own way);
 //! - with no objects, E_RV == E_R bit for bit, in both layers;
 //! - with an object, the same bits at 1 and 3 threads and on the portable and AVX2
-//!   paths.
+//!   paths;
+//! - a renderer that takes the pipeline's `[[light]]` spot lights keeps paper 002's
+//!   flags: a virtual spot leaves E_R bit for bit and adds its irradiance to E_RV on
+//!   the real floor it reaches, a real one adds it to both; the same bits at 1 and 3
+//!   threads and on every path with lights too.
 //!
 //! A new renderer is one line in [`RENDERERS`]: a function that renders the shared
 //! floor scene under the environment `SKY` with given objects and lanes.
@@ -25,30 +29,40 @@ use glam::Vec3;
 use relume_base::simd;
 use relume_base::threads::with_threads;
 use relume_scene::light::split::split_direct_indirect;
-use relume_scene::light::{EnvMap, ValBuilder, ValParams};
+use relume_scene::light::{EnvMap, LightWorld, SpotLight, ValBuilder, ValParams};
 use relume_scene::objects::{Material, VirtualScene};
 use std::f32::consts::PI;
 
 /// A renderer under the contract: its layers for `scene` under the constant
-/// environment `SKY`, with `objects`, on `lanes`.
-type Render = fn(&Scene, &VirtualScene, simd::Kernel) -> IrradianceLayers;
+/// environment `SKY`, with `objects` and the spot lights `spots`, on `lanes`.
+type Render = fn(&Scene, &VirtualScene, &[SpotLight], simd::Kernel) -> IrradianceLayers;
 
-/// Every renderer, by the stage kind and parameters it runs as.
-const RENDERERS: &[(&str, Render)] = &[
-    ("sample.path query=ssrt", |s, o, k| {
-        path(QueryKind::Ssrt, s, o, k)
-    }),
-    ("sample.path query=em", |s, o, k| {
-        path(QueryKind::Em, s, o, k)
-    }),
-    ("sample.path query=dit", |s, o, k| {
-        path(QueryKind::Dit, s, o, k)
-    }),
-    ("sample.path query=vct", |s, o, k| {
-        path(QueryKind::Vct, s, o, k)
-    }),
-    ("sample.val", val),
-    ("sample.dir", dir),
+/// Every renderer, by the stage kind and parameters it runs as, and whether it takes
+/// spot lights.
+const RENDERERS: &[(&str, Render, bool)] = &[
+    (
+        "sample.path query=ssrt",
+        |s, o, l, k| path(QueryKind::Ssrt, s, o, l, k),
+        true,
+    ),
+    (
+        "sample.path query=em",
+        |s, o, l, k| path(QueryKind::Em, s, o, l, k),
+        true,
+    ),
+    (
+        "sample.path query=dit",
+        |s, o, l, k| path(QueryKind::Dit, s, o, l, k),
+        true,
+    ),
+    (
+        "sample.path query=vct",
+        |s, o, l, k| path(QueryKind::Vct, s, o, l, k),
+        true,
+    ),
+    // paper 004's area lights come from the environment alone.
+    ("sample.val", |s, o, _, k| val(s, o, k), false),
+    ("sample.dir", dir, true),
 ];
 
 /// `sample.path` with `query`: the importance table of the constant environment, and
@@ -57,6 +71,7 @@ fn path(
     query: QueryKind,
     scene: &Scene,
     objects: &VirtualScene,
+    spots: &[SpotLight],
     lanes: simd::Kernel,
 ) -> IrradianceLayers {
     let table = uniform_table(4096);
@@ -74,7 +89,7 @@ fn path(
         objects,
         object_voxels: None,
         frame: 7,
-        spots: &[],
+        spots,
     };
     let params = PathParams {
         query,
@@ -111,7 +126,12 @@ fn val(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> Irradiance
 
 /// `sample.dir`: the importance table of the constant environment, with `lanes` (the
 /// gather, blur and splats).
-fn dir(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> IrradianceLayers {
+fn dir(
+    scene: &Scene,
+    objects: &VirtualScene,
+    spots: &[SpotLight],
+    lanes: simd::Kernel,
+) -> IrradianceLayers {
     let table = uniform_table(4096);
     let inputs = DirInputs {
         depth: &scene.depth,
@@ -121,7 +141,7 @@ fn dir(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> Irradiance
         camera_to_world: pose(),
         table: &table,
         objects,
-        spots: &[],
+        spots,
         frame: 7,
     };
     let params = DirParams::default();
@@ -137,8 +157,8 @@ fn dir(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> Irradiance
 fn every_renderer_gives_pi_l_under_a_constant_environment_and_e_rv_equal_to_e_r_without_objects() {
     let scene = floor_scene();
     let lanes = simd::Kernel::detect();
-    for &(name, render) in RENDERERS {
-        let out = render(&scene, &VirtualScene::default(), lanes);
+    for &(name, render, _) in RENDERERS {
+        let out = render(&scene, &VirtualScene::default(), &[], lanes);
         let (mut sum, mut n) = (glam::DVec3::ZERO, 0);
         for i in 0..out.e_r_dir.data.len() {
             if scene.depth.data[i] == 0.0 {
@@ -173,15 +193,88 @@ fn every_renderer_gives_the_same_bits_at_any_thread_count_and_on_every_path() {
         exponent: 0.0,
     };
     let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, material);
-    for &(name, render) in RENDERERS {
+    for &(name, render, lights) in RENDERERS {
+        let spots = if lights { lamps() } else { Vec::new() };
         let detected = simd::Kernel::detect();
-        let one = with_threads(1, || bits(&render(&scene, &objects, detected)));
-        let three = with_threads(3, || bits(&render(&scene, &objects, detected)));
+        let one = with_threads(1, || bits(&render(&scene, &objects, &spots, detected)));
+        let three = with_threads(3, || bits(&render(&scene, &objects, &spots, detected)));
         assert!(one == three, "{name}: 1 and 3 threads differ");
-        let portable = bits(&render(&scene, &objects, simd::Kernel::Portable));
+        let portable = bits(&render(&scene, &objects, &spots, simd::Kernel::Portable));
         assert!(
             portable == one,
             "{name}: the portable and {detected:?} paths differ"
         );
+    }
+}
+
+/// A spot 2 m above the floor below the sphere, shining down (its shadow of the
+/// sphere is 0.44 m wide), real or virtual.
+fn lamp(world: LightWorld) -> SpotLight {
+    SpotLight {
+        name: "lamp".into(),
+        world,
+        position: Vec3::new(SPHERE_CENTER.x, 2.0, SPHERE_CENTER.z),
+        direction: Vec3::NEG_Y,
+        intensity: Vec3::new(6.0, 5.0, 4.0),
+        beam: 30f32.to_radians(),
+        cutoff: 40f32.to_radians(),
+    }
+}
+
+/// A real and a virtual spot, the virtual one aside.
+fn lamps() -> Vec<SpotLight> {
+    let mut aside = lamp(LightWorld::Virtual);
+    aside.position.x += 0.6;
+    vec![lamp(LightWorld::Real), aside]
+}
+
+#[test]
+fn every_renderer_that_takes_lights_keeps_their_flags() {
+    let scene = floor_scene();
+    let objects = sphere(SPHERE_CENTER, SPHERE_RADIUS, Material::DIFFUSE_GRAY);
+    let lanes = simd::Kernel::detect();
+    for &(name, render, lights) in RENDERERS.iter().filter(|r| r.2) {
+        assert!(lights);
+        let dark = render(&scene, &objects, &[], lanes);
+        for world in [LightWorld::Virtual, LightWorld::Real] {
+            let spot = lamp(world);
+            let lit = render(&scene, &objects, std::slice::from_ref(&spot), lanes);
+            let mut checked = 0;
+            for i in 0..lit.mask.data.len() {
+                let p = lit.world_position.data[i];
+                let below = Vec3::new(p.x - spot.position.x, 0.0, p.z - spot.position.z);
+                let ring = (0.55..0.9).contains(&below.length());
+                if lit.mask.data[i] != 1.0 || !p.is_finite() || !ring {
+                    continue;
+                }
+                let light = spot.arrival(p, Vec3::Y).unwrap().irradiance;
+                let close = |gained: Vec3| {
+                    (gained - light).abs().max_element() < 1e-3 * light.max_element()
+                };
+                let (r, rv) = (
+                    lit.e_r_dir.data[i] - dark.e_r_dir.data[i],
+                    lit.e_rv_dir.data[i] - dark.e_rv_dir.data[i],
+                );
+                assert!(
+                    close(rv),
+                    "{name} {world:?} at {p}: E_RV gained {rv}, the light brings {light}"
+                );
+                match world {
+                    LightWorld::Virtual => assert!(
+                        same_bits(lit.e_r_dir.data[i], dark.e_r_dir.data[i]),
+                        "{name}: a virtual light changed E_R at {p}"
+                    ),
+                    LightWorld::Real => assert!(close(r), "{name} at {p}: E_R gained {r}"),
+                }
+                checked += 1;
+            }
+            assert!(checked > 20, "{name}: {checked} floor pixels in the ring");
+            if world == LightWorld::Virtual {
+                for (a, b) in [(&lit.e_r_dir, &dark.e_r_dir), (&lit.e_r_ind, &dark.e_r_ind)] {
+                    let same = a.data.iter().zip(&b.data).all(|(&x, &y)| same_bits(x, y));
+                    assert!(same, "{name}: a virtual light changed E_R");
+                }
+            }
+        }
     }
 }

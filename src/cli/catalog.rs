@@ -258,7 +258,7 @@ pub fn objects(a: ObjectsArgs) -> anyhow::Result<i32> {
         }
     }
     outln!(
-        "\nKeys of [[light]] tables (spot lights the pipeline knows of; sample.dir lights with them):"
+        "\nKeys of [[light]] tables (spot lights the pipeline knows of; sample.dir and sample.path light with them):"
     )?;
     for key in relume::stages::world::lights::key_docs() {
         let bounds = match (key.min, key.max) {

@@ -387,7 +387,8 @@ impl PathRunner {
     }
 
     /// What a reference of `frame` depends on, as one string: the frame, the stride,
-    /// the settings, and the addresses of the products and objects it reads.
+    /// the settings, the addresses of the products and objects it reads, and the
+    /// spot lights.
     fn reference_key(&self, frame: &Frame, stride: u32) -> String {
         let mut key = format!(
             "{} {:?} {:?} {:p}",
@@ -400,6 +401,8 @@ impl PathRunner {
                 None => Arc::as_ptr(&self.objects.scene) as *const (),
             }
         );
+        // The spot lights: pipelines whose objects are one allocation may differ in them.
+        key.push_str(&format!(" {:?}", self.objects.lights));
         let names = self
             .inputs
             .iter()

@@ -38,6 +38,6 @@ impl World for EmptyWorld {
     }
 }
 
-/// Checks a config's `[[object]]` and `[[light]]` tables (in file order) and builds its
-/// world; errors stand at the offending key, as every config error does.
+/// Checks a config's `[[object]]` and `[[light]]` tables (each kind in file order) and
+/// builds its world; errors stand at the offending key, as every config error does.
 pub type WorldResolver = fn(&WorldDecls, &SourceFile) -> Result<Arc<dyn World>, ConfigError>;

@@ -35,6 +35,11 @@ impl LightWorld {
     }
 }
 
+/// Metres within which a spot's 1 / d^2 is held at its value there: a surface
+/// against the lamp (a real lamp seen in the depth map, a virtual one set against a
+/// wall) gets a bounded irradiance, not an infinite one.
+pub const MIN_DISTANCE: f32 = 0.01;
+
 /// The largest cutoff a spot may have, degrees: its shadow maps are paraboloids over
 /// the hemisphere about its axis.
 pub const MAX_CUTOFF_DEG: f32 = 89.0;
@@ -86,7 +91,8 @@ impl SpotLight {
 
     /// What the light brings, unoccluded, to the point `p` with unit normal `n`:
     /// `None` where it brings nothing (outside the cone, behind the surface, at the
-    /// light's own position).
+    /// light's own position). Within [`MIN_DISTANCE`] of the lamp, 1 / d^2 is held at
+    /// its value there.
     pub fn arrival(&self, p: Vec3, n: Vec3) -> Option<SpotArrival> {
         let to_light = self.position - p;
         let d2 = to_light.length_squared();
@@ -104,7 +110,7 @@ impl SpotLight {
             return None;
         }
         Some(SpotArrival {
-            irradiance: self.intensity * (falloff * cos / d2),
+            irradiance: self.intensity * (falloff * cos / d2.max(MIN_DISTANCE * MIN_DISTANCE)),
             to_light,
             distance,
             cos,
@@ -160,5 +166,8 @@ mod tests {
         // Outside the cone, and at the light itself.
         assert_eq!(s.arrival(Vec3::new(3.0, 0.0, 0.0), Vec3::Y), None);
         assert_eq!(s.arrival(s.position, Vec3::Y), None);
+        // A millimetre below it: held at the centimetre's value.
+        let close = s.arrival(s.position - Vec3::Y * 1e-3, Vec3::Y).unwrap();
+        assert_eq!(close.irradiance, s.intensity * 1e4);
     }
 }

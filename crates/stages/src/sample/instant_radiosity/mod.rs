@@ -100,7 +100,7 @@ use super::renderer::{self, RenderFrame, Renderer};
 use crate::OpError;
 use crate::world::follow::FollowedObjects;
 use relume_graph::{BuildContext, ParamSpec, Params, Port, StageError, StageInfo};
-use relume_scene::light::SpotLight;
+use relume_scene::light::{LightWorld, SpotLight};
 
 pub const INFO: StageInfo = renderer::info::<SampleDir>();
 
@@ -135,7 +135,12 @@ impl Renderer for SampleDir {
     }
 
     fn build(ctx: &BuildContext) -> Result<SampleDir, StageError> {
-        let params = DirParams::from_params(ctx.params, ctx.seed);
+        let mut params = DirParams::from_params(ctx.params, ctx.seed);
+        let spots = crate::world::lights(ctx).to_vec();
+        if spots.iter().all(|s| s.world == LightWorld::Real) {
+            // No virtual spot: no slots for its light (nor their maps' memory).
+            params.spot_vpls = 0;
+        }
         params.check()?;
         let objects = FollowedObjects::new(ctx);
         Ok(SampleDir {
@@ -143,7 +148,7 @@ impl Renderer for SampleDir {
             mesh: MeshPoints::new(objects.scene(), params.mesh_points as usize, params.seed),
             params,
             objects,
-            spots: crate::world::lights(ctx).to_vec(),
+            spots,
             renderer: DirRenderer::default(),
         })
     }

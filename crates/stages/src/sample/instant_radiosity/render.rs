@@ -59,8 +59,8 @@ pub struct DirRenderer {
     pub(super) candidates: Vec<Candidate>,
     /// Per candidate, what its surface reflects (see [Bounces](self#bounces)).
     pub(super) reflectors: Vec<Reflector>,
-    /// Real points lit by the virtual spots: what they reflect of that light (in
-    /// L_rv only), the candidates of the spots' own bounce VPLs.
+    /// Real points and mesh points lit by the virtual spots: what they reflect of
+    /// that light (in L_rv only), the candidates of the spots' own bounce VPLs.
     pub(super) spot_candidates: Vec<Candidate>,
     /// Per interleaving class, the indices of its VPLs.
     members: Vec<Vec<u32>>,
@@ -72,9 +72,10 @@ pub struct DirRenderer {
     /// The blur's pass along x.
     between: Option<IrradianceLayers>,
     /// What the last [`DirRenderer::lights`] made lights for (`None` before, or after
-    /// one that failed): the frame's width and height, the interleaving and the maps'
-    /// size, which [`DirRenderer::shade`] must be asked for.
-    lit: Option<[u32; 4]>,
+    /// one that failed): the frame's width and height, the interleaving, the maps'
+    /// size, the number of spot lights and the flags, which [`DirRenderer::shade`]
+    /// must be asked for.
+    lit: Option<[u32; 6]>,
     /// The lanes that gather, blur and project eight receivers, pixels or points at a
     /// time; `None`: one at a time (the same bits).
     pub(super) kernel: Option<Kernel>,
@@ -206,7 +207,7 @@ impl DirRenderer {
         for (i, v) in self.vpls.iter().enumerate() {
             self.members[v.slot as usize % classes].push(i as u32);
         }
-        self.lit = Some(lit_frame(w, h, params));
+        self.lit = Some(lit_frame(w, h, params, inputs.spots.len()));
         Ok(())
     }
 
@@ -222,10 +223,12 @@ impl DirRenderer {
     ) -> Result<(), OpError> {
         let (w, h) = (inputs.depth.width, inputs.depth.height);
         let k = params.interleave as usize;
-        if self.lit != Some(lit_frame(w, h, params)) {
+        if self.lit != Some(lit_frame(w, h, params, inputs.spots.len())) {
             return Err(OpError::BadInput(format!(
-                "sample.dir: no lights made for a {w}x{h} frame with interleave {k} and {s}x{s} maps to shade",
-                s = params.shadow_map_size
+                "sample.dir: no lights made for a {w}x{h} frame with interleave {k}, {s}x{s} maps, {n} spot lights and flags {f:?} to shade",
+                s = params.shadow_map_size,
+                n = inputs.spots.len(),
+                f = params.flags
             )));
         }
         if out.size() != Some((w, h)) {
@@ -355,9 +358,18 @@ impl DirRenderer {
     }
 }
 
-/// What [`DirRenderer::lit`] records of a frame `w` x `h` lit with `params`.
-fn lit_frame(w: u32, h: u32, params: &DirParams) -> [u32; 4] {
-    [w, h, params.interleave, params.shadow_map_size]
+/// What [`DirRenderer::lit`] records of a frame `w` x `h` lit with `params` and
+/// `spots` spot lights.
+fn lit_frame(w: u32, h: u32, params: &DirParams, spots: usize) -> [u32; 6] {
+    let flags = params.flags as u32;
+    [
+        w,
+        h,
+        params.interleave,
+        params.shadow_map_size,
+        spots as u32,
+        flags,
+    ]
 }
 
 /// Empties the rectangle `[x0, y0, x1, y1)` of a `size`-texel map.
@@ -754,7 +766,7 @@ impl DirRenderer {
         let area = mesh.area * mesh.len() as f32 / picks.len().max(1) as f32;
         let (environment, kernel) = (&self.environment[..], self.kernel);
         let spots = self.spot_set(inputs, params);
-        let found: Vec<(Candidate, Reflector)> = picks
+        let found: Vec<(Candidate, Reflector, Option<Candidate>)> = picks
             .par_chunks(64)
             .flat_map_iter(|picks| {
                 let mut lit = Vec::with_capacity(picks.len());
@@ -773,10 +785,14 @@ impl DirRenderer {
             .map(|(j, lit)| {
                 let (p, n) = (mesh.position[j], mesh.normal[j]);
                 let reflectance = mesh.material[j].albedo / PI;
-                let rv_dir = if spots.is_empty() {
-                    lit.rv_dir
+                // The real spots join the environment's direct light; the virtual
+                // ones' light goes to their own slots (as on the real surface), so
+                // that no slot of the bounces, and no later bounce, carries it.
+                let (rv_dir, virtual_light) = if spots.is_empty() {
+                    (lit.rv_dir, Vec3::ZERO)
                 } else {
-                    lit.rv_dir + spots.gather(p, n, Receiver::Virtual).rv_dir()
+                    let s = spots.gather(p, n, Receiver::Virtual);
+                    (lit.rv_dir + s.rv_dir_real, s.rv_dir_virtual)
                 };
                 let candidate = Candidate {
                     position: p,
@@ -790,12 +806,18 @@ impl DirRenderer {
                     radiance_or_reflectance: reflectance,
                     received_r: Vec3::ZERO,
                 };
-                (candidate, reflector)
+                let spot_lit = Candidate {
+                    power_rv: reflectance * virtual_light * area,
+                    ..candidate
+                };
+                let spot_lit = (spot_lit.power_rv.max_element() > 0.0).then_some(spot_lit);
+                (candidate, reflector, spot_lit)
             })
             .collect();
-        for (c, s) in found {
+        for (c, s, spot_lit) in found {
             self.candidates.push(c);
             self.reflectors.push(s);
+            self.spot_candidates.extend(spot_lit);
         }
     }
 }

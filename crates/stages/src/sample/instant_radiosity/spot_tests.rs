@@ -140,6 +140,29 @@ fn a_virtual_light_leaves_e_r_alone_and_brightens_e_rv_on_the_real_floor() {
 }
 
 #[test]
+fn a_virtual_light_leaves_e_r_alone_over_two_bounces_too() {
+    // Its light on the objects and on the real surface takes slots of its own: no
+    // bounce's slots, and no second bounce, carry it.
+    let scene = floor_scene();
+    let objects = ball();
+    let params = DirParams {
+        bounces: 2,
+        ..DirParams::default()
+    };
+    let without = render(&scene, &objects, &[], &params);
+    let with = render(&scene, &objects, &[spot(LightWorld::Virtual)], &params);
+    let bits = |img: &Image<Vec3>| -> Vec<[u32; 3]> {
+        img.data
+            .iter()
+            .map(|v| v.to_array().map(f32::to_bits))
+            .collect()
+    };
+    assert_eq!(bits(&with.e_r_dir), bits(&without.e_r_dir));
+    assert_eq!(bits(&with.e_r_ind), bits(&without.e_r_ind));
+    assert_ne!(bits(&with.e_rv_ind), bits(&without.e_rv_ind));
+}
+
+#[test]
 fn a_real_light_blocked_by_a_virtual_object_darkens_e_rv_only() {
     let scene = floor_scene();
     let objects = ball();
@@ -231,7 +254,7 @@ fn the_earlier_method_casts_a_double_shadow_where_a_virtual_object_hides_a_real_
 }
 
 #[test]
-fn without_objects_the_switch_changes_nothing_and_without_lights_neither() {
+fn without_objects_the_switch_changes_no_bit() {
     // Only the flagged terms move: with nothing virtual to hide a real blocker and
     // no ir = 1 VPL to drop, [4] and the paper agree bit for bit.
     let scene = plate_scene();

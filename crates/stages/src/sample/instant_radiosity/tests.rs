@@ -433,8 +433,7 @@ fn shading_without_lights_of_the_frame_is_an_error() {
     let (w, h) = (scene.depth.width, scene.depth.height);
     let mut renderer = DirRenderer::default();
     let mut out = IrradianceLayers::new(w, h);
-    let no_lights =
-        "sample.dir: no lights made for a 96x72 frame with interleave 4 and 128x128 maps to shade";
+    let no_lights = "sample.dir: no lights made for a 96x72 frame with interleave 4, 128x128 maps, 0 spot lights and flags Reciprocal to shade";
     let err = renderer.shade(&inputs, &params, &mut out).unwrap_err();
     assert_eq!(err.to_string(), no_lights);
     renderer.lights(&inputs, &params, &mesh).unwrap();
@@ -444,20 +443,46 @@ fn shading_without_lights_of_the_frame_is_an_error() {
                 interleave: 2,
                 ..params
             },
-            "96x72 frame with interleave 2 and 128x128 maps",
+            "96x72 frame with interleave 2, 128x128 maps, 0 spot lights and flags Reciprocal",
         ),
         (
             DirParams {
                 shadow_map_size: 256,
                 ..params
             },
-            "96x72 frame with interleave 4 and 256x256 maps",
+            "96x72 frame with interleave 4, 256x256 maps, 0 spot lights and flags Reciprocal",
+        ),
+        (
+            DirParams {
+                flags: Flags::Knecht2010,
+                ..params
+            },
+            "96x72 frame with interleave 4, 128x128 maps, 0 spot lights and flags Knecht2010",
         ),
     ] {
         let err = renderer.shade(&inputs, &other, &mut out).unwrap_err();
         let expected = format!("sample.dir: no lights made for a {what} to shade");
         assert_eq!(err.to_string(), expected);
     }
+    // Spots the lights were not made with (their maps would be missing).
+    let lamp = [relume_scene::light::SpotLight {
+        name: "lamp".into(),
+        world: relume_scene::light::LightWorld::Real,
+        position: Vec3::new(0.0, 2.0, 1.0),
+        direction: Vec3::NEG_Y,
+        intensity: Vec3::ONE,
+        beam: 0.3,
+        cutoff: 0.5,
+    }];
+    let with_spot = DirInputs {
+        spots: &lamp,
+        ..inputs
+    };
+    let err = renderer.shade(&with_spot, &params, &mut out).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "sample.dir: no lights made for a 96x72 frame with interleave 4, 128x128 maps, 1 spot lights and flags Reciprocal to shade"
+    );
     // A frame of the same pixel count in another shape.
     let transposed = relume_base::raster::Image::filled(h, w, 1.0f32);
     let mut other_shape = inputs;
@@ -465,7 +490,7 @@ fn shading_without_lights_of_the_frame_is_an_error() {
     let err = renderer.shade(&other_shape, &params, &mut out).unwrap_err();
     assert_eq!(
         err.to_string(),
-        "sample.dir: no lights made for a 72x96 frame with interleave 4 and 128x128 maps to shade"
+        "sample.dir: no lights made for a 72x96 frame with interleave 4, 128x128 maps, 0 spot lights and flags Reciprocal to shade"
     );
     let mut small = IrradianceLayers::new(w / 2, h);
     let err = renderer.shade(&inputs, &params, &mut small).unwrap_err();

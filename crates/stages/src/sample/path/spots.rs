@@ -33,7 +33,8 @@ struct Lit {
     nearest: Option<f32>,
 }
 
-/// Adds the spots' direct light to every shaded row of `out` (rows `stride` apart).
+/// Adds the spots' direct light to the pixels the estimator shaded (rows and columns
+/// `stride` apart).
 pub(super) fn add_spots(
     kernel: &Kernel,
     spots: &[SpotLight],

@@ -15,11 +15,14 @@
 //!   included (r(pl) = 0), so the composite brightens the real surfaces it lights and
 //!   darkens nothing. Spots are gathered at every pixel, not interleaved, and added to
 //!   the layers after the blur: a point light's shadow is sharp.
-//! - **Their bounce** (Sec. 3.7): the first bounce's candidates count the spots in their
-//!   direct light (`render.rs`): a real candidate the objects shade from a real spot
-//!   gets the ir = 1 VPL that cancels its real colour bleeding; a real candidate lit by
-//!   a virtual spot reflects that light into L_rv with the albedo its camera radiance
-//!   and its real direct light imply; a virtual candidate reflects every spot's light.
+//! - **Their bounce** (Sec. 3.7): the first bounce's candidates count the real spots in
+//!   their direct light (`render.rs`): a real candidate the objects shade from a real
+//!   spot gets the ir = 1 VPL that cancels its real colour bleeding; a virtual
+//!   candidate reflects the real spots' light as the environment's. The virtual spots'
+//!   light, in L_rv only, takes `spot_vpls` slots of its own after every other slot:
+//!   off a real candidate with the albedo its camera radiance and its real direct light
+//!   imply, off a virtual one with its albedo; so no bounce's slots, and no E_R bit,
+//!   depend on a virtual spot.
 //! - **The \[4\] switch** (`flags = "knecht2010"`): the earlier method keeps one map per
 //!   light whose nearest blocker alone decides. Where a virtual blocker stands between
 //!   a real spot and a real one, it hides the real blocker: L_r takes the light the

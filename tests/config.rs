@@ -253,7 +253,7 @@ fn structure_errors() {
     let e = error("[pipline]\n");
     assert_eq!(
         e.hint.as_deref(),
-        Some("did you mean `pipeline`? allowed: pipeline, stage, object")
+        Some("did you mean `pipeline`? allowed: pipeline, stage, object, light")
     );
 }
 

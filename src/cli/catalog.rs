@@ -248,30 +248,29 @@ pub fn objects(a: ObjectsArgs) -> anyhow::Result<i32> {
             let name = shape.unwrap_or_default();
             outln!("\nKeys of shape = \"{name}\":")?;
         }
-        let bounds = match (key.min, key.max) {
-            (Some(lo), Some(hi)) => format!(", {lo} to {hi}"),
-            _ => String::new(),
-        };
-        outln!("  {} ({}{bounds})", key.name, key.kind)?;
-        for line in wrap(key.doc, 82) {
-            outln!("      {line}")?;
-        }
+        print_key(key)?;
     }
     outln!(
         "\nKeys of [[light]] tables (spot lights the pipeline knows of; sample.dir and sample.path light with them):"
     )?;
-    for key in relume::stages::world::lights::key_docs() {
-        let bounds = match (key.min, key.max) {
-            (Some(lo), Some(hi)) => format!(", {lo} to {hi}"),
-            _ => String::new(),
-        };
-        outln!("  {} ({}{bounds})", key.name, key.kind)?;
-        for line in wrap(key.doc, 82) {
-            outln!("      {line}")?;
-        }
+    for key in &relume::stages::world::lights::key_docs() {
+        print_key(key)?;
     }
     outln!("\n{OBJECTS_EXAMPLE}")?;
     Ok(0)
+}
+
+/// One key of the help page: its name, kind and bounds, then its doc wrapped.
+fn print_key(key: &relume::stages::world::config::KeyDoc) -> anyhow::Result<()> {
+    let bounds = match (key.min, key.max) {
+        (Some(lo), Some(hi)) => format!(", {lo} to {hi}"),
+        _ => String::new(),
+    };
+    outln!("  {} ({}{bounds})", key.name, key.kind)?;
+    for line in wrap(key.doc, 82) {
+        outln!("      {line}")?;
+    }
+    Ok(())
 }
 
 /// `text` in lines of at most `width` characters, broken at spaces.

@@ -44,8 +44,8 @@ Scores (per stage, keyed by the stage's name):
                     psnr_db of the final image against the composite of the references;
                     psnr_db_unfiltered (the composite of the unfiltered layers);
                     psnr_db_by_frame (psnr_db of each scored frame); on recordings of
-                    `relume synth`, against the true frame (the room with the objects
-                    really in it, path traced): psnr_db_truth, psnr_db_truth_differential
+                    `relume synth`, against the true frame (the room with the objects,
+                    and the virtual lamps, really in it, path traced): psnr_db_truth, psnr_db_truth_differential
                     (pixels off the objects the truth changes by more than one level:
                     shadows, bleeding), psnr_db_truth_objects, shadow_ratio_bias (the
                     composite's ratio to the camera frame minus the truth's, in its

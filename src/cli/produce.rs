@@ -10,7 +10,7 @@ use relume::recording::importers::{
     self, ImportOptions, StoreMode, k4a, record3d, redwood, scannet, tum,
 };
 use relume::recording::mcap;
-use relume::recording::synth::{self, SynthConfig};
+use relume::recording::synth::{self, LightSwitches, SynthConfig};
 use relume::recording::{Recording, Replay, ReplayOptions};
 use std::path::{Path, PathBuf};
 
@@ -56,6 +56,14 @@ pub struct SynthArgs {
     /// over the switch measures how fast a pipeline follows it.
     #[arg(long, value_name = "FRAME")]
     panel_off_at: Option<usize>,
+    /// Switch the room's lamp on at this frame (0: on throughout): a real spot light on a
+    /// low stand by the west wall, aimed east across the floor towards the checker block
+    /// (Mitsuba 3's spot profile). Every frame's truth, and `relume eval`'s true frames,
+    /// are lit by it. A pipeline models it with a `[[light]]` table `world = "real"` of
+    /// the same pose and profile: pipelines/mixed-reality-dir-room-lamp.toml, paper
+    /// 002's double shadow (scripts/double_shadow.py).
+    #[arg(long, value_name = "FRAME")]
+    lamp_on_at: Option<usize>,
 }
 
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
@@ -81,7 +89,10 @@ pub fn synth(a: SynthArgs) -> anyhow::Result<i32> {
         contrast: a.contrast,
         zoom: a.zoom,
         depth_noise: !a.no_depth_noise,
-        panel_off_at: a.panel_off_at,
+        switches: LightSwitches {
+            panel_off_at: a.panel_off_at,
+            lamp_on_at: a.lamp_on_at,
+        },
         ..SynthConfig::default()
     };
     output::check_output_file("-o", &a.out)?;

@@ -9,6 +9,8 @@
 //! - [`ticks`]: a clock cheap enough to read per pixel, for splitting a stage's time.
 //! - [`payload`]: what a pipeline product holds: the [`payload::Payload`] trait and kinds.
 //! - [`files`]: reading the files a user names, regular files only.
+//! - [`spot`]: a spot light's cone (Mitsuba 3's profile), shared by the synthetic room's
+//!   lamp and the spot lights pipelines declare.
 
 pub mod cancel;
 pub mod files;
@@ -17,5 +19,6 @@ pub mod pinhole;
 pub mod raster;
 pub mod rng;
 pub mod simd;
+pub mod spot;
 pub mod threads;
 pub mod ticks;

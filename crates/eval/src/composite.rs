@@ -10,8 +10,8 @@
 //! - `psnr_db_by_frame`: `psnr_db` of each scored frame alone, in `scored_frames` order.
 //!
 //! On recordings of the synthetic room, the same frames and pixels are scored against
-//! the true frame as well ([`super::true_frame`]: the room with the objects really in
-//! it), the model-consistent scores above separating noise from the model's own error:
+//! the true frame as well ([`super::true_frame`]: the room with the objects, and the
+//! pipeline's virtual lamps, really in it), the model-consistent scores above separating noise from the model's own error:
 //! - `psnr_db_truth`: the whole frame against the truth;
 //! - `psnr_db_truth_differential`: over the differential region, the pixels off the
 //!   objects where the truth differs from the recorded frame by more than one level in

@@ -182,9 +182,9 @@ impl Evaluator {
         // The frame at which a synthetic room's light changes, whose lag the composite's
         // scores measure.
         let light_change = (header.provenance.tool == relume_recording::synth::SYNTH_TOOL)
-            .then(|| relume_recording::synth::panel_off_at(&header.provenance).ok())
+            .then(|| relume_recording::synth::LightSwitches::of(&header.provenance).ok())
             .flatten()
-            .flatten();
+            .and_then(|s| s.change_frame());
         let mut scorers: Vec<_> = pipeline
             .stages
             .iter()

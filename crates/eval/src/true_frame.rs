@@ -6,7 +6,8 @@
 //!
 //! Only recordings of `relume synth` with this build's generator version have one: the
 //! truth re-traces the analytic room the recording was rendered from, so it must be the
-//! same room, lit as it was at each frame (`relume synth --panel-off-at`). Where the objects change nothing the true pixel is the recorded one
+//! same room, lit as it was at each frame (`relume synth --panel-off-at`, `--lamp-on-at`).
+//! Where the objects change nothing the true pixel is the recorded one
 //! exactly (the renderer returns the recorded radiance bit for bit, and the recorded
 //! color was made from it by the same camera model).
 
@@ -19,10 +20,12 @@ use relume_recording::synth::camera::{GAMMA, camera_pixel};
 use relume_recording::synth::insert::{
     InsertedHit, InsertedObjects, TrueFrameSettings, render_inserted,
 };
+use relume_recording::synth::lamp::SpotLamp;
 use relume_recording::synth::render::View;
 use relume_recording::synth::scene::Scene;
-use relume_recording::synth::{self, GENERATOR_VERSION, SYNTH_TOOL};
+use relume_recording::synth::{GENERATOR_VERSION, LightSwitches, SYNTH_TOOL};
 use relume_recording::{Header, Intrinsics};
+use relume_scene::light::spot::{LightWorld, SpotLight};
 use relume_scene::objects::VirtualScene;
 use relume_stages::world::ObjectWorld;
 use std::sync::{Arc, Mutex};
@@ -70,7 +73,8 @@ impl TrueComposite {
 }
 
 /// The pipeline's objects as the truth renderer sees them.
-struct Objects<'a>(&'a VirtualScene);
+/// The pipeline's objects and its virtual lamps, as the truth inserts them.
+struct Objects<'a>(&'a VirtualScene, &'a [SpotLamp]);
 
 impl InsertedObjects for Objects<'_> {
     fn intersect(
@@ -94,6 +98,29 @@ impl InsertedObjects for Objects<'_> {
     fn occluded(&self, origin: Vec3, direction: Vec3, t_min: f32, t_max: f32) -> bool {
         self.0.occluded(origin, direction, t_min, t_max)
     }
+
+    fn lamps(&self) -> &[SpotLamp] {
+        self.1
+    }
+}
+
+/// The pipeline's `[[light]]`s of the virtual world as lamps the truth inserts (paper
+/// 002's virtual light sources: the room never had them). Its real lights are not
+/// inserted: the truth's room has the lights the recording had (the synthetic room's
+/// own lamp when `relume synth --lamp-on-at` switched it on), whatever the pipeline
+/// believes.
+fn virtual_lamps(lights: &[SpotLight]) -> Vec<SpotLamp> {
+    lights
+        .iter()
+        .filter(|l| l.world == LightWorld::Virtual)
+        .map(|l| SpotLamp {
+            position: l.position,
+            direction: l.direction,
+            intensity: l.intensity,
+            beam: l.beam,
+            cutoff: l.cutoff,
+        })
+        .collect()
 }
 
 /// True frames computed for the frames in flight, shared by the evaluators of several
@@ -113,10 +140,12 @@ impl TruthCache {
 
 /// Renders the true frames of a synthetic recording for one pipeline's objects.
 pub struct TruthRenderer {
-    /// The frame from which the room's ceiling panel is off (`relume synth --panel-off-at`).
-    panel_off_at: Option<usize>,
+    /// When the room's lights switch (`relume synth --panel-off-at`, `--lamp-on-at`).
+    switches: LightSwitches,
     /// The pipeline's objects (posed at each frame when they move).
     objects: ObjectWorld,
+    /// Its `[[light]]`s of the virtual world ([`virtual_lamps`]).
+    lamps: Vec<SpotLamp>,
     intrinsics: Intrinsics,
     settings: TrueFrameSettings,
     shared: Option<TruthCache>,
@@ -132,7 +161,7 @@ pub fn unavailable(header: &Header) -> Option<String> {
         ));
     }
     match p.settings.get("generator") {
-        Some(v) if v == GENERATOR_VERSION => synth::panel_off_at(p).err(),
+        Some(v) if v == GENERATOR_VERSION => LightSwitches::of(p).err(),
         v => Some(format!(
             "the recording was made by generator version {}, this build renders version {GENERATOR_VERSION}'s room; make it again with `relume synth`",
             v.map_or("(none)", |v| v.as_str())
@@ -142,14 +171,18 @@ pub fn unavailable(header: &Header) -> Option<String> {
 
 impl TruthRenderer {
     /// The renderer for `objects` over the recording of `header`, or `None` when the
-    /// recording has no true frame ([`unavailable`]) or there are no objects.
+    /// recording has no true frame ([`unavailable`]) or nothing is inserted
+    /// (no objects and no virtual lamps).
     pub fn new(header: &Header, objects: ObjectWorld, seed: u64) -> Option<TruthRenderer> {
-        if unavailable(header).is_some() || objects.scene.triangles.is_empty() {
+        let lamps = virtual_lamps(&objects.lights);
+        if unavailable(header).is_some() || (objects.scene.triangles.is_empty() && lamps.is_empty())
+        {
             return None;
         }
         Some(TruthRenderer {
             // `unavailable` has checked the setting.
-            panel_off_at: synth::panel_off_at(&header.provenance).ok()?,
+            switches: LightSwitches::of(&header.provenance).ok()?,
+            lamps,
             objects,
             intrinsics: header.color_intrinsics,
             settings: TrueFrameSettings {
@@ -172,14 +205,16 @@ impl TruthRenderer {
     /// no ground truth or no recorded pose.
     pub fn render(&self, frame: &Frame, stride: u32) -> Result<Option<Arc<TrueComposite>>, String> {
         let key = format!(
-            "{} {stride} {:p} {:?}",
+            "{} {stride} {:p} {:?} {:?}",
             frame.index,
             // Moving objects: their own motions, which no other pipeline shares.
             match &self.objects.moving {
                 Some(moving) => Arc::as_ptr(moving) as *const (),
                 None => Arc::as_ptr(&self.objects.scene) as *const (),
             },
-            self.settings
+            self.settings,
+            // Pipelines with the same objects and other lamps have other truths.
+            self.lamps,
         );
         if let Some(cache) = &self.shared {
             let held = cache.0.lock().unwrap_or_else(|p| p.into_inner());
@@ -215,12 +250,12 @@ impl TruthRenderer {
             .scene_at(frame.index as u64)
             .map_err(|e| e.to_string())?;
         let started = std::time::Instant::now();
-        let scene: Scene = synth::scene_at(self.panel_off_at, frame.index);
+        let scene: Scene = self.switches.scene_at(frame.index);
         let rendered = render_inserted(
             &scene,
             &view,
             &truth.radiance,
-            &Objects(&objects),
+            &Objects(&objects, &self.lamps),
             frame.index as u64,
             &self.settings,
             &|x, y| x % s == 0 && y % s == 0,
@@ -399,6 +434,48 @@ mod tests {
         for i in (0..recorded.data.len()).filter(|&i| !strided.has_pixel(i)) {
             assert_eq!(strided.image.data[i], recorded.data[i]);
         }
+    }
+
+    #[test]
+    fn a_virtual_lamp_is_inserted_and_a_real_one_is_not() {
+        let config = SynthConfig {
+            frames: 15,
+            width: 64,
+            height: 48,
+            ..SynthConfig::default()
+        };
+        let header = synth::header(&config);
+        let frame = synthetic_frame(&config, 14);
+        let room = relume_recording::synth::lamp::room_lamp();
+        let light = |world| SpotLight {
+            name: "lamp".into(),
+            world,
+            position: room.position,
+            direction: room.direction,
+            intensity: room.intensity,
+            beam: room.beam,
+            cutoff: room.cutoff,
+        };
+        let lit_by = |lights: Vec<SpotLight>| ObjectWorld {
+            lights,
+            ..ObjectWorld::still(VirtualScene::new(Vec::new(), Vec::new()))
+        };
+        // A real light the recording does not have changes nothing the truth renders:
+        // with no objects, nothing is inserted.
+        assert!(TruthRenderer::new(&header, lit_by(vec![light(LightWorld::Real)]), 1).is_none());
+        let renderer =
+            TruthRenderer::new(&header, lit_by(vec![light(LightWorld::Virtual)]), 1).unwrap();
+        let truth = renderer.render(&frame, 1).unwrap().unwrap();
+        let recorded = truth.camera.data.clone();
+        let (mut brighter, mut darker) = (0, 0);
+        for (t, r) in truth.image.data.iter().zip(&recorded) {
+            brighter += usize::from((0..3).all(|c| t[c] > r[c].saturating_add(2).min(254)));
+            darker += usize::from((0..3).any(|c| t[c] < r[c]));
+        }
+        // The lamp's cone brightens the floor in view, and nothing darkens.
+        assert!(brighter > 100, "{brighter} pixels brighter");
+        assert_eq!(darker, 0);
+        assert!(truth.object.iter().all(|o| !o));
     }
 
     #[test]

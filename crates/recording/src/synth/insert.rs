@@ -21,12 +21,21 @@
 //! point's radiance is its direct light (shadow rays through the room and the objects)
 //! plus one sampled bounce: another object point, or a room point's radiance plus its
 //! differential. Paths stop after [`TrueFrameSettings::bounces`] surfaces; a light met
-//! by a bounce adds nothing (its light is counted by the light samples).
+//! by a bounce adds nothing (its light is counted by the light samples). The lamp, when
+//! it is on, is a point source: one shadow ray gives its light exactly, at room and
+//! object points alike.
+//!
+//! Lamps of the virtual world ([`InsertedObjects::lamps`], paper 002's virtual light
+//! sources) are part of what is inserted: at a room point the differential gains their
+//! light where neither the room nor the objects block it (the room without the objects
+//! never had it), and its bounces carry it on; at an object point they light as the
+//! room's lamp does.
 //!
 //! Objects reflect by the normalized Phong BRDF of `sample.path` (paper 001 Sec. 3):
 //! rho / pi for exponent 0, rho (n + 2) / (2 pi) cos^n(alpha) about the mirror direction
 //! otherwise.
 
+use super::lamp::SpotLamp;
 use super::render::{View, pixel_direction};
 use super::scene::{Ray, Scene, direct_irradiance};
 use glam::Vec3;
@@ -61,6 +70,11 @@ pub trait InsertedObjects: Sync {
     ) -> Option<InsertedHit>;
     /// True when an object lies along `origin + t direction`, t in (`t_min`, `t_max`).
     fn occluded(&self, origin: Vec3, direction: Vec3, t_min: f32, t_max: f32) -> bool;
+    /// Lamps of the virtual world (paper 002's virtual light sources): they light the
+    /// room and the objects, and the room and the objects block them. None by default.
+    fn lamps(&self) -> &[SpotLamp] {
+        &[]
+    }
 }
 
 /// How much work the truth does per pixel.
@@ -271,6 +285,20 @@ impl Tracer<'_> {
             }
             direct -= light.radiance * (blocked * light.area() / m as f32);
         }
+        // The lamp's light, one exact shadow ray.
+        if let Some(lamp) = &self.scene.lamp
+            && let Some((irradiance, to_lamp, d)) = lamp.arrival(origin, point.normal)
+            && self
+                .objects
+                .occluded(origin, to_lamp, 1e-4, d * (1.0 - 1e-4))
+            && !self.scene.occluded(origin, lamp.position)
+        {
+            direct -= irradiance;
+        }
+        // The virtual lamps' light, which the room without the objects never had.
+        for lamp in self.objects.lamps() {
+            direct += self.virtual_lamp(lamp, origin, point.normal, |_| 1.0);
+        }
         // One bounce: what the objects change in the light arriving from a cosine-
         // distributed direction.
         let mut indirect = Vec3::ZERO;
@@ -287,6 +315,27 @@ impl Tracer<'_> {
             };
         }
         point.albedo / PI * (direct + indirect)
+    }
+
+    /// The light virtual `lamp` brings to `origin` (a point just off a surface with unit
+    /// normal `normal`) where neither the room nor the objects block it, weighted by
+    /// `lobe` of the direction towards it.
+    fn virtual_lamp(
+        &self,
+        lamp: &SpotLamp,
+        origin: Vec3,
+        normal: Vec3,
+        lobe: impl Fn(Vec3) -> f32,
+    ) -> Vec3 {
+        match lamp.arrival(origin, normal) {
+            Some((irradiance, wi, d))
+                if !self.scene.occluded(origin, lamp.position)
+                    && !self.objects.occluded(origin, wi, 1e-4, d * (1.0 - 1e-4)) =>
+            {
+                irradiance * lobe(wi)
+            }
+            _ => Vec3::ZERO,
+        }
     }
 
     /// One sample of the radiance leaving object point `hit` towards `to_viewer`.
@@ -336,6 +385,16 @@ impl Tracer<'_> {
                 sum += here * there / (d2 * d2) * lobe(wi);
             }
             direct += light.radiance * (sum * light.area() / m as f32);
+        }
+        if let Some(lamp) = &self.scene.lamp
+            && let Some((irradiance, wi, d)) = lamp.arrival(origin, n)
+            && !self.scene.occluded(origin, lamp.position)
+            && !self.objects.occluded(origin, wi, 1e-4, d * (1.0 - 1e-4))
+        {
+            direct += irradiance * lobe(wi);
+        }
+        for lamp in self.objects.lamps() {
+            direct += self.virtual_lamp(lamp, origin, n, lobe);
         }
         let mut indirect = Vec3::ZERO;
         if depth + 1 < self.settings.bounces {
@@ -553,6 +612,142 @@ mod tests {
         for i in (0..n).filter(|&i| truth.object[i]) {
             assert!(truth.radiance[i].max_element() > 0.0);
             assert!(truth.standard_error[i].max_element() > 0.0);
+        }
+    }
+
+    /// Virtual lamps and no objects.
+    struct Lamps(Vec<SpotLamp>);
+
+    impl InsertedObjects for Lamps {
+        fn intersect(&self, _: Vec3, _: Vec3, _: f32, _: f32) -> Option<InsertedHit> {
+            None
+        }
+        fn occluded(&self, _: Vec3, _: Vec3, _: f32, _: f32) -> bool {
+            false
+        }
+        fn lamps(&self) -> &[SpotLamp] {
+            &self.0
+        }
+    }
+
+    #[test]
+    fn a_virtual_lamp_adds_its_exact_light_where_it_reaches_and_nothing_elsewhere() {
+        let scene = crate::synth::interreflection::room();
+        let (view, recorded) = small_frame(&scene);
+        // The room's lamp, but virtual: the recording never had it.
+        let lamp = crate::synth::lamp::room_lamp();
+        let settings = TrueFrameSettings {
+            paths: 4,
+            bounces: 1,
+            ..TrueFrameSettings::default()
+        };
+        let truth = render_inserted(
+            &scene,
+            &view,
+            &recorded,
+            &Lamps(vec![lamp]),
+            14,
+            &settings,
+            &|_, _| true,
+        );
+        let (mut lit, mut dark) = (0, 0);
+        for (i, &before) in recorded.iter().enumerate() {
+            let (x, y) = ((i % 64) as u32, (i / 64) as u32);
+            let direction = (view.rotation * pixel_direction(&view.intrinsics, x, y)).normalize();
+            let ray = Ray {
+                origin: view.position,
+                direction,
+            };
+            let hit = scene.intersect(&ray, 0.0).unwrap();
+            let material = scene.material(&hit);
+            let origin = hit.position + hit.normal * 1e-4;
+            let added = match lamp.arrival(origin, hit.normal) {
+                Some((e, _, _)) if !scene.occluded(origin, lamp.position) => {
+                    material.albedo / PI * e
+                }
+                _ => Vec3::ZERO,
+            };
+            assert!(!truth.object[i]);
+            if added == Vec3::ZERO {
+                // Outside its cone or in a real shadow of it: the recorded pixel.
+                assert_eq!(truth.radiance[i], before, "pixel {i}");
+                dark += 1;
+            } else {
+                // One bounce: the lamp's light alone, the same on every path.
+                let error = (truth.radiance[i] - (before + added)).abs().max_element();
+                assert!(
+                    error <= 1e-5 * (before + added).max_element(),
+                    "pixel {i}: {error}"
+                );
+                assert_eq!(truth.standard_error[i], Vec3::ZERO);
+                lit += 1;
+            }
+        }
+        assert!(lit > 200 && dark > 200, "{lit} lit, {dark} not");
+    }
+
+    #[test]
+    fn the_lamp_switched_on_is_shadowed_by_an_inserted_object_exactly() {
+        // The room with its lamp on, and a ball hanging between the lamp and the floor
+        // where it is aimed: that floor loses the lamp's light.
+        let scene =
+            crate::synth::interreflection::room_lit(crate::synth::interreflection::RoomLights {
+                panel: true,
+                lamp: true,
+            });
+        let lamp = scene.lamp.unwrap();
+        let floor = crate::synth::lamp::LAMP_AIM;
+        let ball = Ball {
+            sphere: Sphere {
+                center: lamp.position + (floor - lamp.position) * 0.6,
+                radius: 0.15,
+            },
+            albedo: Vec3::splat(0.5),
+        };
+        let tracer = Tracer {
+            scene: &scene,
+            objects: &ball,
+            settings: &TrueFrameSettings {
+                paths: 1,
+                bounces: 1,
+                light_samples: 1,
+                seed: 1,
+            },
+        };
+        let point = |p: Vec3| {
+            let hit = scene
+                .intersect(
+                    &Ray {
+                        origin: p + Vec3::Y,
+                        direction: Vec3::NEG_Y,
+                    },
+                    0.0,
+                )
+                .unwrap();
+            let material = scene.material(&hit);
+            RoomPoint {
+                position: hit.position,
+                normal: hit.normal,
+                albedo: material.albedo,
+                emitter: false,
+                hit,
+            }
+        };
+        let shadowed = point(floor);
+        let lost = lamp
+            .arrival(shadowed.position + Vec3::Y * 1e-4, Vec3::Y)
+            .unwrap()
+            .0;
+        // The ball blocks neither the panel nor the window from there: the change is the
+        // lamp's light alone, on every draw.
+        let mut rng = Counter::new(&[3]);
+        let expected = -shadowed.albedo / PI * lost;
+        for _ in 0..16 {
+            let change = tracer.differential(&shadowed, 0, &mut rng);
+            assert!(
+                (change - expected).abs().max_element() < 1e-6,
+                "{change} vs {expected}"
+            );
         }
     }
 

@@ -8,7 +8,7 @@
 //! E_ind^(k)(x) = mean over cosine-distributed directions w of rho(y) (E_dir(y) + E_ind^(k-1)(y)),
 //!
 //! where y is the first surface along w from x, rho its albedo and E_dir its direct
-//! irradiance from the two area lights (cosine sampling makes the estimator of
+//! irradiance from the two area lights and the lamp when it is on (cosine sampling makes the estimator of
 //! E = integral of L cos dw the mean of pi L = rho E). Rays that reach a light add
 //! nothing here: the lights' radiance is direct light, sampled on their area by the
 //! renderer. Iteration stops after [`MAX_BOUNCES`] or when a bounce adds less than
@@ -45,31 +45,51 @@ const DIRECT_PURPOSE: u64 = 11;
 const GATHER_PURPOSE: u64 = 12;
 
 /// The room every synthetic recording shows, with its interreflection (solved on the
-/// first call, in about a second on two cores, and kept for the process).
+/// first call, in about a second on two cores, and kept for the process): the panel
+/// on, the lamp off.
 pub fn room() -> Scene {
-    static ROOM: OnceLock<Scene> = OnceLock::new();
-    solved_once(&ROOM, |_| {})
+    room_lit(RoomLights::default())
 }
 
-/// The room of [`room`] with its ceiling panel switched off (the window alone lights it;
-/// the panel's emission is zero, so it looks black), with its own interreflection, solved
-/// on the first call and kept for the process. Light samples are still drawn on the dark
-/// panel, so the window's samples, and their noise, are those of the lit room.
-pub fn room_panel_off() -> Scene {
-    static ROOM: OnceLock<Scene> = OnceLock::new();
-    solved_once(&ROOM, |scene| scene.lights[PANEL].radiance = Vec3::ZERO)
+/// Which of the room's switchable lights are on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RoomLights {
+    /// The ceiling panel (on unless switched off).
+    pub panel: bool,
+    /// The lamp ([`super::lamp`], off unless switched on).
+    pub lamp: bool,
 }
 
-/// The room changed by `light`, with its interreflection solved into `cell` on the first
-/// call.
-fn solved_once(cell: &OnceLock<Scene>, light: impl FnOnce(&mut Scene)) -> Scene {
-    cell.get_or_init(|| {
-        let mut scene = Scene::room_without_interreflection();
-        light(&mut scene);
-        scene.indirect = Some(Arc::new(solve(&scene)));
-        scene
-    })
-    .clone()
+impl Default for RoomLights {
+    fn default() -> Self {
+        RoomLights {
+            panel: true,
+            lamp: false,
+        }
+    }
+}
+
+/// The room lit by `lights`, with its own interreflection, solved on the first call for
+/// those lights and kept for the process. A panel switched off keeps its rectangle with
+/// zero emission (it looks black) and its light samples are still drawn, so the
+/// window's samples, and their noise, are those of the lit room; the lamp draws no
+/// random numbers.
+pub fn room_lit(lights: RoomLights) -> Scene {
+    static ROOMS: [OnceLock<Scene>; 4] = [const { OnceLock::new() }; 4];
+    let index = usize::from(lights.panel) | usize::from(lights.lamp) << 1;
+    ROOMS[index]
+        .get_or_init(|| {
+            let mut scene = Scene::room_without_interreflection();
+            if !lights.panel {
+                scene.lights[PANEL].radiance = Vec3::ZERO;
+            }
+            if lights.lamp {
+                scene.lamp = Some(super::lamp::room_lamp());
+            }
+            scene.indirect = Some(Arc::new(solve(&scene)));
+            scene
+        })
+        .clone()
 }
 
 /// Index of the ceiling panel in [`Scene::lights`].

@@ -3,7 +3,7 @@
 //! [`export_scene`] writes `scene.xml` (Mitsuba 3's XML, `version="3.0.0"`) with the
 //! room's six surfaces and the visible faces of its blocks as `rectangle` shapes whose
 //! albedo is baked into float EXR textures, the ball as a `sphere`, the two emitters as
-//! one-sided `area` lights, virtual objects as PLY meshes, and one `perspective` sensor
+//! one-sided `area` lights, the lamp when it is on as a `spot` emitter, virtual objects as PLY meshes, and one `perspective` sensor
 //! per [`View`] that reproduces relume's pinhole. `scripts/mitsuba_render.py` renders it
 //! (variant `scalar_rgb`, `path` integrator) and writes one PFM of linear RGB radiance
 //! per view, which [`read_radiance`] reads back.
@@ -292,6 +292,8 @@ fn io_error(path: &Path, e: impl std::fmt::Display) -> String {
 /// - Each light is a one-sided `rectangle` moved [`EMITTER_OFFSET`] along its normal
 ///   into the room, with an `area` emitter of its RGB radiance and a black `diffuse`
 ///   BSDF (relume's emitters reflect nothing).
+/// - The lamp, when it is on, is a `spot` emitter of its intensity, `cutoff_angle` and
+///   `beam_width` (the profile relume's lamp shines), placed by a `lookat` along its axis.
 /// - Each object is `objects/object_N.ply` (ASCII PLY, three unshared vertices per
 ///   triangle) with a `diffuse` BSDF of its albedo; `face_normals` when it has no normals.
 /// - Each view is a `perspective` sensor ([`sensor_parameters`], [`sensor_to_world`])
@@ -436,6 +438,25 @@ pub fn export_scene(
              \x20   </shape>",
             numbers(&face.transform(EMITTER_OFFSET)),
             rgb(light.radiance),
+        );
+    }
+    if let Some(lamp) = &scene.lamp {
+        // Mitsuba's spot shines along its local +z, which `lookat` turns to the target.
+        let _ = writeln!(
+            xml,
+            "    <emitter type=\"spot\" id=\"lamp\">\n\
+             \x20       <transform name=\"to_world\">\n\
+             \x20           <lookat origin=\"{}\" target=\"{}\" up=\"0, 1, 0\"/>\n\
+             \x20       </transform>\n\
+             \x20       <rgb name=\"intensity\" value=\"{}\"/>\n\
+             \x20       <float name=\"cutoff_angle\" value=\"{}\"/>\n\
+             \x20       <float name=\"beam_width\" value=\"{}\"/>\n\
+             \x20   </emitter>",
+            rgb(lamp.position),
+            rgb(lamp.position + lamp.direction),
+            rgb(lamp.intensity),
+            lamp.cutoff.to_degrees(),
+            lamp.beam.to_degrees(),
         );
     }
     for (index, object) in objects.iter().enumerate() {

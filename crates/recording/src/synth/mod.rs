@@ -36,10 +36,12 @@ pub mod geometry;
 pub mod indirect;
 pub mod insert;
 pub mod interreflection;
+pub mod lamp;
 pub mod mitsuba;
 pub mod render;
 pub mod room;
 pub mod scene;
+pub mod switches;
 pub mod texture;
 
 use super::codec::{self, encode_floats};
@@ -57,6 +59,7 @@ use render::View;
 use scene::Scene;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+pub use switches::LightSwitches;
 
 /// Version of the generator's output: bumped whenever the same config would give
 /// different content, so cached recordings can be told apart.
@@ -100,11 +103,11 @@ pub struct SynthConfig {
     /// 320x240 pixels of the 640x480 camera, at the same metres per pixel. Tests use it
     /// for small images whose pixels are as fine as the full camera's.
     pub zoom: f64,
-    /// The frame from which the ceiling panel is switched off (default `None`: on
-    /// throughout). The room then darkens at once, its interreflection with it, and the
-    /// truth of every frame is of the room as it is lit then; the header's `environment`
-    /// attachment is the room as frame 0 shows it (a light probe taken at the start).
-    pub panel_off_at: Option<usize>,
+    /// When the ceiling panel switches off and the lamp switches on (default: the panel
+    /// on and the lamp off throughout). The truth of every frame is of the room as it is
+    /// lit then; the header's `environment` attachment is the room as frame 0 shows it
+    /// (a light probe taken at the start).
+    pub switches: LightSwitches,
 }
 
 impl Default for SynthConfig {
@@ -120,7 +123,7 @@ impl Default for SynthConfig {
             white_balance: 0.2,
             contrast: 0.0,
             zoom: 1.0,
-            panel_off_at: None,
+            switches: LightSwitches::default(),
         }
     }
 }
@@ -172,14 +175,7 @@ impl SynthConfig {
         if !(0.25..=16.0).contains(&self.zoom) {
             return Err(format!("zoom {} must lie in [0.25, 16]", self.zoom));
         }
-        if let Some(off) = self.panel_off_at
-            && off >= self.frames
-        {
-            return Err(format!(
-                "the panel cannot switch off at frame {off}: the recording's frames are 0 to {}",
-                self.frames - 1
-            ));
-        }
+        self.switches.validate(self.frames)?;
         Ok(())
     }
 
@@ -192,41 +188,11 @@ impl SynthConfig {
         k
     }
 
-    /// The room as it is lit at `frame`: [`interreflection::room`], or
-    /// [`interreflection::room_panel_off`] from [`SynthConfig::panel_off_at`] on.
+    /// The room as it is lit at `frame` ([`LightSwitches::scene_at`]).
     pub fn scene_at(&self, frame: usize) -> Scene {
-        scene_at(self.panel_off_at, frame)
+        self.switches.scene_at(frame)
     }
 }
-
-/// The room as it is lit at `frame` when the panel switches off at `panel_off_at`.
-pub fn scene_at(panel_off_at: Option<usize>, frame: usize) -> Scene {
-    match panel_off_at {
-        Some(off) if frame >= off => interreflection::room_panel_off(),
-        _ => interreflection::room(),
-    }
-}
-
-/// The frame from which the ceiling panel of the recording with `provenance` is off, as
-/// its settings say (`None`: on throughout); an error when the setting is not a frame
-/// number.
-pub fn panel_off_at(provenance: &Provenance) -> Result<Option<usize>, String> {
-    provenance
-        .settings
-        .get(PANEL_OFF_AT_SETTING)
-        .map(|v| {
-            v.parse::<usize>().map_err(|_| {
-                format!(
-                    "the recording's setting {PANEL_OFF_AT_SETTING} = {v:?} is not a frame number"
-                )
-            })
-        })
-        .transpose()
-}
-
-/// The provenance setting naming [`SynthConfig::panel_off_at`]; absent when the panel
-/// stays on, so recordings made before the switch existed keep their header bytes.
-pub const PANEL_OFF_AT_SETTING: &str = "panel_off_at";
 
 /// Summary of what was generated.
 #[derive(Clone, Debug, PartialEq)]
@@ -254,7 +220,7 @@ pub fn provenance(config: &SynthConfig) -> Provenance {
         white_balance,
         contrast,
         zoom,
-        panel_off_at,
+        switches,
     } = config;
     let mut settings: BTreeMap<String, String> = [
         ("generator", GENERATOR_VERSION.to_string()),
@@ -275,9 +241,7 @@ pub fn provenance(config: &SynthConfig) -> Provenance {
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
     .collect();
-    if let Some(off) = panel_off_at {
-        settings.insert(PANEL_OFF_AT_SETTING.into(), off.to_string());
-    }
+    switches.write_settings(&mut settings);
     Provenance {
         tool: SYNTH_TOOL.into(),
         tool_version: env!("CARGO_PKG_VERSION").into(),
@@ -546,7 +510,10 @@ mod tests {
     fn the_panel_switches_off_at_its_frame_and_the_provenance_says_so() {
         let config = SynthConfig {
             frames: 10,
-            panel_off_at: Some(4),
+            switches: LightSwitches {
+                panel_off_at: Some(4),
+                lamp_on_at: None,
+            },
             ..SynthConfig::default()
         };
         assert_eq!(config.validate(), Ok(()));
@@ -579,7 +546,10 @@ mod tests {
         // The light probe is the room as frame 0 shows it.
         let small = |panel_off_at| SynthConfig {
             frames: 5,
-            panel_off_at,
+            switches: LightSwitches {
+                panel_off_at,
+                lamp_on_at: None,
+            },
             ..SynthConfig::default()
         };
         let probe = |c: &SynthConfig| header(c).attachments[0].image.clone();
@@ -587,21 +557,24 @@ mod tests {
         assert_ne!(probe(&small(Some(0))), probe(&small(None)));
 
         let p = provenance(&config);
-        assert_eq!(p.settings[PANEL_OFF_AT_SETTING], "4");
-        assert_eq!(panel_off_at(&p), Ok(Some(4)));
+        assert_eq!(p.settings[switches::PANEL_OFF_AT_SETTING], "4");
+        assert_eq!(LightSwitches::of(&p), Ok(config.switches));
         // A recording without the switch keeps the header it always had.
         let plain = provenance(&SynthConfig::default());
-        assert!(!plain.settings.contains_key(PANEL_OFF_AT_SETTING));
-        assert_eq!(panel_off_at(&plain), Ok(None));
+        assert!(!plain.settings.contains_key(switches::PANEL_OFF_AT_SETTING));
+        assert_eq!(LightSwitches::of(&plain), Ok(LightSwitches::default()));
         let mut bad = p.clone();
         bad.settings
-            .insert(PANEL_OFF_AT_SETTING.into(), "soon".into());
+            .insert(switches::PANEL_OFF_AT_SETTING.into(), "soon".into());
         assert_eq!(
-            panel_off_at(&bad),
+            LightSwitches::of(&bad),
             Err("the recording's setting panel_off_at = \"soon\" is not a frame number".into())
         );
         let late = SynthConfig {
-            panel_off_at: Some(10),
+            switches: LightSwitches {
+                panel_off_at: Some(10),
+                lamp_on_at: None,
+            },
             ..config
         };
         assert_eq!(

@@ -13,6 +13,7 @@ pub use super::geometry::{
     AxisBox, Hit, Ray, Sphere, ray_box_entry, ray_sphere, segment_crosses_box,
 };
 use super::indirect::IndirectLight;
+pub use super::lamp::SpotLamp;
 pub use super::room::{ROOM_MAX, ROOM_MIN, Surface};
 pub use super::texture::BlockTexture;
 use super::texture::{BALL_ALBEDO, block_albedo, room_albedo};
@@ -87,6 +88,8 @@ pub struct Scene {
     pub ball: Sphere,
     /// The ceiling light and the window.
     pub lights: [RectLight; 2],
+    /// The lamp, when it is on ([`super::lamp`]); `None`: off.
+    pub lamp: Option<SpotLamp>,
     /// The light the surfaces reflect onto each other, solved once ([`super::interreflection::room`]);
     /// `None` lights the room by the two lights' direct light alone.
     pub indirect: Option<Arc<IndirectLight>>,
@@ -137,6 +140,7 @@ impl Scene {
                     surface: Surface::EastWall,
                 },
             ],
+            lamp: None,
             indirect: None,
         }
     }
@@ -222,6 +226,19 @@ impl Scene {
             .is_some()
     }
 
+    /// The lamp's direct light at `origin` (a point just off a surface with unit normal
+    /// `normal`): zero when it is off, outside its cone, or a box or the sphere blocks
+    /// it. One shadow ray: a point source's light is exact.
+    pub fn lamp_irradiance(&self, origin: Vec3, normal: Vec3) -> Vec3 {
+        match self
+            .lamp
+            .and_then(|lamp| Some((lamp, lamp.arrival(origin, normal)?)))
+        {
+            Some((lamp, (irradiance, _, _))) if !self.occluded(origin, lamp.position) => irradiance,
+            _ => Vec3::ZERO,
+        }
+    }
+
     /// The irradiance the room's surfaces reflect onto `hit` (zero without a solution).
     pub fn indirect_irradiance(&self, hit: &Hit) -> Vec3 {
         self.indirect.as_ref().map_or(Vec3::ZERO, |s| s.at(hit))
@@ -256,7 +273,9 @@ impl Scene {
 
 /// The irradiance at `position` (unit `normal`) from both area lights: for each, `grid`
 /// stratified points on its area (one jittered sample per cell), each weighted by
-/// cos_here cos_light / d^2 when no box or the sphere blocks it.
+/// cos_here cos_light / d^2 when no box or the sphere blocks it; and the lamp's, when
+/// it is on ([`Scene::lamp_irradiance`], no random numbers: the area lights' draws are
+/// the same with the lamp on or off).
 pub fn direct_irradiance(
     scene: &Scene,
     position: Vec3,
@@ -287,6 +306,9 @@ pub fn direct_irradiance(
             }
         }
         irradiance += light.radiance * (geometry_sum * light.area() / samples);
+    }
+    if scene.lamp.is_some() {
+        irradiance += scene.lamp_irradiance(origin, normal);
     }
     irradiance
 }

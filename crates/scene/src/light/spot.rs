@@ -79,14 +79,7 @@ impl SpotLight {
     /// the light): 1 within the beam, linear in angle to 0 at the cutoff, 0 beyond
     /// (Mitsuba 3's `spot` falloff).
     pub fn falloff(&self, towards: Vec3) -> f32 {
-        let cos = self.direction.dot(towards).clamp(-1.0, 1.0);
-        if cos <= self.cutoff.cos() {
-            return 0.0;
-        }
-        if cos >= self.beam.cos() || self.cutoff <= self.beam {
-            return 1.0;
-        }
-        ((self.cutoff - cos.acos()) / (self.cutoff - self.beam)).clamp(0.0, 1.0)
+        relume_base::spot::falloff(self.direction.dot(towards), self.beam, self.cutoff)
     }
 
     /// What the light brings, unoccluded, to the point `p` with unit normal `n`:

@@ -122,11 +122,87 @@ fn compare_runs_acquisition_once_and_scores_each_pipeline_as_eval_does() {
         for kind in ["composite", "difference", "truth_difference"] {
             assert!(frame.join(format!("{label}.{kind}.png")).is_file());
         }
+        let own = &report["images"][0]["variants"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|i| i["label"] == label)
+            .unwrap()["truth"];
+        assert_eq!(own, "frames/000014/truth.png", "{label}: one truth for all");
         let truth = &v["scores"]["composite.differential"]["psnr_db_truth"];
         assert!(truth.as_f64().is_some_and(|p| p > 10.0), "{label}: {truth}");
     }
     assert!(page.contains("<th>psnr_db against the truth</th>"));
     check_page_in_browser(&out.join("index.html"));
+}
+
+/// A pipeline with a virtual lamp has a truth of its own (the lamp inserted with the
+/// objects): compare scores it as eval does alone, not against the truth of the
+/// pipeline with the same objects and no lamp, and saves that truth beside the first.
+#[test]
+fn compare_scores_a_virtual_lamp_against_its_own_truth() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    small_recording(d, 16);
+    let (plain, lamp) = (
+        pipeline("mixed-reality-dir.toml"),
+        pipeline("mixed-reality-dir-lamp.toml"),
+    );
+    ok(run_in(
+        d,
+        &[
+            "compare",
+            "small.relume",
+            "--frames",
+            "0..16",
+            "--out",
+            "cmp",
+            "-p",
+            &plain,
+            "-p",
+            &lamp,
+        ],
+    ));
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("cmp/report.json")).unwrap()).unwrap();
+    let scores = |label: &str| {
+        report["variants"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|v| v["label"] == label)
+            .unwrap()["scores"]["composite.differential"]
+            .clone()
+    };
+    let alone = eval_json(d, &lamp);
+    assert_eq!(
+        scores("mixed-reality-dir-lamp"),
+        alone["stages"]["composite.differential"]
+    );
+    let with = scores("mixed-reality-dir-lamp")["psnr_db_truth"]
+        .as_f64()
+        .unwrap();
+    let without = scores("mixed-reality-dir")["psnr_db_truth"]
+        .as_f64()
+        .unwrap();
+    assert_ne!(with, without);
+    let images = &report["images"][0];
+    assert_eq!(images["truth"], "frames/000014/truth.png");
+    let truth_of = |label: &str| {
+        images["variants"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|v| v["label"] == label)
+            .unwrap()["truth"]
+            .clone()
+    };
+    assert_eq!(truth_of("mixed-reality-dir"), "frames/000014/truth.png");
+    let own = "frames/000014/mixed-reality-dir-lamp.truth.png";
+    assert_eq!(truth_of("mixed-reality-dir-lamp"), own);
+    assert!(d.join("cmp").join(own).is_file());
+    let page = std::fs::read_to_string(d.join("cmp/index.html")).unwrap();
+    assert!(page.contains(own), "the page shows its truth");
 }
 
 /// Loads the page in headless Chromium from the file system: every image decodes, no

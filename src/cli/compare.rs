@@ -208,7 +208,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     let stop = stop_on_interrupt();
     let bar = progress::bar(frames.len() as u64, "comparing", "frames");
     let mut images: Vec<FrameImages> = Vec::new();
-    let mut saved_references = SavedReferences::new();
+    let (mut saved_references, mut saved_truths) = (SavedImages::new(), SavedImages::new());
     let mut sink_error: Option<anyhow::Error> = None;
     let stdout = std::io::stdout();
     let options = relume::graph::RunOptions {
@@ -240,7 +240,7 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
                     e,
                     frame,
                     stride,
-                    (&mut images, &mut saved_references),
+                    (&mut images, &mut saved_references, &mut saved_truths),
                 )?;
             }
             Ok(())
@@ -389,8 +389,8 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<i32> {
     Ok(0)
 }
 
-/// The reference images saved so far: (frame, path in the report, image).
-type SavedReferences = Vec<(usize, String, Rgb8Image)>;
+/// The reference or true images saved so far: (frame, path in the report, image).
+type SavedImages = Vec<(usize, String, Rgb8Image)>;
 
 /// `relume replay --hash`'s line for a frame.
 pub(super) fn hash_line(frame: &Frame) -> String {
@@ -422,8 +422,9 @@ fn scored_psnr(variant: &Variant, frame: usize, key: &str) -> Option<f64> {
 }
 
 /// On a frame the evaluator just scored against a reference composite: saves the
-/// reference (once per frame and distinct reference), the variant's composite and
-/// their difference, on the reference's pixel lattice, and lists them in `images`.
+/// reference and the true frame (each once per frame and distinct image), the
+/// variant's composite and its differences from them, on the reference's pixel
+/// lattice, and lists them in `images`.
 fn save_images(
     out: &Path,
     label: &str,
@@ -431,7 +432,11 @@ fn save_images(
     evaluator: &Evaluator,
     frame: &Frame,
     stride: u32,
-    (images, saved_references): (&mut Vec<FrameImages>, &mut SavedReferences),
+    (images, saved_references, saved_truths): (
+        &mut Vec<FrameImages>,
+        &mut SavedImages,
+        &mut SavedImages,
+    ),
 ) -> anyhow::Result<()> {
     let references = evaluator.reference_composites();
     let Some((_, reference)) = references.iter().find(|(f, _)| *f == frame.index) else {
@@ -491,22 +496,35 @@ fn save_images(
         &format!("{label}.difference"),
         &report::images::difference(&own, &reference),
     )?;
-    // The true frame: saved once per frame (the pipelines' objects are the same where
-    // the truths are; the first is shown).
+    // The true frame: saved once per frame and objects (pipelines with other objects or
+    // virtual lamps have other truths), the first as `truth.png`.
     let truths = evaluator.true_composites();
-    let truth = truths.iter().find(|t| t.frame == frame.index);
-    let truth_difference = match truth {
+    let (truth_path, truth_difference) = match truths.iter().find(|t| t.frame == frame.index) {
         Some(t) => {
             let truth = report::images::on_lattice(&t.image, stride);
-            if images[entry].truth.is_none() {
-                images[entry].truth = Some(save("truth", &truth)?);
-            }
-            Some(save(
+            let path = match saved_truths
+                .iter()
+                .find(|(f, _, image)| *f == frame.index && image.data == truth.data)
+            {
+                Some((_, path, _)) => path.clone(),
+                None => {
+                    let name = match images[entry].truth.is_none() {
+                        true => "truth".to_string(),
+                        false => format!("{label}.truth"),
+                    };
+                    let path = save(&name, &truth)?;
+                    images[entry].truth.get_or_insert_with(|| path.clone());
+                    saved_truths.push((frame.index, path.clone(), truth.clone()));
+                    path
+                }
+            };
+            let difference = save(
                 &format!("{label}.truth_difference"),
                 &report::images::difference(&own, &truth),
-            )?)
+            )?;
+            (Some(path), Some(difference))
         }
-        None => None,
+        None => (None, None),
     };
     images[entry].variants.push(VariantImages {
         label: label.to_string(),
@@ -514,6 +532,7 @@ fn save_images(
         composite,
         difference,
         psnr_db: None,
+        truth: truth_path,
         truth_difference,
         psnr_db_truth: None,
     });

@@ -239,6 +239,15 @@ fn frames(h: &mut String, c: &Comparison) {
                 ),
                 false => String::new(),
             };
+            let own_truth = match &v.truth {
+                Some(path) if Some(path) != f.truth.as_ref() => format!(
+                    "<figure><img src=\"{}\" alt=\"{} truth\"><figcaption>its truth \
+                     (other objects or virtual lamps)</figcaption></figure>",
+                    escape(path),
+                    escape(&v.label)
+                ),
+                _ => String::new(),
+            };
             let against_truth = match &v.truth_difference {
                 Some(path) => format!(
                     "<figure><img src=\"{}\" alt=\"{} difference from the truth\">\
@@ -254,7 +263,7 @@ fn frames(h: &mut String, c: &Comparison) {
             };
             let _ = write!(
                 h,
-                "<div class=\"variant\">{own_reference}<figure><img src=\"{}\" alt=\"{} composite\">\
+                "<div class=\"variant\">{own_reference}{own_truth}<figure><img src=\"{}\" alt=\"{} composite\">\
                  <figcaption>{}{}</figcaption></figure><figure><img src=\"{}\" \
                  alt=\"{} difference\"><figcaption>{} − reference</figcaption></figure>\
                  {against_truth}</div>",

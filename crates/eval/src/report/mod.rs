@@ -74,7 +74,8 @@ pub struct FrameImages {
     pub frame: usize,
     /// The composite of the 1024-sample references.
     pub reference: String,
-    /// The true frame with the objects in the room (synthetic recordings).
+    /// The true frame with the objects in the room (synthetic recordings): the first
+    /// variant's.
     pub truth: Option<String>,
     /// Per variant (label): its composite and its false-colour difference from the
     /// reference, and the PSNR of that frame.
@@ -90,6 +91,9 @@ pub struct VariantImages {
     pub composite: String,
     pub difference: String,
     pub psnr_db: Option<f64>,
+    /// The true frame it is scored against (the frame's `truth` unless its objects or
+    /// virtual lamps differ).
+    pub truth: Option<String>,
     /// Its false-colour difference from the true frame, and its PSNR against it.
     pub truth_difference: Option<String>,
     pub psnr_db_truth: Option<f64>,

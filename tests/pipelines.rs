@@ -368,6 +368,58 @@ fn the_lamp_pipeline_is_the_dir_pipeline_with_a_virtual_spot_light() {
     assert_eq!(lights[0].world, relume::light::LightWorld::Virtual);
 }
 
+/// The double-shadow pipeline is the Differential Instant Radiosity one with paper 002
+/// Fig. 5's virtual box for its objects and the synthetic room's real lamp as a
+/// `[[light]]`; its [4] twin changes sample.dir's flags and nothing else.
+#[test]
+fn the_room_lamp_pipelines_are_the_dir_pipeline_with_the_real_lamp_and_a_box() {
+    let dir = std::fs::read_to_string(format!(
+        "{}/pipelines/mixed-reality-dir.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    let lamp = std::fs::read_to_string(format!(
+        "{}/pipelines/mixed-reality-dir-room-lamp.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    // The objects' block of each: from its first comment above [[object]] to the
+    // acquisition.
+    let objects = |text: &str| {
+        let start = text
+            .find("\n\n# A torus")
+            .or(text.find("\n\n# Paper 002 Fig. 5"));
+        text[start.unwrap() + 2..text.find("# --- Acquisition").unwrap()].to_string()
+    };
+    let p = assert_twin(
+        "mixed-reality-dir",
+        "mixed-reality-dir-room-lamp",
+        &[(&objects(&dir), &objects(&lamp))],
+    );
+    let world = relume::stages::world::object_world(&p.world);
+    assert_eq!(world.scene.triangles.len(), 12, "one box");
+    // The [[light]] is the room's lamp as `relume synth --lamp-on-at` switches it on.
+    let room = relume::recording::synth::lamp::room_lamp();
+    let [light] = &world.lights[..] else {
+        panic!("one light: {:?}", world.lights)
+    };
+    assert_eq!(light.world, relume::light::LightWorld::Real);
+    assert_eq!(light.position, room.position);
+    assert!((light.direction - room.direction).length() < 1e-6);
+    assert_eq!(light.intensity, room.intensity);
+    assert!((light.beam - room.beam).abs() < 1e-6 && (light.cutoff - room.cutoff).abs() < 1e-6);
+
+    let knecht = assert_twin(
+        "mixed-reality-dir-room-lamp",
+        "mixed-reality-dir-room-lamp-knecht2010",
+        &[(
+            "kind = \"sample.dir\"\n",
+            "kind = \"sample.dir\"\nparams = { flags = \"knecht2010\" }\n",
+        )],
+    );
+    assert!(knecht.stages.iter().any(|s| s.kind == "sample.dir"));
+}
+
 /// The Distance Impostor Tracing pipeline is the default chain with the query swapped
 /// and nothing else changed (its temporal reuse and filter settings included).
 #[test]

@@ -251,7 +251,7 @@ pub fn objects(a: ObjectsArgs) -> anyhow::Result<i32> {
         print_key(key)?;
     }
     outln!(
-        "\nKeys of [[light]] tables (spot lights the pipeline knows of; sample.dir and sample.path light with them):"
+        "\nKeys of [[light]] tables (spot lights the pipeline knows of; sample.dir, sample.path and sample.val light with them):"
     )?;
     for key in &relume::stages::world::lights::key_docs() {
         print_key(key)?;

@@ -60,8 +60,7 @@ const RENDERERS: &[(&str, Render, bool)] = &[
         |s, o, l, k| path(QueryKind::Vct, s, o, l, k),
         true,
     ),
-    // paper 004's area lights come from the environment alone.
-    ("sample.val", |s, o, _, k| val(s, o, k), false),
+    ("sample.val", val, true),
     ("sample.dir", dir, true),
 ];
 
@@ -104,7 +103,12 @@ fn path(
 
 /// `sample.val`: the constant environment split (paper 004 Sec. 4.2, 90 % of the
 /// energy direct) into light.val's area lights and SH9.
-fn val(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> IrradianceLayers {
+fn val(
+    scene: &Scene,
+    objects: &VirtualScene,
+    spots: &[SpotLight],
+    lanes: simd::Kernel,
+) -> IrradianceLayers {
     let map = EnvMap::constant(128, 64, SKY);
     let (direct, indirect) = split_direct_indirect(&map, 0.9);
     let lights = ValBuilder::new(ValParams::default()).update(&direct, &indirect);
@@ -116,6 +120,7 @@ fn val(scene: &Scene, objects: &VirtualScene, lanes: simd::Kernel) -> Irradiance
         lights: &lights,
         objects,
         transfer: None,
+        spots,
     };
     let mut out = val_layers(scene.depth.width, scene.depth.height);
     ValRenderer::with_kernel(lanes)

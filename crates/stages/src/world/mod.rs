@@ -46,7 +46,7 @@ pub struct ObjectWorld {
     /// ([`ObjectWorld::scene_at`] places them frame by frame).
     pub moving: Option<Arc<MovingScene>>,
     /// The `[[light]]` tables: the light sources besides the environment that the
-    /// renderers which take them (`sample.dir`, `sample.path`) light with, in file
+    /// renderers which take them (`sample.dir`, `sample.path`, `sample.val`) light with, in file
     /// order.
     pub lights: Vec<SpotLight>,
 }

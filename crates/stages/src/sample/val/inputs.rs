@@ -4,8 +4,8 @@
 use glam::Affine3A;
 use relume_base::pinhole::Pinhole;
 use relume_base::raster::{DepthImage, Vec3Image};
-use relume_scene::light::AreaLights;
 use relume_scene::light::prt::Transfer;
+use relume_scene::light::{AreaLights, SpotLight};
 use relume_scene::objects::VirtualScene;
 
 /// Settings of [`ValRenderer::render`](super::ValRenderer::render) (the stage's parameters).
@@ -48,4 +48,7 @@ pub struct ValInputs<'a> {
     /// The objects' radiance transfer (paper 004 eq. 11) for their indirect light, or
     /// `None` for the unoccluded SH9 irradiance at the normal.
     pub transfer: Option<&'a Transfer>,
+    /// The pipeline's spot lights (`[[light]]`, paper 002 Sec. 3.7), shaded after the
+    /// area lights (`spots.rs`).
+    pub spots: &'a [SpotLight],
 }

@@ -35,6 +35,11 @@
 //! `sample.path` records it: the z / cos^2(theta_occ) of paper 001 eq. 17). Pixels with
 //! no surface (no depth, or a zero normal, and no object) get NaN irradiance.
 //!
+//! Spot lights (`spots.rs`, the pipeline's `[[light]]` tables, paper 002 Sec. 3.7) get
+//! the two maps an area light gets and are added after the area lights with paper
+//! 002's flags: a real spot to E_R (V_j E_j) and E_RV (V_j V^_j E_j), a virtual one to
+//! E_RV only; E_j is the spot's own profile, not eq. 6.
+//!
 //! Cost: the surfaces are shaded eight pixels at a time (`shade_lanes.rs`, AVX2 +
 //! FMA where the CPU has them, [`relume_base::simd`]), with the bits of the per-point
 //! `shade_point` (tested). The shadow maps are built for up to eight lights per pass,
@@ -54,6 +59,10 @@ mod shade;
 mod shade_lanes;
 mod shadow;
 #[cfg(test)]
+mod spot_tests;
+mod spots;
+mod targets;
+#[cfg(test)]
 mod tests;
 #[cfg(test)]
 mod transfer_tests;
@@ -69,6 +78,7 @@ pub use inputs::{ValInputs, ValShadingParams};
 use relume_graph::{
     BuildContext, ParamDefault, ParamSpec, Params, Port, ProductKind, StageError, StageInfo,
 };
+use relume_scene::light::SpotLight;
 use relume_scene::light::prt::cache::{self, CacheOutcome};
 use relume_scene::light::prt::{Transfer, TransferParams};
 use relume_scene::objects::VirtualScene;
@@ -196,6 +206,8 @@ pub fn sample_val(
 pub struct SampleVal {
     objects: FollowedObjects,
     transfer: Option<Arc<Transfer>>,
+    /// The pipeline's `[[light]]` spot lights.
+    spots: Vec<SpotLight>,
     params: ValShadingParams,
     renderer: ValRenderer,
 }
@@ -237,6 +249,7 @@ impl Renderer for SampleVal {
         Ok(SampleVal {
             objects: FollowedObjects::new(ctx),
             transfer,
+            spots: crate::world::lights(ctx).to_vec(),
             params: ValShadingParams {
                 shadow_map_size: p.int("shadow_map_size") as usize,
                 virtual_bias: p.float("virtual_bias") as f32,
@@ -271,6 +284,7 @@ impl Renderer for SampleVal {
             lights: frame.area_lights("lights")?,
             objects,
             transfer: self.transfer.as_deref(),
+            spots: &self.spots,
         };
         self.renderer.render(&inputs, &self.params, out)?;
         Ok(())

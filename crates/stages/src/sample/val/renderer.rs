@@ -6,12 +6,14 @@ use super::inputs::{ValInputs, ValShadingParams};
 use super::pixel;
 use super::pixel::{PixelContext, sampling_of};
 use super::raster::{DepthTarget, NO_ID, ScreenTriangle, raster_screen_triangle, screen_triangles};
-use super::real_splat::{RealSurface, RealTarget, real_shadow_maps};
+use super::real_splat::{RealSurface, real_shadow_maps};
 use super::shade::PreparedLight;
 use super::shade::{Biases, Maps, Sh9Irradiance};
 use super::shadow::{self, ShadowFrustum};
 use super::shadow::{MAX_SHADOW_MAP_SIZE, TILE, Tile, tile_of};
-use super::virtual_maps::{VirtualTarget, virtual_shadow_maps};
+use super::spots::{self, SpotMaps};
+use super::targets::light_targets;
+use super::virtual_maps::virtual_shadow_maps;
 #[cfg(test)]
 use super::{real_splat, virtual_maps};
 use crate::OpError;
@@ -50,6 +52,8 @@ pub struct ValRenderer {
     pub(super) kernel: Option<Kernel>,
     /// Shade every pixel with the scalar `shade_point`, and splat the real shadow maps
     /// one light and one point at a time, instead (the kernels' reference).
+    /// The spot lights' frusta and maps (`spots.rs`).
+    pub(super) spot_maps: SpotMaps,
     #[cfg(test)]
     pub(super) scalar_reference: bool,
 }
@@ -150,6 +154,24 @@ impl ValRenderer {
                 }
             },
         );
+        if !inputs.spots.is_empty() {
+            let surface = RealSurface {
+                points: &self.real_points,
+                patches: &self.real_patches,
+                width: wu,
+                tiles: &self.tiles,
+            };
+            let map_kernel = self.kernel.unwrap_or_else(Kernel::detect);
+            self.spot_maps.build(inputs, params, &surface, map_kernel);
+            let sampling = sampling_of(inputs);
+            let real = (
+                &self.real_points[..],
+                &self.real_normals[..],
+                &self.real_patches[..],
+            );
+            let patch_of = |p: Vec3| sampling.footprint(p.into());
+            spots::add_spots(inputs, &self.spot_maps, real, patch_of, biases, out);
+        }
         Ok(())
     }
 
@@ -386,27 +408,4 @@ impl ValRenderer {
             .map(|(l, f)| PreparedLight::new(l, *f))
             .collect()
     }
-}
-
-/// One light's slice of [`ValRenderer`]'s maps (its virtual map, real map and the
-/// real map's scratch, size^2 each) as the targets of the map builders.
-fn light_targets<'a>(
-    frustum: &'a ShadowFrustum,
-    maps: &'a mut [f32],
-) -> (VirtualTarget<'a>, RealTarget<'a>) {
-    let texels = frustum.size * frustum.size;
-    let (virtual_map, rest) = maps.split_at_mut(texels);
-    let (map, scratch) = rest.split_at_mut(texels);
-    let virtual_target = VirtualTarget {
-        frustum,
-        map: virtual_map,
-    };
-    (
-        virtual_target,
-        RealTarget {
-            frustum,
-            map,
-            scratch,
-        },
-    )
 }

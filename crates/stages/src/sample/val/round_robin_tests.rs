@@ -41,6 +41,7 @@ fn render_lit(
         lights: set,
         objects: &scene,
         transfer: None,
+        spots: &[],
     };
     let params = ValShadingParams {
         shadow_updates: updates,

@@ -72,6 +72,82 @@ pub(crate) struct Shaded {
     pub min_occluder: f32,
 }
 
+/// What a light's two shadow maps say of a receiver.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct MapVisibility {
+    /// V_j: no real occluder in the real map.
+    pub real: bool,
+    /// V^_j: no virtual occluder in the virtual map.
+    pub virtual_: bool,
+    /// The distance to the nearer occluder along the ray to the light over the cosine
+    /// at the receiver (see [`Shaded::min_occluder`]), where one occludes.
+    pub occluder_over_cos: Option<f32>,
+}
+
+/// V_j and V^_j of the receiver `x` (unit normal `n`, `v` = light position - x, `r2` =
+/// |v|^2, real-map splat size `patch`) from one light's maps (`light_maps`: its
+/// virtual map then its real map, `f.size^2` texels each) over frustum `f`: both 1
+/// outside the frustum.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn map_visibility(
+    f: &ShadowFrustum,
+    light_maps: &[f32],
+    x: Vec3A,
+    n: Vec3A,
+    v: Vec3A,
+    r2: f32,
+    patch: f32,
+    biases: Biases,
+) -> MapVisibility {
+    let visible = MapVisibility {
+        real: true,
+        virtual_: true,
+        occluder_over_cos: None,
+    };
+    let l = f.light_space(x);
+    let Some(t) = f.texel(l) else {
+        return visible;
+    };
+    let texels = f.size * f.size;
+    let z_virtual = light_maps[t];
+    let z_real = light_maps[texels + t];
+    // The slope terms below are never negative, so a texel that passes both tests
+    // without them passes them with them (the same comparisons, so the same bits): most
+    // receivers skip the sqrt and divisions.
+    let virtual_may_occlude = z_virtual < l.z - biases.virtual_bias;
+    let real_may_occlude = z_real < l.z - biases.real_bias;
+    if biases.slope >= 0.0 && !virtual_may_occlude && !real_may_occlude {
+        return visible;
+    }
+    // tan of the angle of incidence, with cos clamped at 0.1.
+    let cos = (n.dot(v) / r2.sqrt()).clamp(0.1, 1.0);
+    let tan = (1.0 - cos * cos).sqrt() / cos;
+    let texel = f.footprint(l.z);
+    let slope = biases.slope * tan;
+    let virtual_occludes = z_virtual < l.z - (biases.virtual_bias + slope * texel);
+    let real_occludes = z_real < l.z - (biases.real_bias + slope * texel.max(patch));
+    let mut occluder = f32::INFINITY;
+    if virtual_occludes {
+        occluder = z_virtual;
+    }
+    if real_occludes {
+        occluder = occluder.min(z_real);
+    }
+    // Along the ray to the light, distance scales with light-space depth; over the
+    // cosine at the receiver, as `sample.path` records it.
+    let occluder_over_cos = occluder.is_finite().then(|| {
+        let r = r2.sqrt();
+        let d = r * (1.0 - occluder / l.z);
+        let cos_receiver = n.dot(v) / r;
+        d.max(0.0) / cos_receiver
+    });
+    MapVisibility {
+        real: !real_occludes,
+        virtual_: !virtual_occludes,
+        occluder_over_cos,
+    }
+}
+
 /// Eq. 6 as irradiance: E_j = I_j cos(theta_j)+ cos(theta)+ / r^2 for the receiver at
 /// `x` with unit normal `n`, where `v` = light position - x. r^2 is clamped below at
 /// A_j / pi: a Lambertian disk of area A and radiance L gives at most pi L = I / (A / pi)
@@ -120,47 +196,13 @@ pub(crate) fn shade_point(
             continue;
         };
         let (mut real_visible, mut virtual_visible) = (true, true);
-        let frustum = light.frustum_to_look_up(j, lookup);
-        if let Some(f) = frustum {
-            let l = f.light_space(x);
-            if let Some(t) = f.texel(l) {
-                let base = j * maps.stride;
-                let z_virtual = maps.data[base + t];
-                let z_real = maps.data[base + maps.texels + t];
-                // The slope terms below are never negative, so a texel that passes both
-                // tests without them passes them with them (the same comparisons, so the
-                // same bits): most receivers skip the sqrt and divisions.
-                let virtual_may_occlude = z_virtual < l.z - biases.virtual_bias;
-                let real_may_occlude = z_real < l.z - biases.real_bias;
-                if biases.slope >= 0.0 && !virtual_may_occlude && !real_may_occlude {
-                    e_r += e;
-                    e_rv += e;
-                    continue;
-                }
-                // tan of the angle of incidence, with cos clamped at 0.1.
-                let cos = (n.dot(v) / r2.sqrt()).clamp(0.1, 1.0);
-                let tan = (1.0 - cos * cos).sqrt() / cos;
-                let texel = f.footprint(l.z);
-                let slope = biases.slope * tan;
-                let virtual_occludes = z_virtual < l.z - (biases.virtual_bias + slope * texel);
-                let real_occludes = z_real < l.z - (biases.real_bias + slope * texel.max(patch));
-                virtual_visible = !virtual_occludes;
-                real_visible = !real_occludes;
-                let mut occluder = f32::INFINITY;
-                if !virtual_visible {
-                    occluder = z_virtual;
-                }
-                if !real_visible {
-                    occluder = occluder.min(z_real);
-                }
-                if occluder.is_finite() {
-                    // Along the ray to the light, distance scales with light-space depth;
-                    // over the cosine at the receiver, as `sample.path` records it.
-                    let r = r2.sqrt();
-                    let d = r * (1.0 - occluder / l.z);
-                    let cos_receiver = n.dot(v) / r;
-                    out.min_occluder = out.min_occluder.min(d.max(0.0) / cos_receiver);
-                }
+        if let Some(f) = light.frustum_to_look_up(j, lookup) {
+            let base = j * maps.stride;
+            let light_maps = &maps.data[base..base + 2 * maps.texels];
+            let seen = map_visibility(f, light_maps, x, n, v, r2, patch, biases);
+            (real_visible, virtual_visible) = (seen.real, seen.virtual_);
+            if let Some(d) = seen.occluder_over_cos {
+                out.min_occluder = out.min_occluder.min(d);
             }
         }
         if real_visible {

@@ -73,6 +73,28 @@ impl ShadowFrustum {
         })
     }
 
+    /// The square frustum from `light` along unit `axis` whose half-angle has tangent
+    /// `tan_half` (a spot's cone), splatting real points from the light on.
+    pub fn cone(light: Vec3, axis: Vec3, tan_half: f32, size: usize) -> Option<Self> {
+        let axis = axis.normalize_or_zero();
+        if axis == Vec3::ZERO || !(tan_half > 0.0 && tan_half.is_finite()) || size == 0 {
+            return None;
+        }
+        let helper = if axis.y.abs() < 0.9 { Vec3::Y } else { Vec3::X };
+        let right = helper.cross(axis).normalize();
+        let up = axis.cross(right);
+        Some(ShadowFrustum {
+            origin: light.into(),
+            right: right.into(),
+            up: up.into(),
+            axis: axis.into(),
+            tan_half,
+            scale: size as f32 / (2.0 * tan_half),
+            size,
+            real_from: 0.0,
+        })
+    }
+
     /// World point to light space (x, y, z along the axis).
     #[inline]
     pub fn light_space(&self, p: Vec3A) -> Vec3A {
@@ -81,8 +103,8 @@ impl ShadowFrustum {
     }
 
     /// The texel holding light-space point `l`, or `None` outside the frustum. (The
-    /// scalar reference: the stage's lanes compute the same texels.)
-    #[cfg(test)]
+    /// scalar path of the spot lights and the reference: the area lights' lanes compute
+    /// the same texels.)
     pub fn texel(&self, l: Vec3A) -> Option<usize> {
         if l.z.is_nan() || l.z <= 0.0 {
             return None;
@@ -93,8 +115,7 @@ impl ShadowFrustum {
     }
 
     /// The texel at map coordinates (`fx`, `fy`) (texel edges at integers), or `None`
-    /// off the map. (The scalar reference, as `texel`.)
-    #[cfg(test)]
+    /// off the map. (The scalar path, as `texel`.)
     pub fn texel_at(&self, fx: f32, fy: f32) -> Option<usize> {
         let s = self.size as f32;
         (fx >= 0.0 && fx < s && fy >= 0.0 && fy < s).then(|| {
@@ -110,7 +131,6 @@ impl ShadowFrustum {
     }
 
     /// World size of one texel at light-space depth `z`.
-    #[cfg(test)]
     pub fn footprint(&self, z: f32) -> f32 {
         z / self.scale
     }

@@ -15,11 +15,11 @@ use relume_scene::objects::{Material, Triangle};
 const W: u32 = 160;
 const H: u32 = 120;
 const CAMERA: Vec3 = Vec3::new(2.0, 3.0, 0.0);
-const SPHERE: Vec3 = Vec3::new(0.0, 0.8, 0.0);
-const RADIUS: f32 = 0.3;
-const LAMP: Vec3 = Vec3::new(0.0, 3.5, 0.0);
+pub(super) const SPHERE: Vec3 = Vec3::new(0.0, 0.8, 0.0);
+pub(super) const RADIUS: f32 = 0.3;
+pub(super) const LAMP: Vec3 = Vec3::new(0.0, 3.5, 0.0);
 /// Height of the real slab, between the lamp and the sphere's top.
-const SLAB_Y: f32 = 1.3;
+pub(super) const SLAB_Y: f32 = 1.3;
 const ALBEDO: Vec3 = Vec3::new(0.8, 0.3, 0.2);
 
 /// A camera looking straight down (camera x = world x, camera y = world z).
@@ -126,6 +126,7 @@ fn render(
         lights,
         objects: scene,
         transfer: None,
+        spots: &[],
     };
     sample_val(&inputs, &ValShadingParams::default()).unwrap()
 }
@@ -137,7 +138,7 @@ fn unshadowed(l: &AreaLight, x: Vec3, n: Vec3) -> f32 {
 }
 
 /// The distance from the sphere's centre to the segment from `x` to the light.
-fn segment_distance(x: Vec3, light: Vec3) -> f32 {
+pub(super) fn segment_distance(x: Vec3, light: Vec3) -> f32 {
     let d = light - x;
     let t = ((SPHERE - x).dot(d) / d.length_squared()).clamp(0.0, 1.0);
     (x + d * t).distance(SPHERE)
@@ -327,6 +328,7 @@ fn missing_depth_and_normals_give_nan_irradiance_not_a_failure() {
         lights: &empty_lights,
         objects: &VirtualScene::default(),
         transfer: None,
+        spots: &[],
     };
     let err = sample_val(&inputs, &ValShadingParams::default()).unwrap_err();
     assert!(err.to_string().contains("normals 4x4"), "{err}");
@@ -540,6 +542,7 @@ fn kernels_match_the_scalar_path(
         lights: set,
         objects: scene,
         transfer: None,
+        spots: &[],
     };
     let run = |mut renderer: ValRenderer| {
         let mut out = val_layers(depth.width, depth.height);

@@ -34,6 +34,7 @@ fn the_transfer_darkens_the_objects_where_they_occlude_themselves_and_nothing_el
             lights: &sky,
             objects: &scene,
             transfer,
+            spots: &[],
         };
         sample_val(&inputs, &ValShadingParams::default()).unwrap()
     };

@@ -381,17 +381,21 @@ mod tests {
         Arc::new(VirtualScene::new(triangles, vec![material]))
     }
 
-    #[test]
-    fn the_truth_keeps_the_recorded_pixels_the_objects_do_not_change() {
+    /// The header and frame 14 of a 64 x 48 synthetic recording of 15 frames.
+    fn small_recording() -> (Header, Frame) {
         let config = SynthConfig {
             frames: 15,
             width: 64,
             height: 48,
             ..SynthConfig::default()
         };
-        let header = synth::header(&config);
+        (synth::header(&config), synthetic_frame(&config, 14))
+    }
+
+    #[test]
+    fn the_truth_keeps_the_recorded_pixels_the_objects_do_not_change() {
+        let (header, frame) = small_recording();
         assert_eq!(unavailable(&header), None);
-        let frame = synthetic_frame(&config, 14);
         let renderer = TruthRenderer::new(&header, ObjectWorld::still(ball()), 1).unwrap();
         let truth = renderer.render(&frame, 1).unwrap().unwrap();
         // The camera model reproduces the recorded frame exactly.
@@ -438,14 +442,7 @@ mod tests {
 
     #[test]
     fn a_virtual_lamp_is_inserted_and_a_real_one_is_not() {
-        let config = SynthConfig {
-            frames: 15,
-            width: 64,
-            height: 48,
-            ..SynthConfig::default()
-        };
-        let header = synth::header(&config);
-        let frame = synthetic_frame(&config, 14);
+        let (header, frame) = small_recording();
         let room = relume_recording::synth::lamp::room_lamp();
         let light = |world| SpotLight {
             name: "lamp".into(),

@@ -56,12 +56,17 @@ impl ShadowFrustum {
         if distance.is_nan() || distance <= radius * 1.05 || normal.dot(v) <= -radius {
             return None;
         }
-        let axis = v / distance;
+        let tan_half = radius / (distance * distance - radius * radius).sqrt();
+        let real_from = (distance - radius - reach).max(0.0);
+        Some(Self::along(light, v / distance, tan_half, size, real_from))
+    }
+
+    /// The square frustum from `light` along unit `axis` (any right and up about it).
+    fn along(light: Vec3, axis: Vec3, tan_half: f32, size: usize, real_from: f32) -> Self {
         let helper = if axis.y.abs() < 0.9 { Vec3::Y } else { Vec3::X };
         let right = helper.cross(axis).normalize();
         let up = axis.cross(right);
-        let tan_half = radius / (distance * distance - radius * radius).sqrt();
-        Some(ShadowFrustum {
+        ShadowFrustum {
             origin: light.into(),
             right: right.into(),
             up: up.into(),
@@ -69,8 +74,8 @@ impl ShadowFrustum {
             tan_half,
             scale: size as f32 / (2.0 * tan_half),
             size,
-            real_from: (distance - radius - reach).max(0.0),
-        })
+            real_from,
+        }
     }
 
     /// The square frustum from `light` along unit `axis` whose half-angle has tangent
@@ -80,19 +85,7 @@ impl ShadowFrustum {
         if axis == Vec3::ZERO || !(tan_half > 0.0 && tan_half.is_finite()) || size == 0 {
             return None;
         }
-        let helper = if axis.y.abs() < 0.9 { Vec3::Y } else { Vec3::X };
-        let right = helper.cross(axis).normalize();
-        let up = axis.cross(right);
-        Some(ShadowFrustum {
-            origin: light.into(),
-            right: right.into(),
-            up: up.into(),
-            axis: axis.into(),
-            tan_half,
-            scale: size as f32 / (2.0 * tan_half),
-            size,
-            real_from: 0.0,
-        })
+        Some(Self::along(light, axis, tan_half, size, 0.0))
     }
 
     /// World point to light space (x, y, z along the axis).

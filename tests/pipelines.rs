@@ -420,6 +420,22 @@ fn the_room_lamp_pipelines_are_the_dir_pipeline_with_the_real_lamp_and_a_box() {
     assert!(knecht.stages.iter().any(|s| s.kind == "sample.dir"));
 }
 
+/// The atlas pipeline is the VAL one with light.val's lights found on the room's
+/// surfaces (paper 004 Secs. 4.1-4.3) and nothing else changed.
+#[test]
+fn the_val_atlas_pipeline_is_the_val_pipeline_with_the_atlas_source() {
+    let p = assert_twin(
+        "mixed-reality-val",
+        "mixed-reality-val-atlas",
+        &[(
+            "kind = \"light.val\"\nevery = 8\nlag = 1\n",
+            "kind = \"light.val\"\nevery = 8\nlag = 1\nparams = { source = \"atlas\" }\n",
+        )],
+    );
+    let val = p.stages.iter().find(|s| s.kind == "light.val").unwrap();
+    assert_eq!(val.inputs["cloud"], "cloud");
+}
+
 /// The Distance Impostor Tracing pipeline is the default chain with the query swapped
 /// and nothing else changed (its temporal reuse and filter settings included).
 #[test]

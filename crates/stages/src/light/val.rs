@@ -2,11 +2,21 @@
 //! environment light (importance samples, k-means on position and normal warm-started
 //! from the previous frame, per-cluster integration of eq. 7) and the nine SH
 //! coefficients of the indirect part. See [`relume_scene::light::val::ValBuilder`].
+//!
+//! `source = "map"` (the default) takes the direct part of a map around the objects
+//! (`light.split`'s); `source = "atlas"` takes paper 004's near-field radiance atlas
+//! (Secs. 4.1-4.3, [`relume_scene::light::val::atlas`]): the environment-sample cloud as
+//! texels of the room's surfaces, its brightest `atlas_share` as the direct part, the
+//! lights placed on the surfaces where the light is, facing as they face, whether or
+//! not the objects' centre sees them. The indirect part stays the map's (SH9 at the
+//! objects).
 
 use super::split::{check_map, same_map};
 use crate::kind;
 use crate::kind::FrameProducts;
 use relume_graph::{Frame, ParamDefault, ParamSpec, Ports, Product, Stage, StageError, StageInfo};
+use relume_scene::light::cloud::EnvCloud;
+use relume_scene::light::val::atlas;
 use relume_scene::light::{AreaLights, EnvMap, LightMethod, ValBuilder, ValParams};
 use std::sync::Arc;
 
@@ -42,6 +52,24 @@ const PARAMS: &[ParamSpec] = &[
     )
     .range(0.0, 1e6),
     ParamSpec::new(
+        "source",
+        ParamDefault::Str("map"),
+        "where the direct light comes from: map = the direct part of the map around the objects (direct_light); atlas = paper 004's radiance atlas, the environment-sample cloud (input cloud) as texels of the room's surfaces, the lights placed on them (Secs. 4.1-4.3)",
+    )
+    .choices(&["map", "atlas"]),
+    ParamSpec::new(
+        "atlas_share",
+        ParamDefault::Float(0.9),
+        "with source = atlas: the share of the atlas's light (L dA) its brightest texels take as the direct part (Sec. 4.2; light.split's ratio for a map)",
+    )
+    .range(0.01, 1.0),
+    ParamSpec::new(
+        "atlas_cell_size",
+        ParamDefault::Float(0.02),
+        "with source = atlas: the cloud's grid cell, metres (cloud.samples' cell_size): a sample stands for cell^2 / (|n_x| + |n_y| + |n_z|) of surface",
+    )
+    .range(0.001, 10.0),
+    ParamSpec::new(
         "distant_radius",
         ParamDefault::Float(100.0),
         "metres from the map's centre where texels of infinite distance are placed (their area is dOmega r^2, so irradiance at the centre is unchanged)",
@@ -53,14 +81,21 @@ pub const INFO: StageInfo = StageInfo {
     kind: "light.val",
     summary: "virtual area lights by importance sampling + k-means, and SH9 of the indirect light (paper 004 Secs. 4.3-4.4)",
     params: PARAMS,
-    ports: |_| {
-        Ports::fixed(
+    ports: |params| match params.str("source") {
+        "atlas" => Ports::fixed(
+            &[
+                ("cloud", &[kind::CLOUD]),
+                ("indirect_light", &[kind::ENVIRONMENT]),
+            ],
+            &[("lights", &[kind::AREA_LIGHTS])],
+        ),
+        _ => Ports::fixed(
             &[
                 ("direct_light", &[kind::ENVIRONMENT]),
                 ("indirect_light", &[kind::ENVIRONMENT]),
             ],
             &[("lights", &[kind::AREA_LIGHTS])],
-        )
+        ),
     },
     build: |ctx| {
         let p = ctx.params;
@@ -71,8 +106,16 @@ pub const INFO: StageInfo = StageInfo {
                 "samples = {samples} is fewer than lights = {lights}: each light is a cluster of samples"
             )));
         }
+        let source = match p.str("source") {
+            "atlas" => DirectSource::Atlas {
+                cloud: ctx.input("cloud"),
+                share: p.float("atlas_share") as f32,
+                cell_size: p.float("atlas_cell_size") as f32,
+            },
+            _ => DirectSource::Map(ctx.input("direct_light")),
+        };
         Ok(Box::new(Val {
-            direct: ctx.input("direct_light"),
+            source,
             indirect: ctx.input("indirect_light"),
             lights: ctx.output("lights"),
             builder: ValBuilder::new(ValParams {
@@ -89,11 +132,26 @@ pub const INFO: StageInfo = StageInfo {
     },
 };
 
-/// The last inputs (direct, indirect) and the lights made from them.
-type Cached = (Arc<EnvMap>, Arc<EnvMap>, Arc<AreaLights>);
+/// Where the direct light comes from.
+enum DirectSource {
+    /// The direct part of a map around the objects (product name).
+    Map(String),
+    /// The radiance atlas of the cloud (product name), its direct share, its grid cell.
+    Atlas {
+        cloud: String,
+        share: f32,
+        cell_size: f32,
+    },
+}
+
+/// The last direct input, indirect input and the lights made from them.
+enum Cached {
+    Map(Arc<EnvMap>, Arc<EnvMap>, Arc<AreaLights>),
+    Atlas(Arc<EnvCloud>, Arc<EnvMap>, Arc<AreaLights>),
+}
 
 struct Val {
-    direct: String,
+    source: DirectSource,
     indirect: String,
     lights: String,
     builder: ValBuilder,
@@ -102,21 +160,49 @@ struct Val {
 
 impl Stage for Val {
     fn process(&mut self, frame: &mut Frame) -> Result<(), StageError> {
-        let direct = frame.environment(&self.direct)?.clone();
         let indirect = frame.environment(&self.indirect)?.clone();
-        let reuse = matches!(&self.last,
-            Some((d, i, _)) if same_map(d, &direct) && same_map(i, &indirect));
-        if !reuse {
-            check_map(&self.direct, &direct)?;
-            check_map(&self.indirect, &indirect)?;
-            let lights = Arc::new(self.builder.update(&direct, &indirect));
-            self.last = Some((direct, indirect, lights));
-        }
-        let (_, _, lights) = self.last.as_ref().expect("set above");
-        frame.insert(
-            &self.lights,
-            Product::new(kind::AREA_LIGHTS, lights.clone()),
-        );
+        let lights = match &self.source {
+            DirectSource::Map(name) => {
+                let direct = frame.environment(name)?.clone();
+                match &self.last {
+                    Some(Cached::Map(d, i, lights))
+                        if same_map(d, &direct) && same_map(i, &indirect) =>
+                    {
+                        lights.clone()
+                    }
+                    _ => {
+                        check_map(name, &direct)?;
+                        check_map(&self.indirect, &indirect)?;
+                        let lights = Arc::new(self.builder.update(&direct, &indirect));
+                        self.last = Some(Cached::Map(direct, indirect, lights.clone()));
+                        lights
+                    }
+                }
+            }
+            DirectSource::Atlas {
+                cloud: name,
+                share,
+                cell_size,
+            } => {
+                let cloud = frame.cloud(name)?.clone();
+                match &self.last {
+                    Some(Cached::Atlas(c, i, lights))
+                        if Arc::ptr_eq(c, &cloud) && same_map(i, &indirect) =>
+                    {
+                        lights.clone()
+                    }
+                    _ => {
+                        check_map(&self.indirect, &indirect)?;
+                        let texels = atlas::atlas_of_cloud(&cloud, *cell_size);
+                        let direct = atlas::direct_part(&texels, *share);
+                        let lights = Arc::new(self.builder.update_atlas(&direct, &indirect));
+                        self.last = Some(Cached::Atlas(cloud, indirect, lights.clone()));
+                        lights
+                    }
+                }
+            }
+        };
+        frame.insert(&self.lights, Product::new(kind::AREA_LIGHTS, lights));
         Ok(())
     }
 }
@@ -125,7 +211,7 @@ impl Stage for Val {
 mod tests {
     use super::*;
     use glam::Vec3;
-    use relume_graph::{BuildContext, ParamValue, Params};
+    use relume_graph::{BuildContext, ParamValue, Params, Ports};
     use relume_recording::{Header, Intrinsics};
     use relume_scene::light::split::split_direct_indirect;
     use relume_scene::light::val::val_center_drift;
@@ -198,5 +284,59 @@ mod tests {
         for l in &first.lights {
             assert!((l.position.length() - 100.0).abs() < 1e-3, "{}", l.position);
         }
+    }
+
+    #[test]
+    fn the_atlas_source_places_lights_on_the_cloud_where_the_light_is() {
+        let mut params = Params::defaults(PARAMS);
+        params.set("source", ParamValue::Str("atlas".into()));
+        params.set("atlas_share", ParamValue::Float(0.6));
+        let roles = |ports: Ports| {
+            ports
+                .inputs
+                .iter()
+                .map(|p| p.role.clone())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(roles((INFO.ports)(&params)), ["cloud", "indirect_light"]);
+        assert_eq!(
+            roles((INFO.ports)(&Params::defaults(PARAMS))),
+            ["direct_light", "indirect_light"]
+        );
+        // A dim floor of 2 cm samples and a bright ceiling patch facing down.
+        let mut cloud = EnvCloud::default();
+        for i in 0..100 {
+            for j in 0..100 {
+                let (x, z) = (i as f32 * 0.02 - 1.0, j as f32 * 0.02 - 1.0);
+                cloud.positions.push(Vec3::new(x, 0.0, z));
+                cloud.normals.push(Vec3::Y);
+                cloud.colors.push(Vec3::splat(0.1));
+                if i < 20 && j < 20 {
+                    cloud.positions.push(Vec3::new(x + 0.5, 2.4, z + 0.5));
+                    cloud.normals.push(Vec3::NEG_Y);
+                    cloud.colors.push(Vec3::new(8.0, 7.0, 6.0));
+                }
+            }
+        }
+        let env = EnvMap::from_fn(64, 32, |_| Vec3::splat(0.2));
+        let mut f = frame(&env);
+        f.insert("cloud", Product::new(kind::CLOUD, Arc::new(cloud)));
+        let mut s = build(params).unwrap();
+        s.process(&mut f).unwrap();
+        let lights = f.area_lights("lights").unwrap();
+        assert!(!lights.lights.is_empty());
+        let mut intensity = Vec3::ZERO;
+        for l in &lights.lights {
+            assert!((l.position.y - 2.4).abs() < 1e-5, "{}", l.position);
+            assert!((-0.5..=-0.1).contains(&l.position.x), "{}", l.position);
+            assert_eq!(l.normal, Vec3::NEG_Y);
+            intensity += l.intensity;
+        }
+        // 400 samples of 4 cm^2: 0.16 m^2 of (8, 7, 6).
+        let expected = Vec3::new(8.0, 7.0, 6.0) * 0.16;
+        assert!(
+            (intensity - expected).abs().max_element() < 1e-4,
+            "{intensity}"
+        );
     }
 }

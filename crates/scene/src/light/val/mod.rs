@@ -4,6 +4,7 @@ use super::EnvMap;
 use super::kmeans::{self, Feature};
 use super::sh::project_sh9;
 use super::split::{luminance, texel_area};
+use atlas::AtlasTexel;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use relume_base::rng;
@@ -195,6 +196,117 @@ impl ValBuilder {
         ));
         let lights = self.integrate(direct.center);
         AreaLights { lights, sh9 }
+    }
+
+    /// The VALs of the direct part of a radiance atlas (paper 004 Sec. 4.3 as published:
+    /// lights placed where the light is, on the room's surfaces, not on a map around the
+    /// object) and the SH9 coefficients of `indirect`. `direct` are the atlas's direct
+    /// texels ([`atlas::direct_part`]). Steps 2 and 3 are [`ValBuilder::update`]'s, on
+    /// features (position, surface normal); step 4 assigns every direct texel to its
+    /// nearest centre and integrates eq. 7: I_j = sum L_k dA_k, area_j = sum dA_k, the
+    /// light at the clusters' L dA-weighted mean position, facing their weighted mean
+    /// normal. Clusters that integrate nothing, or whose normals cancel, are dropped.
+    pub fn update_atlas(&mut self, direct: &[AtlasTexel], indirect: &EnvMap) -> AreaLights {
+        let sh9 = project_sh9(indirect);
+        self.texels.clear();
+        self.texels.extend(direct.iter().filter_map(|t| {
+            let weight = t.weight();
+            (weight > 0.0 && weight.is_finite()).then_some(DirectTexel {
+                feature: Feature {
+                    position: t.position,
+                    normal: t.normal,
+                },
+                direction: -t.normal,
+                radiance: t.radiance,
+                area: t.area,
+                d_omega: 0.0,
+                weight,
+            })
+        }));
+        let p = self.params;
+        self.draw_samples(p.samples);
+        if self.samples.is_empty() {
+            return AreaLights {
+                lights: Vec::new(),
+                sh9,
+            };
+        }
+        let cold = self.centres.len() != p.lights.max(1);
+        if cold {
+            self.centres =
+                kmeans::seed_centres(&self.samples, p.lights.max(1), p.normal_weight, p.seed);
+        }
+        let iterations = if cold {
+            COLD_START_ITERATIONS.max(p.iterations)
+        } else {
+            p.iterations
+        };
+        self.last_report = Some(kmeans::kmeans(
+            &self.samples,
+            &mut self.centres,
+            iterations,
+            p.normal_weight,
+            &mut self.assignment,
+        ));
+        AreaLights {
+            lights: self.integrate_on_surfaces(),
+            sh9,
+        }
+    }
+
+    /// Step 4 of [`ValBuilder::update_atlas`]: each direct texel to its nearest centre,
+    /// integrated where it lies.
+    fn integrate_on_surfaces(&self) -> Vec<AreaLight> {
+        #[derive(Clone, Copy, Default)]
+        struct Sum {
+            intensity: DVec3,
+            area: f64,
+            position: DVec3,
+            normal: DVec3,
+            weight: f64,
+        }
+        let m = self.centres.len();
+        let w = self.params.normal_weight;
+        let partial: Vec<Vec<Sum>> = self
+            .texels
+            .par_chunks(1024)
+            .map(|chunk| {
+                let mut sums = vec![Sum::default(); m];
+                for t in chunk {
+                    let (j, _) = kmeans::nearest_centre(&self.centres, &t.feature, w);
+                    let s = &mut sums[j];
+                    s.intensity += t.radiance.as_dvec3() * t.area as f64;
+                    s.area += t.area as f64;
+                    s.position += t.feature.position.as_dvec3() * t.weight;
+                    s.normal += t.feature.normal.as_dvec3() * t.weight;
+                    s.weight += t.weight;
+                }
+                sums
+            })
+            .collect();
+        let mut total = vec![Sum::default(); m];
+        for sums in &partial {
+            for (t, s) in total.iter_mut().zip(sums) {
+                t.intensity += s.intensity;
+                t.area += s.area;
+                t.position += s.position;
+                t.normal += s.normal;
+                t.weight += s.weight;
+            }
+        }
+        total
+            .iter()
+            .filter(|s| s.area > 0.0 && s.weight > 0.0)
+            .filter_map(|s| {
+                let light = AreaLight {
+                    position: (s.position / s.weight).as_vec3(),
+                    normal: s.normal.try_normalize()?.as_vec3(),
+                    intensity: s.intensity.as_vec3(),
+                    area: s.area as f32,
+                };
+                (light.position.is_finite() && light.intensity.is_finite()).then_some(light)
+            })
+            .collect()
     }
 
     /// Step 1: the direct texels that can emit, with their features and weights.
@@ -389,5 +501,6 @@ pub fn val_center_drift(prev: &AreaLights, cur: &AreaLights) -> f32 {
     (sum / n as f64) as f32
 }
 
+pub mod atlas;
 #[cfg(test)]
 mod tests;

@@ -296,3 +296,93 @@ fn prt_only_has_no_lights_and_all_of_the_map_in_sh() {
         assert_eq!(set.sh9, project_sh9(&map));
     }
 }
+
+/// An atlas of a 4 x 4 m floor (dim, 5 cm texels) with a 1 x 0.6 m panel at 2.5 m
+/// facing down (bright) and a 0.5 x 0.5 m patch of the wall x = 2 facing -x.
+fn room_atlas() -> Vec<atlas::AtlasTexel> {
+    let mut atlas = Vec::new();
+    let mut grid = |origin: Vec3, u: Vec3, v: Vec3, (nu, nv): (usize, usize), normal, l| {
+        for i in 0..nu {
+            for j in 0..nv {
+                atlas.push(atlas::AtlasTexel {
+                    position: origin + u * (i as f32 + 0.5) + v * (j as f32 + 0.5),
+                    normal,
+                    radiance: l,
+                    area: u.length() * v.length(),
+                });
+            }
+        }
+    };
+    let s = 0.05;
+    let floor = Vec3::new(-2.0, 0.0, -2.0);
+    grid(
+        floor,
+        Vec3::X * s,
+        Vec3::Z * s,
+        (80, 80),
+        Vec3::Y,
+        Vec3::splat(0.2),
+    );
+    let panel = Vec3::new(-0.5, 2.5, -0.3);
+    grid(
+        panel,
+        Vec3::X * s,
+        Vec3::Z * s,
+        (20, 12),
+        Vec3::NEG_Y,
+        Vec3::new(9.0, 8.0, 7.0),
+    );
+    let wall = Vec3::new(2.0, 1.0, -0.25);
+    grid(
+        wall,
+        Vec3::Y * s,
+        Vec3::Z * s,
+        (10, 10),
+        Vec3::NEG_X,
+        Vec3::new(4.0, 5.0, 7.0),
+    );
+    atlas
+}
+
+#[test]
+fn atlas_lights_sit_on_the_bright_surfaces_and_carry_their_intensity() {
+    let atlas = room_atlas();
+    let direct = atlas::direct_part(&atlas, 0.6);
+    // The panel (0.6 m^2 of luminance 8.1: 4.9) holds 52 % of the light, with the wall
+    // patch (0.25 m^2 of 4.9: 1.2) 65 %; the floor (16 m^2 of 0.2: 3.2) is left to the
+    // indirect part.
+    assert_eq!(direct.len(), 20 * 12 + 10 * 10);
+    let lights = ValBuilder::new(params(8)).update_atlas(&direct, &room(2.5, 1.0));
+    assert!(!lights.lights.is_empty() && lights.lights.len() <= 8);
+    let (mut on_panel, mut on_wall) = (Vec3::ZERO, Vec3::ZERO);
+    for l in &lights.lights {
+        let p = l.position;
+        if (p.y - 2.5).abs() < 1e-4 {
+            assert!(p.x.abs() <= 0.5 && (-0.3..=0.3).contains(&p.z), "{p}");
+            assert!((l.normal - Vec3::NEG_Y).length() < 1e-5);
+            on_panel += l.intensity;
+        } else {
+            assert!(
+                (p.x - 2.0).abs() < 1e-4,
+                "a light off the bright surfaces: {p}"
+            );
+            assert!((l.normal - Vec3::NEG_X).length() < 1e-5);
+            on_wall += l.intensity;
+        }
+    }
+    // Eq. 7: each surface's lights carry its L dA.
+    let close = |a: Vec3, b: Vec3| (a - b).abs().max_element() < 1e-3 * b.max_element();
+    assert!(
+        close(on_panel, Vec3::new(9.0, 8.0, 7.0) * 0.6),
+        "{on_panel}"
+    );
+    assert!(close(on_wall, Vec3::new(4.0, 5.0, 7.0) * 0.25), "{on_wall}");
+    // The same atlas gives the same lights (warm start from converged centres).
+    let mut builder = ValBuilder::new(params(8));
+    let first = builder.update_atlas(&direct, &room(2.5, 1.0));
+    assert_eq!(
+        first,
+        ValBuilder::new(params(8)).update_atlas(&direct, &room(2.5, 1.0))
+    );
+    assert!(builder.update_atlas(&[], &room(2.5, 1.0)).lights.is_empty());
+}

@@ -129,6 +129,9 @@ def main():
     ap.add_argument("--out", default="out/double-shadow")
     ap.add_argument("--frame", type=int, default=14)
     a = ap.parse_args()
+    if not os.path.isfile(a.relume):
+        sys.exit(f"{a.relume} does not exist: build it with `cargo build --release` "
+                 "(or name a relume binary with --relume PATH)")
     os.makedirs(a.out, exist_ok=True)
     recording = os.path.join(a.out, "lamp.relume")
     if not os.path.exists(recording):

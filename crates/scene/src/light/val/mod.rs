@@ -171,29 +171,11 @@ impl ValBuilder {
     pub fn update(&mut self, direct: &EnvMap, indirect: &EnvMap) -> AreaLights {
         let sh9 = project_sh9(indirect);
         self.gather_texels(direct);
-        let p = self.params;
-        if p.method == LightMethod::Vpls {
+        if self.params.method == LightMethod::Vpls {
             let lights = self.vpls();
             return AreaLights { lights, sh9 };
         }
-        self.draw_samples(p.samples);
-        let cold = self.centres.len() != p.lights.max(1);
-        if cold {
-            self.centres =
-                kmeans::seed_centres(&self.samples, p.lights.max(1), p.normal_weight, p.seed);
-        }
-        let iterations = if cold {
-            COLD_START_ITERATIONS.max(p.iterations)
-        } else {
-            p.iterations
-        };
-        self.last_report = Some(kmeans::kmeans(
-            &self.samples,
-            &mut self.centres,
-            iterations,
-            p.normal_weight,
-            &mut self.assignment,
-        ));
+        self.cluster();
         let lights = self.integrate(direct.center);
         AreaLights { lights, sh9 }
     }
@@ -223,31 +205,14 @@ impl ValBuilder {
                 weight,
             })
         }));
-        let p = self.params;
-        self.draw_samples(p.samples);
-        if self.samples.is_empty() {
+        if self.texels.is_empty() {
+            // Nothing emits: no lights, and the centres stay for the next update.
             return AreaLights {
                 lights: Vec::new(),
                 sh9,
             };
         }
-        let cold = self.centres.len() != p.lights.max(1);
-        if cold {
-            self.centres =
-                kmeans::seed_centres(&self.samples, p.lights.max(1), p.normal_weight, p.seed);
-        }
-        let iterations = if cold {
-            COLD_START_ITERATIONS.max(p.iterations)
-        } else {
-            p.iterations
-        };
-        self.last_report = Some(kmeans::kmeans(
-            &self.samples,
-            &mut self.centres,
-            iterations,
-            p.normal_weight,
-            &mut self.assignment,
-        ));
+        self.cluster();
         AreaLights {
             lights: self.integrate_on_surfaces(),
             sh9,
@@ -307,6 +272,30 @@ impl ValBuilder {
                 (light.position.is_finite() && light.intensity.is_finite()).then_some(light)
             })
             .collect()
+    }
+
+    /// Steps 2 and 3: importance samples of the texels, clustered by k-means warm-started
+    /// from the previous update's centres (seeded and run to convergence on a cold start).
+    fn cluster(&mut self) {
+        let p = self.params;
+        self.draw_samples(p.samples);
+        let cold = self.centres.len() != p.lights.max(1);
+        if cold {
+            self.centres =
+                kmeans::seed_centres(&self.samples, p.lights.max(1), p.normal_weight, p.seed);
+        }
+        let iterations = if cold {
+            COLD_START_ITERATIONS.max(p.iterations)
+        } else {
+            p.iterations
+        };
+        self.last_report = Some(kmeans::kmeans(
+            &self.samples,
+            &mut self.centres,
+            iterations,
+            p.normal_weight,
+            &mut self.assignment,
+        ));
     }
 
     /// Step 1: the direct texels that can emit, with their features and weights.

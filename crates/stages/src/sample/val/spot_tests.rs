@@ -3,7 +3,7 @@
 //! beside the axis, a virtual sphere under a lamp at 3.5 m).
 
 use super::tests::{
-    LAMP, RADIUS, SLAB_Y, bits, camera, lights, real_scene, segment_distance, sphere,
+    LAMP, RADIUS, SLAB_Y, bits, lights, real_scene, render_with_spots, segment_distance, sphere,
 };
 use super::*;
 use relume_base::raster::{DepthImage, Vec3Image};
@@ -24,18 +24,7 @@ fn spot(world: LightWorld) -> SpotLight {
 
 /// The layers with no area lights (their SH9 only) and `spots`.
 fn render(depth: &DepthImage, normals: &Vec3Image, spots: &[SpotLight]) -> IrradianceLayers {
-    let (camera, camera_to_world) = camera();
-    let inputs = ValInputs {
-        depth,
-        normals,
-        camera,
-        camera_to_world,
-        lights: &lights(Vec::new()),
-        objects: &sphere(),
-        transfer: None,
-        spots,
-    };
-    sample_val(&inputs, &ValShadingParams::default()).unwrap()
+    render_with_spots(depth, normals, &lights(Vec::new()), &sphere(), spots)
 }
 
 /// Where a floor point stands: under the slab as the lamp sees it (2 cm in, or

@@ -117,6 +117,17 @@ fn render(
     lights: &AreaLights,
     scene: &VirtualScene,
 ) -> IrradianceLayers {
+    render_with_spots(depth, normals, lights, scene, &[])
+}
+
+/// The layers of the test camera's view with `lights`, the objects `scene` and `spots`.
+pub(super) fn render_with_spots(
+    depth: &DepthImage,
+    normals: &Vec3Image,
+    lights: &AreaLights,
+    scene: &VirtualScene,
+    spots: &[relume_scene::light::SpotLight],
+) -> IrradianceLayers {
     let (camera, camera_to_world) = camera();
     let inputs = ValInputs {
         depth,
@@ -126,7 +137,7 @@ fn render(
         lights,
         objects: scene,
         transfer: None,
-        spots: &[],
+        spots,
     };
     sample_val(&inputs, &ValShadingParams::default()).unwrap()
 }

@@ -6,12 +6,14 @@
 //!
 //! | bytes | field |
 //! |---|---|
-//! | 8 | magic `RLPRT001` |
+//! | 8 | magic `RLPRT002` |
 //! | 16 | digest (two 64-bit hashes of the triangles, the sample count and the seed) |
 //! | 4 | triangles T (u32) |
 //! | 4 | vertices V (u32) |
+//! | 4 | bounce vectors B (u32): 0, or V for a scene of several objects |
 //! | 12 T | per triangle corner, its vertex index (u32) |
 //! | 36 V | per vertex, the nine C_vk (f32) |
+//! | 36 B | per vertex, the nine bounce coefficients B_vk (f32) |
 //!
 //! A file is written to a temporary name in the same folder and renamed, so a reader
 //! never sees half of one. A file that does not match (size, magic, digest, an index out
@@ -26,11 +28,11 @@ use relume_base::rng;
 use relume_recording::writer::write_file_atomic;
 use std::path::{Path, PathBuf};
 
-const MAGIC: &[u8; 8] = b"RLPRT001";
+const MAGIC: &[u8; 8] = b"RLPRT002";
 /// The version of [`Transfer::compute`]'s estimator, in the digest: bump it when the
 /// directions, the ray offset or the estimate change, so old files are not used.
-const ESTIMATOR_VERSION: u64 = 1;
-const HEADER_BYTES: usize = 8 + 16 + 4 + 4;
+const ESTIMATOR_VERSION: u64 = 2;
+const HEADER_BYTES: usize = 8 + 16 + 4 + 4 + 4;
 
 /// What [`load_or_compute`] did.
 #[derive(Debug)]
@@ -87,16 +89,19 @@ pub fn cache_path(dir: &Path, digest: &str) -> PathBuf {
 /// The file's bytes for `transfer` under `digest`.
 pub fn encode(transfer: &Transfer, digest: &str) -> Vec<u8> {
     let mut bytes = Vec::with_capacity(
-        HEADER_BYTES + 4 * transfer.corner_vertex.len() + 36 * transfer.vectors.len(),
+        HEADER_BYTES
+            + 4 * transfer.corner_vertex.len()
+            + 36 * (transfer.vectors.len() + transfer.bounce.len()),
     );
     bytes.extend_from_slice(MAGIC);
     bytes.extend_from_slice(&digest_bytes(digest));
     bytes.extend_from_slice(&((transfer.corner_vertex.len() / 3) as u32).to_le_bytes());
     bytes.extend_from_slice(&(transfer.vectors.len() as u32).to_le_bytes());
+    bytes.extend_from_slice(&(transfer.bounce.len() as u32).to_le_bytes());
     for v in &transfer.corner_vertex {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
-    for vector in &transfer.vectors {
+    for vector in transfer.vectors.iter().chain(&transfer.bounce) {
         for c in vector {
             bytes.extend_from_slice(&c.to_le_bytes());
         }
@@ -126,11 +131,14 @@ pub fn decode(bytes: &[u8], digest: &str, triangles: usize) -> Result<Transfer, 
         return Err("its digest is not the scene's".into());
     }
     let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
-    let (t, v) = (word(24) as usize, word(28) as usize);
+    let (t, v, b) = (word(24) as usize, word(28) as usize, word(32) as usize);
     if t != triangles {
         return Err(format!("it holds {t} triangles, the scene {triangles}"));
     }
-    let expected = HEADER_BYTES as u128 + 12 * t as u128 + 36 * v as u128;
+    if b != 0 && b != v {
+        return Err(format!("it holds {b} bounce vectors for {v} vertices"));
+    }
+    let expected = HEADER_BYTES as u128 + 12 * t as u128 + 36 * (v + b) as u128;
     if bytes.len() as u128 != expected {
         return Err(format!(
             "{} bytes where {expected} were expected",
@@ -143,7 +151,7 @@ pub fn decode(bytes: &[u8], digest: &str, triangles: usize) -> Result<Transfer, 
         .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
         .collect();
     let floats = &bytes[HEADER_BYTES + 12 * t..];
-    let vectors: Vec<[f32; 9]> = floats
+    let mut vectors: Vec<[f32; 9]> = floats
         .chunks_exact(36)
         .map(|chunk| {
             std::array::from_fn(|k| {
@@ -154,9 +162,11 @@ pub fn decode(bytes: &[u8], digest: &str, triangles: usize) -> Result<Transfer, 
     if vectors.iter().flatten().any(|c| !c.is_finite()) {
         return Err("it holds non-finite coefficients".into());
     }
+    let bounce = vectors.split_off(v);
     let transfer = Transfer {
         corner_vertex,
         vectors,
+        bounce,
     };
     if !transfer.fits(triangles) {
         return Err("a corner's vertex index is out of range".into());
@@ -179,7 +189,7 @@ pub fn load_or_compute(
     let path = cache_path(dir, &digest);
     // A file larger than any for this scene (at most 3 vertices per triangle) is not
     // read at all.
-    let largest = HEADER_BYTES as u64 + 12 * scene.triangles.len() as u64 * 10;
+    let largest = HEADER_BYTES as u64 + (12 + 2 * 36 * 3) * scene.triangles.len() as u64;
     let fits = std::fs::metadata(&path).is_ok_and(|m| m.len() <= largest);
     let existing = fits
         .then(|| relume_base::files::read_regular(&path).ok())

@@ -67,6 +67,20 @@ pub struct Transfer {
     pub corner_vertex: Vec<u32>,
     /// Per vertex, the nine coefficients C_vk, k = 0..9 in [`sh9_basis`]'s order.
     pub vectors: Vec<[f32; 9]>,
+    /// Per vertex, the transfer of the light the *other* objects send it (paper 004
+    /// Sec. 4.4, Fig. 7 bottom): the paper's own transfer, V cos(theta) with V the
+    /// object's occlusion of itself only, B_vk = int [the ray's first hit is not this
+    /// vertex's object] cos(theta) Y_k(w) dw, with `vectors`' directions and rays. The
+    /// other objects' light is the dot product of B_vk with the SH coefficients of
+    /// their radiance as seen from this object's centre (`sample.val` computes those
+    /// per frame, as the paper's cube map), while the room's light keeps C_vk, which
+    /// the other objects block. (A mask of the directions where the other objects
+    /// stand would be exact before the SH projection, but the product of two
+    /// projected caps keeps a quarter of their overlap; a smooth lobe keeps the SH9
+    /// irradiance's accuracy.) Empty when the scene has fewer than two objects
+    /// (objects are told apart by the triangles' material index, one per object in
+    /// [`VirtualScene::from_specs`]).
+    pub bounce: Vec<[f32; 9]>,
 }
 
 /// The distinct (position, normal) corners of `scene` and, per corner, its index among
@@ -88,6 +102,29 @@ pub fn scene_vertices(scene: &VirtualScene) -> (Vec<(Vec3, Vec3)>, Vec<u32>) {
         }
     }
     (vertices, corner_vertex)
+}
+
+/// The number of objects of `scene`: one more than the largest material index of
+/// its triangles (0 for an empty scene).
+pub fn object_count(scene: &VirtualScene) -> usize {
+    scene
+        .triangles
+        .iter()
+        .map(|t| t.material as usize + 1)
+        .max()
+        .unwrap_or(0)
+}
+
+/// Per vertex, the object (material index) of the first triangle that has it.
+fn vertex_objects(scene: &VirtualScene, corner_vertex: &[u32], vertices: usize) -> Vec<u32> {
+    let mut owners = vec![u32::MAX; vertices];
+    for (corner, &v) in corner_vertex.iter().enumerate() {
+        let owner = &mut owners[v as usize];
+        if *owner == u32::MAX {
+            *owner = scene.triangles[corner / 3].material;
+        }
+    }
+    owners
 }
 
 /// The base-2 radical inverse of `i`: bit-reversed, as a fraction in [0, 1).
@@ -115,12 +152,18 @@ impl Transfer {
     ///
     /// Gives up with [`Cancelled`] when the process is asked to stop
     /// ([`relume_base::cancel`]), checked before each vertex.
+    ///
+    /// With two objects or more, each ray is a closest-hit query that also says
+    /// whether another object is hit first ([`Transfer::bounce`]); whether anything is
+    /// hit, and so `vectors`, is the same as with the any-hit query of one object.
     pub fn compute(scene: &VirtualScene, params: TransferParams) -> Result<Transfer, Cancelled> {
         let (vertices, corner_vertex) = scene_vertices(scene);
+        let owners = vertex_objects(scene, &corner_vertex, vertices.len());
+        let several_objects = object_count(scene) > 1;
         let n = params.samples.max(1) as u64;
         let bounds = scene.bounds();
         let offset = ((bounds.max - bounds.min).length() * 1e-4).max(1e-5);
-        let vectors = vertices
+        let pairs = vertices
             .par_iter()
             .enumerate()
             .map(|(v, &(position, normal))| {
@@ -129,36 +172,65 @@ impl Transfer {
                 }
                 let normal = normal.normalize_or_zero().as_dvec3();
                 if normal == DVec3::ZERO || !normal.is_finite() {
-                    return Some([0.0; 9]);
+                    return Some(([0.0; 9], [0.0; 9]));
                 }
                 let origin = position + normal.as_vec3() * offset;
-                let mut sum = [0.0f64; 9];
+                let (mut open, mut self_open) = ([0.0f64; 9], [0.0f64; 9]);
                 let h = rng::hash(&[params.seed, SALT_DIRECTIONS, v as u64]);
                 let (shift1, shift2) = (rng::unit_f64(h), rng::unit_f64(rng::mix64(h)));
                 for i in 0..n {
                     let u1 = ((i as f64 + 0.5) / n as f64 + shift1).fract();
                     let u2 = (radical_inverse(i as u32) + shift2).fract();
                     let d = cosine_direction(normal, u1, u2);
-                    if scene.occluded(origin, d.as_vec3(), 0.0, f32::INFINITY) {
+                    // Which sums the direction adds to: the room's light comes where
+                    // nothing is hit, the other objects' where the object itself is not.
+                    let (to_open, to_self_open) = if several_objects {
+                        match scene.intersect(origin, d.as_vec3(), 0.0, f32::INFINITY) {
+                            None => (true, true),
+                            Some(hit) => {
+                                let object = scene.triangles[hit.triangle as usize].material;
+                                (false, object != owners[v])
+                            }
+                        }
+                    } else {
+                        (
+                            !scene.occluded(origin, d.as_vec3(), 0.0, f32::INFINITY),
+                            false,
+                        )
+                    };
+                    if !to_self_open {
+                        if to_open {
+                            for (s, y) in open.iter_mut().zip(sh9_basis(d)) {
+                                *s += y;
+                            }
+                        }
                         continue;
                     }
-                    for (s, y) in sum.iter_mut().zip(sh9_basis(d)) {
+                    for ((o, s), y) in open.iter_mut().zip(&mut self_open).zip(sh9_basis(d)) {
+                        if to_open {
+                            *o += y;
+                        }
                         *s += y;
                     }
                 }
-                Some(sum.map(|s| (s * std::f64::consts::PI / n as f64) as f32))
+                let scale =
+                    |sum: [f64; 9]| sum.map(|s| (s * std::f64::consts::PI / n as f64) as f32);
+                Some((scale(open), scale(self_open)))
             })
             .collect::<Option<Vec<_>>>()
             .ok_or(Cancelled)?;
+        let (vectors, bounce): (Vec<_>, Vec<_>) = pairs.into_iter().unzip();
         Ok(Transfer {
             corner_vertex,
             vectors,
+            bounce: if several_objects { bounce } else { Vec::new() },
         })
     }
 
     /// True when this transfer was made for a scene of `triangles` triangles.
     pub fn fits(&self, triangles: usize) -> bool {
         self.corner_vertex.len() == triangles * 3
+            && (self.bounce.is_empty() || self.bounce.len() == self.vectors.len())
             && self
                 .corner_vertex
                 .iter()
@@ -168,11 +240,21 @@ impl Transfer {
     /// The transfer vector at barycentrics (u, v) of triangle `triangle` (weights
     /// 1 - u - v, u, v on its corners 0, 1, 2).
     pub fn at(&self, triangle: u32, u: f32, v: f32) -> [f32; 9] {
+        self.interpolate(&self.vectors, triangle, u, v)
+    }
+
+    /// The bounce transfer ([`Transfer::bounce`]) at barycentrics (u, v) of triangle
+    /// `triangle`; `None` for a scene of one object.
+    pub fn bounce_at(&self, triangle: u32, u: f32, v: f32) -> Option<[f32; 9]> {
+        (!self.bounce.is_empty()).then(|| self.interpolate(&self.bounce, triangle, u, v))
+    }
+
+    fn interpolate(&self, per_vertex: &[[f32; 9]], triangle: u32, u: f32, v: f32) -> [f32; 9] {
         let base = triangle as usize * 3;
         let weights = [1.0 - u - v, u, v];
         let mut out = [0.0f32; 9];
         for (c, w) in weights.into_iter().enumerate() {
-            let vector = &self.vectors[self.corner_vertex[base + c] as usize];
+            let vector = &per_vertex[self.corner_vertex[base + c] as usize];
             for (o, t) in out.iter_mut().zip(vector) {
                 *o += w * t;
             }

@@ -217,10 +217,17 @@ fn a_damaged_cache_file_is_recomputed_and_replaced() {
         "it holds non-finite coefficients"
     );
     let mut index = bytes.clone();
-    index[32..36].copy_from_slice(&u32::MAX.to_le_bytes());
+    index[36..40].copy_from_slice(&u32::MAX.to_le_bytes());
     assert_eq!(
         cache::decode(&index, &digest, n).unwrap_err(),
         "a corner's vertex index is out of range"
+    );
+    let vertices = good.vectors.len();
+    let mut bounce_count = bytes.clone();
+    bounce_count[32..36].copy_from_slice(&7u32.to_le_bytes());
+    assert_eq!(
+        cache::decode(&bounce_count, &digest, n).unwrap_err(),
+        format!("it holds 7 bounce vectors for {vertices} vertices")
     );
     let other = cache::digest(
         &torus,
@@ -246,5 +253,84 @@ fn a_damaged_cache_file_is_recomputed_and_replaced() {
     );
     assert_eq!(again, good);
     assert_eq!(std::fs::read(&path).unwrap(), bytes);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Two unit-radius-apart spheres, objects 0 and 1 (materials 0 and 1).
+fn two_spheres(radius: f32, gap: f32) -> VirtualScene {
+    let mut triangles = shapes::sphere(radius, 24);
+    let mut other = shapes::sphere(radius, 24);
+    for t in &mut other {
+        t.material = 1;
+        for v in &mut t.vertices {
+            v.x += 2.0 * radius + gap;
+        }
+    }
+    triangles.extend(other);
+    VirtualScene::new(triangles, vec![Material::DIFFUSE_GRAY; 2])
+}
+
+#[test]
+fn one_object_has_no_bounce_transfer() {
+    let transfer = Transfer::compute(&torus(), FEW).unwrap();
+    assert!(transfer.bounce.is_empty());
+    assert_eq!(transfer.bounce_at(0, 0.2, 0.3), None);
+}
+
+#[test]
+fn the_bounce_transfer_leaves_out_only_the_objects_own_occlusion() {
+    // Two convex spheres: the bounce transfer (self-occlusion only) is the whole
+    // clamped-cosine lobe at every vertex, E = pi for a constant radiance 1, while the
+    // room's transfer leaves out the other sphere: a point facing a sphere of radius R
+    // whose centre lies d away along its normal loses its view factor (R / d)^2.
+    let (radius, gap) = (0.2f32, 0.1f32);
+    let scene = two_spheres(radius, gap);
+    let transfer = Transfer::compute(&scene, TransferParams::default()).unwrap();
+    assert_eq!(transfer.bounce.len(), transfer.vectors.len());
+    let (vertices, _) = scene_vertices(&scene);
+    let constant = {
+        let mut c = [Vec3::ZERO; 9];
+        // L = 1: C_0 = sqrt(4 pi).
+        c[0] = Vec3::splat((4.0 * std::f32::consts::PI).sqrt());
+        c
+    };
+    let pi = std::f32::consts::PI;
+    let (mut facing_checked, mut hidden_checked) = (0, 0);
+    for (v, &(p, n)) in vertices.iter().enumerate() {
+        let other_centre = Vec3::new(2.0 * radius + gap, 0.0, 0.0);
+        let from_p = other_centre - p;
+        let facing = n.normalize().dot(from_p.normalize());
+        let e_bounce = Transfer::irradiance(&transfer.bounce[v], &constant).x;
+        let e_open = Transfer::irradiance(&transfer.vectors[v], &constant).x;
+        assert!((e_bounce - pi).abs() < 0.01 * pi, "{p}: {e_bounce}");
+        if p.x > radius * 0.999 && facing > 0.999 {
+            // The first sphere's point nearest the second, facing it squarely.
+            let exact = pi * (1.0 - (radius / from_p.length()).powi(2));
+            assert!((e_open - exact).abs() < 0.02 * exact, "{e_open} vs {exact}");
+            facing_checked += 1;
+        }
+        let half_angle = (radius / from_p.length()).asin();
+        if facing < -half_angle.sin() && p.x < radius {
+            // The other sphere lies wholly below this point's horizon: the same
+            // directions, so the same bits.
+            assert_eq!(transfer.vectors[v], transfer.bounce[v], "{p}");
+            hidden_checked += 1;
+        }
+    }
+    assert!(
+        facing_checked >= 1 && hidden_checked > 100,
+        "{facing_checked} {hidden_checked}"
+    );
+}
+
+#[test]
+fn the_cache_keeps_the_bounce_transfer() {
+    let dir = temp_dir("bounce");
+    let scene = two_spheres(0.2, 0.1);
+    let (computed, _) = cache::load_or_compute(&scene, FEW, Some(&dir)).unwrap();
+    assert!(!computed.bounce.is_empty());
+    let (loaded, outcome) = cache::load_or_compute(&scene, FEW, Some(&dir)).unwrap();
+    assert!(matches!(outcome, CacheOutcome::Loaded(_)), "{outcome:?}");
+    assert_eq!(loaded, computed);
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -18,6 +18,9 @@ pub struct ValShadingParams {
     pub real_occluder_reach: f32,
     /// Lights whose shadow maps are rebuilt per frame, in turn; 0 = all.
     pub shadow_updates: usize,
+    /// Light between the objects (paper 004 Sec. 4.4, `bounce.rs`), through the
+    /// transfer's bounce part.
+    pub object_bounce: bool,
 }
 
 impl Default for ValShadingParams {
@@ -29,6 +32,7 @@ impl Default for ValShadingParams {
             slope_bias: 1.5,
             real_occluder_reach: 1.0,
             shadow_updates: 0,
+            object_bounce: true,
         }
     }
 }

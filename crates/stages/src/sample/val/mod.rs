@@ -48,6 +48,7 @@
 //! spaces at once, with the bits of the one-light code (tested). The rest of the time
 //! goes to the camera raster and the per-pixel outputs.
 
+mod bounce;
 mod inputs;
 mod pixel;
 mod raster;
@@ -129,6 +130,12 @@ const PARAMS: &[ParamSpec] = &[
         "indirect light on the objects: prt = SH9 times each vertex's precomputed transfer, with the objects' occlusion of themselves and each other (paper 004 eqs. 9, 11; computed when the pipeline loads, cached in RELUME_CACHE, else $XDG_CACHE_HOME/relume or ~/.cache/relume; RELUME_CACHE=off computes every run); none = unoccluded SH9 irradiance at the normal",
     )
     .choices(&["prt", "none"]),
+    ParamSpec::new(
+        "object_bounce",
+        ParamDefault::Str("sh"),
+        "light between the objects (paper 004 Sec. 4.4, Fig. 7 bottom): sh = per frame, each object's view of the others' radiance (lit by the lights and the room) as SH9, reaching its surface where they, not it, stand (needs transfer = prt; with none there is nothing to carry it); none = the objects only block each other's light",
+    )
+    .choices(&["sh", "none"]),
     ParamSpec::new(
         "transfer_samples",
         ParamDefault::Int(4096),
@@ -257,6 +264,7 @@ impl Renderer for SampleVal {
                 slope_bias: p.float("slope_bias") as f32,
                 real_occluder_reach: p.float("real_occluder_reach") as f32,
                 shadow_updates: p.int("shadow_updates") as usize,
+                object_bounce: p.str("object_bounce") == "sh",
             },
             renderer: ValRenderer::default(),
         })

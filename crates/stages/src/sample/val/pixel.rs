@@ -37,6 +37,9 @@ pub(super) struct PixelContext<'a> {
     pub(super) biases: Biases,
     pub(super) sh: Sh9Irradiance,
     pub(super) sampling: PointSampling,
+    /// Per object, the other objects' radiance SH coefficients (`bounce.rs`); empty
+    /// when off or with fewer than two objects.
+    pub(super) object_bounce: &'a [[Vec3; 9]],
 }
 
 /// A virtual surface seen at a pixel centre, before shading.
@@ -258,7 +261,16 @@ impl PixelContext<'_> {
         let position = Vec3A::from(hit.position);
         let e_ind = match self.inputs.transfer {
             Some(transfer) => {
-                Transfer::irradiance(&transfer.at(hit.triangle, u, v), &self.inputs.lights.sh9)
+                let room =
+                    Transfer::irradiance(&transfer.at(hit.triangle, u, v), &self.inputs.lights.sh9);
+                let object = scene.triangles[hit.triangle as usize].material as usize;
+                match (
+                    self.object_bounce.get(object),
+                    transfer.bounce_at(hit.triangle, u, v),
+                ) {
+                    (Some(others), Some(vector)) => room + Transfer::irradiance(&vector, others),
+                    _ => room,
+                }
             }
             None => self.sh.at(hit.normal.into()),
         };
@@ -289,7 +301,7 @@ impl PixelContext<'_> {
 /// Up to eight shading points gathered lane by lane, then loaded as [`Points`]; lanes
 /// not set hold zeros and are inactive.
 #[derive(Default)]
-struct PointArrays {
+pub(super) struct PointArrays {
     position: [[f32; LANES]; 3],
     normal: [[f32; LANES]; 3],
     patch: [f32; LANES],
@@ -298,7 +310,7 @@ struct PointArrays {
 
 impl PointArrays {
     #[inline(always)]
-    fn set(&mut self, l: usize, position: Vec3A, normal: Vec3A, patch: f32) {
+    pub(super) fn set(&mut self, l: usize, position: Vec3A, normal: Vec3A, patch: f32) {
         for c in 0..3 {
             self.position[c][l] = position[c];
             self.normal[c][l] = normal[c];
@@ -318,7 +330,7 @@ impl PointArrays {
     }
 
     #[inline(always)]
-    fn points<V: Lanes>(&self) -> Points<V> {
+    pub(super) fn points<V: Lanes>(&self) -> Points<V> {
         Points {
             position: [
                 V::from_array(self.position[0]),

@@ -2,6 +2,7 @@
 //! points, the camera raster, the tiles), and each light's frustum and shadow maps,
 //! built in groups of eight and in turn (`shadow_updates`, paper 004 Sec. 5).
 
+use super::bounce::{BounceLights, object_bounce};
 use super::inputs::{ValInputs, ValShadingParams};
 use super::pixel;
 use super::pixel::{PixelContext, sampling_of};
@@ -117,6 +118,29 @@ impl ValRenderer {
         };
         let sh = Sh9Irradiance::new(&inputs.lights.sh9);
         let kernel = self.kernel.unwrap_or_else(Kernel::detect).available();
+        let surface = RealSurface {
+            points: &self.real_points,
+            patches: &self.real_patches,
+            width: wu,
+            tiles: &self.tiles,
+        };
+        if !inputs.spots.is_empty() {
+            let map_kernel = self.kernel.unwrap_or_else(Kernel::detect);
+            self.spot_maps.build(inputs, params, &surface, map_kernel);
+        }
+        let bounce = match inputs.transfer {
+            Some(transfer) if params.object_bounce => {
+                let light = BounceLights {
+                    lights: &lights,
+                    maps,
+                    biases,
+                    spot_maps: (!inputs.spots.is_empty()).then_some(&self.spot_maps),
+                    sampling: sampling_of(inputs),
+                };
+                object_bounce(inputs, transfer, &light)
+            }
+            _ => Vec::new(),
+        };
         #[cfg(test)]
         let scalar_reference = self.scalar_reference;
         let context = PixelContext {
@@ -132,6 +156,7 @@ impl ValRenderer {
             biases,
             sh,
             sampling: sampling_of(inputs),
+            object_bounce: &bounce,
         };
         shade_rows(
             out,
@@ -155,14 +180,6 @@ impl ValRenderer {
             },
         );
         if !inputs.spots.is_empty() {
-            let surface = RealSurface {
-                points: &self.real_points,
-                patches: &self.real_patches,
-                width: wu,
-                tiles: &self.tiles,
-            };
-            let map_kernel = self.kernel.unwrap_or_else(Kernel::detect);
-            self.spot_maps.build(inputs, params, &surface, map_kernel);
             let sampling = sampling_of(inputs);
             let real = (
                 &self.real_points[..],

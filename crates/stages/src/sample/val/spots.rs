@@ -89,7 +89,7 @@ impl SpotMaps {
     /// The light of every spot at the point `x` (unit normal `n`, real-map splat size
     /// `patch`): its shares of E_R (for a real point) and E_RV, and the nearest
     /// occluder over the cosine where one occludes.
-    fn light_at(
+    pub(super) fn light_at(
         &self,
         spots: &[SpotLight],
         x: Vec3,

@@ -42,7 +42,7 @@ pub(super) fn sphere() -> VirtualScene {
 }
 
 /// A UV sphere with smooth normals.
-fn sphere_at(centre: Vec3, radius: f32) -> VirtualScene {
+pub(super) fn sphere_at(centre: Vec3, radius: f32) -> VirtualScene {
     let (rings, segments) = (24, 48);
     let at = |i: usize, j: usize| {
         let theta = i as f32 / rings as f32 * std::f32::consts::PI;

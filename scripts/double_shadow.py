@@ -16,6 +16,11 @@ Besides compare's scores it measures the two regions of Fig. 5 on the frame:
   them twice.
 - "true shadows": pixels the truth darkens by four levels or more in every channel
   (the box's shadow on the floor and on the block's face).
+- "the truth's faint changes": the rest of the pixels the truth changes, by less than
+  four levels in some channel: mostly the light the box takes from the bounce (real
+  surfaces it shadows bleed less onto their neighbours) and its own bleeding. Paper 002
+  Fig. 6: [4] keeps the bleeding of a real surface the box shadows (no ir = 1 VPL
+  there); its mean change there, against the truth's, shows that inconsistency.
 and writes figure.png: recorded | truth | paper's flags | [4], cropped around the block.
 Standard library only (a small PNG reader and writer for 8-bit RGB).
 """
@@ -95,7 +100,7 @@ def run(command):
 
 def regions(recorded, truth, composites):
     """Pixel counts and mean changes (levels, per channel) of Fig. 5's two regions."""
-    unchanged, shadows = [], []
+    unchanged, shadows, faint = [], [], []
     for y, row in enumerate(truth):
         for x, t in enumerate(row):
             r = recorded[y][x]
@@ -103,6 +108,8 @@ def regions(recorded, truth, composites):
                 unchanged.append((x, y))
             elif all(t[c] <= r[c] - 4 for c in range(3)):
                 shadows.append((x, y))
+            elif all(abs(t[c] - r[c]) < 4 for c in range(3)):
+                faint.append((x, y))
 
     def change(image, pixels):
         if not pixels:
@@ -110,8 +117,15 @@ def regions(recorded, truth, composites):
         return sum(sum(image[y][x][c] - recorded[y][x][c] for c in range(3))
                    for x, y in pixels) / (3 * len(pixels))
 
+    def rms_error(image, pixels):
+        if not pixels:
+            return 0.0
+        return (sum(sum((image[y][x][c] - truth[y][x][c]) ** 2 for c in range(3))
+                    for x, y in pixels) / (3 * len(pixels))) ** 0.5
+
     out = {"unchanged_pixels": len(unchanged), "true_shadow_pixels": len(shadows),
-           "truth_shadow_change": change(truth, shadows)}
+           "truth_shadow_change": change(truth, shadows),
+           "faint_pixels": len(faint), "truth_faint_change": change(truth, faint)}
     for name, image in composites.items():
         darkened = [(x, y) for x, y in unchanged
                     if all(image[y][x][c] <= recorded[y][x][c] - 4 for c in range(3))]
@@ -119,6 +133,8 @@ def regions(recorded, truth, composites):
             "unchanged_darkened_pixels": len(darkened),
             "unchanged_darkened_change": change(image, darkened),
             "shadow_change": change(image, shadows),
+            "faint_change": change(image, faint),
+            "faint_rms_error": rms_error(image, faint),
         }
     return out
 

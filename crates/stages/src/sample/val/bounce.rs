@@ -10,8 +10,12 @@
 //! direction meets (the area lights through their shadow maps, the spots through
 //! theirs, the room's indirect light through that point's transfer), and zero where
 //! no other object is met. Its SH coefficients reach object i's surface through the
-//! bounce transfer B_vk ([`Transfer::bounce`]), so each point gets the other objects'
-//! light from the directions where they, not itself, stand.
+//! bounce transfer B_vk ([`Transfer::bounce`]): the paper's V cos(theta), V the
+//! object's occlusion of itself only. As in the paper the light is the one the centre
+//! sees: a point on the side facing another object gets about (d / D)^2 of what its
+//! own view would give it (d and D its distance and the centre's from the other
+//! object's centre; 0.4 for a ball 0.1 m from a larger one), a point facing away a few
+//! per cent of the brightest, of either sign (SH9 ringing).
 //!
 //! Where it departs: one bounce (the paper's b - 1 bounces over b static frames are
 //! not accumulated); a lat-long map of [`MAP_WIDTH`] x [`MAP_WIDTH`] / 2 directions

@@ -24,7 +24,9 @@
 //! surfaces. On the objects (`transfer = "prt"`, the default) it is eq. 9 with the
 //! transfer vectors C_vk of eq. 11 interpolated from the hit triangle's corners
 //! ([`relume_scene::light::prt`]): their occlusion of themselves and of each other is in it
-//! (a back face seen through a gap is shaded with its front's vectors). Virtual pixels: E_RV at the object's surface
+//! (a back face seen through a gap is shaded with its front's vectors), and with two
+//! objects or more (`object_bounce = "sh"`) the light they reflect onto each other
+//! (Sec. 4.4, Fig. 7 bottom; `bounce.rs`). Virtual pixels: E_RV at the object's surface
 //! (self-shadowing through V^_j, real occluders through V_j), E_R at the real point
 //! behind it (NaN where the depth has none); `k_v` is the albedo (with E in irradiance
 //! units the Lambertian outgoing radiance is k_V E_RV / pi; glossy lobes are not
@@ -133,7 +135,7 @@ const PARAMS: &[ParamSpec] = &[
     ParamSpec::new(
         "object_bounce",
         ParamDefault::Str("sh"),
-        "light between the objects (paper 004 Sec. 4.4, Fig. 7 bottom): sh = per frame, each object's view of the others' radiance (lit by the lights and the room) as SH9, reaching its surface where they, not it, stand (needs transfer = prt; with none there is nothing to carry it); none = the objects only block each other's light",
+        "light between the objects (paper 004 Sec. 4.4, Fig. 7 bottom): sh = per frame, each object's view of the others' radiance (lit by the lights and the room) as SH9 (the paper's cube map from the object's centre), through its self-occlusion-only transfer (needs transfer = prt; with none there is nothing to carry it); none = the objects only block each other's light",
     )
     .choices(&["sh", "none"]),
     ParamSpec::new(

@@ -115,6 +115,12 @@ pub(super) const PARAMS: &[ParamSpec] = &[
     )
     .range(0.0, MAX_VPLS as f64),
     ParamSpec::new(
+        "spot_split",
+        ParamDefault::Str("flux"),
+        "how the spot_vpls slots are shared between the real surfaces and the objects the virtual spots light: flux = in proportion to the light each reflects (one resampling over both); coverage = paper 002 Sec. 3.7's split, by the solid angle each kind covers as the spots see it (its two RSMs' pixel counts), slot by slot with a Halton sequence, then by light within each",
+    )
+    .choices(&["flux", "coverage"]),
+    ParamSpec::new(
         "spot_map_size",
         ParamDefault::Int(512),
         "texels per side of each [[light]] spot light's shadow map of the real surface (every pixel of the depth map), a paraboloid over the hemisphere about its axis; the objects' shadows of a spot are traced",
@@ -168,6 +174,8 @@ pub struct DirParams {
     pub mesh_points: u32,
     pub flags: Flags,
     pub spot_vpls: u32,
+    /// The `spot_split` parameter is `coverage` (paper 002 Sec. 3.7's Halton split).
+    pub spot_coverage_split: bool,
     pub spot_map_size: u32,
     pub seed: u64,
 }
@@ -198,6 +206,7 @@ impl DirParams {
             mesh_points: p.int("mesh_points") as u32,
             flags: Flags::from_name(p.str("flags")),
             spot_vpls: p.int("spot_vpls") as u32,
+            spot_coverage_split: p.str("spot_split") == "coverage",
             spot_map_size: p.int("spot_map_size") as u32,
             seed,
         }

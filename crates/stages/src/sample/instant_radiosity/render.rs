@@ -35,7 +35,7 @@ use super::params::{DirInputs, DirParams};
 use super::points::{MeshPoints, RealSurface};
 use super::shade::{LightSet, Receiver, gather};
 use super::splat::splat_with;
-use super::spots::{SpotMaps, SpotSet};
+use super::spots::{SpotMaps, SpotSet, split_by_coverage};
 use super::vpl::{Candidate, Emitter, Vpl, environment_vpls, resample};
 use crate::OpError;
 use crate::sample::layers::{IrradianceLayers, check_sizes, shade_rows};
@@ -525,13 +525,26 @@ impl DirRenderer {
             let (first, slots_before) = (self.vpls.len(), self.projections.len());
             let spot_key = rng::hash(&[key, 0x5B07]);
             let slots = params.spot_vpls as usize;
-            resample(
-                &self.spot_candidates,
-                slots,
-                slots_before as u32,
-                spot_key,
-                &mut self.vpls,
-            );
+            if params.spot_coverage_split {
+                let first_slot = slots_before as u32;
+                let candidates = &self.spot_candidates;
+                split_by_coverage(
+                    candidates,
+                    inputs.spots,
+                    slots,
+                    first_slot,
+                    spot_key,
+                    &mut self.vpls,
+                );
+            } else {
+                resample(
+                    &self.spot_candidates,
+                    slots,
+                    slots_before as u32,
+                    spot_key,
+                    &mut self.vpls,
+                );
+            }
             self.project_new_slots(first);
             self.build_maps(slots_before, params, mesh, key);
         }

@@ -312,3 +312,85 @@ fn the_earlier_method_places_no_vpl_that_cancels_real_bleeding() {
     };
     assert_eq!(real_only(&earlier), 0);
 }
+
+#[test]
+fn coverage_splits_the_spot_slots_as_the_maps_pixel_counts_and_halton_say() {
+    // Paper 002 Sec. 3.7: a virtual spot straight above a floor patch (100 real
+    // candidates, 2 m below it) and a small bright object top (10 candidates, 1 m
+    // below). By light the object would take half the slots; by coverage it takes the
+    // Halton count of its share of the solid angle.
+    let lamp = SpotLight {
+        position: Vec3::new(0.0, 2.0, 0.0),
+        cutoff: 80f32.to_radians(),
+        beam: 70f32.to_radians(),
+        ..spot(LightWorld::Virtual)
+    };
+    let candidate = |position: Vec3, real: bool, power: f32| super::vpl::Candidate {
+        position,
+        normal: Vec3::Y,
+        power_r: Vec3::ZERO,
+        power_rv: Vec3::splat(power),
+        real,
+        area: 0.01,
+    };
+    let mut candidates: Vec<_> = (0..100)
+        .map(|i| {
+            let (x, z) = ((i % 10) as f32 * 0.1 - 0.45, (i / 10) as f32 * 0.1 - 0.45);
+            candidate(Vec3::new(x, 0.0, z), true, 1.0)
+        })
+        .collect();
+    candidates
+        .extend((0..10).map(|i| candidate(Vec3::new(i as f32 * 0.01, 1.0, 0.0), false, 10.0)));
+    // The solid angles, written out: A cos / d^2 per candidate.
+    let solid_angle = |c: &super::vpl::Candidate| {
+        let v = lamp.position - c.position;
+        (c.area * v.normalize().y / v.length_squared()) as f64
+    };
+    let real: f64 = candidates.iter().filter(|c| c.real).map(solid_angle).sum();
+    let objects: f64 = candidates.iter().filter(|c| !c.real).map(solid_angle).sum();
+    let p = objects / (real + objects);
+    let coverage = super::spots::virtual_coverage(&candidates, std::slice::from_ref(&lamp));
+    assert!((coverage - p).abs() < 1e-6, "{coverage} vs {p}");
+    let slots = 32u32;
+    // Halton base 2: 0, 1/2, 1/4, 3/4, 1/8, ...
+    let expected_virtual = (0..slots)
+        .filter(|&i| (i.reverse_bits() as f64 / 4294967296.0) < p)
+        .count();
+    assert!(
+        (9..=10).contains(&expected_virtual),
+        "{expected_virtual} (p = {p})"
+    );
+    let count = |coverage_split: bool| {
+        let mut out = Vec::new();
+        if coverage_split {
+            super::spots::split_by_coverage(
+                &candidates,
+                std::slice::from_ref(&lamp),
+                32,
+                100,
+                7,
+                &mut out,
+            );
+        } else {
+            super::vpl::resample(&candidates, 32, 100, 7, &mut out);
+        }
+        let slots_of = |real: bool| {
+            let mut s: Vec<u32> = out
+                .iter()
+                .filter(|v| match v.emitter {
+                    super::vpl::Emitter::Surface { position, .. } => (position.y < 0.5) == real,
+                    _ => false,
+                })
+                .map(|v| v.slot)
+                .collect();
+            s.dedup();
+            s.len()
+        };
+        let all: std::collections::BTreeSet<u32> = out.iter().map(|v| v.slot).collect();
+        assert_eq!(all.len(), 32);
+        assert_eq!((all.first(), all.last()), (Some(&100), Some(&131)));
+        (slots_of(true), slots_of(false))
+    };
+    assert_eq!(count(true), (32 - expected_virtual, expected_virtual));
+    assert_eq!(count(false), (16, 16));
+}

@@ -22,7 +22,10 @@
 //!   light, in L_rv only, takes `spot_vpls` slots of its own after every other slot:
 //!   off a real candidate with the albedo its camera radiance and its real direct light
 //!   imply, off a virtual one with its albedo; so no bounce's slots, and no E_R bit,
-//!   depend on a virtual spot.
+//!   depend on a virtual spot. Those slots go to the real surfaces and the objects by
+//!   light (`spot_split = "flux"`), or as the paper splits them between a spot's two
+//!   RSMs (`"coverage"`, `split_by_coverage`: by the solid angle each covers as the
+//!   spots see it, slot by slot with a Halton sequence).
 //! - **The \[4\] switch** (`flags = "knecht2010"`): the earlier method keeps one map per
 //!   light whose nearest blocker alone decides. Where a virtual blocker stands between
 //!   a real spot and a real one, it hides the real blocker: L_r takes the light the
@@ -34,14 +37,17 @@
 //! do not block here); the objects' shadows are traced, exact and hard-edged, where
 //! the paper rasterizes their RSM (a map splatted from mesh points leaks light through
 //! its holes, and its texels show as steps along the shadow's edge); the spot's own
-//! RSM importance sampling (Sec. 3.7, Clarberg et al.) is replaced by the candidates
-//! the environment's bounce already uses.
+//! RSM importance sampling (Sec. 3.7, Clarberg et al.) is replaced by resampling the
+//! candidates the environment's bounce already uses, in proportion to their light; a
+//! real spot has no slots of its own: the real surfaces' bounce light is what the
+//! camera measured (their candidates' power), which already holds the real spots'.
 
 use super::ism::{MapView, Projection, fill_holes, frame_about};
 use super::params::Flags;
 use super::points::RealSurface;
 use super::shade::{Receiver, shadow_terms};
 use super::splat::splat_with;
+use super::vpl::{Candidate, Vpl, resample};
 use glam::Vec3;
 use rayon::prelude::*;
 use relume_base::simd::Kernel;
@@ -227,4 +233,67 @@ impl SpotSet<'_> {
             None => (1.0, f32::INFINITY),
         }
     }
+}
+
+/// Paper 002 Sec. 3.7's split of a spot's VPL slots between its two reflective shadow
+/// maps (`spot_split = "coverage"`): the real surfaces' and the objects' shares are the
+/// solid angles they cover as the virtual spots see them (the maps' pixel counts: a
+/// candidate of area A at distance d, its normal at angle theta to the spot, covers
+/// A cos(theta) / d^2 of each spot whose cone holds it), normalized to a probability
+/// p; slot i goes to the objects when the base-2 Halton value of i is below p. Each
+/// kind's slots are then drawn by light ([`resample`], the RSM's importance sampling).
+/// `candidates` are the virtual spots' candidates (real first or mixed, `real` says).
+pub(super) fn split_by_coverage(
+    candidates: &[Candidate],
+    spots: &[SpotLight],
+    slots: usize,
+    first_slot: u32,
+    key: u64,
+    out: &mut Vec<Vpl>,
+) {
+    let p_virtual = virtual_coverage(candidates, spots);
+    let virtual_slots = (0..slots as u32)
+        .filter(|&i| halton2(i) < p_virtual)
+        .count();
+    let (real, virtual_): (Vec<Candidate>, Vec<Candidate>) =
+        candidates.iter().partition(|c| c.real);
+    resample(&real, slots - virtual_slots, first_slot, key, out);
+    let next_slot = out
+        .last()
+        .map_or(first_slot, |v| v.slot + 1)
+        .max(first_slot);
+    resample(&virtual_, virtual_slots, next_slot, key ^ 0x7EA1, out);
+}
+
+/// The objects' share of the solid angle the candidates cover as the virtual spots
+/// see them (0 when nothing is covered).
+pub(super) fn virtual_coverage(candidates: &[Candidate], spots: &[SpotLight]) -> f64 {
+    let (mut real, mut virtual_) = (0.0f64, 0.0f64);
+    for c in candidates {
+        let covered: f64 = spots
+            .iter()
+            .filter(|s| s.world == LightWorld::Virtual && s.arrival(c.position, c.normal).is_some())
+            .map(|s| {
+                let v = s.position - c.position;
+                let d2 = v.length_squared() as f64;
+                c.area as f64 * c.normal.dot(v).abs() as f64 / (d2 * d2.sqrt())
+            })
+            .filter(|w| w.is_finite())
+            .sum();
+        if c.real {
+            real += covered;
+        } else {
+            virtual_ += covered;
+        }
+    }
+    if real + virtual_ > 0.0 {
+        virtual_ / (real + virtual_)
+    } else {
+        0.0
+    }
+}
+
+/// The base-2 Halton value (radical inverse) of `i`, in [0, 1).
+fn halton2(i: u32) -> f64 {
+    i.reverse_bits() as f64 / (1u64 << 32) as f64
 }

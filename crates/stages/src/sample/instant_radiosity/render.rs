@@ -525,25 +525,12 @@ impl DirRenderer {
             let (first, slots_before) = (self.vpls.len(), self.projections.len());
             let spot_key = rng::hash(&[key, 0x5B07]);
             let slots = params.spot_vpls as usize;
+            let (candidates, first_slot) = (&self.spot_candidates, slots_before as u32);
+            let out = &mut self.vpls;
             if params.spot_coverage_split {
-                let first_slot = slots_before as u32;
-                let candidates = &self.spot_candidates;
-                split_by_coverage(
-                    candidates,
-                    inputs.spots,
-                    slots,
-                    first_slot,
-                    spot_key,
-                    &mut self.vpls,
-                );
+                split_by_coverage(candidates, inputs.spots, slots, first_slot, spot_key, out);
             } else {
-                resample(
-                    &self.spot_candidates,
-                    slots,
-                    slots_before as u32,
-                    spot_key,
-                    &mut self.vpls,
-                );
+                resample(candidates, slots, first_slot, spot_key, out);
             }
             self.project_new_slots(first);
             self.build_maps(slots_before, params, mesh, key);

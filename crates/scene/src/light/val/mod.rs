@@ -8,6 +8,7 @@ use atlas::AtlasTexel;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use relume_base::rng;
+use std::ops::AddAssign;
 
 /// One virtual area light (VAL, paper 004 Sec. 4.3): a Lambertian emitter at `position`
 /// facing `normal`, with radiant intensity `intensity` = sum of L_k dA_k over its texels
@@ -230,35 +231,22 @@ impl ValBuilder {
             normal: DVec3,
             weight: f64,
         }
-        let m = self.centres.len();
-        let w = self.params.normal_weight;
-        let partial: Vec<Vec<Sum>> = self
-            .texels
-            .par_chunks(1024)
-            .map(|chunk| {
-                let mut sums = vec![Sum::default(); m];
-                for t in chunk {
-                    let (j, _) = kmeans::nearest_centre(&self.centres, &t.feature, w);
-                    let s = &mut sums[j];
-                    s.intensity += t.radiance.as_dvec3() * t.area as f64;
-                    s.area += t.area as f64;
-                    s.position += t.feature.position.as_dvec3() * t.weight;
-                    s.normal += t.feature.normal.as_dvec3() * t.weight;
-                    s.weight += t.weight;
-                }
-                sums
-            })
-            .collect();
-        let mut total = vec![Sum::default(); m];
-        for sums in &partial {
-            for (t, s) in total.iter_mut().zip(sums) {
-                t.intensity += s.intensity;
-                t.area += s.area;
-                t.position += s.position;
-                t.normal += s.normal;
-                t.weight += s.weight;
+        impl AddAssign for Sum {
+            fn add_assign(&mut self, s: Sum) {
+                self.intensity += s.intensity;
+                self.area += s.area;
+                self.position += s.position;
+                self.normal += s.normal;
+                self.weight += s.weight;
             }
         }
+        let total = self.sum_per_centre(|t| Sum {
+            intensity: t.radiance.as_dvec3() * t.area as f64,
+            area: t.area as f64,
+            position: t.feature.position.as_dvec3() * t.weight,
+            normal: t.feature.normal.as_dvec3() * t.weight,
+            weight: t.weight,
+        });
         total
             .iter()
             .filter(|s| s.area > 0.0 && s.weight > 0.0)
@@ -411,6 +399,36 @@ impl ValBuilder {
             .collect()
     }
 
+    /// Per centre, the sum of `terms` over the texels nearest it: chunks of 1024
+    /// texels in parallel, each summed in order from zero, the chunks' sums then added
+    /// in order (the same bits on any thread count).
+    fn sum_per_centre<S>(&self, terms: impl Fn(&DirectTexel) -> S + Sync) -> Vec<S>
+    where
+        S: AddAssign + Copy + Default + Send,
+    {
+        let m = self.centres.len();
+        let w = self.params.normal_weight;
+        let partial: Vec<Vec<S>> = self
+            .texels
+            .par_chunks(1024)
+            .map(|chunk| {
+                let mut sums = vec![S::default(); m];
+                for t in chunk {
+                    let (j, _) = kmeans::nearest_centre(&self.centres, &t.feature, w);
+                    sums[j] += terms(t);
+                }
+                sums
+            })
+            .collect();
+        let mut total = vec![S::default(); m];
+        for sums in &partial {
+            for (t, s) in total.iter_mut().zip(sums) {
+                *t += *s;
+            }
+        }
+        total
+    }
+
     /// Step 4: assignment of every direct texel to its nearest centre and integration,
     /// per row in parallel, rows combined in order.
     fn integrate(&self, center: Vec3) -> Vec<AreaLight> {
@@ -422,39 +440,25 @@ impl ValBuilder {
             weight_area: f64,
             weight_omega: f64,
         }
-        let m = self.centres.len();
-        if m == 0 || self.texels.is_empty() {
-            return Vec::new();
-        }
-        let w = self.params.normal_weight;
-        let partial: Vec<Vec<Sum>> = self
-            .texels
-            .par_chunks(1024)
-            .map(|chunk| {
-                let mut sums = vec![Sum::default(); m];
-                for t in chunk {
-                    let (j, _) = kmeans::nearest_centre(&self.centres, &t.feature, w);
-                    let l = t.radiance;
-                    let s = &mut sums[j];
-                    s.intensity += l.as_dvec3() * t.area as f64;
-                    s.area += t.area as f64;
-                    s.weighted_direction += t.direction.as_dvec3() * t.weight;
-                    s.weight_area += t.weight;
-                    s.weight_omega += luminance(l) as f64 * t.d_omega as f64;
-                }
-                sums
-            })
-            .collect();
-        let mut total = vec![Sum::default(); m];
-        for sums in &partial {
-            for (t, s) in total.iter_mut().zip(sums) {
-                t.intensity += s.intensity;
-                t.area += s.area;
-                t.weighted_direction += s.weighted_direction;
-                t.weight_area += s.weight_area;
-                t.weight_omega += s.weight_omega;
+        impl AddAssign for Sum {
+            fn add_assign(&mut self, s: Sum) {
+                self.intensity += s.intensity;
+                self.area += s.area;
+                self.weighted_direction += s.weighted_direction;
+                self.weight_area += s.weight_area;
+                self.weight_omega += s.weight_omega;
             }
         }
+        if self.centres.is_empty() || self.texels.is_empty() {
+            return Vec::new();
+        }
+        let total = self.sum_per_centre(|t| Sum {
+            intensity: t.radiance.as_dvec3() * t.area as f64,
+            area: t.area as f64,
+            weighted_direction: t.direction.as_dvec3() * t.weight,
+            weight_area: t.weight,
+            weight_omega: luminance(t.radiance) as f64 * t.d_omega as f64,
+        });
         total
             .iter()
             .filter(|s| s.area > 0.0 && s.weight_omega > 0.0)

@@ -2,9 +2,31 @@
 
 use super::tests::{bits, camera, lights, real_scene};
 use super::*;
-use relume_base::raster::Vec3Image;
+use relume_base::raster::{DepthImage, Vec3Image};
+use relume_scene::light::AreaLights;
 use relume_scene::light::prt::{Transfer, TransferParams};
 use relume_scene::objects::{Material, shapes};
+
+/// The inputs of the floor seen by the test camera, with `scene`, `lights` and
+/// `transfer` and no spots.
+fn floor_inputs<'a>(
+    (depth, normals): &'a (DepthImage, Vec3Image),
+    lights: &'a AreaLights,
+    scene: &'a VirtualScene,
+    transfer: Option<&'a Transfer>,
+) -> ValInputs<'a> {
+    let (camera, camera_to_world) = camera();
+    ValInputs {
+        depth,
+        normals,
+        camera,
+        camera_to_world,
+        lights,
+        objects: scene,
+        transfer,
+        spots: &[],
+    }
+}
 
 /// A torus lying on the floor right under the camera: its inner side faces its own
 /// tube across the hole.
@@ -19,23 +41,13 @@ fn torus() -> VirtualScene {
 
 #[test]
 fn the_transfer_darkens_the_objects_where_they_occlude_themselves_and_nothing_else() {
-    let (depth, normals) = real_scene(false);
-    let (camera, camera_to_world) = camera();
+    let floor = real_scene(false);
     let scene = torus();
     // No area lights: the constant sky's SH9 is all the light.
     let sky = lights(Vec::new());
     let transfer = Transfer::compute(&scene, TransferParams::default()).unwrap();
     let render = |transfer: Option<&Transfer>| {
-        let inputs = ValInputs {
-            depth: &depth,
-            normals: &normals,
-            camera,
-            camera_to_world,
-            lights: &sky,
-            objects: &scene,
-            transfer,
-            spots: &[],
-        };
+        let inputs = floor_inputs(&floor, &sky, &scene, transfer);
         sample_val(&inputs, &ValShadingParams::default()).unwrap()
     };
     let (open, occluded) = (render(None), render(Some(&transfer)));
@@ -138,18 +150,8 @@ fn the_objects_light_each_other_as_their_view_factors_say() {
     let white_centre = red_centre + WHITE_OFFSET;
     let room = lights(Vec::new());
     let transfer = Transfer::compute(&scene, TransferParams::default()).unwrap();
-    let (depth, normals) = real_scene(false);
-    let (camera, camera_to_world) = camera();
-    let inputs = ValInputs {
-        depth: &depth,
-        normals: &normals,
-        camera,
-        camera_to_world,
-        lights: &room,
-        objects: &scene,
-        transfer: Some(&transfer),
-        spots: &[],
-    };
+    let floor = real_scene(false);
+    let inputs = floor_inputs(&floor, &room, &scene, Some(&transfer));
     let light = super::bounce::BounceLights {
         lights: &[],
         maps: super::shade::Maps {
@@ -201,22 +203,12 @@ fn the_objects_light_each_other_as_their_view_factors_say() {
 
 #[test]
 fn light_between_the_objects_moves_only_their_indirect_light_on_any_thread_count() {
-    let (depth, normals) = real_scene(false);
-    let (camera, camera_to_world) = camera();
+    let floor = real_scene(false);
     let (scene, red_centre, red_radius) = red_and_white();
     let room = lights(vec![super::tests::light(super::tests::LAMP, 2.0)]);
     let transfer = Transfer::compute(&scene, TransferParams::default()).unwrap();
     let render = |object_bounce: bool| {
-        let inputs = ValInputs {
-            depth: &depth,
-            normals: &normals,
-            camera,
-            camera_to_world,
-            lights: &room,
-            objects: &scene,
-            transfer: Some(&transfer),
-            spots: &[],
-        };
+        let inputs = floor_inputs(&floor, &room, &scene, Some(&transfer));
         let params = ValShadingParams {
             object_bounce,
             ..ValShadingParams::default()

@@ -95,10 +95,18 @@ fn read_floats(path: &Path, record: usize) -> Result<Vec<f32>> {
         path.display(),
         bytes.len()
     );
-    Ok(bytes
+    let floats: Vec<f32> = bytes
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect())
+        .collect();
+    if let Some(k) = floats.iter().position(|v| !v.is_finite()) {
+        bail!(
+            "{}: value {k} (record {}) is not a finite number",
+            path.display(),
+            k / record
+        );
+    }
+    Ok(floats)
 }
 
 fn trace(triangles: &Path, rays: &Path, hits: &Path, repeat: usize) -> Result<()> {

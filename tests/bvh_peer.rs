@@ -10,7 +10,7 @@
 
 mod common;
 
-use common::{stderr, stdout};
+use common::{stdout, succeeded};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -54,13 +54,7 @@ fn relume_and_embree_find_the_same_nearest_hits() {
         .arg(work.path())
         .output()
         .expect("run python");
-    assert!(
-        out.status.success(),
-        "bvh_peer.py failed ({:?})\nstdout:\n{}\nstderr:\n{}",
-        out.status,
-        stdout(&out),
-        stderr(&out)
-    );
+    let out = succeeded("bvh_peer.py", out);
     let report: Value = serde_json::from_str(&stdout(&out)).expect("the report is JSON");
     let rows = report["rows"].as_array().expect("rows");
     let names: Vec<(String, String)> = rows

@@ -13,7 +13,7 @@
 mod common;
 
 use common::open3d::python;
-use common::{ok, run_in, stderr, stdout};
+use common::{ok, run_in, stderr, stdout, succeeded};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -73,13 +73,7 @@ fn open3d_odometry_runs_beside_pose_track_on_the_same_frames_and_scores() {
         &["s.relume", "--work", "work", "--json"],
     );
     let seconds = started.elapsed().as_secs_f64();
-    assert!(
-        out.status.success(),
-        "track_peer.py failed ({:?})\nstdout:\n{}\nstderr:\n{}",
-        out.status,
-        stdout(&out),
-        stderr(&out)
-    );
+    let out = succeeded("track_peer.py", out);
     let report: Value = serde_json::from_str(&stdout(&out)).unwrap_or_else(|e| {
         panic!(
             "track_peer.py --json printed no JSON ({e}):\n{}",

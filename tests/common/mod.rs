@@ -115,11 +115,16 @@ pub fn composite_scores(
     doc["stages"]["composite.differential"].clone()
 }
 
-/// Asserts success, printing both streams otherwise.
+/// Asserts that relume succeeded, printing both streams otherwise.
 pub fn ok(o: Output) -> Output {
+    succeeded("relume", o)
+}
+
+/// Asserts that `program` succeeded, printing both streams otherwise.
+pub fn succeeded(program: &str, o: Output) -> Output {
     assert!(
         o.status.success(),
-        "relume failed ({:?})\nstdout:\n{}\nstderr:\n{}",
+        "{program} failed ({:?})\nstdout:\n{}\nstderr:\n{}",
         o.status,
         stdout(&o),
         stderr(&o)

@@ -128,18 +128,46 @@ pub(super) fn render_with_spots(
     scene: &VirtualScene,
     spots: &[relume_scene::light::SpotLight],
 ) -> IrradianceLayers {
+    let inputs = view_inputs((depth, normals), lights, scene, None, spots);
+    sample_val(&inputs, &ValShadingParams::default()).unwrap()
+}
+
+/// The inputs of the test camera's view of `depth` and `normals`, with `lights`, the
+/// objects `scene`, their `transfer` and `spots`.
+pub(super) fn view_inputs<'a>(
+    (depth, normals): (&'a DepthImage, &'a Vec3Image),
+    lights: &'a AreaLights,
+    scene: &'a VirtualScene,
+    transfer: Option<&'a relume_scene::light::prt::Transfer>,
+    spots: &'a [relume_scene::light::SpotLight],
+) -> ValInputs<'a> {
     let (camera, camera_to_world) = camera();
-    let inputs = ValInputs {
+    ValInputs {
         depth,
         normals,
         camera,
         camera_to_world,
         lights,
         objects: scene,
-        transfer: None,
+        transfer,
         spots,
+    }
+}
+
+/// Asserts that `a` and `b` differ only in the objects' indirect light: the same bits
+/// in E_R, E_RV^dir and E_RV^ind on the real surfaces (mask not 0).
+pub(super) fn only_the_objects_indirect_light_differs(a: &IrradianceLayers, b: &IrradianceLayers) {
+    assert_eq!(bits(&a.e_r_dir), bits(&b.e_r_dir));
+    assert_eq!(bits(&a.e_r_ind), bits(&b.e_r_ind));
+    assert_eq!(bits(&a.e_rv_dir), bits(&b.e_rv_dir));
+    let real = |l: &IrradianceLayers| -> Vec<[u32; 3]> {
+        let values = l.e_rv_ind.data.iter().zip(&a.mask.data);
+        values
+            .filter(|&(_, &m)| m != 0.0)
+            .map(|(v, _)| v.to_array().map(f32::to_bits))
+            .collect()
     };
-    sample_val(&inputs, &ValShadingParams::default()).unwrap()
+    assert_eq!(real(a), real(b));
 }
 
 /// Eq. 6 for a point light `l` above a receiver at `x` with normal `n`.

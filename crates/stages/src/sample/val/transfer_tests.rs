@@ -1,6 +1,8 @@
 //! `sample.val` with the objects' radiance transfer (paper 004 eqs. 9, 11).
 
-use super::tests::{bits, camera, lights, real_scene};
+use super::tests::{
+    bits, camera, lights, only_the_objects_indirect_light_differs, real_scene, view_inputs,
+};
 use super::*;
 use relume_base::raster::{DepthImage, Vec3Image};
 use relume_scene::light::AreaLights;
@@ -15,17 +17,7 @@ fn floor_inputs<'a>(
     scene: &'a VirtualScene,
     transfer: Option<&'a Transfer>,
 ) -> ValInputs<'a> {
-    let (camera, camera_to_world) = camera();
-    ValInputs {
-        depth,
-        normals,
-        camera,
-        camera_to_world,
-        lights,
-        objects: scene,
-        transfer,
-        spots: &[],
-    }
+    view_inputs((depth, normals), lights, scene, transfer, &[])
 }
 
 /// A torus lying on the floor right under the camera: its inner side faces its own
@@ -52,24 +44,11 @@ fn the_transfer_darkens_the_objects_where_they_occlude_themselves_and_nothing_el
     };
     let (open, occluded) = (render(None), render(Some(&transfer)));
     // Real surfaces: the same bits (the transfer is for the objects only).
-    let bits = |image: &Vec3Image| -> Vec<[u32; 3]> {
-        image
-            .data
-            .iter()
-            .map(|v| v.to_array().map(f32::to_bits))
-            .collect()
-    };
-    assert_eq!(bits(&open.e_r_dir), bits(&occluded.e_r_dir));
-    assert_eq!(bits(&open.e_r_ind), bits(&occluded.e_r_ind));
-    assert_eq!(bits(&open.e_rv_dir), bits(&occluded.e_rv_dir));
+    only_the_objects_indirect_light_differs(&open, &occluded);
     let (mut virtual_pixels, mut darker, mut top) = (0, 0, 0);
     for i in 0..open.mask.data.len() {
         let (a, b) = (open.e_rv_ind.data[i], occluded.e_rv_ind.data[i]);
         if open.mask.data[i] != 0.0 {
-            assert_eq!(
-                a.to_array().map(f32::to_bits),
-                b.to_array().map(f32::to_bits)
-            );
             continue;
         }
         virtual_pixels += 1;
@@ -220,17 +199,11 @@ fn light_between_the_objects_moves_only_their_indirect_light_on_any_thread_count
     let one = relume_base::threads::with_threads(1, || render(true));
     assert_eq!(bits(&one.e_rv_ind), bits(&three.e_rv_ind));
     // The real surfaces and all direct light keep their bits.
-    assert_eq!(bits(&alone.e_r_dir), bits(&together.e_r_dir));
-    assert_eq!(bits(&alone.e_r_ind), bits(&together.e_r_ind));
-    assert_eq!(bits(&alone.e_rv_dir), bits(&together.e_rv_dir));
+    only_the_objects_indirect_light_differs(&alone, &together);
     let (mut red_pixels, mut white_gains) = (0, Vec::new());
     for i in 0..alone.mask.data.len() {
         let (a, b) = (alone.e_rv_ind.data[i], together.e_rv_ind.data[i]);
         if alone.mask.data[i] != 0.0 {
-            assert_eq!(
-                a.to_array().map(f32::to_bits),
-                b.to_array().map(f32::to_bits)
-            );
             continue;
         }
         let gain = b - a;
